@@ -1,0 +1,27 @@
+"""baker: lightmaps for glTF 2.0 scenes, with obscurances and colour bleeding.
+
+    import baker
+    result = baker.bake("level.glb", "level_baked.glb", baker.Settings(rays=128))
+
+The pipeline, one module per stage (DESIGN.md §3):
+
+    load.load            glTF file → Scene (instances with float64 world matrices)
+    geometry.build_world Scene → World (every triangle in world space)
+    unwrap.unwrap        World → Atlas (xatlas lightmap pages)
+    rasterise.rasterise  Atlas → Texels (world sample point of every texel)
+    integrate.integrate  Texels → Terms (obscurance terms, rays cast with trace.Tracer)
+    compose.compose      Terms → Lightmaps (L = I_A · W per page)
+    postprocess          dilation into the padding
+    encode.encode        Lightmaps → PNG pages
+    write.write          Scene + Atlas + pages → glTF file with MOZ_lightmap
+
+``bake.bake`` runs them in order.
+"""
+
+from .bake import BakeResult, bake
+from .errors import BakerError, InputError, OutputError, SettingsError
+from .settings import Settings
+
+__all__ = ["bake", "BakeResult", "Settings", "BakerError", "InputError", "OutputError",
+           "SettingsError"]
+__version__ = "0.1.0"

@@ -1,0 +1,211 @@
+"""The whole bake, stage by stage (DESIGN.md §3):
+
+    load → plan → unwrap → rasterise → trace/integrate → compose → post-process → write
+
+Each stage is one module with one entry function; this module only runs them in order, times
+them, and gathers the report.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+
+from .ambient import Ambient, ambient_terms
+from .atlas import Atlas
+from .compose import Lightmaps, compose, effective_r_ave
+from .encode import encode
+from .errors import OutputError
+from .geometry import World, build_world
+from .integrate import Terms, integrate
+from .load import load
+from .plan import Plan, make_plan
+from .postprocess import postprocess
+from .progress import bar, wanted
+from .rasterise import Texels, rasterise
+from .scene import Scene
+from .settings import Resolved, Settings, resolve
+from .surface import LUMINANCE
+from .trace import Tracer
+from .unwrap import baked_instances, unwrap
+from .write import WriteOptions, write
+
+
+@dataclass(frozen=True)
+class BakeResult:
+    """What a bake did. ``report`` is the JSON-able dict that ``--report`` writes."""
+
+    output: Path
+    settings: Resolved
+    plan: Plan
+    texels: int
+    rays: int
+    pages: int
+    seconds: float
+    rmse_estimate: float
+    report: dict = field(repr=False)
+
+
+@contextmanager
+def _timed(times: dict[str, float], name: str) -> Iterator[None]:
+    """Add the wall time of the block to ``times[name]``, in seconds."""
+    start = time.perf_counter()
+    yield
+    times[name] = times.get(name, 0.0) + time.perf_counter() - start
+
+
+def _bounds_of_baked(world, scene) -> tuple[float, float]:
+    """World area and bounds diagonal of the baked instances (for default settings)."""
+    tris = np.concatenate([world.instance_triangles(i) for i in baked_instances(scene)] or
+                          [np.zeros(0, np.int64)])
+    if len(tris) == 0:
+        return 0.0, 0.0
+    points = world.positions[world.triangles[tris].reshape(-1)]
+    return float(world.areas(tris).sum()), float(np.linalg.norm(points.max(0) - points.min(0)))
+
+
+def check_output(input_path: Path, output: Path) -> None:
+    """Refuse an output that would overwrite the input or has an unsupported extension."""
+    if output.suffix.lower() not in (".glb", ".gltf"):
+        raise OutputError(f"the output must end in .glb or .gltf, not {output.suffix or '(none)'}",
+                          file=str(output), fix="name the output e.g. scene_baked.glb")
+    if output.exists() and input_path.exists() and os.path.samefile(input_path, output):
+        raise OutputError("the output is the input file; baker never overwrites its input",
+                          file=str(output), fix="give another output path with -o")
+    if not output.parent.exists():
+        raise OutputError("the output's folder does not exist", file=str(output),
+                          fix=f"create {output.parent} first, or choose another -o path")
+
+
+@dataclass(frozen=True)
+class Computed:
+    """Everything a bake computed before encoding, for the report, tests and benchmarks."""
+
+    scene: Scene
+    world: World
+    settings: Resolved
+    ambient: Ambient
+    plan: Plan
+    atlas: Atlas
+    texels: Texels
+    terms: Terms
+    lightmaps: Lightmaps
+    stage_seconds: dict[str, float]
+
+    def rmse_estimate(self) -> float:
+        """RMSE of the lightmap's luminance estimated from the rays' sample variance."""
+        if not len(self.texels):
+            return 0.0
+        r_ave = effective_r_ave(self.ambient, self.settings.rho)
+        stderr = self.terms.standard_error(r_ave, self.settings.rays)
+        return float(np.sqrt(np.mean(stderr ** 2)) * (self.ambient.intensity @ LUMINANCE))
+
+
+def compute(scene: Scene, settings: Settings, quiet: bool = True) -> Computed:
+    """Run every stage from the loaded scene up to the post-processed float lightmaps."""
+    times: dict[str, float] = {}
+    with _timed(times, "load"):
+        world = build_world(scene)
+    area, diagonal = _bounds_of_baked(world, scene)
+    resolved = resolve(settings, area, diagonal)
+    with _timed(times, "plan"):
+        ambient = ambient_terms(scene, world, resolved.ambient)
+        plan = make_plan(scene, ambient, resolved.rho)
+    with _timed(times, "unwrap"):
+        atlas = unwrap(scene, world, resolved)
+    with _timed(times, "rasterise"):
+        texels = rasterise(atlas, world)
+    with _timed(times, "trace"):
+        tracer = Tracer(world)
+        with bar(len(texels), "baking", wanted(quiet)) as advance:
+            terms = integrate(scene, world, tracer, texels, resolved, advance)
+    with _timed(times, "compose"):
+        lightmaps = postprocess(compose(atlas, texels, terms, ambient, resolved.rho),
+                                resolved.padding)
+    return Computed(scene=scene, world=world, settings=resolved, ambient=ambient, plan=plan,
+                    atlas=atlas, texels=texels, terms=terms, lightmaps=lightmaps,
+                    stage_seconds=times)
+
+
+def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings = Settings(), *,
+         report_path: str | os.PathLike | None = None,
+         lightmaps_dir: str | os.PathLike | None = None, quiet: bool = True) -> BakeResult:
+    """Bake the glTF scene at ``input`` into ``output`` (.glb or .gltf) with lightmaps.
+
+    ``report_path`` writes the JSON report; ``lightmaps_dir`` also writes each page as a PNG
+    file; ``quiet=False`` draws a progress bar when stderr is a terminal.
+    """
+    input_path, output = Path(input), Path(output)
+    check_output(input_path, output)
+    settings.check()
+    started = time.perf_counter()
+    loading: dict[str, float] = {}
+    with _timed(loading, "load"):
+        scene = load(input_path)
+    done = compute(scene, settings, quiet)
+    times = dict(done.stage_seconds)
+    times["load"] += loading["load"]
+    resolved = done.settings
+    with _timed(times, "write"):
+        pages = encode(done.lightmaps, resolved.encoding, resolved.occlusion != "none")
+        info = write(scene, done.atlas, pages, output,
+                     WriteOptions(encoding=resolved.encoding, occlusion=resolved.occlusion))
+        if lightmaps_dir is not None:
+            write_page_files(Path(lightmaps_dir), output.stem, pages)
+    seconds = time.perf_counter() - started
+    rmse = done.rmse_estimate()
+    ambient, atlas = done.ambient, done.atlas
+    report = {
+        "input": str(input_path), "output": str(output),
+        "settings": resolved.as_dict(),
+        "plan": done.plan.as_dict(),
+        "ambient": {"r_ave": ambient.r_ave.tolist(), "intensity": ambient.intensity.tolist(),
+                    "source": ambient.source, "series_truncated": ambient.truncated},
+        "atlas": {"pages": atlas.page_count, "width": atlas.width, "height": atlas.height,
+                  "texel_density": atlas.texel_density},
+        "texels": len(done.texels), "rays": done.terms.rays,
+        "rays_per_second": done.terms.rays / times["trace"] if times["trace"] > 0 else 0.0,
+        "stage_seconds": times, "seconds": seconds,
+        "rmse_estimate": rmse,
+        "notes": list(info.notes),
+    }
+    if report_path is not None:
+        write_atomically(Path(report_path), json.dumps(report, indent=2).encode())
+    return BakeResult(output=output, settings=resolved, plan=done.plan, texels=len(done.texels),
+                      rays=done.terms.rays, pages=atlas.page_count, seconds=seconds,
+                      rmse_estimate=rmse, report=report)
+
+
+def write_atomically(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` through a temporary file and a rename."""
+    if not path.parent.exists():
+        raise OutputError("the folder does not exist", file=str(path),
+                          fix=f"create {path.parent} first")
+    handle, temp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(handle, "wb") as f:
+            f.write(data)
+        os.replace(temp, path)
+    except BaseException:
+        if os.path.exists(temp):
+            os.unlink(temp)
+        raise
+
+
+def write_page_files(folder: Path, stem: str, pages) -> list[Path]:
+    """Write each lightmap page as ``<stem>_lightmap_<p>.png`` in ``folder`` (made if needed)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for p, page in enumerate(pages):
+        path = folder / f"{stem}_lightmap_{p}.png"
+        write_atomically(path, page.png)
+        paths.append(path)
+    return paths

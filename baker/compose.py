@@ -1,0 +1,48 @@
+"""Compose the stored terms into lightmap pages: L(P) = D(P) + I_A · W(P).
+
+A recomposition needs no ray: it only combines the terms the integrator kept apart, so a change of
+R_ave or I_A costs a few array operations (DESIGN.md §2). Direct light D joins here with a later
+issue; until then L = I_A · W.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .ambient import Ambient
+from .atlas import Atlas
+from .integrate import Terms
+from .obscurance import UNIT_REFLECTIVITY
+from .rasterise import Texels
+
+
+@dataclass(frozen=True)
+class Lightmaps:
+    """Float lightmap pages, linear RGB.
+
+    light: (P, H, W, 3) float64, what arrives at the surface (the shader multiplies by albedo).
+    obscurance: (P, H, W, 3) float64, W itself. covered: (P, H, W) bool, texels that were baked
+    (the rest are padding, filled by dilation).
+    """
+
+    light: np.ndarray
+    obscurance: np.ndarray
+    covered: np.ndarray
+
+
+def effective_r_ave(ambient: Ambient, rho: str) -> np.ndarray:
+    """R_ave as the estimator uses it: 1 for classic ambient occlusion (every surface white)."""
+    return np.ones(3) if rho in UNIT_REFLECTIVITY else ambient.r_ave
+
+
+def compose(atlas: Atlas, texels: Texels, terms: Terms, ambient: Ambient, rho: str) -> Lightmaps:
+    """Scatter the texels' light and obscurance into page images."""
+    shape = (atlas.page_count, atlas.height, atlas.width)
+    w = terms.obscurance(effective_r_ave(ambient, rho))
+    obscurance = np.zeros(shape + (3,))
+    covered = np.zeros(shape, bool)
+    obscurance[texels.page, texels.y, texels.x] = w
+    covered[texels.page, texels.y, texels.x] = True
+    return Lightmaps(light=obscurance * ambient.intensity, obscurance=obscurance, covered=covered)

@@ -1,0 +1,213 @@
+"""Find every lightmap texel a baked triangle touches, and the surface point it stands for.
+
+Coverage is conservative: a texel belongs to a triangle when the texel's square overlaps the
+triangle in UV space at all (separating-axis test), not only when its centre is inside. So a
+sliver or a triangle smaller than a texel still gets the texel(s) it touches, and a viewer's
+bilinear lookup on any triangle reads texels that were baked.
+
+A texel touched by several triangles (along shared edges) is owned by the one whose interior is
+deepest at the texel centre, ties going to the lower triangle index: a fixed rule, so the result
+does not depend on how the work is split. The texel's sample point is its centre's barycentric
+position in the owner, clamped into the triangle, mapped to world space.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .atlas import Atlas
+from .geometry import World
+
+# Candidate (triangle, texel) pairs examined at once; bounds memory at ~100 bytes a pair.
+_CANDIDATES_PER_CHUNK = 2_000_000
+
+
+@dataclass(frozen=True)
+class Texels:
+    """The baked texels, N of them, sorted by ``key``.
+
+    page, x, y: (N,) int64, the texel's page and column/row (row 0 at the top of the page image).
+    key: (N,) uint64 stable texel key for the sampler, ``(page·height + y)·width + x``.
+    position: (N, 3) float64 world sample point. normal: (N, 3) unit interpolated shading normal.
+    geometric_normal: (N, 3) unit front-face normal of the owning triangle.
+    triangle: (N,) int64 owning world triangle (index into World.triangles); instance: (N,) int64.
+    barycentric: (N, 3) float64 of the sample point in the owning triangle.
+    size: (N,) float64 world length of one texel side on the owning triangle.
+    triangle_texels: (T,) int64, for every world triangle, how many texels its UV footprint
+    touches (0 for triangles that are not baked).
+    """
+
+    page: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    key: np.ndarray
+    position: np.ndarray
+    normal: np.ndarray
+    geometric_normal: np.ndarray
+    triangle: np.ndarray
+    instance: np.ndarray
+    barycentric: np.ndarray
+    size: np.ndarray
+    triangle_texels: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.key)
+
+
+def _baked_triangles(atlas: Atlas, world: World) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Texel-space corners (k, 3, 2), page (k,) and world triangle index (k,) of every baked
+    triangle that xatlas placed on a page."""
+    corners, pages, tris = [], [], []
+    scale = np.array([atlas.width, atlas.height], np.float64)
+    for unwrap in atlas.instances:
+        placed = unwrap.pages >= 0
+        corners.append(unwrap.uv[unwrap.triangles[placed]] * scale)
+        pages.append(unwrap.pages[placed])
+        tris.append(world.instance_triangles(unwrap.instance)[placed])
+    if not corners:
+        return np.zeros((0, 3, 2)), np.zeros(0, np.int64), np.zeros(0, np.int64)
+    return np.concatenate(corners), np.concatenate(pages), np.concatenate(tris)
+
+
+def _candidates(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """All (triangle, x, y) pairs of the integer texel boxes [lo, hi] (inclusive), vectorised.
+
+    lo, hi: (k, 2) int64. Returns owner (c,) index into the k boxes and texel x, y (c,).
+    """
+    w = hi[:, 0] - lo[:, 0] + 1
+    h = hi[:, 1] - lo[:, 1] + 1
+    counts = w * h
+    owner = np.repeat(np.arange(len(lo)), counts)
+    start = np.cumsum(counts) - counts
+    local = np.arange(counts.sum()) - start[owner]
+    return owner, lo[owner, 0] + local % w[owner], lo[owner, 1] + local // w[owner]
+
+
+def _edge_terms(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Inward unit edge normals (k, 3, 2) and offsets (k, 3) of UV triangles.
+
+    For a point p, ``normals[e] · p - offsets[e]`` is its distance inside edge e (negative
+    outside). Degenerate triangles get zero normals, so only their bounding box counts.
+    """
+    a, b, c = corners[:, 0], corners[:, 1], corners[:, 2]
+    ab, ac = b - a, c - a
+    orientation = np.sign(ab[:, 0] * ac[:, 1] - ab[:, 1] * ac[:, 0])
+    edges = np.stack([b - a, c - b, a - c], axis=1)
+    normals = np.stack([-edges[..., 1], edges[..., 0]], axis=-1) * orientation[:, None, None]
+    length = np.linalg.norm(normals, axis=-1, keepdims=True)
+    normals = np.divide(normals, length, out=np.zeros_like(normals), where=length > 0)
+    starts = np.stack([a, b, c], axis=1)
+    return normals, np.einsum("kej,kej->ke", normals, starts)
+
+
+def _cover(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Conservative coverage of a chunk of UV triangles (k, 3, 2) in texel units.
+
+    Returns, for every (triangle, texel) pair whose square overlaps the triangle: triangle (c,)
+    index into the chunk, texel x and y (c,), and the depth (c,) of the texel centre inside the
+    triangle (negative when the centre is outside).
+    """
+    lo = np.floor(corners.min(axis=1)).astype(np.int64)
+    hi = np.floor(corners.max(axis=1)).astype(np.int64)
+    hi = np.maximum(hi, lo)
+    owner, x, y = _candidates(lo, hi)
+    normals, offsets = _edge_terms(corners)
+    centre = np.stack([x + 0.5, y + 0.5], axis=1)
+    n = normals[owner]
+    inside = np.einsum("cej,cj->ce", n, centre) - offsets[owner]  # (c, 3) distance inside
+    radius = 0.5 * np.abs(n).sum(axis=-1)  # the square's half-extent along each normal
+    overlaps = np.all(inside >= -radius, axis=1)
+    depth = inside.min(axis=1)
+    return owner[overlaps], x[overlaps], y[overlaps], depth[overlaps]
+
+
+def _chunks(counts: np.ndarray, limit: int) -> list[slice]:
+    """Split consecutive items with ``counts`` candidates each into slices of about ``limit``."""
+    bounds = np.searchsorted(np.cumsum(counts), np.arange(limit, counts.sum() + limit, limit))
+    edges = np.unique(np.concatenate([[0], np.minimum(bounds + 1, len(counts)), [len(counts)]]))
+    return [slice(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:]) if b > a]
+
+
+def _barycentric(corners: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Barycentric coordinates (c, 3) of ``points`` (c, 2) in triangles (c, 3, 2), clamped into
+    the triangle (negative weights cut to 0 and the rest renormalised); degenerate triangles
+    give their centroid."""
+    a, b, c = corners[:, 0], corners[:, 1], corners[:, 2]
+    v0, v1, v2 = b - a, c - a, points - a
+    d00 = np.einsum("ij,ij->i", v0, v0)
+    d01 = np.einsum("ij,ij->i", v0, v1)
+    d11 = np.einsum("ij,ij->i", v1, v1)
+    d20 = np.einsum("ij,ij->i", v2, v0)
+    d21 = np.einsum("ij,ij->i", v2, v1)
+    denom = d00 * d11 - d01 * d01
+    ok = np.abs(denom) > 1e-30 * np.maximum(d00 * d11, 1e-300)
+    safe = np.where(ok, denom, 1.0)
+    v = (d11 * d20 - d01 * d21) / safe
+    w = (d00 * d21 - d01 * d20) / safe
+    bary = np.stack([1.0 - v - w, v, w], axis=1)
+    bary = np.clip(bary, 0.0, None)
+    total = bary.sum(axis=1, keepdims=True)
+    bary = np.divide(bary, total, out=np.full_like(bary, 1 / 3), where=total > 0)
+    bary[~ok] = 1.0 / 3.0
+    return bary
+
+
+def rasterise(atlas: Atlas, world: World) -> Texels:
+    """All texels touched by baked triangles, with their world sample points and normals."""
+    corners, pages, tris = _baked_triangles(atlas, world)
+    width, height = atlas.width, atlas.height
+    page_texels = max(atlas.page_count, 1) * width * height
+    best_depth = np.full(page_texels, -np.inf)
+    best_owner = np.full(page_texels, -1, np.int64)  # index into corners/tris
+    triangle_texels = np.zeros(len(world.triangles), np.int64)
+    extent = np.floor(corners.max(axis=1)) - np.floor(corners.min(axis=1)) + 1
+    for part in _chunks(np.prod(extent, axis=1).astype(np.int64), _CANDIDATES_PER_CHUNK):
+        owner, x, y, depth = _cover(corners[part])
+        owner = owner + part.start
+        inside_page = (x >= 0) & (x < width) & (y >= 0) & (y < height)
+        owner, x, y, depth = owner[inside_page], x[inside_page], y[inside_page], depth[inside_page]
+        np.add.at(triangle_texels, tris[owner], 1)
+        texel = (pages[owner] * height + y) * width + x
+        # Best candidate per texel inside the chunk: deepest, then lowest triangle index.
+        order = np.lexsort((owner, -depth, texel))
+        texel, owner, depth = texel[order], owner[order], depth[order]
+        first = np.ones(len(texel), bool)
+        first[1:] = texel[1:] != texel[:-1]
+        texel, owner, depth = texel[first], owner[first], depth[first]
+        better = (depth > best_depth[texel]) | ((depth == best_depth[texel])
+                                                 & (owner < best_owner[texel]))
+        best_depth[texel[better]] = depth[better]
+        best_owner[texel[better]] = owner[better]
+    key = np.flatnonzero(best_owner >= 0)
+    owner = best_owner[key]
+    page, rest = np.divmod(key, width * height)
+    y, x = np.divmod(rest, width)
+    centre = np.stack([x + 0.5, y + 0.5], axis=1)
+    bary = _barycentric(corners[owner], centre)
+    return _surface_points(world, tris[owner], bary, corners[owner], page, x, y, key,
+                           triangle_texels)
+
+
+def _surface_points(world: World, tri: np.ndarray, bary: np.ndarray, uv_corners: np.ndarray,
+                    page: np.ndarray, x: np.ndarray, y: np.ndarray, key: np.ndarray,
+                    triangle_texels: np.ndarray) -> Texels:
+    """World position, normals and texel size of each texel's sample point."""
+    a, b, c = world.corners(tri)
+    position = bary[:, :1] * a + bary[:, 1:2] * b + bary[:, 2:] * c
+    geometric = world.geometric_normals(tri)
+    vertices = world.triangles[tri]
+    shading = np.einsum("ck,ckj->cj", bary, world.normals[vertices])
+    smooth = world.smooth[vertices].all(axis=1)
+    length = np.linalg.norm(shading, axis=1, keepdims=True)
+    usable = smooth & (length[:, 0] > 1e-12)
+    normal = np.where(usable[:, None], shading / np.where(length > 0, length, 1.0), geometric)
+    world_area = world.areas(tri)
+    uv_edges = uv_corners[:, 1:] - uv_corners[:, :1]
+    uv_area = 0.5 * np.abs(uv_edges[:, 0, 0] * uv_edges[:, 1, 1] - uv_edges[:, 0, 1] * uv_edges[:, 1, 0])
+    size = np.sqrt(np.divide(world_area, uv_area, out=np.zeros_like(world_area), where=uv_area > 0))
+    return Texels(page=page, x=x, y=y, key=key.astype(np.uint64), position=position,
+                  normal=normal, geometric_normal=geometric, triangle=tri,
+                  instance=world.tri_instance[tri], barycentric=bary, size=size,
+                  triangle_texels=triangle_texels)

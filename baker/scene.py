@@ -1,0 +1,129 @@
+"""The scene as the loader hands it to the rest of the pipeline.
+
+A glTF file is flattened into *instances*: one per (node, mesh primitive) pair, or per GPU instance
+of such a pair, each with its float64 world matrix. Geometry stays in the mesh's local space in
+``Primitive`` (shared by every instance of the mesh); ``geometry.py`` puts it in world space.
+
+Colours are linear RGB(A) floats unless a field says otherwise. Lengths are in glTF units (metres).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pygltflib
+
+# glTF sampler wrap modes (OpenGL enums), as glTF stores them.
+REPEAT = 10497
+CLAMP_TO_EDGE = 33071
+MIRRORED_REPEAT = 33648
+
+
+@dataclass(frozen=True)
+class Image:
+    """A decoded texture image, its texels exactly as stored in the file.
+
+    ``pixels``: (h, w, 4) uint8 RGBA, row 0 at the top (v = 0 in glTF UV space). The values are
+    sRGB-encoded for colour textures (base colour, emissive); whoever samples decodes them.
+    """
+
+    pixels: np.ndarray
+    name: str = ""
+
+
+@dataclass(frozen=True)
+class TextureRef:
+    """A material's reference to a texture: which image, which UV set, how UVs wrap."""
+
+    image: int  # index into Scene.images
+    texcoord: int = 0  # the primitive's TEXCOORD_<texcoord> set
+    wrap_s: int = REPEAT
+    wrap_t: int = REPEAT
+
+
+@dataclass(frozen=True)
+class Material:
+    """What the baker needs of a glTF material.
+
+    ``index`` is the glTF material index, or None for the default material that glTF prescribes for
+    primitives without one (white, opaque, metallic 1, roughness 1, single-sided).
+    """
+
+    index: int | None
+    name: str
+    base_color: np.ndarray  # (4,) float64 linear RGBA, baseColorFactor
+    base_color_texture: TextureRef | None
+    emissive: np.ndarray  # (3,) float64 linear, emissiveFactor × KHR_materials_emissive_strength
+    emissive_texture: TextureRef | None
+    metallic: float = 1.0
+    roughness: float = 1.0
+    alpha_mode: str = "OPAQUE"  # OPAQUE, MASK or BLEND
+    alpha_cutoff: float = 0.5
+    double_sided: bool = False
+    unlit: bool = False  # KHR_materials_unlit
+    extensions: tuple[str, ...] = ()  # names of the material's extensions, for the plan
+
+
+@dataclass(frozen=True)
+class Primitive:
+    """One glTF mesh primitive's triangles, in the mesh's local space.
+
+    ``mesh``/``index`` say where it lives: ``meshes[mesh].primitives[index]``.
+    Vertex arrays all have n rows; ``triangles`` is (m, 3) int64 into them (strips and fans are
+    already expanded to triangle lists, non-indexed primitives given indices 0..n-1).
+    """
+
+    mesh: int
+    index: int
+    positions: np.ndarray  # (n, 3) float64
+    normals: np.ndarray | None  # (n, 3) float64, None when the file has none
+    texcoords: tuple[np.ndarray, ...]  # TEXCOORD_0, TEXCOORD_1, …: each (n, 2) float64
+    colors: np.ndarray | None  # (n, 4) float64 linear RGBA from COLOR_0, None when absent
+    triangles: np.ndarray  # (m, 3) int64
+    material: int  # index into Scene.materials
+    has_morph_targets: bool = False
+
+
+@dataclass(frozen=True)
+class Instance:
+    """One placement of a primitive in the world.
+
+    ``world`` is the (4, 4) float64 matrix from the primitive's local space to world space
+    (column vectors: p_world = world @ [p, 1]). ``baked`` says whether the instance gets lightmap
+    texels; instances that are not baked still occlude and reflect light, and ``reason`` says why
+    they are not baked (GPU-instanced, skinned, unlit, …).
+    """
+
+    node: int
+    primitive: int  # index into Scene.primitives
+    world: np.ndarray
+    baked: bool = True
+    reason: str = ""
+    gpu_instance: int | None = None  # index within EXT_mesh_gpu_instancing, if any
+
+
+@dataclass(frozen=True)
+class Skipped:
+    """Something in the file the bake leaves out, with where it is and why."""
+
+    where: str  # glTF JSON path, e.g. "meshes[2].primitives[0]"
+    reason: str
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A loaded glTF scene: the flattened instances plus the document to write back.
+
+    ``document`` is the pygltflib document as read (buffers resolved); the writer changes only what
+    the bake adds to it. ``materials`` has one entry per glTF material, then the default material.
+    """
+
+    path: Path
+    document: pygltflib.GLTF2
+    primitives: tuple[Primitive, ...]
+    instances: tuple[Instance, ...]
+    materials: tuple[Material, ...]
+    images: tuple[Image, ...]
+    skipped: tuple[Skipped, ...] = field(default=())

@@ -1,0 +1,122 @@
+"""Bake settings: what the user may set, their checks, and the defaults derived from the scene.
+
+``Settings`` holds what the user asked for (None = "derive it from the scene"); ``resolve`` turns it
+into ``Resolved`` with every value fixed, which is what the report prints and what the bake uses.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, fields
+
+from .errors import SettingsError
+
+RHO_FUNCTIONS = ("sqrt", "step", "linear")
+ENCODINGS = ("linear", "srgb")
+OCCLUSION_MODES = ("none", "also", "only")
+
+
+@dataclass(frozen=True)
+class Settings:
+    """What the user asks for. Lengths in scene units (metres for glTF).
+
+    texel_density: texels per world unit along a surface; None derives it from ``page_size``.
+    page_size: the largest lightmap page, in texels per side.
+    padding: texels kept free around every chart (dilation fills them).
+    rays: obscurance rays per texel.
+    d_max: the obscurance distance; None takes ``d_max_fraction`` of the baked bounds' diagonal.
+    rho: the obscurance function ρ(d): "sqrt" (the paper's sqrt(d/d_max)), "step" (classic
+        ambient occlusion: a hit closer than d_max counts 0, R(Q) = 1) or "linear" (d/d_max).
+    ambient: the ambient intensity I_A; None computes it from the scene's emission (eq. 3).
+    seed: the sampler's seed; the same seed gives the same bytes.
+    threads: worker threads for ray casting (0: one per core).
+    chunk_texels: texels per work unit; bounds memory, never changes the result.
+    encoding: how lightmap PNG texels map to light ("linear", as three.js and Hubs read them, or
+        "srgb", as the proposed MOZ_lightmap text says).
+    occlusion: also write the obscurance W as the core occlusionTexture ("also"), instead of the
+        lightmap ("only"), or not ("none").
+    """
+
+    texel_density: float | None = None
+    page_size: int = 1024
+    padding: int = 2
+    rays: int = 64
+    d_max: float | None = None
+    d_max_fraction: float = 0.2
+    rho: str = "sqrt"
+    ambient: float | None = None
+    seed: int = 0
+    threads: int = 0
+    chunk_texels: int = 4096
+    encoding: str = "linear"
+    occlusion: str = "none"
+
+    def check(self) -> None:
+        """Raise SettingsError for a value that cannot work, saying which values can."""
+        positive = {
+            "texel_density": self.texel_density,
+            "d_max": self.d_max,
+            "d_max_fraction": self.d_max_fraction,
+            "ambient": self.ambient if self.ambient is None else self.ambient + 1.0,
+        }
+        for name, value in positive.items():
+            if value is not None and not (math.isfinite(value) and value > 0):
+                raise SettingsError(f"{name} must be a finite number above 0, not {value}",
+                                    fix=f"give --{name.replace('_', '-')} a positive value")
+        if self.ambient is not None and self.ambient < 0:
+            raise SettingsError(f"ambient must be 0 or more, not {self.ambient}",
+                                fix="give --ambient a value of 0 or more")
+        integers = {"page_size": (self.page_size, 16), "rays": (self.rays, 1),
+                    "chunk_texels": (self.chunk_texels, 1), "padding": (self.padding, 0),
+                    "threads": (self.threads, 0), "seed": (self.seed, 0)}
+        for name, (value, low) in integers.items():
+            if int(value) != value or value < low:
+                raise SettingsError(f"{name} must be a whole number of at least {low}, not {value}",
+                                    fix=f"give --{name.replace('_', '-')} a whole number ≥ {low}")
+        if self.page_size > 16384:
+            raise SettingsError(f"page_size {self.page_size} is larger than 16384 texels",
+                                fix="use --page-size 16384 or less; large scenes get several pages")
+        for name, value, allowed in (("rho", self.rho, RHO_FUNCTIONS),
+                                     ("encoding", self.encoding, ENCODINGS),
+                                     ("occlusion", self.occlusion, OCCLUSION_MODES)):
+            if value not in allowed:
+                raise SettingsError(f"{name} must be one of {', '.join(allowed)}, not {value!r}",
+                                    fix=f"use --{name} {allowed[0]}")
+
+
+@dataclass(frozen=True)
+class Resolved(Settings):
+    """Settings with every derived value filled in (no None left but ``ambient``)."""
+
+    texel_density: float = 0.0
+    d_max: float = 0.0
+
+    def as_dict(self) -> dict:
+        """The settings as plain JSON-able values, for the report."""
+        return asdict(self)
+
+
+def default_texel_density(surface_area: float, page_size: int, fill: float = 0.5) -> float:
+    """Texels per world unit that fill about ``fill`` of one page of ``page_size``² texels.
+
+    ``surface_area`` is the world-space area of every baked triangle; xatlas packs charts to
+    roughly 50–70 % of a page once padding is counted, hence the default fill.
+    """
+    if surface_area <= 0:
+        return 1.0
+    return math.sqrt(fill * page_size * page_size / surface_area)
+
+
+def resolve(settings: Settings, surface_area: float, diagonal: float) -> Resolved:
+    """Fill in the defaults that depend on the scene.
+
+    ``surface_area``: world area of the baked surfaces; ``diagonal``: length of the diagonal of
+    their world bounds. Both in scene units.
+    """
+    settings.check()
+    values = {f.name: getattr(settings, f.name) for f in fields(Settings)}
+    if values["texel_density"] is None:
+        values["texel_density"] = default_texel_density(surface_area, settings.page_size)
+    if values["d_max"] is None:
+        values["d_max"] = settings.d_max_fraction * diagonal if diagonal > 0 else 1.0
+    return Resolved(**values)

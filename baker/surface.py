@@ -1,0 +1,87 @@
+"""What a surface looks like at a point: diffuse albedo and emission, linear RGB.
+
+Albedo R(Q) = baseColorFactor × baseColorTexture(uv) × COLOR_0, the texture sRGB-decoded and
+sampled bilinearly with its sampler's wrap modes. Emission = emissiveFactor × emissive strength ×
+emissiveTexture(uv). Work is vectorised over points, looping only over the scene's materials.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .geometry import World
+from .scene import CLAMP_TO_EDGE, MIRRORED_REPEAT, Image, Scene, TextureRef
+
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])  # Rec. 709 weights of linear RGB
+
+# sRGB transfer function, decoded once for every 8-bit value.
+_levels = np.arange(256) / 255.0
+SRGB_TO_LINEAR = np.where(_levels <= 0.04045, _levels / 12.92, ((_levels + 0.055) / 1.055) ** 2.4)
+
+
+def _wrap(coord: np.ndarray, size: int, mode: int) -> np.ndarray:
+    """Integer texel coordinates wrapped into [0, size) by a glTF sampler wrap mode."""
+    if mode == CLAMP_TO_EDGE:
+        return np.clip(coord, 0, size - 1)
+    if mode == MIRRORED_REPEAT:
+        period = np.mod(coord, 2 * size)
+        return np.where(period < size, period, 2 * size - 1 - period)
+    return np.mod(coord, size)
+
+
+def sample_texture(image: Image, ref: TextureRef, uv: np.ndarray) -> np.ndarray:
+    """Bilinear lookup of an sRGB colour texture at glTF UVs (k, 2); returns linear RGB (k, 3).
+
+    UV (0, 0) is the top-left corner of the image; texel centres sit at half-integers.
+    """
+    pixels = image.pixels
+    h, w = pixels.shape[:2]
+    x = uv[:, 0] * w - 0.5
+    y = uv[:, 1] * h - 0.5
+    x0, y0 = np.floor(x), np.floor(y)
+    fx, fy = (x - x0)[:, None], (y - y0)[:, None]
+    x0, y0 = x0.astype(np.int64), y0.astype(np.int64)
+    xs = [_wrap(x0, w, ref.wrap_s), _wrap(x0 + 1, w, ref.wrap_s)]
+    ys = [_wrap(y0, h, ref.wrap_t), _wrap(y0 + 1, h, ref.wrap_t)]
+
+    def tap(yy: np.ndarray, xx: np.ndarray) -> np.ndarray:
+        return SRGB_TO_LINEAR[pixels[yy, xx, :3]]
+
+    top = tap(ys[0], xs[0]) * (1 - fx) + tap(ys[0], xs[1]) * fx
+    bottom = tap(ys[1], xs[0]) * (1 - fx) + tap(ys[1], xs[1]) * fx
+    return top * (1 - fy) + bottom * fy
+
+
+def _interpolate(values: np.ndarray, world: World, tris: np.ndarray, bary: np.ndarray) -> np.ndarray:
+    """Interpolate a per-vertex array (V, c) at barycentric points (k, 3) of triangles (k,)."""
+    return np.einsum("kv,kvc->kc", bary, values[world.triangles[tris]])
+
+
+def _textured(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray,
+              factor: np.ndarray, texture_of) -> np.ndarray:
+    """factor[material] (k, 3) times each material's texture, looked up where it has one."""
+    materials = world.tri_material[tris]
+    result = factor[materials].copy()
+    for m, material in enumerate(scene.materials):
+        ref = texture_of(material)
+        if ref is None:
+            continue
+        mask = materials == m
+        if not mask.any():
+            continue
+        uv = _interpolate(world.texcoords[ref.texcoord], world, tris[mask], bary[mask])
+        result[mask] *= sample_texture(scene.images[ref.image], ref, uv)
+    return result
+
+
+def albedo(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray) -> np.ndarray:
+    """Diffuse albedo (k, 3), linear RGB, at barycentric points (k, 3) of world triangles (k,)."""
+    base = np.array([m.base_color[:3] for m in scene.materials], np.float64)
+    colour = _textured(scene, world, tris, bary, base, lambda m: m.base_color_texture)
+    return colour * _interpolate(world.colors[:, :3], world, tris, bary)
+
+
+def emission(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray) -> np.ndarray:
+    """Emitted radiance (k, 3), linear RGB, at barycentric points of world triangles."""
+    factor = np.array([m.emissive for m in scene.materials], np.float64)
+    return _textured(scene, world, tris, bary, factor, lambda m: m.emissive_texture)

@@ -1,0 +1,112 @@
+"""Lay every baked instance out in lightmap pages with xatlas.
+
+All baked instances go into one xatlas run, in world space, so that one texel covers about
+1 / texel_density world units everywhere and every instance of a shared mesh gets its own area.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import xatlas
+
+from .atlas import Atlas, InstanceUV
+from .errors import SettingsError
+from .geometry import World
+from .scene import Scene
+from .settings import Resolved
+
+_NO_PAGE = np.uint32(0xFFFFFFFF)  # xatlas's page index for vertices of faces it could not place
+
+
+def baked_instances(scene: Scene) -> list[int]:
+    """Indices of the instances that get lightmap texels, in scene order."""
+    return [i for i, inst in enumerate(scene.instances) if inst.baked]
+
+
+def _pack_options(settings: Resolved, resolution: int) -> xatlas.PackOptions:
+    """Packing settings; positions reach xatlas in texel units, so one texel per unit."""
+    options = xatlas.PackOptions()
+    options.texels_per_unit = 1.0
+    options.padding = int(settings.padding)
+    options.bilinear = True
+    options.resolution = int(resolution)
+    options.create_image = False
+    return options
+
+
+def _generate(world: World, instances: list[int], settings: Resolved, resolution: int) -> xatlas.Atlas:
+    """One xatlas run over the instances' world triangles, recentred and scaled to texel units.
+
+    xatlas takes float32 and ignores faces with an area under about 1e-7 of its units; in texel
+    units only faces far below a texel's size fall under that, not merely small ones.
+    """
+    atlas = xatlas.Atlas()
+    for i in instances:
+        tris = world.instance_triangles(i)
+        vertices = world.triangles[tris]
+        first = world.vertex_start[i]
+        count = world.vertex_start[i + 1] - first
+        positions = (world.positions[first:first + count] - world.center) * settings.texel_density
+        positions = positions.astype(np.float32)
+        atlas.add_mesh(positions, (vertices - first).astype(np.uint32))
+    atlas.generate(xatlas.ChartOptions(), _pack_options(settings, resolution))
+    return atlas
+
+
+def unwrap(scene: Scene, world: World, settings: Resolved) -> Atlas:
+    """Unwrap the baked instances into pages of at most ``settings.page_size`` texels a side.
+
+    One page of the size xatlas needs is tried first; if it would exceed the page size, the
+    charts are packed into as many ``page_size``² pages as they need.
+    """
+    instances = baked_instances(scene)
+    if not instances:
+        return Atlas(width=0, height=0, page_count=0, texel_density=settings.texel_density,
+                     padding=settings.padding, instances=())
+    area = float(sum(world.areas(world.instance_triangles(i)).sum() for i in instances))
+    expected = area * settings.texel_density ** 2
+    resolution = settings.page_size if expected > 0.5 * settings.page_size ** 2 else 0
+    atlas = _generate(world, instances, settings, resolution)
+    if max(atlas.width, atlas.height) > settings.page_size:
+        atlas = _generate(world, instances, settings, settings.page_size)
+    if atlas.width == 0 or atlas.height == 0:
+        raise SettingsError("no surface got any lightmap texels at this texel density",
+                            fix="raise --texel-density, or check that the meshes have area")
+    result = []
+    for mesh, i in enumerate(instances):
+        vertices, triangles, uv = atlas[mesh]
+        page_of_vertex, _chart = atlas.get_mesh_vertex_assignment(mesh)
+        vertices, triangles = vertices.astype(np.int64), triangles.astype(np.int64)
+        uv, page = _snap_unplaced(world, i, vertices, uv.astype(np.float64),
+                                  page_of_vertex.astype(np.int64), int(_NO_PAGE))
+        result.append(InstanceUV(instance=i, vertices=vertices, triangles=triangles, uv=uv,
+                                 pages=page[triangles[:, 0]]))
+    return Atlas(width=int(atlas.width), height=int(atlas.height),
+                 page_count=int(atlas.atlas_count), texel_density=float(settings.texel_density),
+                 padding=int(settings.padding), instances=tuple(result))
+
+
+def _snap_unplaced(world: World, instance: int, vertices: np.ndarray, uv: np.ndarray,
+                   page: np.ndarray, no_page: int) -> tuple[np.ndarray, np.ndarray]:
+    """Give vertices xatlas left unplaced the UV and page of the nearest placed vertex.
+
+    xatlas leaves out faces it finds degenerate; collapsing them onto the closest placed point
+    (in world space) of the same instance gives them a real texel to read, so no face of the
+    output samples outside the lightmap. Returns uv (k, 2) and page (k,), -1 where the instance
+    has no placed vertex at all.
+    """
+    lost = page == no_page
+    if not lost.any():
+        return uv, page
+    placed = np.flatnonzero(~lost)
+    page = np.where(lost, -1, page)
+    if placed.size == 0:
+        return uv, page
+    first = world.vertex_start[instance]
+    where = world.positions[first + vertices]
+    uv, page = uv.copy(), page.copy()
+    for chunk in np.array_split(np.flatnonzero(lost), max(1, int(np.flatnonzero(lost).size // 256))):
+        distance = np.linalg.norm(where[chunk, None] - where[None, placed], axis=-1)
+        nearest = placed[np.argmin(distance, axis=1)]
+        uv[chunk], page[chunk] = uv[nearest], page[nearest]
+    return uv, page

@@ -1,0 +1,1 @@
+"""The ``baker`` command line: a thin layer over the library's public API (``baker.bake``)."""

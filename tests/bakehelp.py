@@ -1,0 +1,43 @@
+"""Helpers the tests share: save an assets scene, load it, run the bake's stages on it."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+from baker.bake import Computed, compute
+from baker.load import load
+from baker.scene import Scene
+from baker.settings import Settings
+
+SHARED_SCENES = Path(__file__).resolve().parents[2] / "shared" / "scenes"
+REAL_SCENES = {
+    "GlassVaseFlowers": SHARED_SCENES / "GlassVaseFlowers" / "GlassVaseFlowers.glb",
+    "NegativeScaleTest": SHARED_SCENES / "NegativeScaleTest" / "NegativeScaleTest.glb",
+    "SimpleInstancing": SHARED_SCENES / "SimpleInstancing" / "SimpleInstancing.glb",
+    "MultiUVTest": SHARED_SCENES / "MultiUVTest" / "MultiUVTest.glb",
+    "LightsPunctualLamp": SHARED_SCENES / "LightsPunctualLamp" / "LightsPunctualLamp.gltf",
+}
+
+
+def saved(builder, folder: Path, name: str = "scene.glb") -> Path:
+    """Save an assets ``GltfBuilder`` into ``folder`` and return the file's path."""
+    return builder.save(folder / name)
+
+
+def loaded(builder, folder: Path) -> Scene:
+    """The ``Scene`` the loader makes of an assets scene."""
+    return load(saved(builder, folder))
+
+
+def computed(builder, folder: Path, only_nodes=None, **settings) -> Computed:
+    """Run the bake's stages (no writing) on an assets scene with ``Settings(**settings)``.
+
+    ``only_nodes``: bake only the instances of these node indices (the rest still occlude).
+    """
+    scene = loaded(builder, folder)
+    if only_nodes is not None:
+        scene = replace(scene, instances=tuple(
+            replace(inst, baked=inst.baked and inst.node in only_nodes, reason="not under test")
+            for inst in scene.instances))
+    return compute(scene, Settings(**settings))

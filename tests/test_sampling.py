@@ -1,0 +1,67 @@
+"""The sampler: a pure function of (seed, key, sample, dimension), well stratified."""
+
+import numpy as np
+
+from baker.sampling import cosine_hemisphere, hash_u32, owen_scramble, sample_2d, tangent_frames
+
+
+def test_same_arguments_same_numbers_however_split():
+    keys = np.arange(50, dtype=np.uint64)
+    whole = sample_2d(7, keys[:, None], np.arange(64)[None, :], 0)
+    parts = np.concatenate([sample_2d(7, keys[:20, None], np.arange(64)[None, :], 0),
+                            sample_2d(7, keys[20:, None], np.arange(64)[None, :], 0)])
+    late = sample_2d(7, keys[:, None], np.arange(32, 64)[None, :], 0)
+    assert np.array_equal(whole, parts)
+    assert np.array_equal(whole[:, 32:], late)
+
+
+def test_seed_key_and_dimension_all_change_the_points():
+    base = sample_2d(0, np.uint64(5), np.arange(16), 0)
+    for other in (sample_2d(1, np.uint64(5), np.arange(16), 0),
+                  sample_2d(0, np.uint64(6), np.arange(16), 0),
+                  sample_2d(0, np.uint64(5), np.arange(16), 1)):
+        assert not np.allclose(base, other)
+
+
+def test_every_power_of_two_prefix_is_a_stratified_net():
+    """The first 4^k samples of a texel put one point in each cell of a 2^k × 2^k grid."""
+    for key in range(20):
+        points = sample_2d(3, np.uint64(key), np.arange(64), 0)
+        cells = np.floor(points * 8).astype(int)
+        assert len({(x, y) for x, y in cells}) == 64
+        assert points.min() > 0 and points.max() < 1
+
+
+def test_owen_scramble_is_a_permutation_of_aligned_blocks():
+    """Owen scrambling maps the 2^m values sharing their top bits to another such block."""
+    values = (np.arange(256, dtype=np.uint32) << np.uint32(24))
+    scrambled = owen_scramble(values, np.uint32(12345)) >> np.uint32(24)
+    assert sorted(scrambled.tolist()) == list(range(256))
+
+
+def test_hash_spreads_neighbouring_keys():
+    h = hash_u32(0, np.arange(100000, dtype=np.uint64))
+    bits = ((h[:, None] >> np.arange(32, dtype=np.uint32)) & 1).mean(axis=0)
+    assert np.all(np.abs(bits - 0.5) < 0.01)
+    assert len(np.unique(h)) > 99990
+
+
+def test_cosine_hemisphere_has_the_cosine_moments():
+    """E[cosθ] = 2/3 and E[cos²θ] = 1/2 for pdf cosθ/π; directions are unit and upward."""
+    d = cosine_hemisphere(sample_2d(0, np.arange(500, dtype=np.uint64)[:, None],
+                                    np.arange(256)[None, :], 0))
+    assert np.allclose(np.linalg.norm(d, axis=-1), 1.0)
+    assert d[..., 2].min() >= 0
+    assert abs(d[..., 2].mean() - 2 / 3) < 1e-3
+    assert abs((d[..., 2] ** 2).mean() - 0.5) < 1e-3
+    assert abs(d[..., 0].mean()) < 1e-3 and abs(d[..., 1].mean()) < 1e-3
+
+
+def test_tangent_frames_are_orthonormal_even_at_the_poles():
+    rng = np.random.default_rng(1)
+    n = np.vstack([rng.normal(size=(1000, 3)), [[0, 0, 1], [0, 0, -1], [1, 0, 0]]])
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    t1, t2 = tangent_frames(n)
+    for a, b in ((t1, n), (t2, n), (t1, t2)):
+        assert np.abs((a * b).sum(axis=1)).max() < 1e-12
+    assert np.allclose(np.linalg.norm(t1, axis=1), 1) and np.allclose(np.linalg.norm(t2, axis=1), 1)

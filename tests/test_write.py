@@ -1,0 +1,524 @@
+"""baker.write: lightmap UVs, images and materials added to the input glTF, nothing else changed.
+
+The scenes are built by hand (a small glTF document, its ``Scene``, a hand-made ``Atlas`` with two
+pages and PNG pages from pillow), so these tests do not depend on the loader or the unwrapper.
+Every output must pass the Khronos glTF Validator without errors or warnings.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import struct
+from pathlib import Path
+from urllib.parse import unquote
+
+import numpy as np
+import pygltflib
+import pytest
+from PIL import Image as PILImage
+
+from baker import write as write_module
+from baker.atlas import Atlas, InstanceUV
+from baker.encode import EncodedPage
+from baker.errors import OutputError
+from baker.scene import Instance, Material, Primitive, Scene
+from baker.write import WriteOptions, write
+
+import gltf_validator
+
+FLOAT, UBYTE, USHORT, UINT = 5126, 5121, 5123, 5125
+DTYPES = {5120: "<i1", 5121: "<u1", 5122: "<i2", 5123: "<u2", 5125: "<u4", 5126: "<f4"}
+COMPONENTS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
+
+# mesh 0: a quad with normals, UVs, 8-bit vertex colours and one (sparse) morph target
+QUAD_POSITIONS = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32)
+QUAD_NORMALS = np.tile(np.array([0, 0, 1], np.float32), (4, 1))
+QUAD_UV0 = np.array([[0, 1], [1, 1], [1, 0], [0, 0]], np.float32)
+QUAD_COLORS = np.array([[255, 0, 0], [0, 255, 0], [0, 0, 255], [10, 20, 30]], np.uint8)
+QUAD_TRIANGLES = np.array([[0, 1, 2], [0, 2, 3]], np.int64)
+MORPH_INDICES = np.array([1, 2], np.uint16)
+MORPH_VALUES = np.array([[0, 0, 0.5], [0, 0, 0.25]], np.float32)
+QUAD_MORPH = np.zeros((4, 3), np.float32)
+QUAD_MORPH[MORPH_INDICES] = MORPH_VALUES
+# mesh 1: a quad that already has two UV sets
+TWO_UV1 = np.array([[0.1, 0.1], [0.9, 0.1], [0.9, 0.9], [0.1, 0.9]], np.float32)
+# mesh 2: non-indexed triangles, positions only, no material
+BARE_POSITIONS = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]],
+                          np.float32)
+BARE_TRIANGLES = np.arange(6, dtype=np.int64).reshape(2, 3)
+
+
+class _Doc:
+    """A glTF JSON dict and its binary chunk under construction."""
+
+    def __init__(self):
+        self.blob = bytearray()
+        self.json = {"asset": {"version": "2.0", "generator": "test_write",
+                               "extras": {"author": "tests"}},
+                     "bufferViews": [], "accessors": []}
+
+    def view(self, payload: bytes, target=None, stride=None) -> int:
+        self.blob += b"\0" * (-len(self.blob) % 4)
+        view = {"buffer": 0, "byteOffset": len(self.blob), "byteLength": len(payload)}
+        if target:
+            view["target"] = target
+        if stride:
+            view["byteStride"] = stride
+        self.blob += payload
+        self.json["bufferViews"].append(view)
+        return len(self.json["bufferViews"]) - 1
+
+    def accessor(self, values: np.ndarray, ctype: int, kind: str, target=34962, bounds=False,
+                 normalized=False, stride=None) -> int:
+        values = np.asarray(values, DTYPES[ctype]).reshape(len(values), -1)
+        payload = values.tobytes()
+        if stride:
+            padded = np.zeros((len(values), stride), np.uint8)
+            padded[:, :values.shape[1] * values.itemsize] = values.view(np.uint8)
+            payload = padded.tobytes()
+        accessor = {"bufferView": self.view(payload, target, stride), "componentType": ctype,
+                    "count": len(values), "type": kind}
+        if normalized:
+            accessor["normalized"] = True
+        if bounds:
+            accessor["min"] = values.min(0).tolist()
+            accessor["max"] = values.max(0).tolist()
+        self.json["accessors"].append(accessor)
+        return len(self.json["accessors"]) - 1
+
+    def gltf(self, path: Path) -> None:
+        """Write as .gltf with the buffer in ``<stem>.bin`` beside it."""
+        self.json["buffers"] = [{"byteLength": len(self.blob), "uri": path.stem + ".bin"}]
+        path.with_suffix(".bin").write_bytes(bytes(self.blob))
+        path.write_text(json.dumps(self.json))
+
+    def glb(self, path: Path) -> None:
+        self.json["buffers"] = [{"byteLength": len(self.blob)}]
+        text = json.dumps(self.json).encode()
+        text += b" " * (-len(text) % 4)
+        blob = bytes(self.blob) + b"\0" * (-len(self.blob) % 4)
+        body = struct.pack("<II", len(text), 0x4E4F534A) + text
+        body += struct.pack("<II", len(blob), 0x004E4942) + blob
+        path.write_bytes(struct.pack("<III", 0x46546C67, 2, 12 + len(body)) + body)
+
+
+def _input_doc() -> _Doc:
+    doc = _Doc()
+    a = doc.accessor
+    pos = a(QUAD_POSITIONS, FLOAT, "VEC3", bounds=True)
+    nor = a(QUAD_NORMALS, FLOAT, "VEC3")
+    uv0 = a(QUAD_UV0, FLOAT, "VEC2")
+    col = a(QUAD_COLORS, UBYTE, "VEC3", normalized=True, stride=4)
+    idx = a(QUAD_TRIANGLES.ravel(), USHORT, "SCALAR", target=34963)
+    morph = {"bufferView": None, "componentType": FLOAT, "count": 4, "type": "VEC3",
+             "min": QUAD_MORPH.min(0).tolist(), "max": QUAD_MORPH.max(0).tolist(),
+             "sparse": {"count": 2,
+                        "indices": {"bufferView": doc.view(MORPH_INDICES.tobytes()),
+                                    "componentType": USHORT},
+                        "values": {"bufferView": doc.view(MORPH_VALUES.tobytes())}}}
+    del morph["bufferView"]
+    doc.json["accessors"].append(morph)
+    morph = len(doc.json["accessors"]) - 1
+    uv1 = a(TWO_UV1, FLOAT, "VEC2")
+    bare = a(BARE_POSITIONS, FLOAT, "VEC3", bounds=True)
+    doc.json.update({
+        "scene": 0,
+        "scenes": [{"nodes": [0, 1, 2, 3, 4], "name": "level"}],
+        "nodes": [
+            {"mesh": 0, "name": "quad A", "extras": {"tag": "a"}},
+            {"mesh": 0, "name": "quad B", "translation": [2, 0, 0]},
+            {"mesh": 1, "name": "two uv", "translation": [0, 2, 0]},
+            {"mesh": 2, "name": "mirrored", "scale": [-1, 1, 1], "translation": [4, 0, 0]},
+            {"mesh": 0, "name": "quad unbaked", "translation": [0, -2, 0]},
+        ],
+        "meshes": [
+            {"name": "quad", "weights": [0.0], "extras": {"targetNames": ["bulge"]},
+             "primitives": [{"attributes": {"POSITION": pos, "NORMAL": nor, "TEXCOORD_0": uv0,
+                                            "COLOR_0": col},
+                             "indices": idx, "material": 0, "targets": [{"POSITION": morph}]}]},
+            {"name": "two uv",
+             "primitives": [{"attributes": {"POSITION": pos, "TEXCOORD_0": uv0,
+                                            "TEXCOORD_1": uv1},
+                             "indices": idx, "material": 1}]},
+            {"name": "bare", "primitives": [{"attributes": {"POSITION": bare}}]},
+        ],
+        "materials": [
+            {"name": "wall", "pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.7, 0.6, 1]},
+             "extras": {"keep": True}},
+            {"name": "floor", "doubleSided": True},
+        ],
+        "cameras": [{"type": "perspective", "perspective": {"yfov": 0.8, "znear": 0.1}}],
+    })
+    return doc
+
+
+def _input_glb(path: Path) -> None:
+    _input_doc().glb(path)
+
+
+def _material(index, name) -> Material:
+    return Material(index=index, name=name, base_color=np.ones(4), base_color_texture=None,
+                    emissive=np.zeros(3), emissive_texture=None)
+
+
+def _scene(path: Path) -> Scene:
+    """The Scene a loader would make of ``_input_glb``; nodes 0–3 baked, node 4 not."""
+    document = pygltflib.GLTF2.load(str(path))
+    f64 = np.float64
+    primitives = (
+        Primitive(mesh=0, index=0, positions=QUAD_POSITIONS.astype(f64),
+                  normals=QUAD_NORMALS.astype(f64), texcoords=(QUAD_UV0.astype(f64),),
+                  colors=None, triangles=QUAD_TRIANGLES, material=0, has_morph_targets=True),
+        Primitive(mesh=1, index=0, positions=QUAD_POSITIONS.astype(f64), normals=None,
+                  texcoords=(QUAD_UV0.astype(f64), TWO_UV1.astype(f64)), colors=None,
+                  triangles=QUAD_TRIANGLES, material=1),
+        Primitive(mesh=2, index=0, positions=BARE_POSITIONS.astype(f64), normals=None,
+                  texcoords=(), colors=None, triangles=BARE_TRIANGLES, material=2),
+    )
+
+    def moved(x, y, sx=1.0):
+        m = np.eye(4)
+        m[0, 0], m[0, 3], m[1, 3] = sx, x, y
+        return m
+
+    instances = (
+        Instance(node=0, primitive=0, world=moved(0, 0)),
+        Instance(node=1, primitive=0, world=moved(2, 0)),
+        Instance(node=2, primitive=1, world=moved(0, 2)),
+        Instance(node=3, primitive=2, world=moved(4, 0, -1.0)),
+        Instance(node=4, primitive=0, world=moved(0, -2), baked=False, reason="test"),
+    )
+    materials = (_material(0, "wall"), _material(1, "floor"), _material(None, "default"))
+    return Scene(path=path, document=document, primitives=primitives, instances=instances,
+                 materials=materials, images=())
+
+
+def _atlas() -> Atlas:
+    rng = np.random.default_rng(7)
+    return Atlas(width=8, height=8, page_count=2, texel_density=8.0, padding=1, instances=(
+        # quad A: split at the diagonal, one triangle on each page
+        InstanceUV(instance=0, vertices=np.array([0, 1, 2, 0, 2, 3]),
+                   triangles=np.array([[0, 1, 2], [3, 4, 5]]), uv=rng.random((6, 2)),
+                   pages=np.array([0, 1])),
+        # quad B: page 1, its second triangle without area (goes with page 1)
+        InstanceUV(instance=1, vertices=np.array([3, 2, 1, 0]),
+                   triangles=np.array([[3, 2, 1], [3, 1, 0]]), uv=rng.random((4, 2)),
+                   pages=np.array([1, -1])),
+        # the two-UV quad, its corners rotated (same winding)
+        InstanceUV(instance=2, vertices=np.array([0, 1, 2, 3]),
+                   triangles=np.array([[1, 2, 0], [0, 2, 3]]), uv=rng.random((4, 2)),
+                   pages=np.array([0, 0])),
+        # the mirrored bare mesh: the unwrapper saw it with two corners swapped
+        InstanceUV(instance=3, vertices=np.array([0, 1, 2, 3, 4, 5]),
+                   triangles=np.array([[0, 2, 1], [3, 5, 4]]), uv=rng.random((6, 2)),
+                   pages=np.array([0, 0])),
+    ))
+
+
+def _png(value: int, mode: str = "RGB") -> bytes:
+    stream = io.BytesIO()
+    PILImage.new(mode, (8, 8), value if mode == "L" else (value, value // 2, 7)).save(
+        stream, format="PNG")
+    return stream.getvalue()
+
+
+def _pages(occlusion: bool = False) -> list[EncodedPage]:
+    return [EncodedPage(png=_png(200), intensity=2.5,
+                        occlusion_png=_png(180, "L") if occlusion else None),
+            EncodedPage(png=_png(90), intensity=1.0,
+                        occlusion_png=_png(120, "L") if occlusion else None)]
+
+
+def _read(document: pygltflib.GLTF2, blob: bytes, index: int) -> np.ndarray:
+    """An output accessor as stored (dense, strided): (count, components)."""
+    accessor = document.accessors[index]
+    view = document.bufferViews[accessor.bufferView]
+    dtype = np.dtype(DTYPES[accessor.componentType])
+    components = COMPONENTS[accessor.type]
+    stride = view.byteStride or dtype.itemsize * components
+    start = (view.byteOffset or 0) + (accessor.byteOffset or 0)
+    return np.ndarray((accessor.count, components), dtype, buffer=blob, offset=start,
+                      strides=(stride, dtype.itemsize)).copy()
+
+
+def _load(path: Path) -> tuple[pygltflib.GLTF2, bytes]:
+    document = pygltflib.GLTF2.load(str(path))
+    if path.suffix == ".glb":
+        return document, document.binary_blob()
+    return document, (path.parent / unquote(document.buffers[0].uri)).read_bytes()
+
+
+def _assert_valid(path: Path) -> dict:
+    report = gltf_validator.validate(path)
+    assert not gltf_validator.issue_codes(report, 0), gltf_validator.describe(report, 0)
+    assert not gltf_validator.issue_codes(report, 1), gltf_validator.describe(report, 1)
+    return report
+
+
+@pytest.fixture
+def baked(tmp_path):
+    source = tmp_path / "in" / "level.glb"
+    source.parent.mkdir()
+    _input_glb(source)
+    scene = _scene(source)
+    output = tmp_path / "level_baked.glb"
+    info = write(scene, _atlas(), _pages(), output, WriteOptions())
+    return source, output, info
+
+
+def test_input_is_valid(tmp_path):
+    path = tmp_path / "level.glb"
+    _input_glb(path)
+    _assert_valid(path)
+
+
+def test_output_validates_and_records_encoding(baked):
+    _, output, info = baked
+    report = _assert_valid(output)
+    assert report["info"]["maxUVs"] == 3
+    document, _ = _load(output)
+    assert "MOZ_lightmap" in document.extensionsUsed
+    assert "MOZ_lightmap" not in (document.extensionsRequired or [])
+    assert document.asset.extras["author"] == "tests"
+    assert document.asset.extras["baker"]["lightmap_encoding"] == "linear"
+    assert document.asset.extras["baker"]["lightmap_extension"] == "MOZ_lightmap"
+    assert info.lightmap_texcoord == {0: 1, 1: 1, 2: 2, 3: 1}
+    assert any("TEXCOORD_2" in note for note in info.notes)
+    assert len(document.buffers) == 1
+
+
+def test_untouched_parts_survive(baked):
+    _, output, _ = baked
+    document, _ = _load(output)
+    assert document.nodes[0].extras == {"tag": "a"}
+    assert [n.name for n in document.nodes] == ["quad A", "quad B", "two uv", "mirrored",
+                                               "quad unbaked"]
+    assert document.cameras[0].perspective.yfov == 0.8
+    assert document.nodes[4].mesh == 0  # the unbaked node keeps the original mesh
+    original = document.meshes[0].primitives[0]
+    assert original.material == 0 and original.attributes.TEXCOORD_1 is None
+    assert document.materials[0].extras == {"keep": True}
+
+
+def test_each_baked_node_has_its_own_mesh(baked):
+    _, output, _ = baked
+    document, _ = _load(output)
+    meshes = [document.nodes[i].mesh for i in range(4)]
+    assert len(set(meshes)) == 4
+    assert 0 not in meshes  # mesh 0 is shared with the unbaked node: copied
+    assert meshes[2] == 1  # mesh 1 is used by node 2 only: rewritten in place
+    assert document.meshes[meshes[0]].weights == [0.0]
+    assert document.meshes[meshes[0]].extras == {"targetNames": ["bulge"]}
+
+
+def test_split_by_page_and_lightmap_material(baked):
+    _, output, _ = baked
+    document, _ = _load(output)
+    quad_a = document.meshes[document.nodes[0].mesh].primitives
+    quad_b = document.meshes[document.nodes[1].mesh].primitives
+    assert len(quad_a) == 2 and len(quad_b) == 1
+    for primitive, page in zip(quad_a + quad_b, (0, 1, 1)):
+        material = document.materials[primitive.material]
+        lightmap = material.extensions["MOZ_lightmap"]
+        assert material.name == f"wall (lightmap page {page})"
+        assert material.pbrMetallicRoughness.baseColorFactor == [0.8, 0.7, 0.6, 1]
+        assert lightmap["intensity"] == (2.5, 1.0)[page]
+        image = document.images[document.textures[lightmap["index"]].source]
+        assert image.mimeType == "image/png" and image.name == f"lightmap page {page}"
+        assert primitive.mode == 4
+    bare = document.meshes[document.nodes[3].mesh].primitives[0]
+    assert document.materials[bare.material].name == "default (lightmap page 0)"
+
+
+def test_texcoord_names_a_set_the_primitive_has(baked):
+    _, output, _ = baked
+    document, _ = _load(output)
+    for node in document.nodes[:4]:
+        for primitive in document.meshes[node.mesh].primitives:
+            texcoord = document.materials[primitive.material].extensions["MOZ_lightmap"][
+                "texCoord"]
+            assert getattr(primitive.attributes, f"TEXCOORD_{texcoord}") is not None
+
+
+def test_attributes_are_gathered_through_vertices(baked):
+    _, output, _ = baked
+    document, blob = _load(output)
+    atlas = _atlas()
+    for node, unwrap in ((0, atlas.instances[0]), (1, atlas.instances[1])):
+        corners_seen = 0
+        for primitive in document.meshes[document.nodes[node].mesh].primitives:
+            indices = _read(document, blob, primitive.indices)[:, 0].reshape(-1, 3)
+            positions = _read(document, blob, primitive.attributes.POSITION)
+            lightmap_uv = _read(document, blob, primitive.attributes.TEXCOORD_1)
+            # which split vertex each output vertex is: match on the lightmap UVs
+            split = np.array([np.flatnonzero(np.all(unwrap.uv.astype(np.float32) == uv, 1))[0]
+                              for uv in lightmap_uv])
+            original = unwrap.vertices[split]
+            np.testing.assert_array_equal(positions, QUAD_POSITIONS[original])
+            np.testing.assert_array_equal(_read(document, blob, primitive.attributes.NORMAL),
+                                          QUAD_NORMALS[original])
+            np.testing.assert_array_equal(_read(document, blob, primitive.attributes.TEXCOORD_0),
+                                          QUAD_UV0[original])
+            np.testing.assert_array_equal(_read(document, blob, primitive.attributes.COLOR_0),
+                                          QUAD_COLORS[original])
+            morph = _read(document, blob, primitive.targets[0]["POSITION"])
+            np.testing.assert_array_equal(morph, QUAD_MORPH[original])
+            assert document.accessors[primitive.attributes.COLOR_0].normalized
+            # the triangles are the file's triangles, corners in the file's order
+            for triangle in original[indices]:
+                assert any(np.array_equal(np.roll(triangle, r), t)
+                           for t in QUAD_TRIANGLES for r in range(3))
+            corners_seen += indices.size
+        assert corners_seen == 6  # no triangle lost, page -1 included
+
+
+def test_mirrored_instance_keeps_file_winding(baked):
+    _, output, _ = baked
+    document, blob = _load(output)
+    primitive = document.meshes[document.nodes[3].mesh].primitives[0]
+    indices = _read(document, blob, primitive.indices)[:, 0].reshape(-1, 3)
+    positions = _read(document, blob, primitive.attributes.POSITION)
+    np.testing.assert_array_equal(positions[indices], BARE_POSITIONS[BARE_TRIANGLES])
+    # no TEXCOORD_0 in the input: the lightmap set is written as TEXCOORD_0 and TEXCOORD_1
+    assert primitive.attributes.TEXCOORD_0 is not None
+    assert primitive.attributes.TEXCOORD_1 is not None
+
+
+def test_existing_texcoord_1_is_kept_and_lightmap_goes_to_2(baked):
+    _, output, _ = baked
+    document, blob = _load(output)
+    primitive = document.meshes[document.nodes[2].mesh].primitives[0]
+    material = document.materials[primitive.material]
+    assert material.extensions["MOZ_lightmap"]["texCoord"] == 2
+    assert material.doubleSided
+    positions = _read(document, blob, primitive.attributes.POSITION)
+    order = [np.flatnonzero(np.all(QUAD_POSITIONS == p, 1))[0] for p in positions]
+    uv1 = _read(document, blob, primitive.attributes.TEXCOORD_1)
+    assert uv1.tobytes() == TWO_UV1[order].tobytes()
+    lightmap = _read(document, blob, primitive.attributes.TEXCOORD_2)
+    np.testing.assert_array_equal(lightmap, _atlas().instances[2].uv[order].astype(np.float32))
+
+
+def test_occlusion_also_and_only(tmp_path):
+    source = tmp_path / "level.glb"
+    _input_glb(source)
+    scene = _scene(source)
+    for mode in ("also", "only"):
+        output = tmp_path / f"level_{mode}.glb"
+        write(scene, _atlas(), _pages(occlusion=True), output, WriteOptions(occlusion=mode))
+        _assert_valid(output)
+        document, _ = _load(output)
+        for node in document.nodes[:4]:
+            for primitive in document.meshes[node.mesh].primitives:
+                material = document.materials[primitive.material]
+                occlusion = material.occlusionTexture
+                assert getattr(primitive.attributes, f"TEXCOORD_{occlusion.texCoord}") is not None
+                assert ("MOZ_lightmap" in material.extensions) == (mode == "also")
+        assert ("MOZ_lightmap" in (document.extensionsUsed or [])) == (mode == "also")
+
+
+def test_gltf_output_writes_bin_and_round_trips(tmp_path, baked):
+    source, glb_output, _ = baked
+    scene = _scene(source)
+    output = tmp_path / "out" / "level baked.gltf"
+    output.parent.mkdir()
+    write(scene, _atlas(), _pages(), output, WriteOptions(encoding="srgb"))
+    assert (output.parent / "level baked.bin").is_file()
+    assert sorted(p.name for p in output.parent.iterdir()) == ["level baked.bin",
+                                                              "level baked.gltf"]
+    _assert_valid(output)
+    document, blob = _load(output)
+    assert document.asset.extras["baker"]["lightmap_encoding"] == "srgb"
+    glb_document, glb_blob = _load(glb_output)
+    assert len(document.accessors) == len(glb_document.accessors)
+    for i in range(len(document.accessors)):
+        if document.accessors[i].bufferView is None:
+            continue  # the input's sparse morph target, kept as it was
+        np.testing.assert_array_equal(_read(document, blob, i), _read(glb_document, glb_blob, i))
+
+
+def test_gltf_output_copies_referenced_images(tmp_path):
+    source_dir = tmp_path / "src"
+    (source_dir / "textures").mkdir(parents=True)
+    (source_dir / "textures" / "brick.png").write_bytes(_png(128))
+    doc = _input_doc()
+    doc.json["images"] = [{"uri": "textures/brick.png"}]
+    doc.json["textures"] = [{"source": 0}]
+    doc.json["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = {"index": 0}
+    source = source_dir / "level.gltf"
+    doc.gltf(source)
+    _assert_valid(source)
+    scene = _scene(source)
+    output = tmp_path / "out" / "level.gltf"
+    output.parent.mkdir()
+    write(scene, _atlas(), _pages(), output, WriteOptions())
+    assert (output.parent / "textures" / "brick.png").read_bytes() == _png(128)
+    _assert_valid(output)
+
+
+def test_missing_folder_raises_and_writes_nothing(tmp_path, baked):
+    source, _, _ = baked
+    output = tmp_path / "nowhere" / "level.glb"
+    with pytest.raises(OutputError) as raised:
+        write(_scene(source), _atlas(), _pages(), output, WriteOptions())
+    assert str(output.parent) in str(raised.value)
+    assert raised.value.fix
+    assert not output.parent.exists()
+
+
+def test_failure_midway_leaves_existing_output_intact(tmp_path, baked, monkeypatch):
+    source, _, _ = baked
+    output = tmp_path / "level.gltf"
+    bin_path = tmp_path / "level.bin"
+    output.write_text("old gltf")
+    bin_path.write_bytes(b"old bin")
+    before = set(tmp_path.iterdir())
+
+    def failing_replace(src, dst):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(write_module.os, "replace", failing_replace)
+    with pytest.raises(OutputError):
+        write(_scene(source), _atlas(), _pages(), output, WriteOptions())
+    assert output.read_text() == "old gltf"
+    assert bin_path.read_bytes() == b"old bin"
+    assert set(tmp_path.iterdir()) == before  # no temporary left behind
+
+
+def test_existing_output_is_replaced(tmp_path, baked):
+    source, _, _ = baked
+    output = tmp_path / "level.glb"
+    output.write_bytes(b"old")
+    write(_scene(source), _atlas(), _pages(), output, WriteOptions())
+    _assert_valid(output)
+    assert not [p for p in tmp_path.iterdir() if p.name.endswith(".tmp")]
+
+
+@pytest.mark.skipif(os.name != "posix" or os.geteuid() == 0, reason="root ignores permissions")
+def test_unwritable_folder_raises_output_error(tmp_path, baked):
+    source, _, _ = baked
+    folder = tmp_path / "locked"
+    folder.mkdir()
+    folder.chmod(0o500)
+    try:
+        with pytest.raises(OutputError) as raised:
+            write(_scene(source), _atlas(), _pages(), folder / "level.glb", WriteOptions())
+        assert "permission" in str(raised.value)
+    finally:
+        folder.chmod(0o700)
+
+
+def test_permission_error_becomes_output_error(tmp_path, baked, monkeypatch):
+    source, _, _ = baked
+    output = tmp_path / "level.glb"
+
+    def refused(*args, **kwargs):
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setattr(write_module.os, "open", refused)
+    with pytest.raises(OutputError) as raised:
+        write(_scene(source), _atlas(), _pages(), output, WriteOptions())
+    assert "permission" in str(raised.value) and str(output.parent) in raised.value.fix
+    assert not output.exists()
