@@ -1,0 +1,102 @@
+"""``baker bake``: parse the bake's options into ``baker.Settings``, bake, print the summary."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import baker
+from cli.common import add_debug, positive_float
+
+EPILOG = """examples:
+  baker bake level.glb -o level_baked.glb
+  baker bake level.gltf -o out/level.gltf --rays 256 --texel-density 20 --report report.json
+  baker bake prop.glb -o prop_ao.glb --rho step          (classic ambient occlusion)
+
+The output is the same scene with a second UV set and the lightmaps embedded as PNG, referenced
+by the MOZ_lightmap material extension (three.js, Hubs, Spoke read it).
+"""
+
+
+def add_parser(commands) -> None:
+    """Register ``bake`` and its options on the ``baker`` command's subparsers."""
+    bake = commands.add_parser(
+        "bake", help="bake a glTF scene's lightmaps", epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description="Unwrap every static surface into lightmap pages, compute the light arriving "
+                    "at each texel, and write the scene back with the lightmaps embedded.")
+    bake.set_defaults(run=run)
+    bake.add_argument("scene", type=Path, help="the input scene, .glb or .gltf")
+    bake.add_argument("-o", "--output", type=Path, required=True,
+                      help="where to write the baked scene (.glb or .gltf); never the input")
+    d = baker.Settings()
+    quality = bake.add_argument_group("lightmap layout")
+    quality.add_argument("--texel-density", type=positive_float, metavar="TEXELS_PER_UNIT",
+                         help="lightmap texels per scene unit (metre) along a surface "
+                              "(default: fill about half of one page)")
+    quality.add_argument("--page-size", type=int, default=d.page_size, metavar="TEXELS",
+                         help=f"largest lightmap page side; more pages when one is full (default {d.page_size})")
+    quality.add_argument("--padding", type=int, default=d.padding, metavar="TEXELS",
+                         help=f"free texels around each chart (default {d.padding})")
+    model = bake.add_argument_group("light model")
+    model.add_argument("--rays", type=int, default=d.rays,
+                       help=f"obscurance rays per texel: more is smoother and slower (default {d.rays})")
+    model.add_argument("--d-max", type=positive_float, metavar="DISTANCE",
+                       help="obscurance distance in scene units: farther surfaces count as open "
+                            f"(default {d.d_max_fraction:g} × the baked surfaces' bounds diagonal)")
+    model.add_argument("--rho", choices=baker.settings.RHO_FUNCTIONS, default=d.rho,
+                       help="obscurance function ρ(d): sqrt (the paper's), linear, or step "
+                            "(classic ambient occlusion) (default sqrt)")
+    model.add_argument("--ambient", type=positive_float, metavar="I_A",
+                       help="ambient intensity I_A (default: from the scene's emissive surfaces, "
+                            "or 1 when it has none)")
+    model.add_argument("--seed", type=int, default=d.seed, help="sampler seed (default 0)")
+    out = bake.add_argument_group("output")
+    out.add_argument("--encoding", choices=baker.settings.ENCODINGS, default=d.encoding,
+                     help="how PNG texels map to light: linear (three.js, Hubs) or srgb "
+                          "(the MOZ_lightmap proposal) (default linear)")
+    out.add_argument("--occlusion", choices=baker.settings.OCCLUSION_MODES, default=d.occlusion,
+                     help="also (or only) write the obscurance as the core occlusionTexture, "
+                          "which every viewer reads (default none)")
+    out.add_argument("--lightmaps", type=Path, metavar="DIR",
+                     help="also write each lightmap page as a PNG file in DIR")
+    out.add_argument("--report", type=Path, metavar="FILE",
+                     help="write a JSON report: settings used, plan, stage times, rays/s")
+    running = bake.add_argument_group("running")
+    running.add_argument("--threads", type=int, default=d.threads,
+                         help="ray-casting threads (default: one per core)")
+    running.add_argument("--quiet", action="store_true", help="print nothing but errors")
+    add_debug(running)
+
+
+def settings_from(args: argparse.Namespace) -> baker.Settings:
+    """The ``baker.Settings`` that the command line asks for."""
+    return baker.Settings(
+        texel_density=args.texel_density, page_size=args.page_size, padding=args.padding,
+        rays=args.rays, d_max=args.d_max, rho=args.rho, ambient=args.ambient, seed=args.seed,
+        threads=args.threads, encoding=args.encoding, occlusion=args.occlusion)
+
+
+def print_summary(result: baker.BakeResult) -> None:
+    """What was baked, the plan, notes, rays/s and stage times, on stdout."""
+    s = result.settings
+    times = result.report["stage_seconds"]
+    print(f"baked {result.output}")
+    print(f"  {result.texels:,} texels on {result.pages} page(s) of "
+          f"{result.report['atlas']['width']}×{result.report['atlas']['height']}, "
+          f"texel density {s.texel_density:.4g}/unit, d_max {s.d_max:.4g}, {s.rays} rays/texel")
+    print("\n".join(result.plan.lines()))
+    for note in result.report["notes"]:
+        print(f"  note: {note}")
+    print(f"  {result.rays:,} rays, {result.report['rays_per_second'] / 1e6:.2f} M rays/s; "
+          f"estimated RMSE {result.rmse_estimate:.3g}; {result.seconds:.1f} s "
+          f"({', '.join(f'{k} {v:.1f}' for k, v in times.items())})")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Bake; exit code 0."""
+    result = baker.bake(args.scene, args.output, settings_from(args), report_path=args.report,
+                        lightmaps_dir=args.lightmaps, quiet=args.quiet)
+    if not args.quiet:
+        print_summary(result)
+    return 0
