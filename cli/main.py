@@ -13,9 +13,9 @@ import argparse
 import sys
 
 import baker
-from cli import bake
+from cli import bake, preview
 
-SUBCOMMANDS = (bake,)
+SUBCOMMANDS = (bake, preview)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,0 +1,459 @@
+"""A picture of a baked scene, rendered with Embree: see the lightmaps without another program.
+
+    baker preview level_baked.glb -o preview.png [--lightmap-only | --checker] [--size 800x600]
+
+Every pixel is one primary ray (all pixels in one batch, cast in chunks through
+``trace.Tracer``). Where a ray meets a lightmapped surface the pixel shows what a viewer that
+reads ``MOZ_lightmap`` shows there: diffuse albedo × lightmap + emission, the lightmap sampled
+bilinearly (clamped, as the writer's sampler says) at the hit's lightmap UV — the TEXCOORD set
+named by ``MOZ_lightmap.texCoord`` — decoded by ``asset.extras.baker.lightmap_encoding`` (linear
+when absent) and scaled by ``MOZ_lightmap.intensity``. Modes:
+
+- ``lit`` (default): albedo × lightmap + emission, auto-exposed.
+- ``lightmap``: the lightmap alone (as if every surface were white).
+- ``checker``: a checker of lightmap texels, tinted per page, to judge texel density: squares of
+  one texel, or of 2, 4, 8… texels a side when single texels would be smaller than about four
+  pixels in the picture (``Picture.checker_texels`` says which).
+
+Single-sided materials are culled from behind, as glTF viewers do, so the default view from
+outside a closed room looks in. Surfaces without a lightmap (unlit, skinned, GPU-instanced) are
+drawn flat: unlit ones in their base colour, the others albedo × |cos| to the eye × the mean
+lightmap level, so they read as "not baked" rather than as black.
+
+The view is the scene's first camera node (perspective or orthographic), else a default that
+frames the bounds of every triangle from a three-quarter angle above (+x, +y, +z side).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .encode import linear_to_srgb, png_bytes
+from .errors import InputError, OutputError, SettingsError
+from .geometry import World, build_world
+from .load import _Context, _decode_image, load, resolve_buffers, trs_matrices
+from .scene import Scene
+from .surface import LUMINANCE, SRGB_TO_LINEAR, albedo, emission
+from .trace import Tracer
+
+MODES = ("lit", "lightmap", "checker")
+_RAYS_PER_CHUNK = 1 << 16
+_MAX_CULLED_LAYERS = 16  # back faces a primary ray may pass through before it gives up
+_BACKGROUND = np.array([0.02, 0.02, 0.025])  # linear RGB behind the scene
+_UNBAKED_CHECKER = np.array([1.0, 0.0, 1.0])  # magenta: no lightmap here
+_DEFAULT_YFOV = np.radians(50.0)
+_DEFAULT_FROM = np.array([0.6, 0.55, 1.0])  # direction from the scene's centre to the eye
+_WHITE = 0.85  # auto exposure maps the lightmapped pixels' 99th luminance percentile here
+
+
+@dataclass(frozen=True)
+class View:
+    """A pinhole (or orthographic) camera in world space.
+
+    origin: (3,) eye position. axes: (3, 3) rows right, up, backward (the camera looks along
+    −backward, glTF's camera convention). yfov: vertical field of view in radians for a
+    perspective camera, None for orthographic; ymag: half the orthographic view's height (world
+    units). aspect: width / height the camera asks for, None when it leaves it to the picture.
+    """
+
+    origin: np.ndarray
+    axes: np.ndarray
+    yfov: float | None
+    ymag: float = 1.0
+    aspect: float | None = None
+
+
+@dataclass(frozen=True)
+class SceneLightmaps:
+    """Every world triangle's lightmap, decoded to linear light.
+
+    pages: list of (h, w, 3) float64 linear pages, intensity already applied. page: (T,) int64
+    index into ``pages`` per world triangle, −1 where the triangle has no lightmap. uv: (T, 3, 2)
+    float64 lightmap UV of each triangle's corners, in ``World.triangles`` corner order.
+    encoding: the encoding the pages were decoded with.
+    """
+
+    pages: list[np.ndarray]
+    page: np.ndarray
+    uv: np.ndarray
+    encoding: str
+
+
+@dataclass(frozen=True)
+class Picture:
+    """A rendered preview.
+
+    rgb: (H, W, 3) uint8 sRGB, what the PNG holds. radiance: (H, W, 3) float64 linear value of
+    each pixel before exposure (lightmap value × albedo + emission in ``lit`` mode, lightmap in
+    ``lightmap`` mode, checker shade in ``checker`` mode). triangle: (H, W) int64 world triangle
+    seen at the pixel, −1 for the background. lightmapped: (H, W) bool, pixels showing a
+    lightmapped surface. exposure: the factor applied before the sRGB curve.
+    """
+
+    rgb: np.ndarray
+    radiance: np.ndarray
+    triangle: np.ndarray
+    lightmapped: np.ndarray
+    exposure: float
+    position: np.ndarray
+    checker_texels: int = 1
+
+
+# --------------------------------------------------------------------------------------------
+# cameras
+
+
+def _node_world(document, index: int) -> np.ndarray:
+    """(4, 4) world matrix of node ``index``: the product of its ancestors' local matrices."""
+    parent = {c: p for p, node in enumerate(document.nodes) for c in node.children or []}
+    matrix = np.eye(4)
+    seen = set()
+    while index is not None and index not in seen:
+        seen.add(index)
+        node = document.nodes[index]
+        if node.matrix is not None:
+            local = np.asarray(node.matrix, np.float64).reshape(4, 4).T
+        else:
+            t = np.asarray(node.translation if node.translation is not None else [0, 0, 0], float)
+            r = np.asarray(node.rotation if node.rotation is not None else [0, 0, 0, 1], float)
+            s = np.asarray(node.scale if node.scale is not None else [1, 1, 1], float)
+            local = trs_matrices(t[None], r[None], s[None])[0]
+        matrix = local @ matrix
+        index = parent.get(index)
+    return matrix
+
+
+def _orthonormal(axes: np.ndarray) -> np.ndarray | None:
+    """Rows right, up, backward made orthonormal (scale and shear removed); None if degenerate."""
+    back = axes[2] / max(np.linalg.norm(axes[2]), 1e-300)
+    right = np.cross(axes[1], back)
+    if np.linalg.norm(right) < 1e-12 or not np.all(np.isfinite(right)):
+        return None
+    right /= np.linalg.norm(right)
+    return np.stack([right, np.cross(back, right), back])
+
+
+def scene_camera(scene: Scene) -> View | None:
+    """The view of the first node (in node order) that has a camera, or None."""
+    document = scene.document
+    for index, node in enumerate(document.nodes or []):
+        if node.camera is None or not 0 <= node.camera < len(document.cameras or []):
+            continue
+        camera = document.cameras[node.camera]
+        world = _node_world(document, index)
+        axes = _orthonormal(world[:3, :3].T.copy())
+        if axes is None:
+            continue
+        origin = world[:3, 3].copy()
+        if camera.type == "orthographic" and camera.orthographic is not None:
+            o = camera.orthographic
+            aspect = float(o.xmag) / float(o.ymag) if o.xmag and o.ymag else None
+            return View(origin, axes, None, float(abs(o.ymag or 1.0)), aspect)
+        if camera.perspective is not None:
+            p = camera.perspective
+            yfov = float(p.yfov) if p.yfov and 0 < p.yfov < np.pi else _DEFAULT_YFOV
+            aspect = float(p.aspectRatio) if p.aspectRatio else None
+            return View(origin, axes, yfov, 1.0, aspect)
+    return None
+
+
+def default_view(world: World) -> View:
+    """A perspective view framing every triangle's bounds from the (+x, +y, +z) side, above.
+
+    The eye looks at the bounds' centre from direction (0.6, 0.55, 1.0), far enough that the
+    bounding sphere fits in a 50° vertical field of view.
+    """
+    points = world.positions[world.triangles.reshape(-1)] if len(world.triangles) else np.zeros((1, 3))
+    lo, hi = points.min(0), points.max(0)
+    centre, radius = (lo + hi) / 2, max(np.linalg.norm(hi - lo) / 2, 1e-6)
+    back = _DEFAULT_FROM / np.linalg.norm(_DEFAULT_FROM)
+    origin = centre + back * radius / np.sin(_DEFAULT_YFOV / 2) * 1.02
+    axes = _orthonormal(np.stack([np.zeros(3), np.array([0.0, 1.0, 0.0]), back]))
+    return View(origin, axes, _DEFAULT_YFOV)
+
+
+def primary_rays(view: View, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+    """Origins and unit directions (H·W, 3) of the pixel centres' rays, row-major from the top."""
+    aspect = width / height
+    py = 1.0 - 2.0 * (np.arange(height) + 0.5) / height
+    px = 2.0 * (np.arange(width) + 0.5) / width - 1.0
+    gx, gy = np.meshgrid(px, py)
+    gx, gy = gx.reshape(-1), gy.reshape(-1)
+    right, up, back = view.axes
+    if view.yfov is None:
+        origins = (view.origin + (gx * view.ymag * aspect)[:, None] * right
+                   + (gy * view.ymag)[:, None] * up)
+        directions = np.broadcast_to(-back, origins.shape).copy()
+        return origins, directions
+    t = np.tan(view.yfov / 2)
+    directions = -back + (gx * t * aspect)[:, None] * right + (gy * t)[:, None] * up
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    return np.broadcast_to(view.origin, directions.shape).copy(), directions
+
+
+# --------------------------------------------------------------------------------------------
+# lightmaps
+
+
+def read_lightmaps(scene: Scene, world: World) -> SceneLightmaps:
+    """Decode every MOZ_lightmap page the scene's materials use, and each triangle's lightmap UVs.
+
+    Raises InputError when no material has a MOZ_lightmap and ``asset.extras.baker`` is absent
+    (the file was not baked); a file baker wrote in which nothing got a lightmap (e.g. only
+    GPU-instanced meshes) has no pages, and renders flat.
+    """
+    document = scene.document
+    extras = (document.asset.extras or {}) if document.asset is not None else {}
+    encoding = ((extras.get("baker") or {}) if isinstance(extras, dict) else {}).get(
+        "lightmap_encoding") or "linear"
+    ctx = _Context(document, resolve_buffers(document, scene.path), str(scene.path),
+                   Path(scene.path).parent)
+    pages: list[np.ndarray] = []
+    page_of_key: dict[tuple[int, float], int] = {}
+    count = len(world.triangles)
+    tri_page = np.full(count, -1, np.int64)
+    tri_uv = np.zeros((count, 3, 2))
+    for i, inst in enumerate(scene.instances):
+        prim = scene.primitives[inst.primitive]
+        gltf_material = scene.materials[prim.material].index
+        if gltf_material is None:
+            continue
+        ext = (document.materials[gltf_material].extensions or {}).get("MOZ_lightmap")
+        if not isinstance(ext, dict) or ext.get("index") is None:
+            continue
+        texcoord = int(ext.get("texCoord", 0))
+        if texcoord >= len(prim.texcoords):
+            continue
+        intensity = float(ext.get("intensity", 1.0))
+        source = document.textures[ext["index"]].source
+        key = (source, intensity)
+        if key not in page_of_key:
+            texels = _decode_image(ctx, source)[..., :3]
+            decoded = SRGB_TO_LINEAR[texels] if encoding == "srgb" else texels / 255.0
+            pages.append(decoded * intensity)
+            page_of_key[key] = len(pages) - 1
+        tris = world.instance_triangles(i)
+        local = world.triangles[tris] - world.vertex_start[i]
+        tri_page[tris] = page_of_key[key]
+        tri_uv[tris] = prim.texcoords[texcoord][local]
+    baked_by_us = isinstance(extras, dict) and isinstance(extras.get("baker"), dict)
+    if not pages and not baked_by_us:
+        raise InputError("the scene has no lightmap: no material has a MOZ_lightmap extension",
+                         file=str(scene.path),
+                         fix="bake it first: baker bake SCENE -o SCENE_baked.glb, then preview "
+                             "the baked file")
+    return SceneLightmaps(pages=pages, page=tri_page, uv=tri_uv, encoding=encoding)
+
+
+def sample_bilinear(page: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Bilinear, clamp-to-edge lookup of a (h, w, C) image at glTF UVs (k, 2) → (k, C).
+
+    UV (0, 0) is the image's top-left corner; texel centres sit at half-integers, as GPUs do.
+    """
+    h, w = page.shape[:2]
+    x = uv[:, 0] * w - 0.5
+    y = uv[:, 1] * h - 0.5
+    x0, y0 = np.floor(x), np.floor(y)
+    fx, fy = (x - x0)[:, None], (y - y0)[:, None]
+    x0, y0 = x0.astype(np.int64), y0.astype(np.int64)
+    xa, xb = np.clip(x0, 0, w - 1), np.clip(x0 + 1, 0, w - 1)
+    ya, yb = np.clip(y0, 0, h - 1), np.clip(y0 + 1, 0, h - 1)
+    top = page[ya, xa] * (1 - fx) + page[ya, xb] * fx
+    bottom = page[yb, xa] * (1 - fx) + page[yb, xb] * fx
+    return top * (1 - fy) + bottom * fy
+
+
+# --------------------------------------------------------------------------------------------
+# rendering
+
+
+def _first_front_hits(scene: Scene, world: World, tracer: Tracer, origins: np.ndarray,
+                      directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Nearest hit (triangle (n,), barycentric (n, 3)) of each ray, passing through the back faces
+    of single-sided materials; triangle −1 where the ray leaves the scene."""
+    single = ~np.array([m.double_sided for m in scene.materials], bool)[world.tri_material]
+    normals = world.geometric_normals()
+    points = world.positions[world.triangles.reshape(-1)] if len(world.triangles) else np.zeros((1, 3))
+    scale = float(np.abs(points - world.center).max(initial=1.0))
+    step = 1e-6 * scale  # past a culled face: above float32 spacing at the scene's extent
+    triangle = np.full(len(origins), -1, np.int64)
+    bary = np.zeros((len(origins), 3))
+    active = np.arange(len(origins))
+    start = origins.copy()
+    for _ in range(_MAX_CULLED_LAYERS):
+        if not len(active):
+            break
+        hits = tracer.cast(start[active], directions[active], np.inf)
+        hit = hits.triangle >= 0
+        tri = np.where(hit, hits.triangle, 0)
+        facing = np.einsum("ij,ij->i", normals[tri], directions[active])
+        culled = hit & single[tri] & (facing > 0)
+        done = hit & ~culled
+        triangle[active[done]] = hits.triangle[done]
+        bary[active[done]] = hits.barycentric()[done]
+        again = active[culled]
+        start[again] += directions[again] * (hits.distance[culled] + step)[:, None]
+        active = again
+    return triangle, bary
+
+
+def render(scene: Scene, mode: str = "lit", size: tuple[int, int] | None = None,
+           exposure: float | None = None, view: View | None = None) -> Picture:
+    """Render ``scene`` (a baked glTF, loaded) into a Picture.
+
+    mode: one of MODES. size: (width, height) pixels; None takes 640 wide and the camera's
+    aspect ratio (480 high without one). exposure: factor on linear values before the sRGB curve;
+    None picks one so the 99th percentile of the lightmapped pixels' luminance maps to 0.85 (lit
+    and lightmap modes; checker shades are used as they are). view: None uses the scene's
+    camera or the default view.
+    """
+    if mode not in MODES:
+        raise SettingsError(f"preview mode must be one of {', '.join(MODES)}, not {mode!r}",
+                            fix="use lit, lightmap or checker")
+    if exposure is not None and not (np.isfinite(exposure) and exposure > 0):
+        raise SettingsError(f"exposure must be a finite number above 0, not {exposure}",
+                            fix="give --exposure a positive factor, or leave it out (automatic)")
+    world = build_world(scene)
+    lightmaps = read_lightmaps(scene, world)
+    view = view or scene_camera(scene) or default_view(world)
+    if size is None:
+        aspect = view.aspect or 4 / 3
+        size = (640, max(1, int(round(640 / aspect))))
+    width, height = size
+    origins, directions = primary_rays(view, width, height)
+    tracer = Tracer(world)
+    n = len(origins)
+    triangle = np.full(n, -1, np.int64)
+    bary = np.zeros((n, 3))
+    for start in range(0, n, _RAYS_PER_CHUNK):
+        rows = slice(start, min(start + _RAYS_PER_CHUNK, n))
+        triangle[rows], bary[rows] = _first_front_hits(scene, world, tracer, origins[rows],
+                                                       directions[rows])
+    cell = _checker_cell(lightmaps, triangle, bary, width, height) if mode == "checker" else 1
+    radiance, lightmapped = _shade(scene, world, lightmaps, mode, triangle, bary, directions, cell)
+    if exposure is None:
+        exposure = 1.0
+        if mode != "checker" and lightmapped.any():
+            level = np.percentile(radiance[lightmapped] @ LUMINANCE, 99)
+            exposure = _WHITE / level if level > 0 else 1.0
+    shown = np.where((triangle >= 0)[:, None], radiance * exposure, _BACKGROUND)
+    rgb = np.round(linear_to_srgb(shown) * 255).astype(np.uint8)
+    return Picture(rgb=rgb.reshape(height, width, 3), radiance=radiance.reshape(height, width, 3),
+                   triangle=triangle.reshape(height, width),
+                   lightmapped=lightmapped.reshape(height, width), exposure=float(exposure),
+                   position=_points(world, triangle, bary).reshape(height, width, 3),
+                   checker_texels=cell)
+
+
+def _points(world: World, triangle: np.ndarray, bary: np.ndarray) -> np.ndarray:
+    """World points (n, 3) at barycentric ``bary`` (n, 3) of ``triangle`` (n,); NaN where −1."""
+    if not len(world.triangles):
+        return np.full((len(triangle), 3), np.nan)
+    corners = world.positions[world.triangles[np.maximum(triangle, 0)]]
+    points = np.einsum("nc,ncj->nj", bary, corners)
+    points[triangle < 0] = np.nan
+    return points
+
+
+def _lightmap_texel_coords(lightmaps: SceneLightmaps, tris: np.ndarray,
+                           bary: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Lightmap page (k,) and position in texels (k, 2) of barycentric points of triangles."""
+    page = lightmaps.page[tris]
+    uv = np.einsum("kc,kcj->kj", bary, lightmaps.uv[tris])
+    shape = np.array([p.shape[1::-1] for p in lightmaps.pages] or [[1, 1]], np.float64)
+    return page, uv * shape[np.maximum(page, 0)]
+
+
+def _checker_cell(lightmaps: SceneLightmaps, triangle: np.ndarray, bary: np.ndarray,
+                  width: int, height: int) -> int:
+    """Texels per checker square side: the smallest power of two whose squares are at least
+    about four pixels wide, from the median texel step between neighbouring pixels that see the
+    same lightmapped triangle."""
+    tri = triangle.reshape(height, width)
+    same = (tri[:, 1:] == tri[:, :-1]) & (tri[:, 1:] >= 0)
+    if not same.any():
+        return 1
+    left = np.flatnonzero(np.pad(same, ((0, 0), (0, 1))).reshape(-1))
+    page, texel = _lightmap_texel_coords(lightmaps, triangle[left], bary[left])
+    _, beside = _lightmap_texel_coords(lightmaps, triangle[left + 1], bary[left + 1])
+    steps = np.linalg.norm(beside - texel, axis=1)[page >= 0]
+    if not len(steps):
+        return 1
+    per_pixel = float(np.median(steps))
+    return int(2 ** max(0, int(np.ceil(np.log2(max(4.0 * per_pixel, 1.0))))))
+
+
+def _shade(scene: Scene, world: World, lightmaps: SceneLightmaps, mode: str, triangle: np.ndarray,
+           bary: np.ndarray, directions: np.ndarray,
+           cell: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """Linear pixel values (n, 3) and which pixels show a lightmap (n,), for ``mode``;
+    ``cell`` is the checker square's side in texels."""
+    n = len(triangle)
+    radiance = np.zeros((n, 3))
+    hit = np.flatnonzero(triangle >= 0)
+    tris, b = triangle[hit], bary[hit]
+    page, texel = _lightmap_texel_coords(lightmaps, tris, b)
+    baked = page >= 0
+    light = np.zeros((len(hit), 3))
+    for p in np.unique(page[baked]):
+        on = page == p
+        if mode == "checker":
+            parity = np.floor(texel[on] / cell).sum(axis=1) % 2
+            tint = 0.7 + 0.3 * np.cos(2.4 * p + np.array([3.0, 5.1, 1.0]))
+            light[on] = (0.25 + 0.6 * parity)[:, None] * tint
+        else:
+            shape = np.array(lightmaps.pages[p].shape[1::-1], np.float64)
+            light[on] = sample_bilinear(lightmaps.pages[p], texel[on] / shape)
+    cosine = np.abs(np.einsum("kj,kj->k", world.geometric_normals(tris), directions[hit]))
+    level = (light[baked] @ LUMINANCE).mean() if baked.any() else 1.0
+    if mode == "checker":
+        light[~baked] = _UNBAKED_CHECKER
+        radiance[hit] = light
+        return radiance, np.isin(np.arange(n), hit[baked])
+    unlit = np.array([m.unlit for m in scene.materials], bool)[world.tri_material[tris]]
+    flat = np.where(unlit, 1.0, cosine * level)[:, None]
+    if mode == "lightmap":
+        radiance[hit] = np.where(baked[:, None], light, flat * 0.5)
+    else:
+        colour = albedo(scene, world, tris, b)
+        lit = np.where(baked[:, None], light, flat)
+        radiance[hit] = colour * lit + emission(scene, world, tris, b)
+    lightmapped = np.zeros(n, bool)
+    lightmapped[hit[baked]] = True
+    return radiance, lightmapped
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    """'800x600' → (800, 600); ValueError unless both are whole numbers from 1 to 16384."""
+    parts = text.lower().replace("×", "x").split("x")
+    if len(parts) != 2 or not all(p.strip().isdigit() for p in parts):
+        raise ValueError(f"size must be WIDTHxHEIGHT, e.g. 800x600, not {text!r}")
+    width, height = (int(p) for p in parts)
+    if not (1 <= width <= 16384 and 1 <= height <= 16384):
+        raise ValueError(f"size {width}x{height} must be 1 to 16384 pixels a side")
+    return width, height
+
+
+def preview(input: str | os.PathLike, output: str | os.PathLike, mode: str = "lit",
+            size: tuple[int, int] | None = None, exposure: float | None = None) -> Picture:
+    """Load the baked glTF at ``input``, render it (see ``render``) and write ``output`` (.png).
+
+    The PNG is written atomically; nothing is written when anything fails.
+    """
+    from .bake import write_atomically  # late: bake imports the whole pipeline
+
+    output = Path(output)
+    if output.suffix.lower() != ".png":
+        raise OutputError(f"the preview is a PNG picture; the output ends in "
+                          f"{output.suffix or '(nothing)'}", file=str(output),
+                          fix="name the output e.g. preview.png")
+    if not output.parent.exists():
+        raise OutputError("the output's folder does not exist", file=str(output),
+                          fix=f"create {output.parent} first, or choose another -o path")
+    picture = render(load(input), mode, size, exposure)
+    write_atomically(output, png_bytes(picture.rgb))
+    return picture

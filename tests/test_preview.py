@@ -1,0 +1,145 @@
+"""``baker preview``: the picture of a baked scene (albedo × lightmap, one Embree ray per pixel)."""
+
+import io
+
+import numpy as np
+import pygltflib
+import pytest
+from PIL import Image
+
+import baker
+from assets.gltf_builder import quat_axis_angle
+from assets.make_scenes import cornell_box
+from baker.geometry import build_world
+from baker.load import load
+from baker.preview import View, primary_rays, render
+from cli.main import main
+from tests.bakehelp import REAL_SCENES, saved
+
+SIZE = (200, 150)
+
+
+@pytest.fixture(scope="module")
+def cornell(tmp_path_factory):
+    """The Cornell box baked once (small and fast), its loaded output and its node indices."""
+    folder = tmp_path_factory.mktemp("cornell")
+    builder = cornell_box()
+    source = saved(builder, folder, "in.glb")
+    out = folder / "out.glb"
+    baker.bake(source, out, baker.Settings(texel_density=10.0, rays=32))
+    scene = load(out)
+    world = build_world(scene)
+    node_of_triangle = np.array([inst.node for inst in scene.instances])[world.tri_instance]
+    return dict(source=source, out=out, scene=scene, nodes=builder.info["nodes"],
+                node_of_triangle=node_of_triangle)
+
+
+def _nodes_seen(cornell, picture):
+    """(H, W) node index seen at each pixel, −1 for the background."""
+    tri = picture.triangle
+    return np.where(tri >= 0, cornell["node_of_triangle"][np.maximum(tri, 0)], -1)
+
+
+def _near(picture, seen, node, centre, radius=0.12):
+    """Pixels seeing ``node`` within ``radius`` of ``centre`` (world)."""
+    distance = np.linalg.norm(picture.position - np.asarray(centre, float), axis=-1)
+    return (seen == node) & (distance < radius)
+
+
+def test_cornell_box_preview_is_albedo_times_lightmap(cornell):
+    picture = render(cornell["scene"], "lit", SIZE)
+    seen = _nodes_seen(cornell, picture)
+    nodes = cornell["nodes"]
+    assert picture.rgb.shape == (150, 200, 3) and picture.rgb.dtype == np.uint8
+    assert picture.rgb.std() > 20  # not flat
+    # Red wall pixels are red (in the stored picture, not only in the float values).
+    red = picture.rgb[seen == nodes["left_wall"]].astype(float)
+    assert len(red) > 1000
+    assert red[:, 0].mean() > 2.0 * red[:, 1].mean() and red[:, 0].mean() > 100
+    # The open floor in front of the blocks is lit more than the floor in the back-right corner.
+    open_floor = _near(picture, seen, nodes["floor"], (-0.3, 0.0, 0.6))
+    corner = _near(picture, seen, nodes["floor"], (0.95, 0.0, -0.95))
+    assert open_floor.sum() > 20 and corner.sum() > 5
+    open_level = picture.radiance[open_floor].mean()
+    corner_level = picture.radiance[corner].mean()
+    assert open_level > 1.8 * corner_level, (open_level, corner_level)
+    # Lightmapped surfaces differ from unlit ones: same white albedo, values vary across the floor.
+    floor = picture.radiance[seen == nodes["floor"]].mean(axis=1)
+    assert floor.std() / floor.mean() > 0.1
+    assert picture.lightmapped[seen >= 0].all()
+
+
+def test_lightmap_only_and_checker_pictures(cornell):
+    lit = render(cornell["scene"], "lit", SIZE)
+    alone = render(cornell["scene"], "lightmap", SIZE)
+    checker = render(cornell["scene"], "checker", SIZE)
+    seen = _nodes_seen(cornell, lit)
+    np.testing.assert_array_equal(alone.triangle, lit.triangle)  # same view
+    red_wall = seen == cornell["nodes"]["left_wall"]
+    # The lightmap alone leaves out the wall's red albedo: only the bleeding stays.
+    lit_red = lit.radiance[red_wall].mean(axis=0)
+    alone_red = alone.radiance[red_wall].mean(axis=0)
+    assert lit_red[0] / lit_red[1] > 5 and alone_red[0] / alone_red[1] < 2
+    difference = np.abs(alone.rgb.astype(int) - checker.rgb.astype(int))[seen >= 0]
+    assert difference.mean() > 20
+    # The checker has two shades (per page tint); squares are at least a texel.
+    shades = np.unique(checker.radiance[seen >= 0].round(6), axis=0)
+    assert len(shades) == 2 and checker.checker_texels >= 1
+
+
+def test_preview_looks_through_the_first_gltf_camera(cornell, tmp_path):
+    doc = pygltflib.GLTF2().load(str(cornell["out"]))
+    doc.cameras.append(pygltflib.Camera(type="perspective", perspective=pygltflib.Perspective(
+        yfov=np.radians(40.0), aspectRatio=2.0, znear=0.01)))
+    # Inside the box, 0.8 m from the red wall, above the tall block, turned +90° about +Y: glTF
+    # cameras look along −Z, so this one faces −X and sees nothing but the red wall.
+    doc.nodes.append(pygltflib.Node(name="eye", camera=len(doc.cameras) - 1,
+                                    translation=[-0.2, 1.5, 0.3],
+                                    rotation=list(quat_axis_angle((0, 1, 0), 90.0))))
+    doc.scenes[0].nodes.append(len(doc.nodes) - 1)
+    with_camera = tmp_path / "camera.glb"
+    doc.save_binary(str(with_camera))
+    picture = render(load(with_camera))
+    assert picture.rgb.shape == (320, 640, 3)  # 640 wide at the camera's aspect ratio
+    seen = _nodes_seen(cornell, picture)
+    assert (seen == cornell["nodes"]["left_wall"]).mean() > 0.99
+
+
+def test_orthographic_rays_are_parallel_and_span_the_view():
+    view = View(origin=np.zeros(3), axes=np.eye(3), yfov=None, ymag=2.0)
+    origins, directions = primary_rays(view, 8, 4)
+    np.testing.assert_allclose(directions, np.tile([0.0, 0.0, -1.0], (32, 1)))
+    assert origins[:, 1].max() == pytest.approx(2.0 * (1 - 1 / 4))  # top pixel centre
+    assert origins[:, 0].max() == pytest.approx(4.0 * (1 - 1 / 8))  # aspect 2: xmag 4
+
+
+def test_command_writes_the_png(cornell, tmp_path, capsys):
+    png = tmp_path / "preview.png"
+    assert main(["preview", str(cornell["out"]), "-o", str(png), "--size", "120x90",
+                 "--checker"]) == 0
+    pixels = np.asarray(Image.open(io.BytesIO(png.read_bytes())))
+    assert pixels.shape == (90, 120, 3) and pixels.std() > 20
+    assert "checker squares of" in capsys.readouterr().out
+
+
+def test_scene_without_lightmaps_is_refused_cleanly(cornell, tmp_path, capsys):
+    png = tmp_path / "preview.png"
+    assert main(["preview", str(cornell["source"]), "-o", str(png)]) == 1
+    err = capsys.readouterr().err
+    assert "no lightmap" in err and "baker bake" in err and "Traceback" not in err
+    assert not png.exists()
+    assert main(["preview", str(cornell["out"]), "-o", str(tmp_path / "p.jpg")]) == 1
+    assert "PNG" in capsys.readouterr().err
+
+
+def test_preview_of_a_shared_scene_with_several_uv_sets(tmp_path):
+    """MultiUVTest keeps its own TEXCOORD_0/1; the lightmap goes to another set, which the
+    preview must read (MOZ_lightmap.texCoord), not TEXCOORD_1."""
+    out = tmp_path / "multi.glb"
+    baker.bake(REAL_SCENES["MultiUVTest"], out, baker.Settings(texel_density=4.0, rays=8))
+    lit = render(load(out), "lit", (96, 64))
+    alone = render(load(out), "lightmap", (96, 64))
+    hit = lit.triangle >= 0
+    assert hit.mean() > 0.1 and lit.lightmapped[hit].all()
+    assert lit.rgb.std() > 10
+    assert np.abs(lit.rgb.astype(int) - alone.rgb.astype(int))[hit].mean() > 10
