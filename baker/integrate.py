@@ -22,12 +22,12 @@ from typing import Callable
 import numpy as np
 
 from .geometry import World
-from .obscurance import RHO, UNIT_REFLECTIVITY
+from .obscurance import RHO_KINDS, UNIT_REFLECTIVITY, rho
 from .rasterise import Texels
-from .sampling import cosine_hemisphere, sample_2d, tangent_frames
+from .sampling import TECHNIQUES, fill_cosine, fill_points, frame, jit
 from .scene import Scene
 from .settings import Resolved
-from .surface import LUMINANCE, albedo
+from .surface import LUMINANCE, albedo, triangle_albedo
 from .trace import Tracer
 
 # Smallest ray offset, in texel sizes and in float32 units of the position's magnitude.
@@ -72,40 +72,125 @@ def ray_offsets(texels: Texels, rows: slice, center: np.ndarray) -> np.ndarray:
     return np.maximum(_OFFSET_TEXELS * texels.size[rows], _OFFSET_ULPS * np.maximum(magnitude, 1e-30))
 
 
-def hemisphere_rays(texels: Texels, rows: slice, rays: int, seed: int,
-                    center: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Cosine-distributed rays about each texel's front-face normal.
+@jit
+def _to_world_kernel(rays, positions, normals, offsets, center, x, y, z, origins, directions):
+    """Turn local cosine directions (x, y, z) (k·rays,) into Embree's float32 rays.
 
-    Returns origins and directions, each (k·rays, 3) float64, texel-major (texel i's rays are
-    rows i·rays … i·rays + rays − 1).
+    Each texel's directions go into the frame of its normal; its origin (lifted off the surface
+    by its offset, recentred on ``center``) is repeated for each of its rays.
     """
-    keys = texels.key[rows]
-    local = cosine_hemisphere(sample_2d(seed, keys[:, None], np.arange(rays)[None, :], 0))
-    normal = texels.geometric_normal[rows]
-    t1, t2 = tangent_frames(normal)
-    directions = (local[..., :1] * t1[:, None] + local[..., 1:2] * t2[:, None]
-                  + local[..., 2:] * normal[:, None]).reshape(-1, 3)
-    lift = ray_offsets(texels, rows, center)[:, None] * normal
-    origins = np.repeat(texels.position[rows] + lift, rays, axis=0)
+    for i in range(len(positions)):
+        nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
+        f = frame(nx, ny, nz)
+        ox = positions[i, 0] - center[0] + offsets[i] * nx
+        oy = positions[i, 1] - center[1] + offsets[i] * ny
+        oz = positions[i, 2] - center[2] + offsets[i] * nz
+        for r in range(i * rays, (i + 1) * rays):
+            origins[r, 0], origins[r, 1], origins[r, 2] = ox, oy, oz
+            directions[r, 0] = x[r] * f[0] + y[r] * f[3] + z[r] * nx
+            directions[r, 1] = x[r] * f[1] + y[r] * f[4] + z[r] * ny
+            directions[r, 2] = x[r] * f[2] + y[r] * f[5] + z[r] * nz
+
+
+def hemisphere_rays(texels: Texels, rows: slice, rays: int, seed: int, center: np.ndarray,
+                    technique: str = "sobol") -> tuple[np.ndarray, np.ndarray]:
+    """Cosine-distributed rays about each texel's front-face normal, ready for Embree.
+
+    Returns origins and directions, each (k·rays, 3) float32 in the tracer's recentred frame
+    (world − ``center``), texel-major (texel i's rays are rows i·rays … i·rays + rays − 1).
+    Computed in float64 (points, then directions, in flat arrays that the compiler vectorises),
+    rounded once at the end.
+    """
+    k = rows.stop - rows.start
+    u, v = np.empty(k * rays), np.empty(k * rays)
+    fill_points(TECHNIQUES.index(technique), np.uint64(seed), texels.key[rows], rays,
+                np.uint64(0), u, v)
+    x, y, z = np.empty(k * rays), np.empty(k * rays), np.empty(k * rays)
+    fill_cosine(u, v, x, y, z)
+    origins = np.empty((k * rays, 3), np.float32)
+    directions = np.empty((k * rays, 3), np.float32)
+    _to_world_kernel(rays, texels.position[rows], texels.geometric_normal[rows],
+                     ray_offsets(texels, rows, center), center, x, y, z, origins, directions)
     return origins, directions
 
 
-def _chunk_terms(scene: Scene, world: World, tracer: Tracer, texels: Texels, rows: slice,
+@jit
+def _accumulate_kernel(rays, primitive, distance, d_max, rho_kind, table, varying, ray_albedo,
+                       luminance, w_hit, escaped, hit_sq):
+    """Per texel: mean of R(Q)·ρ(d) (RGB), the escaped fraction, mean squared luminance.
+
+    primitive/distance: (k·rays,) Embree's primID (−1: no hit within d_max) and tfar.
+    table/varying: ``surface.triangle_albedo``; ray_albedo (k·rays, 3): the albedo at each
+    hit of a ``varying`` triangle (may be (0, 3) when the chunk hits none).
+    """
+    for i in range(len(escaped)):
+        red = green = blue = square = 0.0
+        missed = 0
+        for s in range(rays):
+            r = i * rays + s
+            t = primitive[r]
+            if t < 0:
+                missed += 1
+                continue
+            weight = rho(rho_kind, distance[r] / d_max)
+            if weight == 0.0:
+                continue
+            if varying[t]:
+                cr, cg, cb = ray_albedo[r, 0], ray_albedo[r, 1], ray_albedo[r, 2]
+            else:
+                cr, cg, cb = table[t, 0], table[t, 1], table[t, 2]
+            cr, cg, cb = cr * weight, cg * weight, cb * weight
+            red += cr
+            green += cg
+            blue += cb
+            lum = cr * luminance[0] + cg * luminance[1] + cb * luminance[2]
+            square += lum * lum
+        w_hit[i, 0], w_hit[i, 1], w_hit[i, 2] = red / rays, green / rays, blue / rays
+        escaped[i] = missed / rays
+        hit_sq[i] = square / rays
+
+
+@dataclass(frozen=True)
+class _Surfaces:
+    """What the shading of obscurance hits needs, built once per bake."""
+
+    scene: Scene
+    world: World
+    table: np.ndarray  # (T, 3) constant albedo per world triangle
+    varying: np.ndarray  # (T,) bool: albedo varies over the triangle (texture, vertex colours)
+
+    def varying_albedo(self, primitive: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """(n, 3) albedo at the hits on varying triangles (other rows zero), or (0, 3) if none."""
+        hit = primitive >= 0
+        where = np.flatnonzero(hit)
+        where = where[self.varying[primitive[where]]]
+        if not len(where):
+            return np.zeros((0, 3))
+        out = np.zeros((len(primitive), 3))
+        uu, vv = u[where].astype(np.float64), v[where].astype(np.float64)
+        bary = np.stack([1.0 - uu - vv, uu, vv], axis=1)
+        out[where] = albedo(self.scene, self.world, primitive[where].astype(np.int64), bary)
+        return out
+
+
+def _chunk_terms(surfaces: _Surfaces, tracer: Tracer, texels: Texels, rows: slice,
                  settings: Resolved) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """w_hit (k, 3), escaped (k,), hit_sq (k,) for the texels in ``rows``."""
     n = settings.rays
-    origins, directions = hemisphere_rays(texels, rows, n, settings.seed, tracer.center)
-    hits = tracer.cast(origins, directions, settings.d_max)
-    hit = hits.triangle >= 0
-    value = np.zeros((len(origins), 3))
-    if settings.rho not in UNIT_REFLECTIVITY and hit.any():
-        reflectivity = albedo(scene, world, hits.triangle[hit], hits.barycentric()[hit])
-        rho = RHO[settings.rho](np.clip(hits.distance[hit] / settings.d_max, 0.0, 1.0))
-        value[hit] = reflectivity * rho[:, None]
-    k = len(origins) // n
-    w_hit = value.reshape(k, n, 3).mean(axis=1)
-    escaped = (~hit).reshape(k, n).mean(axis=1)
-    hit_sq = ((value @ LUMINANCE) ** 2).reshape(k, n).mean(axis=1)
+    origins, directions = hemisphere_rays(texels, rows, n, settings.seed, tracer.center,
+                                          settings.sampling)
+    hits = tracer.cast_local(origins, directions, np.full(len(origins), settings.d_max, np.float32))
+    primitive = hits["primID"]
+    kind = RHO_KINDS[settings.rho]
+    if settings.rho in UNIT_REFLECTIVITY or not surfaces.varying.any():
+        ray_albedo = np.zeros((0, 3))
+    else:
+        ray_albedo = surfaces.varying_albedo(primitive, hits["u"], hits["v"])
+    varying = surfaces.varying if len(ray_albedo) else np.zeros_like(surfaces.varying)
+    k = rows.stop - rows.start
+    w_hit, escaped, hit_sq = np.empty((k, 3)), np.empty(k), np.empty(k)
+    _accumulate_kernel(n, primitive, hits["tfar"], np.float32(settings.d_max), kind,
+                       surfaces.table, varying, ray_albedo, LUMINANCE, w_hit, escaped, hit_sq)
     return w_hit, escaped, hit_sq
 
 
@@ -113,6 +198,8 @@ def integrate(scene: Scene, world: World, tracer: Tracer, texels: Texels, settin
               progress: Callable[[int], None] | None = None) -> Terms:
     """Estimate the obscurance terms of every texel, ``settings.rays`` rays each."""
     count = len(texels)
+    table, varying = triangle_albedo(scene, world)
+    surfaces = _Surfaces(scene, world, table, varying)
     w_hit = np.zeros((count, 3))
     escaped = np.zeros(count)
     hit_sq = np.zeros(count)
@@ -121,11 +208,11 @@ def integrate(scene: Scene, world: World, tracer: Tracer, texels: Texels, settin
 
     def work(rows: slice) -> None:
         w_hit[rows], escaped[rows], hit_sq[rows] = _chunk_terms(
-            scene, world, tracer, texels, rows, settings)
+            surfaces, tracer, texels, rows, settings)
         if progress is not None:
             progress(rows.stop - rows.start)
 
-    threads = settings.threads or _cores()
+    threads = settings.threads or cores()
     if threads == 1:
         for rows in chunks:
             work(rows)
@@ -135,6 +222,6 @@ def integrate(scene: Scene, world: World, tracer: Tracer, texels: Texels, settin
     return Terms(w_hit=w_hit, escaped=escaped, hit_sq=hit_sq, rays=count * settings.rays)
 
 
-def _cores() -> int:
+def cores() -> int:
     """Cores this process may run on."""
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)

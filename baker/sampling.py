@@ -3,125 +3,314 @@
 No random state flows between texels, chunks or threads (DESIGN.md §4): the same texel asks for
 the same sample and always gets the same number, as in pbrt-v4's ``StartPixelSample``.
 
-The points are the first two dimensions of the Sobol sequence (a (0, 2)-sequence in base 2),
-Owen-scrambled per texel with the hash of Burley, "Practical Hash-based Owen Scrambling" (JCGT
-2020); the sample index is Owen-scrambled too, so every texel walks its own permutation of a
-Sobol net. Error falls faster than 1/sqrt(N) on smooth integrands, as quasi-Monte Carlo bakers'
-does. Each further 2D ``dimension`` is an independently scrambled copy of the same net.
+Three techniques (``TECHNIQUES``), all pure functions of those four numbers:
 
-All arithmetic is on uint32/uint64 numpy arrays, where overflow wraps as the hashes intend.
+- ``sobol`` (default): the first two dimensions of the Sobol sequence (a (0, 2)-sequence in
+  base 2), Owen-scrambled per texel with the hash of Burley, "Practical Hash-based Owen
+  Scrambling" (JCGT 2020); the sample index is Owen-scrambled too, so every texel walks its own
+  permutation of a Sobol net. Error falls faster than 1/sqrt(N) on smooth integrands.
+- ``stratified``: a jittered ⌊√N⌋² grid (N the texel's sample count), the leftover samples
+  independent.
+- ``random``: independent uniform points (plain Monte Carlo).
+
+Each further 2D ``dimension`` is an independently randomised copy. The per-sample arithmetic is
+compiled with numba (``nogil``, so the integrator's threads run it side by side): the scalar
+functions below are the one implementation, which both the array functions and the integrator's
+fused ray-generation kernel call. uint64/uint32 arithmetic wraps as the hashes intend.
 """
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
+TECHNIQUES = ("sobol", "stratified", "random")
+
+_U64 = np.uint64
 _U32 = np.uint32
+_GOLDEN = _U64(0x9E3779B97F4A7C15)
+_MIX1 = _U64(0xBF58476D1CE4E5B9)
+_MIX2 = _U64(0x94D049BB133111EB)
+_S30, _S27, _S31 = _U64(30), _U64(27), _U64(31)
+_LOW32 = _U64(0xFFFFFFFF)
+_TO_UNIT = 1.0 / 16777216.0  # 2^-24: a 24-bit fixed-point value to [0, 1)
+
+jit = numba.njit(nogil=True, cache=True)
 
 
-def hash_u32(*words: np.ndarray | int) -> np.ndarray:
-    """Mix integer words (arrays broadcast together, values taken mod 2^64) into uint32.
-
-    A splitmix64-style finaliser applied after each word; good avalanche, cheap in numpy.
-    """
-    with np.errstate(over="ignore"):
-        h = np.uint64(0x9E3779B97F4A7C15)
-        for word in words:
-            h = h ^ np.asarray(word).astype(np.uint64)
-            h = (h ^ (h >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
-            h = (h ^ (h >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-            h = h ^ (h >> np.uint64(31))
-        return (h & np.uint64(0xFFFFFFFF)).astype(_U32)
+@jit
+def _mix(h, word):
+    """One splitmix64 finaliser round of ``word`` into the state ``h`` (both uint64)."""
+    h = h ^ word
+    h = (h ^ (h >> _S30)) * _MIX1
+    h = (h ^ (h >> _S27)) * _MIX2
+    return h ^ (h >> _S31)
 
 
-def _reverse_bits(x: np.ndarray) -> np.ndarray:
-    """Reverse the 32 bits of every uint32."""
+@jit
+def hash4(a, b, c, d):
+    """uint32 hash of four integer words (each taken mod 2^64)."""
+    h = _mix(_GOLDEN, _U64(a))
+    h = _mix(h, _U64(b))
+    h = _mix(h, _U64(c))
+    h = _mix(h, _U64(d))
+    return _U32(h & _LOW32)
+
+
+@jit
+def _reverse_bits(x):
+    """Reverse the 32 bits of a uint32."""
     x = ((x >> _U32(1)) & _U32(0x55555555)) | ((x & _U32(0x55555555)) << _U32(1))
     x = ((x >> _U32(2)) & _U32(0x33333333)) | ((x & _U32(0x33333333)) << _U32(2))
     x = ((x >> _U32(4)) & _U32(0x0F0F0F0F)) | ((x & _U32(0x0F0F0F0F)) << _U32(4))
     x = ((x >> _U32(8)) & _U32(0x00FF00FF)) | ((x & _U32(0x00FF00FF)) << _U32(8))
-    return (x >> _U32(16)) | (x << _U32(16))
+    return _U32((x >> _U32(16)) | (x << _U32(16)))
 
 
-def _laine_karras(x: np.ndarray, seed: np.ndarray) -> np.ndarray:
+@jit
+def _laine_karras(x, seed):
     """Burley's improved Laine–Karras permutation: each bit flips depending on lower bits only."""
-    with np.errstate(over="ignore"):
-        x = x + seed
-        x = x ^ (x * _U32(0x6C50B47C))
-        x = x ^ (x * _U32(0xB82F1E52))
-        x = x ^ (x * _U32(0xC7AFE638))
-        x = x ^ (x * _U32(0x8D22F6E6))
+    x = _U32(x + seed)
+    x ^= _U32(x * _U32(0x6C50B47C))
+    x ^= _U32(x * _U32(0xB82F1E52))
+    x ^= _U32(x * _U32(0xC7AFE638))
+    x ^= _U32(x * _U32(0x8D22F6E6))
     return x
 
 
-def owen_scramble(x: np.ndarray, seed: np.ndarray) -> np.ndarray:
-    """Nested uniform (Owen) scrambling of 32-bit fixed-point values ``x`` with ``seed``."""
-    return _reverse_bits(_laine_karras(_reverse_bits(x), seed))
+@jit
+def owen_scramble(x, seed):
+    """Nested uniform (Owen) scrambling of a 32-bit fixed-point value ``x`` with ``seed``."""
+    return _reverse_bits(_laine_karras(_reverse_bits(_U32(x)), _U32(seed)))
 
 
-def _sobol_2d(index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Dimensions 0 and 1 of the Sobol sequence at ``index`` (uint32), as 32-bit fixed point.
+def _sobol_second_table() -> np.ndarray:
+    """(4, 256) uint32: dimension 1 of Sobol for each byte value at each byte position.
 
-    Dimension 0 is the van der Corput sequence (bit reversal); dimension 1 uses the generator
-    matrix of the polynomial x + 1 (direction numbers v_k = v_{k-1} ^ (v_{k-1} >> 1)).
+    The generator matrix of the polynomial x + 1 has direction numbers v_k = v_{k-1} ^
+    (v_{k-1} >> 1), v_0 = 2^31; the point of an index is the XOR of v_k over its set bits, so it
+    is the XOR of one table entry per byte of the index.
     """
-    first = _reverse_bits(index)
-    second = np.zeros_like(index)
-    direction = _U32(1 << 31)
-    for bit in range(32):
-        set_bits = (index >> _U32(bit)) & _U32(1)
-        second ^= set_bits * direction
-        direction = _U32(direction ^ (direction >> _U32(1)))
-    return first, second
+    directions = [1 << 31]
+    for _ in range(31):
+        directions.append(directions[-1] ^ (directions[-1] >> 1))
+    table = np.zeros((4, 256), np.uint32)
+    for position in range(4):
+        for value in range(256):
+            for bit in range(8):
+                if value >> bit & 1:
+                    table[position, value] ^= directions[8 * position + bit]
+    return table
 
 
-def sample_2d(seed: int, keys: np.ndarray, samples: np.ndarray, dimension: int) -> np.ndarray:
-    """Points in [0, 1)² for (texel ``keys``, ``samples``) pairs, broadcast together.
+# Bit-reversed entries: Owen scrambling works on reversed bits, and reversal commutes with XOR.
+_SOBOL_SECOND_REVERSED = np.array(
+    [[int(f"{v:032b}"[::-1], 2) for v in row] for row in _sobol_second_table()], np.uint32)
 
-    keys: uint64 texel keys; samples: sample indices; dimension: which 2D pair of dimensions.
-    Returns (..., 2) float64. A pure function of its arguments.
+
+@jit
+def _sobol_second_reversed(index):
+    """Dimension 1 of the Sobol sequence at ``index``, 32-bit fixed point, bits reversed.
+
+    (Dimension 0 is the van der Corput sequence, ``_reverse_bits(index)``.)
     """
-    keys = np.asarray(keys, np.uint64)
-    samples = np.asarray(samples).astype(_U32)
-    shuffle = hash_u32(seed, keys, dimension, 0)
-    index = owen_scramble(samples, shuffle)
-    x, y = _sobol_2d(index)
-    x = owen_scramble(x, hash_u32(seed, keys, dimension, 1))
-    y = owen_scramble(y, hash_u32(seed, keys, dimension, 2))
-    scale = 1.0 / 4294967296.0
-    # Take the top 24 bits and centre them so that no coordinate is exactly 0 or 1.
-    top = np.float64(256.0)
-    return np.stack([((x >> _U32(8)) + 0.5) * scale * top, ((y >> _U32(8)) + 0.5) * scale * top], axis=-1)
+    table = _SOBOL_SECOND_REVERSED
+    return _U32(table[0, index & _U32(255)] ^ table[1, (index >> _U32(8)) & _U32(255)]
+                ^ table[2, (index >> _U32(16)) & _U32(255)] ^ table[3, index >> _U32(24)])
+
+
+@jit
+def _unit(bits):
+    """The top 24 bits of a uint32 as a float in (0, 1), centred: never exactly 0 or 1."""
+    return ((bits >> _U32(8)) + 0.5) * _TO_UNIT
+
+
+@jit
+def texel_scrambles(seed, key, dimension):
+    """The three per-(texel, dimension) hashes the sample points need (index, x, y scrambles)."""
+    return (hash4(seed, key, dimension, 0), hash4(seed, key, dimension, 1),
+            hash4(seed, key, dimension, 2))
+
+
+@jit
+def _sobol_point(sample, shuffle, sx, sy):
+    """Owen-scrambled Sobol point ``sample`` of a texel with scrambles (shuffle, sx, sy).
+
+    owen_scramble(x, seed) = rev(LK(rev(x), seed)); dimension 0 is rev(index), so its scramble
+    is rev(LK(index)), and dimension 1 is read from the bit-reversed table.
+    """
+    index = owen_scramble(_U32(sample), shuffle)
+    return (_unit(_reverse_bits(_laine_karras(index, sx))),
+            _unit(_reverse_bits(_laine_karras(_sobol_second_reversed(index), sy))))
+
+
+@jit
+def _hashed_point(technique, sample, count, shuffle, sx, sy):
+    """Point ``sample`` of ``count`` for the ``stratified`` (1) or ``random`` (2) technique."""
+    jitter_x = _unit(hash4(sx, sample, shuffle, 3))
+    jitter_y = _unit(hash4(sy, sample, shuffle, 4))
+    side = int(np.sqrt(count))
+    if technique == 1 and sample < side * side:
+        return ((sample % side + jitter_x) / side, (sample // side + jitter_y) / side)
+    return jitter_x, jitter_y
+
+
+@jit
+def point(technique, sample, count, scrambles):
+    """Sample ``sample`` of ``count`` for one texel and dimension: a point (x, y) of (0, 1)².
+
+    technique: 0 sobol, 1 stratified, 2 random (the order of ``TECHNIQUES``); scrambles: that
+    texel's ``texel_scrambles``. ``count`` matters to the stratified grid only.
+    """
+    shuffle, sx, sy = scrambles
+    if technique == 0:
+        return _sobol_point(sample, shuffle, sx, sy)
+    return _hashed_point(technique, sample, count, shuffle, sx, sy)
+
+
+@jit
+def fill_points(technique, seed, keys, count, dimension, u, v):
+    """Samples 0 … count−1 of every texel in ``keys`` (k,) into ``u``, ``v`` (k·count,).
+
+    Texel-major, as ``point`` gives them; the technique is chosen once per texel, outside the
+    inner loop, so that the compiler vectorises the Sobol case.
+    """
+    for i in range(len(keys)):
+        shuffle, sx, sy = texel_scrambles(seed, keys[i], dimension)
+        base = i * count
+        if technique == 0:
+            for s in range(count):
+                u[base + s], v[base + s] = _sobol_point(s, shuffle, sx, sy)
+        else:
+            for s in range(count):
+                u[base + s], v[base + s] = _hashed_point(technique, s, count, shuffle, sx, sy)
+
+
+@jit
+def _points_kernel(technique, seed, keys, samples, counts, dimension, out):
+    for i in range(len(keys)):
+        out[i, 0], out[i, 1] = point(technique, samples[i], counts[i],
+                                     texel_scrambles(seed, keys[i], dimension))
+
+
+def sample_2d(seed: int, keys: np.ndarray, samples: np.ndarray, dimension: int,
+              technique: str = "sobol", count: int | None = None) -> np.ndarray:
+    """Points in (0, 1)² for (texel ``keys``, ``samples``) pairs, broadcast together.
+
+    keys: uint64 texel keys; samples: sample indices; dimension: which 2D pair of dimensions;
+    count: samples per texel (for ``stratified``; default max(samples) + 1). Returns (..., 2)
+    float64. A pure function of its arguments.
+    """
+    keys, samples = np.broadcast_arrays(np.asarray(keys, np.uint64), np.asarray(samples, np.int64))
+    if count is None:
+        count = int(samples.max()) + 1 if samples.size else 1
+    out = np.empty(keys.shape + (2,))
+    _points_kernel(TECHNIQUES.index(technique), _U64(seed), np.array(keys.reshape(-1)),
+                   np.array(samples.reshape(-1)), np.full(keys.size, count, np.int64), _U64(dimension),
+                   out.reshape(-1, 2))
+    return out
+
+
+@jit
+def _sin_cos(t):
+    """(sin t, cos t) for |t| ≤ π/4 by their Taylor polynomials (error below 1e-16).
+
+    Several times faster than libm's sin and cos, which reduce any argument's range first.
+    """
+    t2 = t * t
+    sin = t * (1.0 + t2 * (-1.0 / 6 + t2 * (1.0 / 120 + t2 * (-1.0 / 5040 + t2 * (
+        1.0 / 362880 + t2 * (-1.0 / 39916800 + t2 * (1.0 / 6227020800 + t2 * (
+            -1.0 / 1307674368000))))))))
+    cos = 1.0 + t2 * (-0.5 + t2 * (1.0 / 24 + t2 * (-1.0 / 720 + t2 * (1.0 / 40320 + t2 * (
+        -1.0 / 3628800 + t2 * (1.0 / 479001600 + t2 * (-1.0 / 87178291200 + t2 * (
+            1.0 / 20922789888000))))))))
+    return sin, cos
+
+
+@jit
+def concentric_hemisphere(u, v):
+    """Map (u, v) of [0, 1)² to a unit direction (x, y, z), z ≥ 0, with pdf cosθ / π.
+
+    Shirley–Chiu concentric disk mapping, lifted to the hemisphere (Malley's method); the
+    mapping keeps the points' stratification. In both wedges the angle is t = (π/4)·minor/major
+    in [−π/4, π/4], so that ``_sin_cos`` applies; the wedge is chosen by selects, not branches,
+    so that loops over points vectorise.
+    """
+    a = 2.0 * u - 1.0
+    b = 2.0 * v - 1.0
+    first = abs(a) > abs(b)
+    major = a if first else b
+    minor = b if first else a
+    sin, cos = _sin_cos((np.pi / 4) * (minor / (major if major != 0.0 else 1.0)))
+    x = major * (cos if first else sin)
+    y = major * (sin if first else cos)
+    return x, y, np.sqrt(max(1.0 - major * major, 0.0))
+
+
+@jit
+def fill_cosine(u, v, x, y, z):
+    """``concentric_hemisphere`` of every point (u, v) (n,) into x, y, z (n,) (vectorised)."""
+    for i in range(len(u)):
+        x[i], y[i], z[i] = concentric_hemisphere(u[i], v[i])
+
+
+@jit
+def _cosine_kernel(points, out):
+    for i in range(len(points)):
+        out[i, 0], out[i, 1], out[i, 2] = concentric_hemisphere(points[i, 0], points[i, 1])
 
 
 def cosine_hemisphere(u: np.ndarray) -> np.ndarray:
-    """Map points (..., 2) of [0, 1)² to unit directions (..., 3) around +z with pdf cosθ / π.
+    """Map points (..., 2) of [0, 1)² to unit directions (..., 3) around +z with pdf cosθ / π."""
+    u = np.ascontiguousarray(u, np.float64)
+    out = np.empty(u.shape[:-1] + (3,))
+    _cosine_kernel(u.reshape(-1, 2), out.reshape(-1, 3))
+    return out
 
-    Shirley–Chiu concentric disk mapping, then lifted to the hemisphere (Malley's method); the
-    mapping keeps the points' stratification.
+
+@jit
+def frame(nx, ny, nz):
+    """Two unit tangents orthogonal to the unit normal (nx, ny, nz) and to each other.
+
+    Duff et al., "Building an Orthonormal Basis, Revisited" (JCGT 2017): no singularity.
+    Returns (t1x, t1y, t1z, t2x, t2y, t2z).
     """
-    a = 2.0 * u[..., 0] - 1.0
-    b = 2.0 * u[..., 1] - 1.0
-    first = np.abs(a) > np.abs(b)
-    safe_a = np.where(a == 0, 1.0, a)
-    safe_b = np.where(b == 0, 1.0, b)
-    r = np.where(first, a, b)
-    phi = np.where(first, (np.pi / 4) * (b / safe_a), (np.pi / 2) - (np.pi / 4) * (a / safe_b))
-    x, y = r * np.cos(phi), r * np.sin(phi)
-    z = np.sqrt(np.clip(1.0 - x * x - y * y, 0.0, 1.0))
-    return np.stack([x, y, z], axis=-1)
+    sign = 1.0 if nz >= 0.0 else -1.0
+    a = -1.0 / (sign + nz)
+    b = nx * ny * a
+    return (1.0 + sign * nx * nx * a, sign * b, -sign * nx, b, sign + ny * ny * a, -ny)
+
+
+@jit
+def _frames_kernel(normals, t1, t2):
+    for i in range(len(normals)):
+        f = frame(normals[i, 0], normals[i, 1], normals[i, 2])
+        t1[i, 0], t1[i, 1], t1[i, 2] = f[0], f[1], f[2]
+        t2[i, 0], t2[i, 1], t2[i, 2] = f[3], f[4], f[5]
 
 
 def tangent_frames(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Two unit tangents (k, 3) each, orthogonal to unit ``normals`` (k, 3) and to each other.
-
-    Duff et al., "Building an Orthonormal Basis, Revisited" (JCGT 2017): branch-free, no
-    singularity.
-    """
-    nx, ny, nz = normals[:, 0], normals[:, 1], normals[:, 2]
-    sign = np.where(nz >= 0, 1.0, -1.0)
-    a = -1.0 / (sign + nz)
-    b = nx * ny * a
-    t1 = np.stack([1.0 + sign * nx * nx * a, sign * b, -sign * nx], axis=1)
-    t2 = np.stack([b, sign + ny * ny * a, -ny], axis=1)
+    """Two unit tangents (k, 3) each, orthogonal to unit ``normals`` (k, 3) and to each other."""
+    normals = np.ascontiguousarray(normals, np.float64)
+    t1, t2 = np.empty_like(normals), np.empty_like(normals)
+    _frames_kernel(normals, t1, t2)
     return t1, t2
+
+
+def hash_u32(*words) -> np.ndarray:
+    """uint32 hash of up to four integer words (arrays broadcast together), zero-padded.
+
+    The same ``hash4`` the samplers use, for callers that need a deterministic integer per item.
+    """
+    arrays = np.broadcast_arrays(*[np.asarray(w).astype(np.uint64) for w in words],
+                                 *([np.uint64(0)] * (4 - len(words))))
+    flat = [np.array(a.reshape(-1)) for a in arrays]  # own, writeable, contiguous copies
+    out = np.empty(flat[0].size, np.uint32)
+    _hash_kernel(*flat, out)
+    return out.reshape(arrays[0].shape)
+
+
+@jit
+def _hash_kernel(a, b, c, d, out):
+    for i in range(len(out)):
+        out[i] = hash4(a[i], b[i], c[i], d[i])

@@ -10,6 +10,7 @@ import math
 from dataclasses import asdict, dataclass, fields
 
 from .errors import SettingsError
+from .sampling import TECHNIQUES
 
 RHO_FUNCTIONS = ("sqrt", "step", "linear")
 ENCODINGS = ("linear", "srgb")
@@ -24,6 +25,8 @@ class Settings:
     page_size: the largest lightmap page, in texels per side.
     padding: texels kept free around every chart (dilation fills them).
     rays: obscurance rays per texel.
+    sampling: how each texel's ray directions are drawn: "sobol" (Owen-scrambled Sobol, the
+        default), "stratified" (jittered grid) or "random" (independent), see sampling.py.
     d_max: the obscurance distance; None takes ``d_max_fraction`` of the baked bounds' diagonal.
     rho: the obscurance function ρ(d): "sqrt" (the paper's sqrt(d/d_max)), "step" (classic
         ambient occlusion: a hit closer than d_max counts 0, R(Q) = 1) or "linear" (d/d_max).
@@ -41,6 +44,7 @@ class Settings:
     page_size: int = 1024
     padding: int = 2
     rays: int = 64
+    sampling: str = "sobol"
     d_max: float | None = None
     d_max_fraction: float = 0.2
     rho: str = "sqrt"
@@ -78,6 +82,7 @@ class Settings:
                                 fix="use --page-size 16384 or less; large scenes get several pages")
         for name, value, allowed in (("rho", self.rho, RHO_FUNCTIONS),
                                      ("encoding", self.encoding, ENCODINGS),
+                                     ("sampling", self.sampling, TECHNIQUES),
                                      ("occlusion", self.occlusion, OCCLUSION_MODES)):
             if value not in allowed:
                 raise SettingsError(f"{name} must be one of {', '.join(allowed)}, not {value!r}",

@@ -74,11 +74,30 @@ def _textured(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray,
     return result
 
 
+def _base_colours(scene: Scene) -> np.ndarray:
+    """(M, 3) baseColorFactor RGB of every material."""
+    return np.array([m.base_color[:3] for m in scene.materials], np.float64).reshape(-1, 3)
+
+
 def albedo(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray) -> np.ndarray:
     """Diffuse albedo (k, 3), linear RGB, at barycentric points (k, 3) of world triangles (k,)."""
-    base = np.array([m.base_color[:3] for m in scene.materials], np.float64)
-    colour = _textured(scene, world, tris, bary, base, lambda m: m.base_color_texture)
+    colour = _textured(scene, world, tris, bary, _base_colours(scene),
+                       lambda m: m.base_color_texture)
     return colour * _interpolate(world.colors[:, :3], world, tris, bary)
+
+
+def triangle_albedo(scene: Scene, world: World) -> tuple[np.ndarray, np.ndarray]:
+    """Albedo per world triangle where it is constant over the triangle, for the ray kernels.
+
+    Returns ``table`` (T, 3) linear RGB and ``varying`` (T,) bool: True where the material has a
+    base colour texture or the corners' vertex colours differ, so ``albedo`` must be evaluated at
+    each hit (``table`` is then meaningless for that triangle).
+    """
+    corners = world.colors[world.triangles][..., :3]  # (T, 3 corners, 3)
+    uniform = np.all(corners == corners[:, :1], axis=(1, 2))
+    textured = np.array([m.base_color_texture is not None for m in scene.materials], bool)
+    table = _base_colours(scene)[world.tri_material] * corners[:, 0]
+    return table, textured[world.tri_material] | ~uniform
 
 
 def emission(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray) -> np.ndarray:

@@ -65,6 +65,20 @@ class Tracer:
         return Hits(np.where(hit, triangle, -1), distance, result["u"].astype(np.float64),
                     result["v"].astype(np.float64))
 
+    def cast_local(self, origins: np.ndarray, directions: np.ndarray,
+                   lengths: np.ndarray) -> dict[str, np.ndarray]:
+        """Nearest hits of rays already in the tracer's recentred float32 frame (hot path).
+
+        origins: (n, 3) float32 world position − ``center``; directions: (n, 3) float32 unit;
+        lengths: (n,) float32, overwritten. Returns embreex's arrays: ``primID`` (n,) int32 world
+        triangle or −1, ``tfar`` (n,) float32 distance, ``u``/``v`` (n,) float32 barycentrics.
+        """
+        if self.triangle_count == 0:
+            n = len(origins)
+            return {"primID": np.full(n, -1, np.int32), "tfar": lengths,
+                    "u": np.zeros(n, np.float32), "v": np.zeros(n, np.float32)}
+        return self._scene.run(origins, directions, dists=lengths, output=1)
+
     def occluded(self, origins: np.ndarray, directions: np.ndarray,
                  length: np.ndarray | float) -> np.ndarray:
         """(n,) bool: whether anything lies along each ray within ``length`` (shadow rays)."""
