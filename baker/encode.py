@@ -3,7 +3,7 @@
 Each page is scaled by its largest value (stored as MOZ_lightmap ``intensity``) and quantised to
 8-bit PNG, either linearly (``linear``: what the three.js MOZ_lightmap plugin and the Hubs client
 read) or through the sRGB curve (``srgb``: what the proposed MOZ_lightmap text says). The default
-is ``linear`` because that is what the viewers people use show correctly; docs/lightmaps.md says
+is ``linear`` because that is what the viewers people use show correctly; docs/output.md says
 more.
 """
 
