@@ -62,6 +62,7 @@ class GltfBuilder:
         self._extensions_used: set[str] = set()
         self._child_nodes: set[int] = set()
         self._roots: list[int] | None = None
+        self._lights: list[dict[str, Any]] = []
         self.info: dict[str, Any] = {}
 
     # ------------------------------------------------------------------ buffers and accessors
@@ -288,6 +289,46 @@ class GltfBuilder:
         self._nodes.append(node)
         return len(self._nodes) - 1
 
+    def light(
+        self,
+        kind: str,
+        *,
+        name: str = "",
+        color: Sequence[float] = (1.0, 1.0, 1.0),
+        intensity: float = 1.0,
+        range: float | None = None,
+        inner_cone: float | None = None,
+        outer_cone: float | None = None,
+        extras: dict[str, Any] | None = None,
+    ) -> int:
+        """Add a KHR_lights_punctual light definition; return its index in the ``lights`` array.
+
+        ``kind``: "directional" (``intensity`` in lux), "point" or "spot" (candela); ``color``
+        linear RGB; ``range`` metres (point/spot); cone angles in radians (spot). Place it with
+        ``node(..., extensions={"KHR_lights_punctual": {"light": index}})``: it shines down the
+        node's local −Z.
+        """
+        if kind not in ("directional", "point", "spot"):
+            raise ValueError(f"light kind must be directional, point or spot, got {kind!r}")
+        light: dict[str, Any] = {"type": kind, "color": [float(c) for c in color],
+                                 "intensity": float(intensity)}
+        if name:
+            light["name"] = name
+        if range is not None:
+            light["range"] = float(range)
+        if kind == "spot":
+            spot = {}
+            if inner_cone is not None:
+                spot["innerConeAngle"] = float(inner_cone)
+            if outer_cone is not None:
+                spot["outerConeAngle"] = float(outer_cone)
+            light["spot"] = spot
+        if extras:
+            light["extras"] = dict(extras)
+        self._lights.append(light)
+        self._extensions_used.add("KHR_lights_punctual")
+        return len(self._lights) - 1
+
     def roots(self, nodes: Sequence[int]) -> None:
         """Set the root nodes of scene 0 explicitly (default: every node that is nobody's child)."""
         self._roots = [int(n) for n in nodes]
@@ -317,6 +358,8 @@ class GltfBuilder:
             samplers=_copy(self._samplers),
             extensionsUsed=sorted(self._extensions_used),
         )
+        if self._lights:
+            doc.extensions = {"KHR_lights_punctual": {"lights": copy.deepcopy(self._lights)}}
         return doc
 
     def binary(self) -> bytes:

@@ -10,7 +10,8 @@ The pipeline, one module per stage (DESIGN.md §3):
     unwrap.unwrap        World → Atlas (xatlas lightmap pages)
     rasterise.rasterise  Atlas → Texels (world sample point of every texel)
     integrate.integrate  Texels → Terms (obscurance terms, rays cast with trace.Tracer)
-    compose.compose      Terms → Lightmaps (L = I_A · W per page)
+    direct.direct_light  Texels → Direct (lights, emitters, sky per texel, with shadow rays)
+    compose.compose      Terms + Direct → Lightmaps (L = D + I_A · W per page)
     postprocess          dilation into the padding
     encode.encode        Lightmaps → PNG pages
     write.write          Scene + Atlas + pages → glTF file with MOZ_lightmap

@@ -12,17 +12,26 @@ As R_ave → 1 (a closed white room) it diverges — the model's stiff case. We 
 to ``MAX_BOUNCES`` terms, (1 − R^K) / (1 − R): identical to the closed form to 4 significant
 digits for R ≤ 0.99, finite and continuous up to and including R = 1 (where it equals K), and
 flagged in the report whenever the truncation changes I_A by more than 0.1 %.
+
+With direct light baked apart (direct.py), the lightmap is L = D + I_A·W and I_A carries only
+the light that has bounced at least once: I_A = R_ave·Σ_{k<K} R_ave^k · Φ / A_T, where Φ is the
+power every source (punctual lights, emissive surfaces, sky) lays on the scene's surfaces, in
+irradiance × area (``direct.Power``). docs/direct_light.md derives it.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .geometry import World
 from .scene import Scene
 from .surface import albedo, emission
+
+if TYPE_CHECKING:
+    from .direct import Power
 
 MAX_BOUNCES = 1000
 
@@ -38,7 +47,8 @@ class Ambient:
     r_ave: np.ndarray
     mean_emission: np.ndarray
     intensity: np.ndarray
-    source: str  # "emission", "user" or "none" (no light in the scene: I_A = 1)
+    source: str  # "user", "none" (no light in the scene: I_A = 1), or the sources I_A comes
+    # from: "emission" (equation 3 alone), or "+"-joined "lights", "emission", "sky" (with power)
     truncated: bool  # the bounce series was cut (R_ave close to 1)
 
 
@@ -60,8 +70,14 @@ def _triangle_means(scene: Scene, world: World, lookup) -> np.ndarray:
     return lookup(scene, world, tris, bary).reshape(t, len(_POINTS), 3).mean(axis=1)
 
 
-def ambient_terms(scene: Scene, world: World, user_intensity: float | None) -> Ambient:
-    """R_ave and I_A of the scene; ``user_intensity`` overrides I_A (all channels)."""
+def ambient_terms(scene: Scene, world: World, user_intensity: float | None,
+                  power: Power | None = None) -> Ambient:
+    """R_ave and I_A of the scene; ``user_intensity`` overrides I_A (all channels).
+
+    ``power``: what the direct-light sources lay on the surfaces (direct.delivered_power); then
+    I_A = R_ave·series·Φ/A_T, the light after its first bounce (D holds the direct light). Without
+    it, equation (3) on the emissive surfaces alone, as when emission is not baked as direct light.
+    """
     areas = world.areas()
     total = areas.sum()
     if total <= 0:
@@ -72,6 +88,12 @@ def ambient_terms(scene: Scene, world: World, user_intensity: float | None) -> A
     series, truncated = bounce_factor(r_ave)
     if user_intensity is not None:
         return Ambient(r_ave, mean_emission, np.full(3, float(user_intensity)), "user", False)
+    if power is not None:
+        names = power.sources()
+        if not names:
+            return Ambient(r_ave, mean_emission, np.ones(3), "none", False)
+        bounced = r_ave * series * power.total() / total
+        return Ambient(r_ave, mean_emission, bounced, "+".join(names), truncated)
     if not np.any(mean_emission > 0):
         return Ambient(r_ave, mean_emission, np.ones(3), "none", False)
     return Ambient(r_ave, mean_emission, series * mean_emission, "emission", truncated)

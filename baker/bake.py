@@ -22,6 +22,7 @@ import numpy as np
 from .ambient import Ambient, ambient_terms
 from .atlas import Atlas
 from .compose import Lightmaps, compose, effective_r_ave
+from .direct import Direct, Power, Sources, delivered_power, direct_light, light_sources
 from .encode import encode
 from .errors import OutputError
 from .geometry import World, build_world
@@ -99,6 +100,9 @@ class Computed:
     terms: Terms
     lightmaps: Lightmaps
     stage_seconds: dict[str, float]
+    sources: Sources | None = None  # what lights the scene directly (direct.py)
+    power: Power | None = None  # what each source lays on the surfaces, for I_A
+    direct: Direct | None = None  # the texels' direct light, per source
 
     def rmse_estimate(self) -> float:
         """RMSE of the lightmap's luminance estimated from the rays' sample variance."""
@@ -106,7 +110,10 @@ class Computed:
             return 0.0
         r_ave = effective_r_ave(self.ambient, self.settings.rho)
         stderr = self.terms.standard_error(r_ave, self.settings.rays)
-        return float(np.sqrt(np.mean(stderr ** 2)) * (self.ambient.intensity @ LUMINANCE))
+        variance = (stderr * (self.ambient.intensity @ LUMINANCE)) ** 2
+        if self.direct is not None:
+            variance = variance + self.direct.variance()
+        return float(np.sqrt(np.mean(variance)))
 
 
 def compute(scene: Scene, settings: Settings, quiet: bool = True) -> Computed:
@@ -116,23 +123,29 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True) -> Computed:
         world = build_world(scene)
     area, diagonal = _bounds_of_baked(world, scene)
     resolved = resolve(settings, area, diagonal)
+    with _timed(times, "trace"):
+        tracer = Tracer(world)
+        sources = light_sources(scene, world, resolved)
+        power = delivered_power(scene, world, tracer, sources, resolved)
     with _timed(times, "plan"):
-        ambient = ambient_terms(scene, world, resolved.ambient)
-        plan = make_plan(scene, ambient, resolved.rho)
+        ambient = ambient_terms(scene, world, resolved.ambient, power)
+        plan = make_plan(scene, ambient, resolved.rho, sources)
     with _timed(times, "unwrap"):
         atlas = unwrap(scene, world, resolved)
     with _timed(times, "rasterise"):
         texels = rasterise(atlas, world)
     with _timed(times, "trace"):
-        tracer = Tracer(world)
         with bar(len(texels), "baking", wanted(quiet)) as advance:
             terms = integrate(scene, world, tracer, texels, resolved, advance)
+    with _timed(times, "direct"):
+        with bar(len(texels), "direct light", wanted(quiet) and sources.any()) as advance:
+            direct = direct_light(scene, world, tracer, texels, sources, resolved, advance)
     with _timed(times, "compose"):
-        lightmaps = postprocess(compose(atlas, texels, terms, ambient, resolved.rho),
+        lightmaps = postprocess(compose(atlas, texels, terms, ambient, resolved.rho, direct),
                                 resolved.padding)
     return Computed(scene=scene, world=world, settings=resolved, ambient=ambient, plan=plan,
                     atlas=atlas, texels=texels, terms=terms, lightmaps=lightmaps,
-                    stage_seconds=times)
+                    stage_seconds=times, sources=sources, power=power, direct=direct)
 
 
 def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings = Settings(), *,
@@ -172,6 +185,7 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
         "atlas": {"pages": atlas.page_count, "width": atlas.width, "height": atlas.height,
                   "texel_density": atlas.texel_density},
         "texels": len(done.texels), "rays": done.terms.rays,
+        "shadow_rays": done.direct.rays if done.direct is not None else 0,
         "rays_per_second": done.terms.rays / times["trace"] if times["trace"] > 0 else 0.0,
         "stage_seconds": times, "seconds": seconds,
         "rmse_estimate": rmse,

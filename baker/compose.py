@@ -1,8 +1,8 @@
 """Compose the stored terms into lightmap pages: L(P) = D(P) + I_A · W(P).
 
 A recomposition needs no ray: it only combines the terms the integrator kept apart, so a change of
-R_ave or I_A costs a few array operations (DESIGN.md §2). Direct light D joins here with a later
-issue; until then L = I_A · W.
+R_ave or I_A costs a few array operations (DESIGN.md §2). D, the direct light (direct.py), is kept
+per light at unit intensity, so a light's new colour or intensity is a recomposition too.
 """
 
 from __future__ import annotations
@@ -13,6 +13,7 @@ import numpy as np
 
 from .ambient import Ambient
 from .atlas import Atlas
+from .direct import Direct
 from .integrate import Terms
 from .obscurance import UNIT_REFLECTIVITY
 from .rasterise import Texels
@@ -37,12 +38,20 @@ def effective_r_ave(ambient: Ambient, rho: str) -> np.ndarray:
     return np.ones(3) if rho in UNIT_REFLECTIVITY else ambient.r_ave
 
 
-def compose(atlas: Atlas, texels: Texels, terms: Terms, ambient: Ambient, rho: str) -> Lightmaps:
-    """Scatter the texels' light and obscurance into page images."""
+def compose(atlas: Atlas, texels: Texels, terms: Terms, ambient: Ambient, rho: str,
+            direct: Direct | None = None, light_colours: np.ndarray | None = None) -> Lightmaps:
+    """Scatter the texels' light L = D + I_A·W and obscurance W into page images.
+
+    ``direct``: the texels' direct light (None: L = I_A·W); ``light_colours`` (L, 3) replaces the
+    baked colour × intensity of its punctual lights (relighting without rays).
+    """
     shape = (atlas.page_count, atlas.height, atlas.width)
     w = terms.obscurance(effective_r_ave(ambient, rho))
     obscurance = np.zeros(shape + (3,))
     covered = np.zeros(shape, bool)
     obscurance[texels.page, texels.y, texels.x] = w
     covered[texels.page, texels.y, texels.x] = True
-    return Lightmaps(light=obscurance * ambient.intensity, obscurance=obscurance, covered=covered)
+    light = obscurance * ambient.intensity
+    if direct is not None:
+        light[texels.page, texels.y, texels.x] += direct.irradiance(light_colours)
+    return Lightmaps(light=light, obscurance=obscurance, covered=covered)

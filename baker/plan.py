@@ -8,7 +8,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from .ambient import Ambient
+from .direct import Sources
 from .scene import Scene
 
 
@@ -41,8 +44,8 @@ def _node_label(scene: Scene, node: int) -> str:
     return f"nodes[{node}]" + (f" ({name})" if name else "")
 
 
-def make_plan(scene: Scene, ambient: Ambient, rho: str) -> Plan:
-    """What this bake does with ``scene``."""
+def make_plan(scene: Scene, ambient: Ambient, rho: str, sources: Sources | None = None) -> Plan:
+    """What this bake does with ``scene``; ``sources``: its direct light (direct.light_sources)."""
     baked, left_out = [], [(s.where, s.reason) for s in scene.skipped]
     for inst in scene.instances:
         prim = scene.primitives[inst.primitive]
@@ -55,7 +58,11 @@ def make_plan(scene: Scene, ambient: Ambient, rho: str) -> Plan:
         "emission": f"I_A = {_rgb(ambient.intensity)} from emissive surfaces (eq. 3)",
         "user": f"I_A = {_rgb(ambient.intensity)} set by the user",
         "none": "no light source in the scene: I_A = 1, the lightmap is the obscurance W itself",
-    }[ambient.source]
+    }.get(ambient.source, f"I_A = {_rgb(ambient.intensity)}: the power of "
+                          f"{ambient.source.replace('+', ', ')} after its first bounce "
+                          "(docs/direct_light.md)")
+    if ambient.source == "emission" and sources is not None:
+        ambient_text = ambient_text.replace("(eq. 3)", "after their first bounce (docs/direct_light.md)")
     if ambient.truncated:
         ambient_text += (f"; R_ave = {_rgb(ambient.r_ave)} is close to 1, so 1/(1 - R_ave) "
                          "was summed as a bounded series (docs/model.md)")
@@ -64,11 +71,42 @@ def make_plan(scene: Scene, ambient: Ambient, rho: str) -> Plan:
                        else f"obscurance with colour bleeding, ρ = {rho}, R_ave = {_rgb(ambient.r_ave)}"),
         "ambient": ambient_text,
     }
-    lights = (scene.document.extensions or {}).get("KHR_lights_punctual", {}).get("lights", [])
-    if lights:
-        stages["punctual lights"] = (f"{len(lights)} KHR_lights_punctual light(s) not baked yet: "
-                                     "direct light is not computed in this version")
+    stages.update(_direct_stages(scene, sources))
     return Plan(stages=stages, baked=tuple(baked), left_out=tuple(left_out))
+
+
+def _direct_stages(scene: Scene, sources: Sources | None) -> dict[str, str]:
+    """What the direct-light stages do: punctual lights, emissive surfaces, sky (or why not)."""
+    lights = scene.lights if sources is None else sources.lights
+    if not lights:
+        punctual = "none: no shadow rays"
+    else:
+        kinds: dict[str, int] = {}
+        for light in lights:
+            kinds[light.kind] = kinds.get(light.kind, 0) + 1
+        punctual = (f"{len(lights)} light(s) ("
+                    + ", ".join(f"{n} {kind}" for kind, n in sorted(kinds.items())) + ")")
+        if sources is not None:
+            soft = int((sources.spread > 0).sum())
+            punctual += f", shadow rays: 1 per texel per hard light ({len(lights) - soft})"
+            if soft:
+                punctual += f", {int(sources.samples.max())} per soft light ({soft})"
+    stages = {"punctual lights": punctual}
+    if sources is None:
+        return stages
+    emitters = sources.emitters
+    stages["emissive surfaces"] = (
+        "none: no emissive sampling" if emitters is None else
+        f"{len(emitters.triangles)} emissive triangle(s) as area lights, sampled by power, "
+        f"{sources.emissive_rays} shadow rays per texel; their own texels hold only the light "
+        "they receive (the material adds the emission)")
+    if sources.sky is None:
+        stages["sky"] = "none: no escaping rays (--sky R,G,B adds one)"
+    else:
+        zenith, horizon = sources.sky
+        shape = "uniform" if np.array_equal(zenith, horizon) else f"gradient to {_rgb(horizon)} at the horizon"
+        stages["sky"] = f"radiance {_rgb(zenith)} at the zenith, {shape}, {sources.sky_rays} rays per texel"
+    return stages
 
 
 def _rgb(v) -> str:

@@ -38,6 +38,18 @@ class Settings:
         "srgb", as the proposed MOZ_lightmap text says).
     occlusion: also write the obscurance W as the core occlusionTexture ("also"), instead of the
         lightmap ("only"), or not ("none").
+    shadow_rays: shadow rays per texel towards each light that has a size (radius or angular
+        diameter: soft shadows); a light without size casts exactly 1.
+    light_radius: sphere radius (scene units) of point and spot lights whose ``extras.radius``
+        is not set; 0 makes them hard points.
+    light_angle: angular diameter (degrees) of directional lights whose
+        ``extras.angular_diameter`` is not set (the sun's is about 0.53); 0: hard shadows.
+    emissive_rays: shadow rays per texel towards emissive surfaces (area lights).
+    sky: linear RGB radiance of the sky at the zenith (+Y), None for no sky. An open upward
+        surface under a uniform sky of radiance L receives irradiance π·L.
+    sky_horizon: linear RGB radiance at and below the horizon, blended linearly in the sine of
+        the elevation up to ``sky`` at the zenith; None: a uniform sky.
+    sky_rays: rays per texel that look for the sky (escaping the scene entirely).
     """
 
     texel_density: float | None = None
@@ -54,6 +66,13 @@ class Settings:
     chunk_texels: int = 4096
     encoding: str = "linear"
     occlusion: str = "none"
+    shadow_rays: int = 16
+    light_radius: float = 0.0
+    light_angle: float = 0.0
+    emissive_rays: int = 16
+    sky: tuple[float, float, float] | None = None
+    sky_horizon: tuple[float, float, float] | None = None
+    sky_rays: int = 64
 
     def check(self) -> None:
         """Raise SettingsError for a value that cannot work, saying which values can."""
@@ -72,11 +91,14 @@ class Settings:
                                 fix="give --ambient a value of 0 or more")
         integers = {"page_size": (self.page_size, 16), "rays": (self.rays, 1),
                     "chunk_texels": (self.chunk_texels, 1), "padding": (self.padding, 0),
-                    "threads": (self.threads, 0), "seed": (self.seed, 0)}
+                    "threads": (self.threads, 0), "seed": (self.seed, 0),
+                    "shadow_rays": (self.shadow_rays, 1), "emissive_rays": (self.emissive_rays, 1),
+                    "sky_rays": (self.sky_rays, 1)}
         for name, (value, low) in integers.items():
             if int(value) != value or value < low:
                 raise SettingsError(f"{name} must be a whole number of at least {low}, not {value}",
                                     fix=f"give --{name.replace('_', '-')} a whole number ≥ {low}")
+        self._check_lights()
         if self.page_size > 16384:
             raise SettingsError(f"page_size {self.page_size} is larger than 16384 texels",
                                 fix="use --page-size 16384 or less; large scenes get several pages")
@@ -87,6 +109,29 @@ class Settings:
             if value not in allowed:
                 raise SettingsError(f"{name} must be one of {', '.join(allowed)}, not {value!r}",
                                     fix=f"use --{name} {allowed[0]}")
+
+
+    def _check_lights(self) -> None:
+        """Light sizes finite and ≥ 0 (angle below 180°); sky colours three finite numbers ≥ 0."""
+        for name, value, top in (("light_radius", self.light_radius, math.inf),
+                                 ("light_angle", self.light_angle, 180.0)):
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and 0 <= value < top):
+                below = "" if top == math.inf else f" and below {top:g}"
+                raise SettingsError(f"{name} must be a finite number ≥ 0{below}, not {value}",
+                                    fix=f"give --{name.replace('_', '-')} a value such as 0")
+        for name, value in (("sky", self.sky), ("sky_horizon", self.sky_horizon)):
+            if value is None:
+                continue
+            try:
+                ok = len(value) == 3 and all(math.isfinite(float(v)) and float(v) >= 0 for v in value)
+            except (TypeError, ValueError):
+                ok = False
+            if not ok:
+                raise SettingsError(f"{name} must be three finite numbers ≥ 0 (linear RGB), not {value!r}",
+                                    fix=f"give --{name.replace('_', '-')} R,G,B, e.g. 0.5,0.6,0.8")
+        if self.sky_horizon is not None and self.sky is None:
+            raise SettingsError("sky_horizon needs sky (the zenith colour) too",
+                                fix="add --sky R,G,B, or leave out --sky-horizon")
 
 
 @dataclass(frozen=True)

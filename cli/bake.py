@@ -51,6 +51,29 @@ def add_parser(commands) -> None:
                        help="ambient intensity I_A (default: from the scene's emissive surfaces, "
                             "or 1 when it has none)")
     model.add_argument("--seed", type=int, default=d.seed, help="sampler seed (default 0)")
+    direct = bake.add_argument_group("direct light (KHR_lights_punctual, emissive surfaces, sky)")
+    direct.add_argument("--shadow-rays", type=int, default=d.shadow_rays, metavar="N",
+                        help="shadow rays per texel towards a light with a size (soft shadows); "
+                             f"a hard light casts 1 (default {d.shadow_rays})")
+    direct.add_argument("--light-radius", type=positive_float, default=d.light_radius,
+                        metavar="DISTANCE",
+                        help="sphere radius of point and spot lights without extras.radius, in "
+                             "scene units; 0: hard shadows (default 0)")
+    direct.add_argument("--light-angle", type=positive_float, default=d.light_angle,
+                        metavar="DEGREES",
+                        help="angular diameter of directional lights without "
+                             "extras.angular_diameter (the sun's is 0.53); 0: hard (default 0)")
+    direct.add_argument("--emissive-rays", type=int, default=d.emissive_rays, metavar="N",
+                        help="shadow rays per texel towards emissive surfaces "
+                             f"(default {d.emissive_rays})")
+    direct.add_argument("--sky", type=rgb, metavar="R,G,B",
+                        help="add a sky of this linear radiance at the zenith (an open floor "
+                             "under a uniform sky L gets π·L); default: no sky")
+    direct.add_argument("--sky-horizon", type=rgb, metavar="R,G,B",
+                        help="the sky's radiance at the horizon and below: a two-colour "
+                             "gradient (default: uniform)")
+    direct.add_argument("--sky-rays", type=int, default=d.sky_rays, metavar="N",
+                        help=f"rays per texel that look for the sky (default {d.sky_rays})")
     out = bake.add_argument_group("output")
     out.add_argument("--encoding", choices=baker.settings.ENCODINGS, default=d.encoding,
                      help="how PNG texels map to light: linear (three.js, Hubs) or srgb "
@@ -74,7 +97,23 @@ def settings_from(args: argparse.Namespace) -> baker.Settings:
     return baker.Settings(
         texel_density=args.texel_density, page_size=args.page_size, padding=args.padding,
         rays=args.rays, d_max=args.d_max, rho=args.rho, ambient=args.ambient, seed=args.seed,
-        threads=args.threads, encoding=args.encoding, occlusion=args.occlusion)
+        threads=args.threads, encoding=args.encoding, occlusion=args.occlusion,
+        shadow_rays=args.shadow_rays, light_radius=args.light_radius, light_angle=args.light_angle,
+        emissive_rays=args.emissive_rays, sky=args.sky, sky_horizon=args.sky_horizon,
+        sky_rays=args.sky_rays)
+
+
+def rgb(text: str) -> tuple[float, float, float]:
+    """``R,G,B`` (or one number for grey) from the command line as three floats."""
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not R,G,B numbers: {text!r}") from None
+    if len(values) == 1:
+        values *= 3
+    if len(values) != 3:
+        raise argparse.ArgumentTypeError(f"give three numbers R,G,B (or one), not {text!r}")
+    return (values[0], values[1], values[2])
 
 
 def print_summary(result: baker.BakeResult) -> None:
@@ -88,7 +127,8 @@ def print_summary(result: baker.BakeResult) -> None:
     print("\n".join(result.plan.lines()))
     for note in result.report["notes"]:
         print(f"  note: {note}")
-    print(f"  {result.rays:,} rays, {result.report['rays_per_second'] / 1e6:.2f} M rays/s; "
+    print(f"  {result.rays:,} obscurance rays, {result.report['rays_per_second'] / 1e6:.2f} M rays/s, "
+          f"{result.report.get('shadow_rays', 0):,} shadow/sky rays; "
           f"estimated RMSE {result.rmse_estimate:.3g}; {result.seconds:.1f} s "
           f"({', '.join(f'{k} {v:.1f}' for k, v in times.items())})")
 

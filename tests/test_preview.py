@@ -62,7 +62,8 @@ def test_cornell_box_preview_is_albedo_times_lightmap(cornell):
     assert open_floor.sum() > 20 and corner.sum() > 5
     open_level = picture.radiance[open_floor].mean()
     corner_level = picture.radiance[corner].mean()
-    assert open_level > 1.8 * corner_level, (open_level, corner_level)
+    # About 1.7× since the ceiling emitter's direct light is baked in (tests/test_direct.py).
+    assert open_level > 1.4 * corner_level, (open_level, corner_level)
     # Lightmapped surfaces differ from unlit ones: same white albedo, values vary across the floor.
     floor = picture.radiance[seen == nodes["floor"]].mean(axis=1)
     assert floor.std() / floor.mean() > 0.1

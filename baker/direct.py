@@ -1,0 +1,576 @@
+"""Direct light D(P): punctual lights, emissive surfaces and the sky, with shadow rays.
+
+The lightmap holds what arrives at a surface, ``L(P) = D(P) + I_A · W(P)`` (DESIGN.md §2), as
+irradiance: the shader multiplies by albedo / π (three.js, Blender). D is estimated per texel and
+kept apart per source so that changing a light's colour or intensity is a recomposition, with no
+ray cast:
+
+- KHR_lights_punctual lights, each at unit intensity and white colour: a directional light of
+  1 lux gives cosθ, a point light of 1 candela at distance r gives cosθ / r², times the spot cone
+  and range window the extension recommends, times visibility (one shadow ray; several for a
+  light with a size). ``Direct.light_colours`` (L, 3) holds colour × intensity as baked.
+- Emissive triangles (emissiveFactor × emissiveTexture × KHR_materials_emissive_strength, taken
+  as emitted radiance) as area lights, sampled in proportion to their power.
+- A uniform or two-colour gradient sky, through cosine-distributed rays that escape the scene.
+
+Soft shadows: a point/spot light with radius R is a sphere of uniform radiance I / (πR²); it is
+sampled by directions uniform in the cone it subtends, so an unoccluded receiver facing it gets
+exactly I·cosθ/r², as from the point. A directional light with angular diameter 2α is a disc of
+uniform radiance E / (π sin²α); its directions are sampled uniformly in the cone of half-angle α.
+
+The emissive surfaces' own texels: the lightmap holds only the light arriving at them (from other
+emitters, lights, sky and the ambient term), never their own emission, which stays in the
+material (emissiveFactor) where every viewer adds it: nothing is counted twice. An emitter does
+not light itself (a flat triangle's points see it at cosθ = 0).
+
+Randomness is a pure function of (seed, texel key, sample, dimension) through
+``sampling.sample_2d``; the dimensions are distinct from the obscurance's (0):
+``SKY_DIMENSION``, ``EMISSIVE_DIMENSIONS`` and ``light_dimension(l)`` = 16 + 2·l. Chunks of texels
+run on a thread pool and write only their own rows, so the result does not depend on chunking.
+
+``delivered_power`` estimates, for I_A, how much power each source lays on the scene's surfaces
+(docs/direct_light.md): the same estimators at points spread over every triangle by area.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from .geometry import World
+from .rasterise import Texels
+from .sampling import cosine_hemisphere, sample_2d, tangent_frames
+from .scene import Light, Scene
+from .settings import Resolved
+from .surface import LUMINANCE, emission
+from .trace import Tracer
+
+SKY_DIMENSION = 12
+EMISSIVE_DIMENSIONS = (13, 14)  # point on the triangle, choice of the triangle
+POWER_DIMENSIONS = (10, 11)  # where the power-estimate points fall on the surfaces
+
+# Points over the scene's surfaces at which the power each source delivers is estimated.
+POWER_POINTS = 16384
+# Keys of the power-estimate points, apart from texel keys ((page·h + y)·w + x, far below 2^62).
+_POWER_KEY_BASE = np.uint64(1 << 62)
+
+# Ray origin lift off the surface: in texel sizes and in float32 units of the position's magnitude.
+_OFFSET_TEXELS = 1e-3
+_OFFSET_ULPS = 64 * 2.0 ** -23
+# Shadow rays stop this fraction short of the point they aim at (a light sample on a surface).
+_SHORT = 1e-3
+
+# Barycentric points at which each triangle's emission is averaged (as ambient.py does).
+_POINTS = np.array([[1 / 3, 1 / 3, 1 / 3], [2 / 3, 1 / 6, 1 / 6],
+                    [1 / 6, 2 / 3, 1 / 6], [1 / 6, 1 / 6, 2 / 3]])
+
+
+def light_dimension(light: int) -> int:
+    """The sampler dimension of light ``light``'s soft-shadow samples."""
+    return 16 + 2 * light
+
+
+# ------------------------------------------------------------------------------------------------
+# The scene's sources, resolved against the settings
+
+
+@dataclass(frozen=True)
+class Emitters:
+    """The emissive triangles, E of them, and how they are sampled.
+
+    triangles: (E,) int64 world triangles. probability: (E,) float64 chance of picking each one,
+    in proportion to its power (area × luminance of its mean emission × sides). cdf: (E,) float64
+    running sum of ``probability`` (last 1). areas: (E,) float64 world areas. normals: (E, 3)
+    float64 unit front-face normals. two_sided: (E,) bool, emits from both faces (doubleSided).
+    power: the emitted luminous power Σ sides·π·A·lum(e), scene units² × radiance.
+    """
+
+    triangles: np.ndarray
+    probability: np.ndarray
+    cdf: np.ndarray
+    areas: np.ndarray
+    normals: np.ndarray
+    two_sided: np.ndarray
+    power: float
+
+
+@dataclass(frozen=True)
+class Sources:
+    """What lights the scene directly, as this bake treats it.
+
+    lights: the scene's punctual lights (order of ``Scene.lights``). spread: (L,) float64, a
+    point/spot light's sphere radius (scene units) or a directional light's cone half-angle
+    (radians), 0 for a hard light. samples: (L,) int64 shadow rays per texel (1 when hard).
+    emitters: the emissive triangles, None when nothing emits. emissive_rays: rays per texel
+    towards them. sky: (2, 3) float64 zenith and horizon radiance, None for no sky. sky_rays.
+    """
+
+    lights: tuple[Light, ...]
+    spread: np.ndarray
+    samples: np.ndarray
+    emitters: Emitters | None
+    emissive_rays: int
+    sky: np.ndarray | None
+    sky_rays: int
+
+    def light_colours(self) -> np.ndarray:
+        """(L, 3) colour × intensity of every light (lux or candela, linear RGB)."""
+        if not self.lights:
+            return np.zeros((0, 3))
+        return np.array([light.colour * light.intensity for light in self.lights], np.float64)
+
+    def rays_per_texel(self) -> int:
+        """Shadow and sky rays every texel casts."""
+        return (int(self.samples.sum()) + (self.emissive_rays if self.emitters is not None else 0)
+                + (self.sky_rays if self.sky is not None else 0))
+
+    def any(self) -> bool:
+        """Whether anything lights the scene directly."""
+        return bool(self.lights) or self.emitters is not None or self.sky is not None
+
+
+def _triangle_emission(scene: Scene, world: World) -> np.ndarray:
+    """Mean emitted radiance (T, 3) of every world triangle over a few fixed points."""
+    t = len(world.triangles)
+    if t == 0:
+        return np.zeros((0, 3))
+    tris = np.repeat(np.arange(t), len(_POINTS))
+    bary = np.tile(_POINTS, (t, 1))
+    return emission(scene, world, tris, bary).reshape(t, len(_POINTS), 3).mean(axis=1)
+
+
+def find_emitters(scene: Scene, world: World) -> Emitters | None:
+    """The triangles that emit (positive mean emission and area), None when there are none."""
+    if len(world.triangles) == 0:
+        return None
+    mean = _triangle_emission(scene, world)
+    areas = world.areas()
+    sides = np.where([m.double_sided for m in scene.materials], 2.0, 1.0)[world.tri_material]
+    weight = areas * np.maximum(mean @ LUMINANCE, 0.0) * sides
+    emitting = np.flatnonzero((weight > 0) & np.isfinite(weight))
+    if len(emitting) == 0:
+        return None
+    w = weight[emitting]
+    probability = w / w.sum()
+    cdf = np.cumsum(probability)
+    cdf[-1] = 1.0
+    return Emitters(triangles=emitting, probability=probability, cdf=cdf, areas=areas[emitting],
+                    normals=world.geometric_normals(emitting), two_sided=sides[emitting] > 1,
+                    power=float(math.pi * w.sum()))
+
+
+def light_sources(scene: Scene, world: World, settings: Resolved) -> Sources:
+    """The scene's direct-light sources with the settings' fallbacks and ray counts applied."""
+    spread, samples = [], []
+    for light in scene.lights:
+        if light.kind == "directional":
+            diameter = (light.angular_diameter if light.angular_diameter is not None
+                        else math.radians(settings.light_angle))
+            size = min(diameter / 2, math.pi / 2 - 1e-6)
+        else:
+            size = light.radius if light.radius is not None else settings.light_radius
+        spread.append(size)
+        samples.append(settings.shadow_rays if size > 0 else 1)
+    sky = None
+    if settings.sky is not None:
+        zenith = np.asarray(settings.sky, np.float64)
+        horizon = zenith if settings.sky_horizon is None else np.asarray(settings.sky_horizon, np.float64)
+        sky = np.stack([zenith, horizon])
+    return Sources(lights=tuple(scene.lights), spread=np.asarray(spread, np.float64).reshape(-1),
+                   samples=np.asarray(samples, np.int64).reshape(-1),
+                   emitters=find_emitters(scene, world), emissive_rays=settings.emissive_rays,
+                   sky=sky, sky_rays=settings.sky_rays)
+
+
+# ------------------------------------------------------------------------------------------------
+# Estimators at a batch of receiving points
+
+
+@dataclass(frozen=True)
+class Receivers:
+    """k surface points that receive light.
+
+    position: (k, 3) float64 world. normal: (k, 3) unit shading normal (for cosθ).
+    geometric: (k, 3) unit front-face normal (rays leave on this side). lift: (k,) float64 world
+    offset of ray origins along ``geometric``. key: (k,) uint64 sampler key.
+    """
+
+    position: np.ndarray
+    normal: np.ndarray
+    geometric: np.ndarray
+    lift: np.ndarray
+    key: np.ndarray
+
+    def origins(self, n: int) -> np.ndarray:
+        """(k·n, 3) ray origins, each point's repeated n times (point-major)."""
+        return np.repeat(self.position + self.lift[:, None] * self.geometric, n, axis=0)
+
+
+def _lift(position: np.ndarray, size: np.ndarray, center: np.ndarray) -> np.ndarray:
+    """Ray origin offsets (k,): the larger of a texel fraction and the float32 spacing there.
+
+    The same rule as the obscurance rays' (integrate.py), so neither big texels nor scenes far
+    from the origin self-intersect.
+    """
+    magnitude = np.abs(position - center).max(axis=1)
+    return np.maximum(_OFFSET_TEXELS * size, _OFFSET_ULPS * np.maximum(magnitude, 1e-30))
+
+
+def _cone_directions(axis: np.ndarray, cos_max: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Directions (k, n, 3) uniform in solid angle within the cones around unit ``axis`` (k, 3)
+    of half-angle acos(``cos_max``) (k,), from points ``u`` (k, n, 2) of [0, 1)²."""
+    cos_t = 1.0 - u[..., 0] * (1.0 - cos_max[:, None])
+    sin_t = np.sqrt(np.clip(1.0 - cos_t * cos_t, 0.0, 1.0))
+    phi = 2.0 * np.pi * u[..., 1]
+    t1, t2 = tangent_frames(axis)
+    return ((sin_t * np.cos(phi))[..., None] * t1[:, None] + (sin_t * np.sin(phi))[..., None] * t2[:, None]
+            + cos_t[..., None] * axis[:, None])
+
+
+def _mean_and_variance(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean over the last axis of (k, n) samples, and the variance of that mean (0 when n = 1)."""
+    n = values.shape[1]
+    mean = values.mean(axis=1)
+    if n < 2:
+        return mean, np.zeros_like(mean)
+    return mean, values.var(axis=1, ddof=1) / n
+
+
+def _facing(receivers: Receivers, directions: np.ndarray) -> np.ndarray:
+    """cosθ (k, n) of directions (k, n, 3) against the shading normal, 0 where the direction is
+    below either the shading or the geometric surface (the ray could not leave there)."""
+    cos_n = np.einsum("kc,knc->kn", receivers.normal, directions)
+    above = np.einsum("kc,knc->kn", receivers.geometric, directions) > 0
+    return np.where(above, np.maximum(cos_n, 0.0), 0.0)
+
+
+def spot_attenuation(light: Light, to_receiver: np.ndarray) -> np.ndarray:
+    """KHR_lights_punctual's spot cone falloff for unit directions (k, 3) from the light.
+
+    The extension's reference code: a linear ramp in cos between the outer and inner cone
+    angles, squared; 1 inside the inner cone, 0 outside the outer cone.
+    """
+    cos_outer, cos_inner = math.cos(light.outer_cone), math.cos(light.inner_cone)
+    scale = 1.0 / max(0.001, cos_inner - cos_outer)
+    cd = to_receiver @ light.direction
+    return np.clip(cd * scale - cos_outer * scale, 0.0, 1.0) ** 2
+
+
+def range_window(light: Light, distance: np.ndarray) -> np.ndarray:
+    """The extension's recommended range cutoff, clamp(1 − (d / range)⁴, 0, 1) (1 without range)."""
+    if not math.isfinite(light.range):
+        return np.ones_like(distance)
+    return np.clip(1.0 - (distance / light.range) ** 4, 0.0, 1.0)
+
+
+def punctual_irradiance(light: Light, spread: float, n: int, receivers: Receivers, tracer: Tracer,
+                        seed: int, dimension: int) -> tuple[np.ndarray, np.ndarray]:
+    """Irradiance (k,) from ``light`` at unit intensity, white, and the variance of its estimate.
+
+    Directional: cosθ (lux per lux). Point/spot: cosθ / r² × spot cone × range window (lux per
+    candela). ``spread`` > 0 makes the light a sphere of that radius (point/spot) or a disc of that
+    angular radius (directional), sampled with ``n`` shadow rays per receiver; otherwise one ray.
+    """
+    k = len(receivers.position)
+    if k == 0:
+        return np.zeros(0), np.zeros(0)
+    soft = spread > 0
+    n = n if soft else 1
+    u = sample_2d(seed, receivers.key[:, None], np.arange(n)[None, :], dimension)  # (k, n, 2)
+    if light.kind == "directional":
+        axis = np.broadcast_to(-light.direction, (k, 3)).copy()
+        if soft:
+            cos_max = np.full(k, math.cos(spread))
+            directions = _cone_directions(axis, cos_max, u)
+            scale = np.full(k, 2.0 / (1.0 + math.cos(spread)))  # normal irradiance of the disc = 1
+        else:
+            directions = axis[:, None, :]
+            scale = np.ones(k)
+        lengths = np.full(k * n, np.inf)
+    else:
+        offset = light.position - receivers.position
+        r = np.maximum(np.linalg.norm(offset, axis=1), receivers.lift)
+        axis = offset / r[:, None]
+        factor = range_window(light, r)
+        if light.kind == "spot":
+            factor = factor * spot_attenuation(light, -axis)
+        if soft:
+            sin_max = np.minimum(spread / r, 1.0)
+            cos_max = np.sqrt(1.0 - sin_max * sin_max)
+            directions = _cone_directions(axis, cos_max, u)
+            # Radiance I / (πR²) times the cone's solid angle 2π(1 − cos α).
+            scale = factor * 2.0 * (1.0 - cos_max) / (spread * spread)
+            b = np.einsum("knc,kc->kn", directions, offset)
+            to_sphere = b - np.sqrt(np.maximum(b * b - (r * r - spread * spread)[:, None], 0.0))
+            lengths = (np.maximum(to_sphere, 0.0) * (1.0 - _SHORT)).reshape(-1)
+        else:
+            directions = axis[:, None, :]
+            scale = factor / (r * r)
+            lengths = r * (1.0 - _SHORT)
+    cos = _facing(receivers, directions)
+    live = (cos > 0) & (scale[:, None] > 0)
+    visible = np.zeros(k * n, bool)
+    flat = live.reshape(-1)
+    if flat.any():
+        origins = receivers.origins(n)[flat]
+        rays = np.broadcast_to(directions, (k, n, 3)).reshape(-1, 3)[flat]
+        length = lengths[flat] if np.ndim(lengths) else lengths
+        visible[flat] = ~tracer.occluded(origins, rays, length)
+    values = cos * visible.reshape(k, n) * scale[:, None]
+    return _mean_and_variance(values)
+
+
+def emissive_irradiance(scene: Scene, world: World, emitters: Emitters, n: int,
+                        receivers: Receivers, tracer: Tracer, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Irradiance (k, 3) from the emissive triangles, and the variance (k,) of its luminance.
+
+    Each of ``n`` samples picks a triangle in proportion to its power and a uniform point q on
+    it; the estimate is Le(q)·cosθ_p·cosθ_q / d² · V / (P_t / A_t), unbiased for the irradiance
+    of every emitter (a triangle whose mean emission is 0 at the fixed points is never picked).
+    """
+    k = len(receivers.position)
+    if k == 0:
+        return np.zeros((0, 3)), np.zeros(0)
+    samples = np.arange(n)[None, :]
+    where = sample_2d(seed, receivers.key[:, None], samples, EMISSIVE_DIMENSIONS[0]).reshape(-1, 2)
+    pick = sample_2d(seed, receivers.key[:, None], samples, EMISSIVE_DIMENSIONS[1])[..., 0].reshape(-1)
+    chosen = np.minimum(np.searchsorted(emitters.cdf, pick, side="right"), len(emitters.cdf) - 1)
+    tris = emitters.triangles[chosen]
+    root = np.sqrt(where[:, 0])
+    bary = np.stack([1.0 - root, where[:, 1] * root, (1.0 - where[:, 1]) * root], axis=1)
+    a, b, c = world.corners(tris)
+    points = bary[:, :1] * a + bary[:, 1:2] * b + bary[:, 2:] * c
+    origins = receivers.origins(n)
+    offset = points - origins
+    distance = np.linalg.norm(offset, axis=1)
+    lift = np.repeat(receivers.lift, n)
+    distance = np.maximum(distance, lift)
+    directions = offset / distance[:, None]
+    cos_p = _facing(receivers, directions.reshape(k, n, 3)).reshape(-1)
+    cos_q = -np.einsum("ec,ec->e", emitters.normals[chosen], directions)
+    cos_q = np.where(emitters.two_sided[chosen], np.abs(cos_q), np.maximum(cos_q, 0.0))
+    weight = cos_p * cos_q / (distance * distance) * emitters.areas[chosen] / emitters.probability[chosen]
+    live = weight > 0
+    value = np.zeros((k * n, 3))
+    if live.any():
+        visible = ~tracer.occluded(origins[live], directions[live], distance[live] * (1.0 - _SHORT))
+        radiance = emission(scene, world, tris[live], bary[live])
+        value[live] = radiance * (weight[live] * visible)[:, None]
+    value = value.reshape(k, n, 3)
+    _, variance = _mean_and_variance(value @ LUMINANCE)
+    return value.mean(axis=1), variance
+
+
+def sky_radiance(sky: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """Sky radiance (…, 3) in unit directions (…, 3): horizon + (zenith − horizon)·max(0, y)."""
+    up = np.maximum(directions[..., 1:2], 0.0)
+    return sky[1] + (sky[0] - sky[1]) * up
+
+
+def sky_irradiance(sky: np.ndarray, n: int, receivers: Receivers, tracer: Tracer,
+                   seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Irradiance (k, 3) from the sky about the geometric normal, and its luminance variance (k,).
+
+    Cosine-distributed rays (pdf cosθ/π); a ray that meets nothing at any distance sees the sky,
+    so the estimate is π · mean(L_sky(ω) · V(ω)).
+    """
+    k = len(receivers.position)
+    if k == 0:
+        return np.zeros((0, 3)), np.zeros(0)
+    local = cosine_hemisphere(sample_2d(seed, receivers.key[:, None], np.arange(n)[None, :],
+                                        SKY_DIMENSION))
+    normal = receivers.geometric
+    t1, t2 = tangent_frames(normal)
+    directions = (local[..., :1] * t1[:, None] + local[..., 1:2] * t2[:, None]
+                  + local[..., 2:] * normal[:, None]).reshape(-1, 3)
+    escaped = ~tracer.occluded(receivers.origins(n), directions, np.inf)
+    value = (np.pi * sky_radiance(sky, directions) * escaped[:, None]).reshape(k, n, 3)
+    _, variance = _mean_and_variance(value @ LUMINANCE)
+    return value.mean(axis=1), variance
+
+
+# ------------------------------------------------------------------------------------------------
+# Per texel
+
+
+@dataclass(frozen=True)
+class Direct:
+    """Direct irradiance at N texels (rows in ``Texels`` order), kept apart per source.
+
+    punctual: (N, L) float64 irradiance from each light at unit intensity and white colour (lux
+    per lux, or per candela); punctual_var: (N, L) variance of those estimates (0 for hard lights).
+    light_colours: (L, 3) colour × intensity of each light as baked. emission: (N, 3) irradiance
+    from emissive surfaces; sky: (N, 3) from the sky; emission_var, sky_var: (N,) variances of
+    their luminance estimates. rays: shadow and sky rays cast.
+    """
+
+    punctual: np.ndarray
+    punctual_var: np.ndarray
+    light_colours: np.ndarray
+    emission: np.ndarray
+    emission_var: np.ndarray
+    sky: np.ndarray
+    sky_var: np.ndarray
+    rays: int
+
+    def irradiance(self, light_colours: np.ndarray | None = None) -> np.ndarray:
+        """D (N, 3) for the given light colour × intensity (L, 3), by default the baked ones."""
+        colours = self.light_colours if light_colours is None else np.asarray(light_colours, np.float64)
+        return self.punctual @ colours + self.emission + self.sky
+
+    def variance(self, light_colours: np.ndarray | None = None) -> np.ndarray:
+        """(N,) variance of the luminance of D's estimate (the sources' estimates are independent)."""
+        colours = self.light_colours if light_colours is None else np.asarray(light_colours, np.float64)
+        return self.punctual_var @ (colours @ LUMINANCE) ** 2 + self.emission_var + self.sky_var
+
+
+def no_direct(count: int) -> Direct:
+    """The direct term of ``count`` texels in a scene with no source: zeros, no ray."""
+    zeros = np.zeros((count, 3))
+    return Direct(np.zeros((count, 0)), np.zeros((count, 0)), np.zeros((0, 3)), zeros,
+                  np.zeros(count), zeros.copy(), np.zeros(count), 0)
+
+
+def _texel_receivers(texels: Texels, rows: slice, center: np.ndarray) -> Receivers:
+    return Receivers(position=texels.position[rows], normal=texels.normal[rows],
+                     geometric=texels.geometric_normal[rows],
+                     lift=_lift(texels.position[rows], texels.size[rows], center),
+                     key=texels.key[rows])
+
+
+def _threads(settings: Resolved) -> int:
+    if settings.threads:
+        return settings.threads
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+def direct_light(scene: Scene, world: World, tracer: Tracer, texels: Texels, sources: Sources,
+                 settings: Resolved, progress: Callable[[int], None] | None = None) -> Direct:
+    """Estimate every texel's direct irradiance from every source (no ray when there is none)."""
+    count = len(texels)
+    if not sources.any():
+        return no_direct(count)
+    lights = len(sources.lights)
+    punctual = np.zeros((count, lights))
+    punctual_var = np.zeros((count, lights))
+    emitted, emitted_var = np.zeros((count, 3)), np.zeros(count)
+    sky, sky_var = np.zeros((count, 3)), np.zeros(count)
+    step = max(1, settings.chunk_texels)
+    chunks = [slice(start, min(start + step, count)) for start in range(0, count, step)]
+
+    def work(rows: slice) -> None:
+        receivers = _texel_receivers(texels, rows, tracer.center)
+        for l, light in enumerate(sources.lights):
+            punctual[rows, l], punctual_var[rows, l] = punctual_irradiance(
+                light, float(sources.spread[l]), int(sources.samples[l]), receivers, tracer,
+                settings.seed, light_dimension(l))
+        if sources.emitters is not None:
+            emitted[rows], emitted_var[rows] = emissive_irradiance(
+                scene, world, sources.emitters, sources.emissive_rays, receivers, tracer, settings.seed)
+        if sources.sky is not None:
+            sky[rows], sky_var[rows] = sky_irradiance(sources.sky, sources.sky_rays, receivers,
+                                                      tracer, settings.seed)
+        if progress is not None:
+            progress(rows.stop - rows.start)
+
+    threads = _threads(settings)
+    if threads == 1 or len(chunks) < 2:
+        for rows in chunks:
+            work(rows)
+    else:
+        with ThreadPoolExecutor(threads) as pool:
+            list(pool.map(work, chunks))
+    return Direct(punctual=punctual, punctual_var=punctual_var,
+                  light_colours=sources.light_colours(), emission=emitted,
+                  emission_var=emitted_var, sky=sky, sky_var=sky_var,
+                  rays=count * sources.rays_per_texel())
+
+
+# ------------------------------------------------------------------------------------------------
+# Power laid on the scene's surfaces, for the ambient intensity I_A
+
+
+@dataclass(frozen=True)
+class Power:
+    """The power each source lays on the scene's surfaces (irradiance integrated over area).
+
+    punctual: (L,) float64 per light at unit intensity and white colour; light_colours: (L, 3)
+    colour × intensity as baked; emission: (3,) from emissive surfaces; sky: (3,) from the sky.
+    area: A_T, the scene's total triangle area. Units: irradiance × scene units².
+    """
+
+    punctual: np.ndarray
+    light_colours: np.ndarray
+    emission: np.ndarray
+    sky: np.ndarray
+    area: float
+
+    def total(self, light_colours: np.ndarray | None = None) -> np.ndarray:
+        """(3,) power from every source, with light colours × intensities (L, 3) if given."""
+        colours = self.light_colours if light_colours is None else np.asarray(light_colours, np.float64)
+        return self.punctual @ colours + self.emission + self.sky
+
+    def sources(self) -> tuple[str, ...]:
+        """Which kinds of source the scene has: of "lights", "emission", "sky"."""
+        names = []
+        if len(self.punctual):
+            names.append("lights")
+        if np.any(self.emission > 0):
+            names.append("emission")
+        if np.any(self.sky > 0):
+            names.append("sky")
+        return tuple(names)
+
+
+def power_points(world: World, seed: int,
+                 count: int = POWER_POINTS) -> tuple[np.ndarray, np.ndarray, Receivers]:
+    """``count`` points spread over every triangle by area (systematic sampling): their
+    triangles (count,), barycentrics (count, 3) and the Receivers they make."""
+    areas = world.areas()
+    total = areas.sum()
+    keys = _POWER_KEY_BASE + np.arange(count, dtype=np.uint64)
+    u = sample_2d(seed, keys, 0, POWER_DIMENSIONS[0])
+    target = (np.arange(count) + u[:, 0]) / count * total
+    tris = np.minimum(np.searchsorted(np.cumsum(areas), target, side="right"), len(areas) - 1)
+    v = sample_2d(seed, keys, 0, POWER_DIMENSIONS[1])
+    root = np.sqrt(v[:, 0])
+    bary = np.stack([1.0 - root, v[:, 1] * root, (1.0 - v[:, 1]) * root], axis=1)
+    a, b, c = world.corners(tris)
+    position = bary[:, :1] * a + bary[:, 1:2] * b + bary[:, 2:] * c
+    normal = world.geometric_normals(tris)
+    size = np.sqrt(areas[tris])
+    return tris, bary, Receivers(position=position, normal=normal, geometric=normal,
+                                 lift=_lift(position, size, world.center), key=keys)
+
+
+def delivered_power(scene: Scene, world: World, tracer: Tracer, sources: Sources,
+                    settings: Resolved) -> Power:
+    """Estimate the power each source lays on all the scene's surfaces (baked or not).
+
+    Φ = ∫ D dA over every triangle's front face, estimated as A_T × the mean of D at
+    ``POWER_POINTS`` points spread by area, one sample per source at each point. The points and
+    their samples are deterministic (sampler keys of their own), so I_A is too.
+    """
+    lights = len(sources.lights)
+    area = float(world.areas().sum()) if len(world.triangles) else 0.0
+    punctual, emitted, sky = np.zeros(lights), np.zeros(3), np.zeros(3)
+    if area > 0 and sources.any():
+        _, _, receivers = power_points(world, settings.seed)
+        for l, light in enumerate(sources.lights):
+            mean, _ = punctual_irradiance(light, float(sources.spread[l]), 1, receivers, tracer,
+                                          settings.seed, light_dimension(l))
+            punctual[l] = area * mean.mean()
+        if sources.emitters is not None:
+            mean, _ = emissive_irradiance(scene, world, sources.emitters, 1, receivers, tracer,
+                                          settings.seed)
+            emitted = area * mean.mean(axis=0)
+        if sources.sky is not None:
+            mean, _ = sky_irradiance(sources.sky, 1, receivers, tracer, settings.seed)
+            sky = area * mean.mean(axis=0)
+    return Power(punctual=punctual, light_colours=sources.light_colours(), emission=emitted,
+                 sky=sky, area=area)
