@@ -25,7 +25,7 @@ not light itself (a flat triangle's points see it at cosθ = 0).
 
 Randomness is a pure function of (seed, texel key, sample, dimension) through
 ``sampling.sample_2d``; the dimensions are distinct from the obscurance's (0):
-``SKY_DIMENSION``, ``EMISSIVE_DIMENSIONS`` and ``light_dimension(l)`` = 16 + 2·l. Chunks of texels
+``SKY_DIMENSION``, ``EMISSIVE_DIMENSION`` and ``light_dimension(l)`` = 16 + 2·l. Chunks of texels
 run on a thread pool and write only their own rows, so the result does not depend on chunking.
 
 ``delivered_power`` estimates, for I_A, how much power each source lays on the scene's surfaces
@@ -51,7 +51,7 @@ from .surface import LUMINANCE, emission
 from .trace import Tracer
 
 SKY_DIMENSION = 12
-EMISSIVE_DIMENSIONS = (13, 14)  # point on the triangle, choice of the triangle
+EMISSIVE_DIMENSION = 13
 POWER_DIMENSIONS = (10, 11)  # where the power-estimate points fall on the surfaces
 
 # Points over the scene's surfaces at which the power each source delivers is estimated.
@@ -88,6 +88,9 @@ class Emitters:
     running sum of ``probability`` (last 1). areas: (E,) float64 world areas. normals: (E, 3)
     float64 unit front-face normals. two_sided: (E,) bool, emits from both faces (doubleSided).
     power: the emitted luminous power Σ sides·π·A·lum(e), scene units² × radiance.
+    corners: (E, 3, 3) float64 world corners. radiance: (E, 3) float64 emitted radiance of the
+    triangles whose material has no emissive texture (constant over them); textured: (E,) bool,
+    the others, whose radiance is looked up at each sample point.
     """
 
     triangles: np.ndarray
@@ -97,6 +100,9 @@ class Emitters:
     normals: np.ndarray
     two_sided: np.ndarray
     power: float
+    corners: np.ndarray
+    radiance: np.ndarray
+    textured: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -159,9 +165,12 @@ def find_emitters(scene: Scene, world: World) -> Emitters | None:
     probability = w / w.sum()
     cdf = np.cumsum(probability)
     cdf[-1] = 1.0
+    textured = np.array([m.emissive_texture is not None for m in scene.materials], bool)
     return Emitters(triangles=emitting, probability=probability, cdf=cdf, areas=areas[emitting],
                     normals=world.geometric_normals(emitting), two_sided=sides[emitting] > 1,
-                    power=float(math.pi * w.sum()))
+                    power=float(math.pi * w.sum()),
+                    corners=world.positions[world.triangles[emitting]],
+                    radiance=mean[emitting], textured=textured[world.tri_material[emitting]])
 
 
 def light_sources(scene: Scene, world: World, settings: Resolved) -> Sources:
@@ -336,15 +345,16 @@ def emissive_irradiance(scene: Scene, world: World, emitters: Emitters, n: int,
     k = len(receivers.position)
     if k == 0:
         return np.zeros((0, 3)), np.zeros(0)
-    samples = np.arange(n)[None, :]
-    where = sample_2d(seed, receivers.key[:, None], samples, EMISSIVE_DIMENSIONS[0]).reshape(-1, 2)
-    pick = sample_2d(seed, receivers.key[:, None], samples, EMISSIVE_DIMENSIONS[1])[..., 0].reshape(-1)
-    chosen = np.minimum(np.searchsorted(emitters.cdf, pick, side="right"), len(emitters.cdf) - 1)
-    tris = emitters.triangles[chosen]
+    u = sample_2d(seed, receivers.key[:, None], np.arange(n)[None, :], EMISSIVE_DIMENSION).reshape(-1, 2)
+    # The first coordinate picks the triangle, then is stretched back to [0, 1) within the
+    # triangle's slice of the CDF to place the point: one stratified 2D sample does both.
+    chosen = np.minimum(np.searchsorted(emitters.cdf, u[:, 0], side="right"), len(emitters.cdf) - 1)
+    start = emitters.cdf[chosen] - emitters.probability[chosen]
+    where = np.stack([np.clip((u[:, 0] - start) / emitters.probability[chosen], 0.0, 1.0), u[:, 1]],
+                     axis=1)
     root = np.sqrt(where[:, 0])
     bary = np.stack([1.0 - root, where[:, 1] * root, (1.0 - where[:, 1]) * root], axis=1)
-    a, b, c = world.corners(tris)
-    points = bary[:, :1] * a + bary[:, 1:2] * b + bary[:, 2:] * c
+    points = np.einsum("sv,svc->sc", bary, emitters.corners[chosen])
     origins = receivers.origins(n)
     offset = points - origins
     distance = np.linalg.norm(offset, axis=1)
@@ -359,7 +369,12 @@ def emissive_irradiance(scene: Scene, world: World, emitters: Emitters, n: int,
     value = np.zeros((k * n, 3))
     if live.any():
         visible = ~tracer.occluded(origins[live], directions[live], distance[live] * (1.0 - _SHORT))
-        radiance = emission(scene, world, tris[live], bary[live])
+        picked = chosen[live]
+        radiance = emitters.radiance[picked]
+        textured = emitters.textured[picked]
+        if textured.any():
+            radiance[textured] = emission(scene, world, emitters.triangles[picked[textured]],
+                                          bary[live][textured])
         value[live] = radiance * (weight[live] * visible)[:, None]
     value = value.reshape(k, n, 3)
     _, variance = _mean_and_variance(value @ LUMINANCE)
