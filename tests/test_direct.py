@@ -247,3 +247,20 @@ def test_lamp_scene_bakes_its_five_point_lights(tmp_path):
     assert result.plan.stages["punctual lights"].startswith("5 light(s) (5 point)")
     assert result.report["shadow_rays"] >= 5 * result.texels > 0
     assert "lights" in result.report["ambient"]["source"]
+
+
+def test_command_line_light_options_reach_the_settings(tmp_path):
+    from cli.bake import settings_from
+    from cli.main import build_parser
+
+    args = build_parser().parse_args(
+        ["bake", "in.glb", "-o", "out.glb", "--shadow-rays", "32", "--light-radius", "0.05",
+         "--light-angle", "0.53", "--emissive-rays", "8", "--sky", "0.2,0.3,0.9",
+         "--sky-horizon", "1", "--sky-rays", "16"])
+    s = settings_from(args)
+    assert (s.shadow_rays, s.light_radius, s.light_angle, s.emissive_rays, s.sky_rays) == (
+        32, 0.05, 0.53, 8, 16)
+    assert s.sky == (0.2, 0.3, 0.9) and s.sky_horizon == (1.0, 1.0, 1.0)
+    s.check()
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["bake", "in.glb", "-o", "out.glb", "--sky", "1,2"])
