@@ -32,6 +32,7 @@ from .plan import Plan, make_plan
 from .postprocess import postprocess
 from .progress import bar, wanted
 from .rasterise import Texels, rasterise
+from .validity import Validity, check_texels
 from .scene import Scene
 from .settings import Resolved, Settings, resolve
 from .surface import LUMINANCE
@@ -103,6 +104,7 @@ class Computed:
     sources: Sources | None = None  # what lights the scene directly (direct.py)
     power: Power | None = None  # what each source lays on the surfaces, for I_A
     direct: Direct | None = None  # the texels' direct light, per source
+    validity: Validity | None = None  # which sample points were moved, flagged (validity.py)
 
     def rmse_estimate(self) -> float:
         """RMSE of the lightmap's luminance estimated from the rays' sample variance."""
@@ -134,6 +136,8 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True) -> Computed:
         atlas = unwrap(scene, world, resolved)
     with _timed(times, "rasterise"):
         texels = rasterise(atlas, world)
+    with _timed(times, "validity"):  # sample points inside/behind geometry: moved or flagged
+        texels, validity = check_texels(scene, world, tracer, texels, resolved.d_max)
     with _timed(times, "trace"):
         with bar(len(texels), "baking", wanted(quiet)) as advance:
             terms = integrate(scene, world, tracer, texels, resolved, advance)
@@ -142,10 +146,12 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True) -> Computed:
             direct = direct_light(scene, world, tracer, texels, sources, resolved, advance)
     with _timed(times, "compose"):
         lightmaps = postprocess(compose(atlas, texels, terms, ambient, resolved.rho, direct),
-                                resolved.padding)
+                                resolved.padding, *validity.page_masks(
+                                    texels, (atlas.page_count, atlas.height, atlas.width)))
     return Computed(scene=scene, world=world, settings=resolved, ambient=ambient, plan=plan,
                     atlas=atlas, texels=texels, terms=terms, lightmaps=lightmaps,
-                    stage_seconds=times, sources=sources, power=power, direct=direct)
+                    stage_seconds=times, sources=sources, power=power, direct=direct,
+                    validity=validity)
 
 
 def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings = Settings(), *,

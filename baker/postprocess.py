@@ -1,4 +1,8 @@
-"""Clean-up of the composed pages before encoding: dilation into the padding.
+"""Clean-up of the composed pages before encoding: invalid texels, dilation into the padding.
+
+Texels whose sample point lay inside geometry (``validity.py``) are fixed first: those shut
+inside a solid are set dark (no light reaches them), the other invalid ones take the mean of
+their valid neighbours, never their own rays' values.
 
 Bilinear filtering (and mipmapping) reads texels around a chart's border that no triangle
 covers; left black they show as dark seams. Dilation fills each empty texel with the mean of its
@@ -12,6 +16,7 @@ import numpy as np
 from .compose import Lightmaps
 
 _NEIGHBOURS = [(dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1) if (dy, dx) != (0, 0)]
+_FILL_RINGS = 8  # how far (texels) valid values reach into a patch of invalid texels
 
 
 def _shift(a: np.ndarray, dy: int, dx: int) -> np.ndarray:
@@ -24,8 +29,13 @@ def _shift(a: np.ndarray, dy: int, dx: int) -> np.ndarray:
     return out
 
 
-def dilate(values: np.ndarray, filled: np.ndarray, rings: int) -> tuple[np.ndarray, np.ndarray]:
-    """Grow ``values`` (P, H, W, C) from ``filled`` (P, H, W) texels by ``rings`` texels."""
+def dilate(values: np.ndarray, filled: np.ndarray, rings: int,
+           into: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Grow ``values`` (P, H, W, C) from ``filled`` (P, H, W) texels by ``rings`` texels.
+
+    ``into`` (P, H, W) bool, when given, limits the growth to those texels (e.g. the invalid
+    texels inside charts, so that the fill never crosses the padding to another chart).
+    """
     values, filled = values.copy(), filled.copy()
     for _ in range(rings):
         total = np.zeros_like(values)
@@ -34,6 +44,8 @@ def dilate(values: np.ndarray, filled: np.ndarray, rings: int) -> tuple[np.ndarr
             total += _shift(values * filled[..., None], dy, dx)
             count += _shift(filled.astype(np.float64), dy, dx)
         grow = ~filled & (count > 0)
+        if into is not None:
+            grow &= into
         if not grow.any():
             break
         values[grow] = total[grow] / count[grow][:, None]
@@ -41,9 +53,31 @@ def dilate(values: np.ndarray, filled: np.ndarray, rings: int) -> tuple[np.ndarr
     return values, filled
 
 
-def postprocess(lightmaps: Lightmaps, padding: int) -> Lightmaps:
-    """Dilate light and obscurance past the padding (at least 4 texels, for bilinear + 1 mip)."""
+def fill_invalid(values: np.ndarray, covered: np.ndarray, invalid: np.ndarray,
+                 rings: int = _FILL_RINGS) -> np.ndarray:
+    """``values`` (P, H, W, C) with each invalid texel (P, H, W) given the mean of its valid
+    8-neighbours, ring after ring inwards (up to ``rings``); invalid texels no valid texel
+    reaches keep their own value."""
+    filled, _ = dilate(values, covered & ~invalid, rings, into=invalid & covered)
+    return filled
+
+
+def postprocess(lightmaps: Lightmaps, padding: int, invalid: np.ndarray | None = None,
+                enclosed: np.ndarray | None = None) -> Lightmaps:
+    """Clean the composed pages: enclosed texels dark, invalid ones from valid neighbours, then
+    dilation past the padding (at least 4 texels, for bilinear + 1 mip).
+
+    invalid, enclosed: (P, H, W) bool masks from ``validity.Validity.page_masks`` (None: none).
+    """
+    light, obscurance = lightmaps.light, lightmaps.obscurance
+    if enclosed is not None and enclosed.any():
+        light, obscurance = light.copy(), obscurance.copy()
+        light[enclosed] = 0.0  # shut inside a solid: no light reaches it
+        obscurance[enclosed] = 0.0
+    if invalid is not None and invalid.any():
+        light = fill_invalid(light, lightmaps.covered, invalid)
+        obscurance = fill_invalid(obscurance, lightmaps.covered, invalid)
     rings = max(2 * padding, 4)
-    light, filled = dilate(lightmaps.light, lightmaps.covered, rings)
-    obscurance, _ = dilate(lightmaps.obscurance, lightmaps.covered, rings)
+    light, filled = dilate(light, lightmaps.covered, rings)
+    obscurance, _ = dilate(obscurance, lightmaps.covered, rings)
     return Lightmaps(light=light, obscurance=obscurance, covered=lightmaps.covered)

@@ -1,0 +1,205 @@
+"""Texel validity: find sample points that lie inside or behind geometry, move or flag them.
+
+A texel's sample point is the centre of its square mapped onto its triangle. Where another
+surface cuts through that square — a floor running under a wall, a box standing on the floor —
+the centre may sit behind the wall or inside the box, while part of the square is in the open.
+Rays started there see the far side of the wall (light leaks through the corner) or only the
+inside of the box (a dark rim round a box that should have a contact shadow only).
+
+What the mature bakers do (Bakery, Godot's LightmapperRD, Unity's backface tolerance), here:
+
+1. Tangent probes: from the sample point, lifted off the surface by the integrator's offset,
+   ``TANGENT_RAYS`` short rays in the texel's plane, ``PROBE_RADIUS`` texel sides long. A ray
+   that meets the *back* of a single-sided surface first means the sample is behind it: the
+   point moves along that ray past the nearest such face, ``PUSH`` texel sides into the open
+   (the point stays in the texel's plane, within about a texel of where it was). Repeated up to
+   ``TANGENT_ROUNDS`` times, so a point behind two walls (a corner) gets out too.
+2. Hemisphere probes from the final point: ``HEMISPHERE_RAYS`` fixed cosine-spread rays up to
+   d_max. The fraction that meets back faces of single-sided surfaces decides:
+   - at least ``ENCLOSED_FRACTION``: the point is shut inside a solid (a floor under a box or a
+     thick wall). No light reaches it: its lightmap value is 0 (dark), its own rays are unused.
+   - at least ``BACKFACE_TOLERANCE``: inside or behind geometry, and it could not be moved out:
+     *invalid*. Post-processing gives it the mean of its valid neighbours, never the value of
+     rays that started inside a wall.
+   - else valid.
+
+Double-sided materials have no back: their faces never count. Everything is vectorised over
+texels (one ray batch per probe step) and a pure function of the geometry, so the result does not
+depend on chunking or threads (DESIGN.md §4).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .geometry import World
+from .rasterise import Texels
+from .scene import Scene
+from .trace import Tracer
+
+TANGENT_RAYS = 8
+TANGENT_ROUNDS = 3
+PROBE_RADIUS = 1.5  # texel sides: a texel centre up to one texel behind a wall, or diagonally (1.41) behind a corner
+PUSH = 0.1  # texel sides past the back face the point is moved to
+TIE = 0.25  # texel sides: back faces this close to the nearest count as equally near
+HEMISPHERE_RAYS = 12
+ENCLOSED_FRACTION = 0.9
+BACKFACE_TOLERANCE = 0.6
+
+VALID, MOVED, INVALID, ENCLOSED = 0, 1, 2, 3
+STATE_NAMES = ("valid", "moved", "invalid", "enclosed")
+
+# Same smallest lift off the surface as the integrator: in texel sides and in float32 spacings.
+_OFFSET_TEXELS = 1e-3
+_OFFSET_ULPS = 64 * 2.0 ** -23
+_CHUNK = 1 << 15  # texels per ray batch
+
+
+@dataclass(frozen=True)
+class Validity:
+    """What the probes found for N texels (rows in ``Texels`` order).
+
+    state: (N,) int8, one of VALID, MOVED (sample moved past a back face, then valid), INVALID
+    (filled from neighbours later), ENCLOSED (inside a solid: value 0). moved_by: (N,) float64
+    world distance each sample point moved (0 for most). back_fraction: (N,) float64 fraction of
+    the hemisphere probes that met a back face.
+    """
+
+    state: np.ndarray
+    moved_by: np.ndarray
+    back_fraction: np.ndarray
+
+    def counts(self) -> dict[str, int]:
+        """How many texels are in each state, by name (for the report)."""
+        return {name: int((self.state == code).sum()) for code, name in enumerate(STATE_NAMES)}
+
+    def page_masks(self, texels: Texels, shape: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray]:
+        """(invalid, enclosed): (P, H, W) bool page masks of the INVALID and ENCLOSED texels."""
+        invalid = np.zeros(shape, bool)
+        enclosed = np.zeros(shape, bool)
+        invalid[texels.page, texels.y, texels.x] = self.state == INVALID
+        enclosed[texels.page, texels.y, texels.x] = self.state == ENCLOSED
+        return invalid, enclosed
+
+
+def _frames(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit tangents (k, 3) each, orthogonal to the unit normals (k, 3) and to each other."""
+    helper = np.where((np.abs(normal[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+    t1 = np.cross(normal, helper)
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    return t1, np.cross(normal, t1)
+
+
+def _hemisphere_directions(count: int) -> np.ndarray:
+    """(count, 3) fixed cosine-spread directions about +z (a Fibonacci spiral on the disc)."""
+    i = np.arange(count) + 0.5
+    r = np.sqrt(i / count)
+    phi = i * np.pi * (3.0 - np.sqrt(5.0))
+    return np.stack([r * np.cos(phi), r * np.sin(phi), np.sqrt(1.0 - r * r)], axis=1)
+
+
+def _lift(position: np.ndarray, size: np.ndarray, center: np.ndarray) -> np.ndarray:
+    """(k,) distance off the surface for ray origins: the integrator's rule (texel size and
+    float32 spacing at the position's distance from the tracer's centre)."""
+    magnitude = np.abs(position - center).max(axis=1)
+    return np.maximum(_OFFSET_TEXELS * size, _OFFSET_ULPS * np.maximum(magnitude, 1e-30))
+
+
+class _Faces:
+    """Which hits are back faces: geometric normals and single-sidedness of every triangle."""
+
+    def __init__(self, scene: Scene, world: World):
+        self.normals = world.geometric_normals()
+        self.single = ~np.array([m.double_sided for m in scene.materials], bool)[world.tri_material]
+
+    def back(self, triangle: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        """(n,) bool: the ray met the back of a single-sided triangle (False for misses)."""
+        t = np.maximum(triangle, 0)
+        facing = np.einsum("ij,ij->i", self.normals[t], directions)
+        return (triangle >= 0) & self.single[t] & (facing > 0)
+
+
+def _tangent_step(tracer: Tracer, faces: _Faces, position: np.ndarray, normal: np.ndarray,
+                  size: np.ndarray, home: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """One round of tangent probes for k points: (new position (k, 3), moved (k,) bool).
+
+    Of the back faces within ``TIE`` texel sides of the nearest, the point crosses the one
+    whose direction points most towards ``home`` (k, 3), the centroid of the texel's own
+    triangle: where the surface really is (a wall's corner texel poking past the ceiling and a
+    side wall moves back into the room, not over the ceiling)."""
+    k = len(position)
+    t1, t2 = _frames(normal)
+    angle = 2 * np.pi * np.arange(TANGENT_RAYS) / TANGENT_RAYS
+    directions = (np.cos(angle)[None, :, None] * t1[:, None] +
+                  np.sin(angle)[None, :, None] * t2[:, None]).reshape(-1, 3)
+    lift = _lift(position, size, tracer.center)
+    origins = np.repeat(position + lift[:, None] * normal, TANGENT_RAYS, axis=0)
+    length = np.repeat(PROBE_RADIUS * size, TANGENT_RAYS)
+    hits = tracer.cast(origins, directions, length)
+    back = faces.back(hits.triangle, directions)
+    distance = np.where(back, hits.distance, np.inf).reshape(k, TANGENT_RAYS)
+    towards = home - position
+    towards /= np.maximum(np.linalg.norm(towards, axis=1, keepdims=True), 1e-300)
+    alignment = np.einsum("krj,kj->kr", directions.reshape(k, TANGENT_RAYS, 3), towards)
+    close = distance <= distance.min(axis=1, keepdims=True) + TIE * size[:, None]
+    nearest = np.argmax(np.where(close, alignment, -np.inf), axis=1)
+    moved = np.isfinite(distance[np.arange(k), nearest])
+    step = distance[np.arange(k), nearest] + PUSH * size
+    direction = directions.reshape(k, TANGENT_RAYS, 3)[np.arange(k), nearest]
+    new = np.where(moved[:, None], position + np.where(moved, step, 0.0)[:, None] * direction,
+                   position)
+    return new, moved
+
+
+def _back_fraction(tracer: Tracer, faces: _Faces, position: np.ndarray, normal: np.ndarray,
+                   size: np.ndarray, d_max: float) -> np.ndarray:
+    """(k,) fraction of the fixed hemisphere probes from each point that meet a back face."""
+    k = len(position)
+    t1, t2 = _frames(normal)
+    local = _hemisphere_directions(HEMISPHERE_RAYS)
+    directions = (local[None, :, :1] * t1[:, None] + local[None, :, 1:2] * t2[:, None]
+                  + local[None, :, 2:] * normal[:, None]).reshape(-1, 3)
+    lift = _lift(position, size, tracer.center)
+    origins = np.repeat(position + lift[:, None] * normal, HEMISPHERE_RAYS, axis=0)
+    hits = tracer.cast(origins, directions, d_max)
+    return faces.back(hits.triangle, directions).reshape(k, HEMISPHERE_RAYS).mean(axis=1)
+
+
+def check_texels(scene: Scene, world: World, tracer: Tracer, texels: Texels,
+                 d_max: float) -> tuple[Texels, Validity]:
+    """Probe every texel's sample point; return the texels with moved positions and their states.
+
+    ``d_max``: the hemisphere probes' length (the obscurance distance), world units.
+    Only ``Texels.position`` changes; normals, triangle and key stay (the point moves in the
+    texel's own plane).
+    """
+    count = len(texels)
+    faces = _Faces(scene, world)
+    position = texels.position.copy()
+    moved = np.zeros(count, bool)
+    fraction = np.zeros(count)
+    for start in range(0, count, _CHUNK):
+        rows = slice(start, min(start + _CHUNK, count))
+        normal, size = texels.geometric_normal[rows], texels.size[rows]
+        usable = np.flatnonzero((size > 0) & (np.linalg.norm(normal, axis=1) > 0.5))
+        p = position[rows]
+        home = np.mean(world.corners(texels.triangle[rows]), axis=0)  # (k, 3) centroids
+        for _ in range(TANGENT_ROUNDS):
+            new, stepped = _tangent_step(tracer, faces, p[usable], normal[usable], size[usable],
+                                         home[usable])
+            p[usable] = new
+            moved[rows][usable] |= stepped  # a view of ``moved``: writes through
+            usable = usable[stepped]
+            if not len(usable):
+                break
+        position[rows] = p
+        ok = np.flatnonzero(np.linalg.norm(normal, axis=1) > 0.5)
+        fraction[rows][ok] = _back_fraction(tracer, faces, p[ok], normal[ok], size[ok], d_max)
+    state = np.where(moved, MOVED, VALID).astype(np.int8)
+    state[fraction >= BACKFACE_TOLERANCE] = INVALID
+    state[fraction >= ENCLOSED_FRACTION] = ENCLOSED
+    moved_by = np.linalg.norm(position - texels.position, axis=1)
+    return (replace(texels, position=position),
+            Validity(state=state, moved_by=moved_by, back_fraction=fraction))
