@@ -107,15 +107,14 @@ class Computed:
     validity: Validity | None = None  # which sample points were moved, flagged (validity.py)
 
     def rmse_estimate(self) -> float:
-        """RMSE of the lightmap's luminance estimated from the rays' sample variance."""
+        """RMSE of the lightmap's luminance estimated from the rays (``Terms.rmse``)."""
         if not len(self.texels):
             return 0.0
         r_ave = effective_r_ave(self.ambient, self.settings.rho)
-        stderr = self.terms.standard_error(r_ave, self.settings.rays)
-        variance = (stderr * (self.ambient.intensity @ LUMINANCE)) ** 2
-        if self.direct is not None:
-            variance = variance + self.direct.variance()
-        return float(np.sqrt(np.mean(variance)))
+        obscurance = self.terms.rmse(r_ave, self.settings.sampling) * (
+            self.ambient.intensity @ LUMINANCE)
+        direct = float(np.mean(self.direct.variance())) if self.direct is not None else 0.0
+        return float(np.sqrt(obscurance ** 2 + direct))
 
 
 def compute(scene: Scene, settings: Settings, quiet: bool = True) -> Computed:
@@ -140,7 +139,10 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True) -> Computed:
         texels, validity = check_texels(scene, world, tracer, texels, resolved.d_max)
     with _timed(times, "trace"):
         with bar(len(texels), "baking", wanted(quiet)) as advance:
-            terms = integrate(scene, world, tracer, texels, resolved, advance)
+            error_scale = (effective_r_ave(ambient, resolved.rho),
+                           float(ambient.intensity @ LUMINANCE))
+            terms = integrate(scene, world, tracer, texels, resolved, advance,
+                              error_scale=error_scale)
     with _timed(times, "direct"):
         with bar(len(texels), "direct light", wanted(quiet) and sources.any()) as advance:
             direct = direct_light(scene, world, tracer, texels, sources, resolved, advance)

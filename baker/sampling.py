@@ -169,21 +169,22 @@ def point(technique, sample, count, scrambles):
 
 
 @jit
-def fill_points(technique, seed, keys, count, dimension, u, v):
-    """Samples 0 … count−1 of every texel in ``keys`` (k,) into ``u``, ``v`` (k·count,).
+def fill_points(technique, seed, keys, first, count, total, dimension, u, v):
+    """Samples ``first`` … ``first + count − 1`` of ``total`` of every texel in ``keys`` (k,)
+    into ``u``, ``v`` (k·count,), texel-major, as ``point`` gives them.
 
-    Texel-major, as ``point`` gives them; the technique is chosen once per texel, outside the
-    inner loop, so that the compiler vectorises the Sobol case.
+    The technique is chosen once per texel, outside the inner loop, so that the compiler
+    vectorises the Sobol case.
     """
     for i in range(len(keys)):
         shuffle, sx, sy = texel_scrambles(seed, keys[i], dimension)
-        base = i * count
+        base = i * count - first
         if technique == 0:
-            for s in range(count):
+            for s in range(first, first + count):
                 u[base + s], v[base + s] = _sobol_point(s, shuffle, sx, sy)
         else:
-            for s in range(count):
-                u[base + s], v[base + s] = _hashed_point(technique, s, count, shuffle, sx, sy)
+            for s in range(first, first + count):
+                u[base + s], v[base + s] = _hashed_point(technique, s, total, shuffle, sx, sy)
 
 
 @jit

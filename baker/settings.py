@@ -27,6 +27,10 @@ class Settings:
     rays: obscurance rays per texel.
     sampling: how each texel's ray directions are drawn: "sobol" (Owen-scrambled Sobol, the
         default), "stratified" (jittered grid) or "random" (independent), see sampling.py.
+    target_error: adaptive sampling: give each texel rays in rounds (``rays``, then doubling)
+        until the standard error of its lightmap luminance is at most this, or it has
+        ``max_rays``; None: every texel gets ``rays``.
+    max_rays: the most rays a texel gets with ``target_error``.
     d_max: the obscurance distance; None takes ``d_max_fraction`` of the baked bounds' diagonal.
     rho: the obscurance function ρ(d): "sqrt" (the paper's sqrt(d/d_max)), "step" (classic
         ambient occlusion: a hit closer than d_max counts 0, R(Q) = 1) or "linear" (d/d_max).
@@ -57,6 +61,8 @@ class Settings:
     padding: int = 2
     rays: int = 64
     sampling: str = "sobol"
+    target_error: float | None = None
+    max_rays: int = 1024
     d_max: float | None = None
     d_max_fraction: float = 0.2
     rho: str = "sqrt"
@@ -80,6 +86,7 @@ class Settings:
             "texel_density": self.texel_density,
             "d_max": self.d_max,
             "d_max_fraction": self.d_max_fraction,
+            "target_error": self.target_error,
             "ambient": self.ambient if self.ambient is None else self.ambient + 1.0,
         }
         for name, value in positive.items():
@@ -89,7 +96,7 @@ class Settings:
         if self.ambient is not None and self.ambient < 0:
             raise SettingsError(f"ambient must be 0 or more, not {self.ambient}",
                                 fix="give --ambient a value of 0 or more")
-        integers = {"page_size": (self.page_size, 16), "rays": (self.rays, 1),
+        integers = {"page_size": (self.page_size, 16), "rays": (self.rays, 1), "max_rays": (self.max_rays, 1),
                     "chunk_texels": (self.chunk_texels, 1), "padding": (self.padding, 0),
                     "threads": (self.threads, 0), "seed": (self.seed, 0),
                     "shadow_rays": (self.shadow_rays, 1), "emissive_rays": (self.emissive_rays, 1),

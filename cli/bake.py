@@ -51,6 +51,15 @@ def add_parser(commands) -> None:
                        help="ambient intensity I_A (default: from the scene's emissive surfaces, "
                             "or 1 when it has none)")
     model.add_argument("--seed", type=int, default=d.seed, help="sampler seed (default 0)")
+    model.add_argument("--sampling", choices=baker.sampling.TECHNIQUES, default=d.sampling,
+                       help="how each texel's ray directions are drawn: sobol (Owen-scrambled, "
+                            "least noise per ray), stratified or random (default sobol)")
+    model.add_argument("--target-error", type=positive_float, metavar="E",
+                       help="adaptive sampling: rays in rounds (--rays, then doubling) until each "
+                            "texel's standard error is at most E in lightmap units, or it has "
+                            "--max-rays (default: every texel gets --rays)")
+    model.add_argument("--max-rays", type=int, default=d.max_rays, metavar="N",
+                       help=f"the most rays a texel gets with --target-error (default {d.max_rays})")
     direct = bake.add_argument_group("direct light (KHR_lights_punctual, emissive surfaces, sky)")
     direct.add_argument("--shadow-rays", type=int, default=d.shadow_rays, metavar="N",
                         help="shadow rays per texel towards a light with a size (soft shadows); "
@@ -96,7 +105,8 @@ def settings_from(args: argparse.Namespace) -> baker.Settings:
     """The ``baker.Settings`` that the command line asks for."""
     return baker.Settings(
         texel_density=args.texel_density, page_size=args.page_size, padding=args.padding,
-        rays=args.rays, d_max=args.d_max, rho=args.rho, ambient=args.ambient, seed=args.seed,
+        rays=args.rays, sampling=args.sampling, target_error=args.target_error,
+        max_rays=args.max_rays, d_max=args.d_max, rho=args.rho, ambient=args.ambient, seed=args.seed,
         threads=args.threads, encoding=args.encoding, occlusion=args.occlusion,
         shadow_rays=args.shadow_rays, light_radius=args.light_radius, light_angle=args.light_angle,
         emissive_rays=args.emissive_rays, sky=args.sky, sky_horizon=args.sky_horizon,

@@ -13,9 +13,9 @@ import argparse
 import sys
 
 import baker
-from cli import bake, preview
+from cli import bake, preview, study
 
-SUBCOMMANDS = (bake, preview)
+SUBCOMMANDS = (bake, preview, study)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -45,7 +45,7 @@ def test_parallel_plane_matches_closed_form(tmp_path, rho):
     assert probe.sum() >= 4
     r_ave = effective_r_ave(done.ambient, rho)
     w = _w(done)[probe].mean(axis=1)
-    stderr = done.terms.standard_error(r_ave, 4096)[probe]
+    stderr = done.terms.standard_error(r_ave)[probe]
     expected = _closed_form_w(rho, height, d_max, ceiling, float(r_ave[0]))
     assert np.all(np.abs(w - expected) < 3 * stderr + 1e-9), (w, expected, stderr)
 
@@ -67,6 +67,7 @@ def test_colour_bleeding_red_shift_falls_off_with_distance(tmp_path):
 def test_standard_error_of_a_known_variance():
     """Half the rays hit a white surface at ρ = 1 and half escape with R_ave = 0: var = 1/4."""
     terms = Terms(w_hit=np.full((1, 3), 0.5), escaped=np.array([0.5]),
-                  hit_sq=np.array([0.5]), rays=100)
-    stderr = terms.standard_error(np.zeros(3), 100)
+                  hit_sq=np.array([0.5]), counts=np.array([100]),
+                  half_split=np.zeros((1, 2)), quarter_split=np.zeros((1, 2)))
+    stderr = terms.standard_error(np.zeros(3))
     assert np.isclose(stderr[0], np.sqrt(0.25 * 100 / 99 / 100))

@@ -1,0 +1,170 @@
+"""Error against run time: the convergence study behind ``baker study`` (DESIGN.md §6).
+
+The scene is unwrapped and rasterised once; then, for each sampling technique and each number
+of rays per texel, the obscurance terms are estimated again and timed. Each run's lightmap
+(I_A·W, luminance) is compared with a converged reference — the same estimator with many more
+rays — to give the measured RMSE, next to the RMSE the bake itself estimates from its samples'
+variance (what every bake reports). Units are lightmap units, as in the report.
+"""
+
+from __future__ import annotations
+
+import io
+import time
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .bake import Computed
+from .compose import effective_r_ave
+from .integrate import Terms, integrate
+from .sampling import TECHNIQUES
+from .surface import LUMINANCE
+from .trace import Tracer
+
+DEFAULT_RAYS = (4, 8, 16, 32, 64, 128, 256, 512, 1024)
+
+
+@dataclass(frozen=True)
+class Row:
+    """One run of the study: a technique at ``rays`` per texel."""
+
+    technique: str
+    rays: int
+    seconds: float  # wall time of the integration alone
+    rmse: float  # measured against the reference, lightmap units
+    estimated_rmse: float  # from the run's own sample variance
+
+    def as_dict(self) -> dict:
+        return {"technique": self.technique, "rays": self.rays, "seconds": self.seconds,
+                "rmse": self.rmse, "estimated_rmse": self.estimated_rmse}
+
+
+@dataclass(frozen=True)
+class Study:
+    """The study's table, its reference, and the fitted convergence rate per technique."""
+
+    rows: tuple[Row, ...]
+    texels: int
+    reference_rays: int
+    reference_seconds: float
+
+    def slope(self, technique: str, min_rays: int = 16) -> float:
+        """Least-squares slope of log RMSE against log rays (−0.5 for plain Monte Carlo)."""
+        rows = [r for r in self.rows if r.technique == technique and r.rays >= min_rays
+                and r.rmse > 0]
+        x = np.log([r.rays for r in rows])
+        y = np.log([r.rmse for r in rows])
+        return float(np.polyfit(x, y, 1)[0])
+
+    def table(self) -> str:
+        """The table as aligned text, one run per line, then the slopes."""
+        lines = [f"{'technique':<11}{'rays':>6}{'seconds':>10}{'RMSE':>12}{'estimated':>12}"]
+        for r in self.rows:
+            lines.append(f"{r.technique:<11}{r.rays:>6}{r.seconds:>10.3f}{r.rmse:>12.3e}"
+                         f"{r.estimated_rmse:>12.3e}")
+        for technique in dict.fromkeys(r.technique for r in self.rows):
+            lines.append(f"{technique}: RMSE ∝ rays^{self.slope(technique):.2f}")
+        lines.append(f"reference: {self.reference_rays} rays/texel (sobol), "
+                     f"{self.reference_seconds:.1f} s, {self.texels:,} texels")
+        return "\n".join(lines)
+
+    def as_dict(self) -> dict:
+        return {"texels": self.texels, "reference_rays": self.reference_rays,
+                "reference_seconds": self.reference_seconds,
+                "rows": [r.as_dict() for r in self.rows],
+                "slopes": {t: self.slope(t) for t in dict.fromkeys(r.technique for r in self.rows)}}
+
+
+def _luminance(done: Computed, terms: Terms) -> np.ndarray:
+    """(N,) lightmap luminance I_A·W of the terms."""
+    w = terms.obscurance(effective_r_ave(done.ambient, done.settings.rho))
+    return (w @ LUMINANCE) * float(done.ambient.intensity @ LUMINANCE)
+
+
+def _estimated_rmse(done: Computed, terms: Terms, technique: str) -> float:
+    """The RMSE a bake would report for these terms (obscurance part, lightmap units)."""
+    rmse = terms.rmse(effective_r_ave(done.ambient, done.settings.rho), technique)
+    return rmse * float(done.ambient.intensity @ LUMINANCE)
+
+
+def run_study(done: Computed, rays: tuple[int, ...] = DEFAULT_RAYS,
+              techniques: tuple[str, ...] = TECHNIQUES, reference_rays: int = 4096,
+              progress=None) -> Study:
+    """Time and measure every (technique, rays) run on the texels of ``done``.
+
+    ``done`` is a bake computed up to its lightmaps (``bake.compute``); its settings (d_max, ρ,
+    seed, threads) are kept, only the rays and the technique change. ``progress(text)`` is told
+    of each run as it starts.
+    """
+    tracer = Tracer(done.world)
+
+    def estimate(technique: str, count: int) -> tuple[Terms, float]:
+        settings = replace(done.settings, rays=count, sampling=technique, target_error=None)
+        started = time.perf_counter()
+        terms = integrate(done.scene, done.world, tracer, done.texels, settings)
+        return terms, time.perf_counter() - started
+
+    if progress:
+        progress(f"reference: {reference_rays} rays per texel")
+    reference_terms, reference_seconds = estimate("sobol", reference_rays)
+    reference = _luminance(done, reference_terms)
+    rows = []
+    for technique in techniques:
+        for count in rays:
+            if progress:
+                progress(f"{technique}, {count} rays per texel")
+            terms, seconds = estimate(technique, count)
+            rmse = float(np.sqrt(np.mean((_luminance(done, terms) - reference) ** 2)))
+            rows.append(Row(technique, count, seconds, rmse, _estimated_rmse(done, terms, technique)))
+    return Study(tuple(rows), len(done.texels), reference_rays, reference_seconds)
+
+
+_COLOURS = {"sobol": (31, 119, 180), "stratified": (255, 127, 14), "random": (44, 160, 44),
+            "gi": (214, 39, 40)}
+
+
+def plot(study: Study, size: tuple[int, int] = (800, 560)) -> bytes:
+    """PNG bytes: RMSE (measured: solid, estimated: dashed) against seconds, log–log axes."""
+    from PIL import Image, ImageDraw
+
+    width, height = size
+    left, right, top, bottom = 80, 20, 40, 60
+    rows = [r for r in study.rows if r.seconds > 0 and r.rmse > 0]
+    xs = np.log10([r.seconds for r in rows])
+    ys = np.log10([v for r in rows for v in (r.rmse, r.estimated_rmse) if v > 0])
+    x0, x1 = np.floor(xs.min()), np.ceil(xs.max())
+    y0, y1 = np.floor(ys.min()), np.ceil(ys.max())
+
+    def at(seconds: float, rmse: float) -> tuple[float, float]:
+        fx = (np.log10(seconds) - x0) / max(x1 - x0, 1e-9)
+        fy = (np.log10(rmse) - y0) / max(y1 - y0, 1e-9)
+        return left + fx * (width - left - right), height - bottom - fy * (height - top - bottom)
+
+    image = Image.new("RGB", size, "white")
+    draw = ImageDraw.Draw(image)
+    for decade in range(int(x0), int(x1) + 1):
+        x, _ = at(10.0 ** decade, 10.0 ** y0)
+        draw.line([(x, top), (x, height - bottom)], fill=(225, 225, 225))
+        draw.text((x - 12, height - bottom + 6), f"1e{decade}", fill="black")
+    for decade in range(int(y0), int(y1) + 1):
+        _, y = at(10.0 ** x0, 10.0 ** decade)
+        draw.line([(left, y), (width - right, y)], fill=(225, 225, 225))
+        draw.text((left - 40, y - 6), f"1e{decade}", fill="black")
+    draw.rectangle([left, top, width - right, height - bottom], outline="black")
+    draw.text((width // 2 - 60, height - 24), "seconds (log)", fill="black")
+    draw.text((8, top - 28), "RMSE, lightmap units (log): measured solid, estimated dashed",
+              fill="black")
+    for n, technique in enumerate(dict.fromkeys(r.technique for r in rows)):
+        colour = _COLOURS.get(technique, (0, 0, 0))
+        mine = [r for r in rows if r.technique == technique]
+        draw.line([at(r.seconds, r.rmse) for r in mine], fill=colour, width=3)
+        estimated = [at(r.seconds, r.estimated_rmse) for r in mine if r.estimated_rmse > 0]
+        for a, b in zip(estimated[:-1], estimated[1:]):
+            middle = ((a[0] + b[0]) / 2, (a[1] + b[1]) / 2)
+            draw.line([a, middle], fill=colour, width=1)
+        draw.text((width - right - 150, top + 10 + 16 * n),
+                  f"{technique} (rays^{study.slope(technique):.2f})", fill=colour)
+    buffer = io.BytesIO()
+    image.save(buffer, "PNG")
+    return buffer.getvalue()

@@ -1,0 +1,54 @@
+"""Adaptive sampling and integrating a subset of texels."""
+
+import numpy as np
+
+from assets.make_scenes import cornell_box
+from baker.compose import effective_r_ave
+from baker.integrate import integrate
+from baker.surface import LUMINANCE
+from baker.trace import Tracer
+from tests.bakehelp import computed
+
+SETTINGS = dict(texel_density=6.0, rays=16, max_rays=256, d_max=0.6)
+
+
+def _lightmap_stderr(done):
+    scale = float(done.ambient.intensity @ LUMINANCE)
+    return done.terms.standard_error(effective_r_ave(done.ambient, done.settings.rho)) * scale
+
+
+def test_texels_get_rays_until_their_error_is_under_the_target(tmp_path):
+    uniform = computed(cornell_box(), tmp_path, **SETTINGS)
+    target = float(np.median(_lightmap_stderr(uniform)))
+    done = computed(cornell_box(), tmp_path, target_error=target, **SETTINGS)
+    counts = done.terms.counts
+    stderr = _lightmap_stderr(done)
+    assert set(np.unique(counts)) <= {16, 32, 64, 128, 256}
+    assert counts.min() == 16 and counts.max() > 16  # some stop at once, some go on
+    assert np.all((stderr <= target) | (counts == 256))
+    # Texels that needed more rays were the noisy ones at 16 rays.
+    first = _lightmap_stderr(uniform)
+    assert first[counts > 16].min() > target >= first[counts == 16].max()
+
+
+def test_adaptive_result_does_not_depend_on_chunks_or_threads(tmp_path):
+    target = 0.01
+    a = computed(cornell_box(), tmp_path, target_error=target, threads=1, chunk_texels=100000,
+                 **SETTINGS)
+    b = computed(cornell_box(), tmp_path, target_error=target, threads=2, chunk_texels=7,
+                 **SETTINGS)
+    assert np.array_equal(a.terms.counts, b.terms.counts)
+    assert np.array_equal(a.terms.w_hit, b.terms.w_hit)
+    assert np.array_equal(a.lightmaps.light, b.lightmaps.light)
+
+
+def test_a_subset_of_rows_gets_the_same_terms_as_the_full_bake(tmp_path):
+    for extra in ({}, {"target_error": 0.01}):
+        done = computed(cornell_box(), tmp_path, **SETTINGS, **extra)
+        rows = np.random.default_rng(1).choice(len(done.texels), 300, replace=False)
+        part = integrate(done.scene, done.world, Tracer(done.world), done.texels, done.settings,
+                         rows=rows, error_scale=(effective_r_ave(done.ambient, "sqrt"),
+                                                 float(done.ambient.intensity @ LUMINANCE)))
+        assert np.array_equal(part.w_hit, done.terms.w_hit[rows])
+        assert np.array_equal(part.escaped, done.terms.escaped[rows])
+        assert np.array_equal(part.counts, done.terms.counts[rows])

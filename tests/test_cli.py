@@ -1,0 +1,61 @@
+"""The command line as a user runs it: help, a bake, the report, exit codes."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from assets.make_scenes import cornell_box
+from cli.main import main
+
+
+def test_help_explains_every_setting(capsys):
+    with pytest.raises(SystemExit) as stop:
+        main(["bake", "--help"])
+    assert stop.value.code == 0
+    text = capsys.readouterr().out
+    for option in ("--texel-density", "--page-size", "--padding", "--rays", "--d-max", "--rho",
+                   "--seed", "--sampling", "--report", "--lightmaps", "--encoding", "--occlusion"):
+        assert option in text, option
+    assert "sqrt" in text and "step" in text and "examples:" in text
+
+
+def test_bake_prints_a_summary_and_writes_the_report(tmp_path, capsys):
+    scene = cornell_box().save(tmp_path / "box.glb")
+    out, report = tmp_path / "box_baked.glb", tmp_path / "report.json"
+    code = main(["bake", str(scene), "-o", str(out), "--rays", "8", "--texel-density", "6",
+                 "--report", str(report)])
+    printed = capsys.readouterr().out
+    assert code == 0 and out.stat().st_size > scene.stat().st_size
+    data = json.loads(report.read_text())
+    assert f"{data['texels']:,} texels" in printed and "M rays/s" in printed
+    assert data["settings"]["rays"] == 8 and data["settings"]["texel_density"] == 6.0
+    assert data["settings"]["d_max"] > 0  # the default, derived from the scene and reported
+    assert data["rays_per_second"] > 0
+
+
+def test_quiet_prints_nothing(tmp_path, capsys):
+    scene = cornell_box().save(tmp_path / "box.glb")
+    assert main(["bake", str(scene), "-o", str(tmp_path / "o.glb"), "--rays", "4",
+                 "--texel-density", "4", "--quiet"]) == 0
+    captured = capsys.readouterr()
+    assert captured.out == "" and captured.err == ""
+
+
+def test_a_missing_scene_is_one_message_and_exit_1(tmp_path):
+    out = tmp_path / "o.glb"
+    run = subprocess.run([sys.executable, "-m", "cli.main", "bake", str(tmp_path / "nope.glb"),
+                          "-o", str(out)], capture_output=True, text=True)
+    assert run.returncode == 1
+    assert "nope.glb" in run.stderr and "Traceback" not in run.stderr
+    assert not out.exists()
+
+
+def test_bad_settings_say_what_to_do(tmp_path, capsys):
+    scene = cornell_box().save(tmp_path / "box.glb")
+    out = tmp_path / "o.glb"
+    assert main(["bake", str(scene), "-o", str(out), "--rays", "0"]) == 1
+    err = capsys.readouterr().err
+    assert "rays" in err and "--rays" in err
+    assert not out.exists()
