@@ -35,20 +35,19 @@ run on a thread pool and write only their own rows, so the result does not depen
 from __future__ import annotations
 
 import math
-import os
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
 
 from .geometry import World
+from .parallel import run_chunks
 from .rasterise import Texels
 from .sampling import cosine_hemisphere, sample_2d, tangent_frames
 from .scene import Light, Scene
 from .settings import Resolved
 from .surface import LUMINANCE, emission
-from .trace import Tracer
+from .trace import Tracer, ray_lift
 
 SKY_DIMENSION = 12
 EMISSIVE_DIMENSION = 13
@@ -59,9 +58,6 @@ POWER_POINTS = 16384
 # Keys of the power-estimate points, apart from texel keys ((page·h + y)·w + x, far below 2^62).
 _POWER_KEY_BASE = np.uint64(1 << 62)
 
-# Ray origin lift off the surface: in texel sizes and in float32 units of the position's magnitude.
-_OFFSET_TEXELS = 1e-3
-_OFFSET_ULPS = 64 * 2.0 ** -23
 # Shadow rays stop this fraction short of the point they aim at (a light sample on a surface).
 _SHORT = 1e-3
 
@@ -218,16 +214,6 @@ class Receivers:
     def origins(self, n: int) -> np.ndarray:
         """(k·n, 3) ray origins, each point's repeated n times (point-major)."""
         return np.repeat(self.position + self.lift[:, None] * self.geometric, n, axis=0)
-
-
-def _lift(position: np.ndarray, size: np.ndarray, center: np.ndarray) -> np.ndarray:
-    """Ray origin offsets (k,): the larger of a texel fraction and the float32 spacing there.
-
-    The same rule as the obscurance rays' (integrate.py), so neither big texels nor scenes far
-    from the origin self-intersect.
-    """
-    magnitude = np.abs(position - center).max(axis=1)
-    return np.maximum(_OFFSET_TEXELS * size, _OFFSET_ULPS * np.maximum(magnitude, 1e-30))
 
 
 def _cone_directions(axis: np.ndarray, cos_max: np.ndarray, u: np.ndarray) -> np.ndarray:
@@ -454,14 +440,8 @@ def no_direct(count: int) -> Direct:
 def _texel_receivers(texels: Texels, rows: slice, center: np.ndarray) -> Receivers:
     return Receivers(position=texels.position[rows], normal=texels.normal[rows],
                      geometric=texels.geometric_normal[rows],
-                     lift=_lift(texels.position[rows], texels.size[rows], center),
+                     lift=ray_lift(texels.position[rows], texels.size[rows], center),
                      key=texels.key[rows])
-
-
-def _threads(settings: Resolved) -> int:
-    if settings.threads:
-        return settings.threads
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
 def direct_light(scene: Scene, world: World, tracer: Tracer, texels: Texels, sources: Sources,
@@ -493,13 +473,7 @@ def direct_light(scene: Scene, world: World, tracer: Tracer, texels: Texels, sou
         if progress is not None:
             progress(rows.stop - rows.start)
 
-    threads = _threads(settings)
-    if threads == 1 or len(chunks) < 2:
-        for rows in chunks:
-            work(rows)
-    else:
-        with ThreadPoolExecutor(threads) as pool:
-            list(pool.map(work, chunks))
+    run_chunks(work, chunks, settings.threads)
     return Direct(punctual=punctual, punctual_var=punctual_var,
                   light_colours=sources.light_colours(), emission=emitted,
                   emission_var=emitted_var, sky=sky, sky_var=sky_var,
@@ -560,7 +534,7 @@ def power_points(world: World, seed: int,
     normal = world.geometric_normals(tris)
     size = np.sqrt(areas[tris])
     return tris, bary, Receivers(position=position, normal=normal, geometric=normal,
-                                 lift=_lift(position, size, world.center), key=keys)
+                                 lift=ray_lift(position, size, world.center), key=keys)
 
 
 def delivered_power(scene: Scene, world: World, tracer: Tracer, sources: Sources,

@@ -14,8 +14,6 @@ so the result is the same bytes for any chunk size, thread count or order.
 
 from __future__ import annotations
 
-import os
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Callable
 
@@ -23,17 +21,13 @@ import numpy as np
 
 from .geometry import World
 from .obscurance import RHO_KINDS, UNIT_REFLECTIVITY, rho
+from .parallel import run_chunks
 from .rasterise import Texels
 from .sampling import TECHNIQUES, fill_cosine, fill_points, frame, jit
 from .scene import Scene
 from .settings import Resolved
 from .surface import LUMINANCE, albedo, triangle_albedo
-from .trace import Tracer
-
-# Smallest ray offset, in texel sizes and in float32 units of the position's magnitude.
-_OFFSET_TEXELS = 1e-3
-_OFFSET_ULPS = 64 * 2.0 ** -23
-
+from .trace import Tracer, ray_lift
 
 @dataclass(frozen=True)
 class Terms:
@@ -99,16 +93,6 @@ class Terms:
         return float(np.sqrt(half * ratio / (1.0 - ratio)))
 
 
-def ray_offsets(texels: Texels, rows: slice, center: np.ndarray) -> np.ndarray:
-    """How far (k,) to lift each texel's ray origins off its surface, in world units.
-
-    Scales with the texel's world size and with the float32 spacing at the position's distance
-    from the tracer's centre, so neither big texels nor far-away scenes self-intersect.
-    """
-    magnitude = np.abs(texels.position[rows] - center).max(axis=1)
-    return np.maximum(_OFFSET_TEXELS * texels.size[rows], _OFFSET_ULPS * np.maximum(magnitude, 1e-30))
-
-
 @jit
 def _to_world_kernel(rays, positions, normals, offsets, center, x, y, z, origins, directions):
     """Turn local cosine directions (x, y, z) (k·rays,) into Embree's float32 rays.
@@ -150,7 +134,8 @@ def hemisphere_rays(texels: Texels, rows: np.ndarray | slice, rays: int, seed: i
     origins = np.empty((k * rays, 3), np.float32)
     directions = np.empty((k * rays, 3), np.float32)
     _to_world_kernel(rays, texels.position[rows], texels.geometric_normal[rows],
-                     ray_offsets(texels, rows, center), center, x, y, z, origins, directions)
+                     ray_lift(texels.position[rows], texels.size[rows], center), center, x, y, z,
+                     origins, directions)
     return origins, directions
 
 
@@ -257,20 +242,6 @@ def _grid_size(settings: Resolved) -> int:
     return settings.max_rays if settings.target_error is not None else settings.rays
 
 
-def _run_chunks(work: Callable[[np.ndarray], None], rows: np.ndarray, settings: Resolved) -> None:
-    """Call ``work`` on consecutive chunks of ``rows``, on a thread pool (Embree and the
-    kernels release the GIL)."""
-    chunks = [rows[start:start + settings.chunk_texels]
-              for start in range(0, len(rows), settings.chunk_texels)]
-    threads = settings.threads or cores()
-    if threads == 1:
-        for chunk in chunks:
-            work(chunk)
-    else:
-        with ThreadPoolExecutor(threads) as pool:
-            list(pool.map(work, chunks))
-
-
 def integrate(scene: Scene, world: World, tracer: Tracer, texels: Texels, settings: Resolved,
               progress: Callable[[int], None] | None = None, rows: np.ndarray | None = None,
               error_scale: tuple[np.ndarray, float] | None = None) -> Terms:
@@ -304,7 +275,9 @@ def integrate(scene: Scene, world: World, tracer: Tracer, texels: Texels, settin
             if progress is not None and first == 0:
                 progress(len(chunk))
 
-        _run_chunks(work, active, settings)
+        run_chunks(work, [active[start:start + settings.chunk_texels]
+                          for start in range(0, len(active), settings.chunk_texels)],
+                   settings.threads)
         counts[active] += batch
         first += batch
         if settings.target_error is None or 2 * first > settings.max_rays:
@@ -337,8 +310,3 @@ def _means(sums: np.ndarray, counts: np.ndarray) -> Terms:
     first_quarter = _split(sums[:, _QUARTER], quarter, sums[:, _HALF], half)
     return Terms(w_hit=means[:, _RGB], escaped=means[:, _ESCAPED], hit_sq=means[:, _SQUARE],
                  counts=counts, half_split=first_half, quarter_split=first_quarter)
-
-
-def cores() -> int:
-    """Cores this process may run on."""
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)

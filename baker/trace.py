@@ -17,6 +17,22 @@ from embreex.mesh_construction import TriangleMesh
 from .geometry import World
 
 
+# Smallest ray offset, in texel sizes and in float32 units of the position's magnitude.
+_OFFSET_TEXELS = 1e-3
+_OFFSET_ULPS = 64 * 2.0 ** -23
+
+
+def ray_lift(position: np.ndarray, size: np.ndarray, center: np.ndarray) -> np.ndarray:
+    """How far (k,) to lift ray origins at ``position`` (k, 3) off their surface, world units.
+
+    The larger of 10⁻³ of the texel's world size ``size`` (k,) and 64 float32 ulps of the
+    position's distance from the tracer's ``center``: neither big texels nor scenes far from the
+    origin self-intersect inside Embree's float32.
+    """
+    magnitude = np.abs(position - center).max(axis=1)
+    return np.maximum(_OFFSET_TEXELS * size, _OFFSET_ULPS * np.maximum(magnitude, 1e-30))
+
+
 @dataclass(frozen=True)
 class Hits:
     """Nearest hits of n rays. triangle: (n,) int64 world triangle, -1 for a miss; distance:

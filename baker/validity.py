@@ -37,7 +37,7 @@ import numpy as np
 from .geometry import World
 from .rasterise import Texels
 from .scene import Scene
-from .trace import Tracer
+from .trace import Tracer, ray_lift
 
 TANGENT_RAYS = 8
 TANGENT_ROUNDS = 3
@@ -51,9 +51,6 @@ BACKFACE_TOLERANCE = 0.6
 VALID, MOVED, INVALID, ENCLOSED = 0, 1, 2, 3
 STATE_NAMES = ("valid", "moved", "invalid", "enclosed")
 
-# Same smallest lift off the surface as the integrator: in texel sides and in float32 spacings.
-_OFFSET_TEXELS = 1e-3
-_OFFSET_ULPS = 64 * 2.0 ** -23
 _CHUNK = 1 << 15  # texels per ray batch
 
 
@@ -100,13 +97,6 @@ def _hemisphere_directions(count: int) -> np.ndarray:
     return np.stack([r * np.cos(phi), r * np.sin(phi), np.sqrt(1.0 - r * r)], axis=1)
 
 
-def _lift(position: np.ndarray, size: np.ndarray, center: np.ndarray) -> np.ndarray:
-    """(k,) distance off the surface for ray origins: the integrator's rule (texel size and
-    float32 spacing at the position's distance from the tracer's centre)."""
-    magnitude = np.abs(position - center).max(axis=1)
-    return np.maximum(_OFFSET_TEXELS * size, _OFFSET_ULPS * np.maximum(magnitude, 1e-30))
-
-
 class _Faces:
     """Which hits are back faces: geometric normals and single-sidedness of every triangle."""
 
@@ -134,7 +124,7 @@ def _tangent_step(tracer: Tracer, faces: _Faces, position: np.ndarray, normal: n
     angle = 2 * np.pi * np.arange(TANGENT_RAYS) / TANGENT_RAYS
     directions = (np.cos(angle)[None, :, None] * t1[:, None] +
                   np.sin(angle)[None, :, None] * t2[:, None]).reshape(-1, 3)
-    lift = _lift(position, size, tracer.center)
+    lift = ray_lift(position, size, tracer.center)
     origins = np.repeat(position + lift[:, None] * normal, TANGENT_RAYS, axis=0)
     length = np.repeat(PROBE_RADIUS * size, TANGENT_RAYS)
     hits = tracer.cast(origins, directions, length)
@@ -161,7 +151,7 @@ def _back_fraction(tracer: Tracer, faces: _Faces, position: np.ndarray, normal: 
     local = _hemisphere_directions(HEMISPHERE_RAYS)
     directions = (local[None, :, :1] * t1[:, None] + local[None, :, 1:2] * t2[:, None]
                   + local[None, :, 2:] * normal[:, None]).reshape(-1, 3)
-    lift = _lift(position, size, tracer.center)
+    lift = ray_lift(position, size, tracer.center)
     origins = np.repeat(position + lift[:, None] * normal, HEMISPHERE_RAYS, axis=0)
     hits = tracer.cast(origins, directions, d_max)
     return faces.back(hits.triangle, directions).reshape(k, HEMISPHERE_RAYS).mean(axis=1)

@@ -23,8 +23,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from assets.make_scenes import cornell_box  # noqa: E402
 from baker.bake import compute  # noqa: E402
-from baker.integrate import cores, hemisphere_rays, integrate  # noqa: E402
+from baker.integrate import hemisphere_rays, integrate  # noqa: E402
 from baker.load import load  # noqa: E402
+from baker.parallel import cores  # noqa: E402
 from baker.settings import Settings  # noqa: E402
 from baker.trace import Tracer  # noqa: E402
 
