@@ -33,6 +33,7 @@ from .postprocess import postprocess
 from .progress import bar, wanted
 from .rasterise import Texels, rasterise
 from .validity import Validity, check_texels
+from .seams import find_seams
 from .scene import Scene
 from .settings import Resolved, Settings, resolve
 from .surface import LUMINANCE
@@ -149,7 +150,8 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True) -> Computed:
     with _timed(times, "compose"):
         lightmaps = postprocess(compose(atlas, texels, terms, ambient, resolved.rho, direct),
                                 resolved.padding, *validity.page_masks(
-                                    texels, (atlas.page_count, atlas.height, atlas.width)))
+                                    texels, (atlas.page_count, atlas.height, atlas.width)),
+                                seams=find_seams(atlas, world))
     return Computed(scene=scene, world=world, settings=resolved, ambient=ambient, plan=plan,
                     atlas=atlas, texels=texels, terms=terms, lightmaps=lightmaps,
                     stage_seconds=times, sources=sources, power=power, direct=direct,

@@ -6,7 +6,8 @@ their valid neighbours, never their own rays' values.
 
 Bilinear filtering (and mipmapping) reads texels around a chart's border that no triangle
 covers; left black they show as dark seams. Dilation fills each empty texel with the mean of its
-filled 8-neighbours, ring after ring.
+filled 8-neighbours, ring after ring. Last, the texels along smooth UV seams are re-solved so
+that both sides of each seam look the same (``seams.py``).
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from .compose import Lightmaps
+from .seams import Seams, stitch
 
 _NEIGHBOURS = [(dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1) if (dy, dx) != (0, 0)]
 _FILL_RINGS = 8  # how far (texels) valid values reach into a patch of invalid texels
@@ -63,11 +65,13 @@ def fill_invalid(values: np.ndarray, covered: np.ndarray, invalid: np.ndarray,
 
 
 def postprocess(lightmaps: Lightmaps, padding: int, invalid: np.ndarray | None = None,
-                enclosed: np.ndarray | None = None) -> Lightmaps:
-    """Clean the composed pages: enclosed texels dark, invalid ones from valid neighbours, then
-    dilation past the padding (at least 4 texels, for bilinear + 1 mip).
+                enclosed: np.ndarray | None = None, seams: Seams | None = None) -> Lightmaps:
+    """Clean the composed pages: enclosed texels dark, invalid ones from valid neighbours,
+    dilation past the padding (at least 4 texels, for bilinear + 1 mip), then both sides of
+    every smooth UV seam made to agree (``seams.stitch``).
 
     invalid, enclosed: (P, H, W) bool masks from ``validity.Validity.page_masks`` (None: none).
+    seams: from ``seams.find_seams`` (None: no stitching).
     """
     light, obscurance = lightmaps.light, lightmaps.obscurance
     if enclosed is not None and enclosed.any():
@@ -80,4 +84,7 @@ def postprocess(lightmaps: Lightmaps, padding: int, invalid: np.ndarray | None =
     rings = max(2 * padding, 4)
     light, filled = dilate(light, lightmaps.covered, rings)
     obscurance, _ = dilate(obscurance, lightmaps.covered, rings)
+    if seams is not None and len(seams):
+        light = stitch(light, lightmaps.covered, seams)
+        obscurance = stitch(obscurance, lightmaps.covered, seams)
     return Lightmaps(light=light, obscurance=obscurance, covered=lightmaps.covered)

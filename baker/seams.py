@@ -1,0 +1,201 @@
+"""Seams: make both sides of a UV seam show the same light.
+
+An edge that is one edge in 3D but two in the atlas (xatlas cut the surface there into two
+charts, or the mesh's own UV seam) is drawn twice, each side reading its own chart with bilinear
+filtering. Baked independently (and with noise), the two sides disagree and the seam shows as a
+line. This module finds those edges and solves, in the linear least squares sense, for texel
+values that make the bilinear lookups on both sides agree at samples along every seam edge,
+while staying close to the baked values ("Fixing texture seams with linear least squares",
+Sloan & al.; the ands/seamoptimizer approach):
+
+    minimise  Σ_samples (bilinear_A(x) − bilinear_B(x))²  +  Σ_texels λ_i (x_i − x0_i)²
+
+λ is ``DATA_WEIGHT`` for covered texels and ``PADDING_WEIGHT`` for the padding texels the
+lookups also read (their values are only dilated filler). The normal equations are solved by
+conjugate gradients, vectorised (np.bincount for the sparse products): no scipy needed.
+
+Only *smooth* seams are stitched: both sides must have the same shading normals at the edge's
+ends. At a crease (a box's edge) the light really differs on either side; blending it would
+blur a true edge. Seams are found within each instance (an object); objects that merely touch
+are left apart.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .atlas import Atlas
+from .geometry import World
+
+DATA_WEIGHT = 0.02  # λ of a covered texel: how strongly it keeps its baked value
+PADDING_WEIGHT = 0.002  # λ of a padding texel the seam lookups read
+SAMPLES_PER_TEXEL = 2  # seam samples per texel of edge length (on the longer side)
+_SMOOTH_COS = 0.999  # shading normals this close count as the same (about 2.6°)
+_ITERATIONS = 200
+
+
+@dataclass(frozen=True)
+class Seams:
+    """S sample points along the seam edges of an atlas, each seen from both sides.
+
+    page_a, page_b: (S,) int64 page of each side. uv_a, uv_b: (S, 2) float64 glTF UVs of the
+    same 3D point in side A's and side B's chart. edges: how many seam edges were found.
+    """
+
+    page_a: np.ndarray
+    uv_a: np.ndarray
+    page_b: np.ndarray
+    uv_b: np.ndarray
+    edges: int
+
+    def __len__(self) -> int:
+        return len(self.page_a)
+
+
+def _empty() -> Seams:
+    z = np.zeros(0, np.int64)
+    return Seams(z, np.zeros((0, 2)), z, np.zeros((0, 2)), 0)
+
+
+def find_seams(atlas: Atlas, world: World) -> Seams:
+    """Every smooth seam edge of every baked instance, sampled ``SAMPLES_PER_TEXEL`` per texel."""
+    pages_a, uvs_a, pages_b, uvs_b = [], [], [], []
+    edges = 0
+    scale = np.array([atlas.width, atlas.height], np.float64)
+    for unwrap in atlas.instances:
+        tris = world.instance_triangles(unwrap.instance)
+        if len(tris) < 2:
+            continue
+        vertices = world.triangles[tris]  # (m, 3) world vertex ids, unwrap's corner order
+        # Same 3D point ⇔ same rounded position (the mesh may split vertices at its own seams).
+        points = world.positions[vertices.reshape(-1)]
+        extent = max(float(np.abs(points).max()), 1e-30)
+        _, point_id = np.unique(np.round(points / (extent * 1e-7)).astype(np.int64), axis=0,
+                                return_inverse=True)
+        point_id = point_id.reshape(-1, 3)
+        uv = unwrap.uv[unwrap.triangles]  # (m, 3, 2)
+        normal = world.normals[vertices]  # (m, 3, 3)
+        smooth = world.smooth[vertices]  # (m, 3)
+        page = unwrap.pages
+        a_corner = np.array([0, 1, 2])
+        b_corner = np.array([1, 2, 0])
+        tri = np.repeat(np.arange(len(tris)), 3)
+        ca, cb = np.tile(a_corner, len(tris)), np.tile(b_corner, len(tris))
+        ia, ib = point_id[tri, ca], point_id[tri, cb]
+        swap = ia > ib  # orient every edge from its lower point id to its higher
+        lo_c, hi_c = np.where(swap, cb, ca), np.where(swap, ca, cb)
+        key = np.minimum(ia, ib) * (point_id.max() + 1) + np.maximum(ia, ib)
+        order = np.argsort(key, kind="stable")
+        key_sorted = key[order]
+        pair = np.flatnonzero((key_sorted[1:] == key_sorted[:-1])
+                              & ((np.r_[key_sorted[2:], -1] != key_sorted[1:]))
+                              & ((np.r_[-1, key_sorted[:-2]] != key_sorted[:-1])))
+        first, second = order[pair], order[pair + 1]  # edges shared by exactly two triangles
+        ta, tb = tri[first], tri[second]
+        placed = (page[ta] >= 0) & (page[tb] >= 0)
+        uv_a0, uv_a1 = uv[ta, lo_c[first]], uv[ta, hi_c[first]]
+        uv_b0, uv_b1 = uv[tb, lo_c[second]], uv[tb, hi_c[second]]
+        split = (page[ta] != page[tb]) | (np.abs(uv_a0 - uv_b0).max(axis=1) > 1e-9) | (
+            np.abs(uv_a1 - uv_b1).max(axis=1) > 1e-9)
+        same_normals = ((np.einsum("ij,ij->i", normal[ta, lo_c[first]], normal[tb, lo_c[second]])
+                         > _SMOOTH_COS)
+                        & (np.einsum("ij,ij->i", normal[ta, hi_c[first]], normal[tb, hi_c[second]])
+                           > _SMOOTH_COS))
+        is_smooth = (smooth[ta, lo_c[first]] & smooth[ta, hi_c[first]]
+                     & smooth[tb, lo_c[second]] & smooth[tb, hi_c[second]])
+        keep = placed & split & same_normals & is_smooth
+        if not keep.any():
+            continue
+        uv_a0, uv_a1, uv_b0, uv_b1 = uv_a0[keep], uv_a1[keep], uv_b0[keep], uv_b1[keep]
+        ta, tb = ta[keep], tb[keep]
+        length = np.maximum(np.linalg.norm((uv_a1 - uv_a0) * scale, axis=1),
+                            np.linalg.norm((uv_b1 - uv_b0) * scale, axis=1))
+        count = np.maximum(2, np.ceil(length * SAMPLES_PER_TEXEL)).astype(np.int64)
+        edge = np.repeat(np.arange(len(count)), count)
+        start = np.cumsum(count) - count
+        t = ((np.arange(count.sum()) - start[edge]) + 0.5) / count[edge]
+        t = t[:, None]
+        uvs_a.append(uv_a0[edge] + t * (uv_a1 - uv_a0)[edge])
+        uvs_b.append(uv_b0[edge] + t * (uv_b1 - uv_b0)[edge])
+        pages_a.append(page[ta][edge])
+        pages_b.append(page[tb][edge])
+        edges += len(count)
+    if not edges:
+        return _empty()
+    return Seams(np.concatenate(pages_a), np.concatenate(uvs_a), np.concatenate(pages_b),
+                 np.concatenate(uvs_b), edges)
+
+
+def _taps(page: np.ndarray, uv: np.ndarray, shape: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """Flat texel indices (S, 4) and weights (S, 4) of clamped bilinear lookups at ``uv``."""
+    _, h, w = shape
+    x = uv[:, 0] * w - 0.5
+    y = uv[:, 1] * h - 0.5
+    x0, y0 = np.floor(x), np.floor(y)
+    fx, fy = x - x0, y - y0
+    x0, y0 = x0.astype(np.int64), y0.astype(np.int64)
+    xs = np.stack([x0, x0 + 1, x0, x0 + 1], axis=1).clip(0, w - 1)
+    ys = np.stack([y0, y0, y0 + 1, y0 + 1], axis=1).clip(0, h - 1)
+    weights = np.stack([(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy], axis=1)
+    return (page[:, None] * h + ys) * w + xs, weights
+
+
+def seam_steps(values: np.ndarray, seams: Seams) -> np.ndarray:
+    """(S,) largest channel difference of bilinear lookups on side A and side B of each seam
+    sample, for pages ``values`` (P, H, W, C)."""
+    if not len(seams):
+        return np.zeros(0)
+    flat = values.reshape(-1, values.shape[-1])
+    ia, wa = _taps(seams.page_a, seams.uv_a, values.shape[:3])
+    ib, wb = _taps(seams.page_b, seams.uv_b, values.shape[:3])
+    a = np.einsum("sk,skc->sc", wa, flat[ia])
+    b = np.einsum("sk,skc->sc", wb, flat[ib])
+    return np.abs(a - b).max(axis=1)
+
+
+def stitch(values: np.ndarray, covered: np.ndarray, seams: Seams) -> np.ndarray:
+    """``values`` (P, H, W, C) with the texels the seam lookups read re-solved so that both
+    sides of every seam agree (least squares, see the module's docstring); others unchanged."""
+    if not len(seams):
+        return values
+    shape = values.shape[:3]
+    ia, wa = _taps(seams.page_a, seams.uv_a, shape)
+    ib, wb = _taps(seams.page_b, seams.uv_b, shape)
+    index = np.concatenate([ia, ib], axis=1)  # (S, 8) flat texels of each seam row
+    weight = np.concatenate([wa, -wb], axis=1)  # row · x = lookup A − lookup B
+    used, local = np.unique(index, return_inverse=True)
+    local = local.reshape(index.shape)
+    n = len(used)
+    flat = values.reshape(-1, values.shape[-1])
+    x0 = flat[used]
+    lam = np.where(covered.reshape(-1)[used], DATA_WEIGHT, PADDING_WEIGHT)[:, None]
+
+    def normal_matrix(x: np.ndarray) -> np.ndarray:
+        """(MᵀM + Λ) x for x (n, C): M the seam rows (S, n) with 8 entries each."""
+        row = np.einsum("sk,skc->sc", weight, x[local])
+        back = np.stack([np.bincount(local.reshape(-1), (weight[..., None] * row[:, None])
+                                     [..., c].reshape(-1), n) for c in range(x.shape[1])],
+                        axis=1)
+        return back + lam * x
+
+    # Conjugate gradients on every channel at once (the channels share the matrix).
+    x = x0.copy()
+    r = lam * x0 - normal_matrix(x)
+    p = r.copy()
+    rr = (r * r).sum(axis=0)
+    target = 1e-20 * max(float(((lam * x0) ** 2).sum()), 1e-300)
+    for _ in range(_ITERATIONS):
+        if rr.sum() <= target:
+            break
+        q = normal_matrix(p)
+        alpha = rr / np.maximum((p * q).sum(axis=0), 1e-300)
+        x += alpha * p
+        r -= alpha * q
+        rr_new = (r * r).sum(axis=0)
+        p = r + (rr_new / np.maximum(rr, 1e-300)) * p
+        rr = rr_new
+    out = values.copy()
+    out.reshape(-1, values.shape[-1])[used] = x
+    return out
