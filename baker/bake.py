@@ -12,8 +12,9 @@ import json
 import os
 import tempfile
 import time
+import urllib.parse
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Iterator
 
@@ -24,7 +25,7 @@ from .atlas import Atlas
 from .compose import Lightmaps, compose, effective_r_ave
 from .direct import Direct, Power, Sources, delivered_power, direct_light, light_sources
 from .encode import encode
-from .errors import OutputError
+from .errors import BakerError, OutputError
 from .geometry import World, build_world
 from .integrate import Terms, integrate
 from .load import load
@@ -38,7 +39,7 @@ from .scene import Scene
 from .settings import Resolved, Settings, resolve
 from .surface import LUMINANCE
 from .trace import Tracer
-from .unwrap import baked_instances, unwrap
+from .unwrap import PageTooSmall, baked_instances, unwrap
 from .write import WriteOptions, write
 
 
@@ -75,17 +76,75 @@ def _bounds_of_baked(world, scene) -> tuple[float, float]:
     return float(world.areas(tris).sum()), float(np.linalg.norm(points.max(0) - points.min(0)))
 
 
-def check_output(input_path: Path, output: Path) -> None:
-    """Refuse an output that would overwrite the input or has an unsupported extension."""
+def check_output(input_path: Path, output: Path, overwrite: bool = False,
+                 report_path: Path | None = None) -> None:
+    """Refuse, before any work, an output that cannot be written or would replace the input.
+
+    The output ends in .glb or .gltf; its folder (and the report's) exists and can be written
+    to; it is the input itself only with ``overwrite`` (the input is then replaced atomically).
+    """
     if output.suffix.lower() not in (".glb", ".gltf"):
         raise OutputError(f"the output must end in .glb or .gltf, not {output.suffix or '(none)'}",
                           file=str(output), fix="name the output e.g. scene_baked.glb")
-    if output.exists() and input_path.exists() and os.path.samefile(input_path, output):
-        raise OutputError("the output is the input file; baker never overwrites its input",
-                          file=str(output), fix="give another output path with -o")
-    if not output.parent.exists():
-        raise OutputError("the output's folder does not exist", file=str(output),
-                          fix=f"create {output.parent} first, or choose another -o path")
+    if not overwrite and output.exists() and input_path.exists() and os.path.samefile(input_path, output):
+        raise OutputError("the output is the input file: baker replaces its input only when asked",
+                          file=str(output), fix="give another output path with -o, or add --overwrite "
+                                                "to replace the input with its bake")
+    if output.is_dir():
+        raise OutputError("the output path is a folder", file=str(output),
+                          fix="give a file name ending in .glb or .gltf")
+    for path in (output, report_path):
+        if path is not None and not path.parent.is_dir():
+            raise OutputError(f"the folder {path.parent} does not exist", file=str(path),
+                              fix=f"create {path.parent} first, or choose another path")
+        if path is not None:
+            _check_writable(path)
+
+
+def _check_writable(path: Path) -> None:
+    """Create and remove a file in ``path``'s folder: the one true test that it can be written."""
+    try:
+        handle, probe = tempfile.mkstemp(dir=path.parent, prefix=".baker-probe-", suffix=".tmp")
+    except PermissionError:
+        raise OutputError(f"no permission to write in the folder {path.parent}", file=str(path),
+                          fix=f"choose a folder you can write to, or change the permissions of "
+                              f"{path.parent}") from None
+    except OSError as error:
+        raise OutputError(f"cannot write in the folder {path.parent} ({error.strerror or error})",
+                          file=str(path), fix="choose a folder on a writable disk with free space") from None
+    os.close(handle)
+    os.unlink(probe)
+
+
+def check_input_kept(scene: Scene, output: Path, overwrite: bool = False) -> None:
+    """Refuse an output whose files would replace a file the input uses (its .bin, its images)
+    or a different file of the same name beside the output, unless ``overwrite``.
+
+    A ``.gltf`` output writes ``<stem>.bin`` beside it, and copies the images the input names by
+    relative path into the output's folder when that is another folder (``write.py``).
+    """
+    if overwrite:
+        return
+    written = [output] + ([output.with_name(output.stem + ".bin")]
+                          if output.suffix.lower() == ".gltf" else [])
+    folder, elsewhere = scene.path.parent, output.parent.resolve() != scene.path.parent.resolve()
+    fix = "choose another output name or folder, or add --overwrite to replace it"
+    for kind, items in (("buffers", scene.document.buffers), ("images", scene.document.images)):
+        for i, item in enumerate(items):
+            uri = item.uri
+            if not isinstance(uri, str) or not uri or uri.startswith("data:") or ":" in uri.split("/")[0]:
+                continue
+            relative = Path(urllib.parse.unquote(uri))
+            source = folder / relative
+            for target in written:
+                if target.exists() and source.exists() and os.path.samefile(source, target):
+                    raise OutputError(f"the output would replace {source}, which the input uses",
+                                      file=str(output), where=f"{kind}[{i}].uri", fix=fix)
+            copy = output.parent / relative
+            if (kind == "images" and elsewhere and not relative.is_absolute() and ".." not in relative.parts
+                    and copy.is_file() and source.is_file() and copy.read_bytes() != source.read_bytes()):
+                raise OutputError(f"the output's copy of {uri} would replace a different {copy}",
+                                  file=str(output), where=f"{kind}[{i}].uri", fix=fix)
 
 
 @dataclass(frozen=True)
@@ -133,7 +192,13 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True) -> Computed:
         ambient = ambient_terms(scene, world, resolved.ambient, power)
         plan = make_plan(scene, ambient, resolved.rho, sources)
     with _timed(times, "unwrap"):
-        atlas = unwrap(scene, world, resolved)
+        try:
+            atlas = unwrap(scene, world, resolved)
+        except PageTooSmall as error:
+            if settings.texel_density is not None:  # the user's density: say what fits
+                raise
+            resolved = replace(resolved, texel_density=error.texel_density)  # derived: shrink it
+            atlas = unwrap(scene, world, resolved)
     with _timed(times, "rasterise"):
         texels = rasterise(atlas, world)
     with _timed(times, "validity"):  # sample points inside/behind geometry: moved or flagged
@@ -160,20 +225,29 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True) -> Computed:
 
 def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings = Settings(), *,
          report_path: str | os.PathLike | None = None,
-         lightmaps_dir: str | os.PathLike | None = None, quiet: bool = True) -> BakeResult:
+         lightmaps_dir: str | os.PathLike | None = None, quiet: bool = True,
+         overwrite: bool = False) -> BakeResult:
     """Bake the glTF scene at ``input`` into ``output`` (.glb or .gltf) with lightmaps.
 
     ``report_path`` writes the JSON report; ``lightmaps_dir`` also writes each page as a PNG
-    file; ``quiet=False`` draws a progress bar when stderr is a terminal.
+    file; ``quiet=False`` draws a progress bar when stderr is a terminal. ``overwrite`` lets
+    ``output`` be the input itself (or replace a file the input uses); it is replaced
+    atomically, only once the bake has succeeded.
     """
     input_path, output = Path(input), Path(output)
-    check_output(input_path, output)
+    check_output(input_path, output, overwrite,
+                 None if report_path is None else Path(report_path))
     settings.check()
     started = time.perf_counter()
     loading: dict[str, float] = {}
     with _timed(loading, "load"):
         scene = load(input_path)
-    done = compute(scene, settings, quiet)
+    check_input_kept(scene, output, overwrite)
+    try:
+        done = compute(scene, settings, quiet)
+    except BakerError as error:  # a setting this scene cannot meet: name the scene
+        error.file = error.file or str(input_path)
+        raise
     times = dict(done.stage_seconds)
     times["load"] += loading["load"]
     resolved = done.settings

@@ -42,6 +42,7 @@ import json
 import re
 import struct
 import urllib.parse
+import warnings
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -107,6 +108,10 @@ _CHUNK_BIN = 0x004E4942
 _URI_SCHEME = re.compile(r"^[A-Za-z][A-Za-z0-9+.\-]*:")
 
 _REEXPORT = "re-export the asset from your DCC tool; the Khronos glTF Validator shows what is wrong"
+MAX_IMAGE_PIXELS = 16384 * 8192
+"""Largest colour texture decoded (512 MiB as RGBA); larger ones are refused from their header."""
+MAX_ACCESSOR_COMPONENTS = 1 << 28
+"""Largest accessor without a bufferView (all zeros: nothing in the file bounds its count)."""
 _GPU_REASON = "GPU-instanced (EXT_mesh_gpu_instancing): occluder only"
 _SKIN_REASON = "skinned: occluder only (rest pose)"
 _UNLIT_REASON = "unlit material"
@@ -473,6 +478,9 @@ def read_accessor(
         if not isinstance(count, int) or count < 0:
             raise _invalid(f"count {count!r} is not an element count", file, where)
         if accessor.bufferView is None:
+            if count * shape[0] * shape[1] > MAX_ACCESSOR_COMPONENTS:
+                raise _invalid(f"count {count:,} is too large for an accessor without a bufferView",
+                               file, where)
             raw = np.zeros((count, shape[0] * shape[1]), dtype)
         else:
             view, stride = _buffer_view(document, buffers, accessor.bufferView, file, f"{where}.bufferView")
@@ -673,7 +681,8 @@ def _texture_ref(ctx: _Context, info: Any, where: str) -> TextureRef | None:
         return None
     _item(ctx.document.images, source, "images", ctx.file, f"{texture_where}.source")
     if extension is None:
-        _decode_image(ctx, source)
+        with _referred(where):
+            _decode_image(ctx, source)
     else:
         try:
             _decode_image(ctx, source)
@@ -710,9 +719,16 @@ def _decode_image(ctx: _Context, index: int) -> np.ndarray:
     else:
         raise _invalid("image has neither uri nor bufferView", ctx.file, where)
     try:
-        with PILImage.open(io.BytesIO(data)) as opened:
-            opened.load()
-            pixels = _rgba(opened)
+        with warnings.catch_warnings():  # baker has its own limit, MAX_IMAGE_PIXELS
+            warnings.simplefilter("ignore", PILImage.DecompressionBombWarning)
+            with PILImage.open(io.BytesIO(data)) as opened:
+                _check_image_size(ctx, opened.size, label, where)
+                opened.load()
+                pixels = _rgba(opened)
+    except PILImage.DecompressionBombError as exc:
+        pixels = re.search(r"\((\d+) pixels\)", str(exc))
+        size = f"{int(pixels.group(1)):,} pixels" if pixels else "too many pixels"
+        raise _too_large(ctx, f"{label} has {size}", where) from None
     except (OSError, ValueError, SyntaxError, EOFError) as exc:
         raise InputError(
             f"cannot decode {label} ({exc})",
@@ -722,6 +738,23 @@ def _decode_image(ctx: _Context, index: int) -> np.ndarray:
         ) from None
     ctx.decoded[index] = pixels
     return pixels
+
+
+def _check_image_size(ctx: _Context, size: tuple[int, int], label: str, where: str) -> None:
+    """Refuse, from the header alone, an image with more than ``MAX_IMAGE_PIXELS`` pixels."""
+    width, height = size
+    if width * height > MAX_IMAGE_PIXELS:
+        raise _too_large(ctx, f"{label} is {width}×{height} = {width * height:,} pixels", where)
+
+
+def _too_large(ctx: _Context, what: str, where: str) -> InputError:
+    return InputError(
+        f"{what}, more than baker decodes (at most {MAX_IMAGE_PIXELS:,}, e.g. 16384×8192: "
+        f"{4 * MAX_IMAGE_PIXELS >> 20} MiB as RGBA)",
+        file=ctx.file,
+        where=where,
+        fix="downscale the texture (8192×8192 is plenty for a lightmap bake) and export again",
+    )
 
 
 def _rgba(image: PILImage.Image) -> np.ndarray:
@@ -810,7 +843,8 @@ def _attribute(
     attribute_where = f"{where}.attributes.{name}"
     index = attributes[name]
     _item(ctx.document.accessors, index, "accessors", ctx.file, attribute_where)
-    values = read_accessor(ctx.document, ctx.buffers, index, file=ctx.file).astype(np.float64)
+    with _referred(attribute_where):
+        values = read_accessor(ctx.document, ctx.buffers, index, file=ctx.file).astype(np.float64)
     if values.shape[1] not in widths:
         expected = " or ".join(f"{w} components" for w in widths)
         raise _invalid(
@@ -842,7 +876,8 @@ def _triangles(ctx: _Context, primitive: pygltflib.Primitive, mode: int, n: int,
         indices = np.arange(n, dtype=np.int64)
     else:
         _item(ctx.document.accessors, primitive.indices, "accessors", ctx.file, f"{where}.indices")
-        indices = read_accessor(ctx.document, ctx.buffers, primitive.indices, file=ctx.file)
+        with _referred(f"{where}.indices"):
+            indices = read_accessor(ctx.document, ctx.buffers, primitive.indices, file=ctx.file)
         if indices.dtype != np.int64 or indices.shape[1] != 1:
             raise _invalid(
                 "indices must be a SCALAR accessor of unsigned integers", ctx.file, f"{where}.indices"
@@ -1164,6 +1199,18 @@ def _finite(ctx: _Context, value: Any, length: int, where: str) -> np.ndarray:
     if array is None or array.shape != (length,) or not np.isfinite(array).all():
         raise _invalid(f"expected {length} finite numbers, found {value!r}", ctx.file, where)
     return array
+
+
+@contextmanager
+def _referred(referrer: str) -> Iterator[None]:
+    """Name the object that refers to the faulty one too: an error at ``accessors[4]`` read for
+    POSITION is reported at ``meshes[1].primitives[0].attributes.POSITION → accessors[4]``."""
+    try:
+        yield
+    except InputError as error:
+        if not error.where.startswith(referrer):
+            error.where = f"{referrer} → {error.where}" if error.where else referrer
+        raise
 
 
 @contextmanager

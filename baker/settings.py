@@ -153,6 +153,17 @@ class Resolved(Settings):
         return asdict(self)
 
 
+MAX_TEXELS = 1 << 26
+"""Most lightmap texels (surface area × texel density²) one bake may ask for: 67 M, a full 8192²
+page, which already takes several GiB of memory on the way (texels, rays, float page images)."""
+
+
+def _round_down(value: float, digits: int = 3) -> float:
+    """``value`` cut (never rounded up) to ``digits`` significant digits, for a limit to quote."""
+    step = 10.0 ** (math.floor(math.log10(value)) - digits + 1)
+    return math.floor(value / step) * step
+
+
 def default_texel_density(surface_area: float, page_size: int, fill: float = 0.5) -> float:
     """Texels per world unit that fill about ``fill`` of one page of ``page_size``² texels.
 
@@ -172,8 +183,15 @@ def resolve(settings: Settings, surface_area: float, diagonal: float) -> Resolve
     """
     settings.check()
     values = {f.name: getattr(settings, f.name) for f in fields(Settings)}
+    most = math.sqrt(MAX_TEXELS / surface_area) if surface_area > 0 else math.inf
     if values["texel_density"] is None:
-        values["texel_density"] = default_texel_density(surface_area, settings.page_size)
+        values["texel_density"] = min(default_texel_density(surface_area, settings.page_size), most)
+    elif values["texel_density"] > most:
+        texels = surface_area * values["texel_density"] ** 2
+        raise SettingsError(
+            f"texel density {values['texel_density']:g} needs about {texels:.3g} lightmap texels "
+            f"for {surface_area:.4g} square units of surface; one bake holds at most "
+            f"{MAX_TEXELS:,} texels", fix=f"use --texel-density {_round_down(most):g} or less")
     if values["d_max"] is None:
         values["d_max"] = settings.d_max_fraction * diagonal if diagonal > 0 else 1.0
     return Resolved(**values)

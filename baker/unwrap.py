@@ -16,6 +16,16 @@ from .scene import Scene
 from .settings import Resolved
 
 _NO_PAGE = np.uint32(0xFFFFFFFF)  # xatlas's page index for vertices of faces it could not place
+_SHRUNK = 0.95  # a chart whose texels are this much larger than asked was shrunk to fit a page
+
+
+class PageTooSmall(SettingsError):
+    """A chart does not fit in one page at the texel density asked for. ``texel_density`` is the
+    highest density at which it fits (xatlas would otherwise shrink it without a word)."""
+
+    def __init__(self, message: str, *, texel_density: float, fix: str):
+        super().__init__(message, fix=fix)
+        self.texel_density = texel_density
 
 
 def baked_instances(scene: Scene) -> list[int]:
@@ -72,6 +82,7 @@ def unwrap(scene: Scene, world: World, settings: Resolved) -> Atlas:
     if atlas.width == 0 or atlas.height == 0:
         raise SettingsError("no surface got any lightmap texels at this texel density",
                             fix="raise --texel-density, or check that the meshes have area")
+    _check_not_shrunk(atlas, world, scene, instances, settings)
     result = []
     for mesh, i in enumerate(instances):
         vertices, triangles, uv = atlas[mesh]
@@ -110,3 +121,65 @@ def _snap_unplaced(world: World, instance: int, vertices: np.ndarray, uv: np.nda
         nearest = placed[np.argmin(distance, axis=1)]
         uv[chunk], page[chunk] = uv[nearest], page[nearest]
     return uv, page
+
+
+def _check_not_shrunk(atlas: xatlas.Atlas, world: World, scene: Scene, instances: list[int],
+                      settings: Resolved) -> None:
+    """Raise PageTooSmall when xatlas shrank a chart to fit it in a page.
+
+    xatlas scales down, silently, a chart larger than a page: its texels then stand for more than
+    1 / texel_density world units. A chart's scale is the summed length of its edges in texels
+    over their world length × density (≈ 1 for a chart that was not shrunk, thin or not); one
+    below ``_SHRUNK`` whose bounds fill the page was shrunk.
+    """
+    uv_length, world_length, extent, label = [], [], [], []
+    for mesh, i in enumerate(instances):
+        _vertices, triangles, uv = atlas[mesh]
+        _page, chart = atlas.get_mesh_vertex_assignment(mesh)
+        corners = uv.astype(np.float64)[triangles.astype(np.int64)] * [atlas.width, atlas.height]
+        charts = chart.astype(np.int64)[triangles[:, 0].astype(np.int64)]
+        placed = (charts >= 0) & (charts < atlas.chart_count)
+        if not placed.any():
+            continue
+        corners = corners[placed]
+        a, b, c = world.corners(world.instance_triangles(i)[placed])
+        ids, inverse = np.unique(charts[placed], return_inverse=True)
+        texels = sum(np.linalg.norm(corners[:, j] - corners[:, k], axis=1) for j, k in ((0, 1), (1, 2), (2, 0)))
+        metres = sum(np.linalg.norm(p - q, axis=1) for p, q in ((a, b), (b, c), (c, a)))
+        uv_length.append(np.bincount(inverse, texels, len(ids)))
+        world_length.append(np.bincount(inverse, metres, len(ids)))
+        low = np.full((len(ids), 2), np.inf)
+        high = np.full((len(ids), 2), -np.inf)
+        np.minimum.at(low, inverse, corners.min(axis=1))
+        np.maximum.at(high, inverse, corners.max(axis=1))
+        extent.append((high - low).max(axis=1))
+        label += [i] * len(ids)
+    if not uv_length:
+        return
+    uv_length, world_length, extent = (np.concatenate(v) for v in (uv_length, world_length, extent))
+    wanted = world_length * settings.texel_density
+    scale = np.divide(uv_length, wanted, out=np.ones_like(uv_length), where=wanted > 0)
+    room = settings.page_size - 2 * settings.padding
+    shrunk = (scale < _SHRUNK) & (extent > 0.75 * room)
+    if not shrunk.any():
+        return
+    worst = int(np.argmin(np.where(shrunk, scale, np.inf)))
+    need = extent[worst] / scale[worst]
+    fits = _round_down(settings.texel_density * scale[worst] * 0.98)
+    page = int(2 ** np.ceil(np.log2(need + 2 * settings.padding + 2)))
+    inst = scene.instances[label[worst]]
+    prim = scene.primitives[inst.primitive]
+    where = f"nodes[{inst.node}] meshes[{prim.mesh}].primitives[{prim.index}]"
+    bigger = f", or --page-size {page} or more" if page <= 16384 else ""
+    raise PageTooSmall(
+        f"at texel density {settings.texel_density:g} a chart of {where} needs about "
+        f"{need:.0f} texels a side, more than a page of {settings.page_size} holds",
+        texel_density=fits, fix=f"use --texel-density {fits:g} or less{bigger}")
+
+
+def _round_down(value: float, digits: int = 3) -> float:
+    """``value`` cut (never rounded up) to ``digits`` significant digits."""
+    if value <= 0:
+        return value
+    step = 10.0 ** (np.floor(np.log10(value)) - digits + 1)
+    return float(np.floor(value / step) * step)

@@ -28,7 +28,11 @@ def add_parser(commands) -> None:
     bake.set_defaults(run=run)
     bake.add_argument("scene", type=Path, help="the input scene, .glb or .gltf")
     bake.add_argument("-o", "--output", type=Path, required=True,
-                      help="where to write the baked scene (.glb or .gltf); never the input")
+                      help="where to write the baked scene (.glb or .gltf); the input itself "
+                           "only with --overwrite")
+    bake.add_argument("--overwrite", action="store_true",
+                      help="allow the output to replace the input (or a file it uses); the "
+                           "replacement is atomic and happens only once the bake succeeded")
     d = baker.Settings()
     quality = bake.add_argument_group("lightmap layout")
     quality.add_argument("--texel-density", type=positive_float, metavar="TEXELS_PER_UNIT",
@@ -146,7 +150,7 @@ def print_summary(result: baker.BakeResult) -> None:
 def run(args: argparse.Namespace) -> int:
     """Bake; exit code 0."""
     result = baker.bake(args.scene, args.output, settings_from(args), report_path=args.report,
-                        lightmaps_dir=args.lightmaps, quiet=args.quiet)
+                        lightmaps_dir=args.lightmaps, quiet=args.quiet, overwrite=args.overwrite)
     if not args.quiet:
         print_summary(result)
     return 0

@@ -1,0 +1,498 @@
+"""Bad input never costs the user data (issue 7).
+
+Every case runs the command line as a user does — in-process through ``cli.main.main`` (so the
+exit code and stderr are checked exactly), and a few as a real ``baker bake`` subprocess — and
+checks three things:
+- the exit code (1 for bad input, settings or output; 130 when interrupted);
+- the message: one or two lines, ``baker: error: <file>: <glTF path>: <what> / fix: <what to do>``,
+  never a traceback;
+- nothing the user had changed and nothing new appeared: a previous output stays byte for byte,
+  no temporary file is left (the whole folder is compared before and after).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import importlib
+import json
+import os
+import signal
+import struct
+import subprocess
+import sys
+import time
+import zlib
+from pathlib import Path
+
+import numpy as np
+import pygltflib
+import pytest
+
+import baker
+from assets.gltf_builder import GltfBuilder, box, quad
+from assets.make_scenes import checker, cornell_box
+from baker.load import load, read_accessor, resolve_buffers
+from cli.main import main
+
+ROOT = Path(__file__).resolve().parents[1]
+BAKE = importlib.import_module("baker.bake")  # the module (``baker.bake`` is the function)
+PREVIOUS = b"the previous bake: must survive every failure\n"
+FAST = ["--rays", "2", "--page-size", "64", "--quiet"]
+
+
+# ------------------------------------------------------------------------------------------------
+# scenes and helpers
+
+
+def small_scene(textured: bool = False) -> GltfBuilder:
+    """A 2 m floor with a 0.5 m box on it: bakes in a fraction of a second."""
+    b = GltfBuilder()
+    image = checker(16, 4) if textured else None
+    floor_mat = b.material("floor", (0.8, 0.8, 0.8), base_color_image=image)
+    box_mat = b.material("box", (0.6, 0.3, 0.2))
+    b.node("floor", b.shape_mesh("floor", quad(2.0, 2.0), material=floor_mat))
+    b.node("box", b.shape_mesh("box", box((0.5, 0.5, 0.5)), material=box_mat), translation=(0, 0.25, 0))
+    return b
+
+
+def snapshot(folder: Path) -> dict[str, bytes]:
+    """Every file under ``folder`` (hidden temporaries included) with its bytes."""
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def bake_cli(capsys, *argv: str) -> tuple[int, str, str]:
+    """Run ``baker`` in-process; return (exit code, stdout, stderr)."""
+    code = main(list(argv))
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def assert_one_clean_message(err: str, *parts: str) -> None:
+    """``err`` is baker's one- or two-line error naming every one of ``parts`` and a fix."""
+    assert err.startswith("baker: error: "), err
+    assert "Traceback" not in err and "internal error" not in err, err
+    lines = err.strip().splitlines()
+    assert 1 <= len(lines) <= 2, err
+    assert lines[-1].strip().startswith("fix: ") and len(lines[-1].strip()) > 10, err
+    for part in parts:
+        assert part in err, f"{part!r} not in {err!r}"
+
+
+def refuses(tmp_path, capsys, source: Path, *parts: str, args=(), output: Path | None = None) -> str:
+    """Bake ``source`` over an existing output; check exit 1, the message and that no file changed."""
+    output = output or tmp_path / "out" / "baked.glb"
+    output.parent.mkdir(exist_ok=True)
+    if output != source:
+        output.write_bytes(PREVIOUS)
+    before = snapshot(tmp_path)
+    code, out, err = bake_cli(capsys, "bake", str(source), "-o", str(output), *FAST, *args)
+    assert code == 1, err
+    assert out == ""
+    assert_one_clean_message(err, *parts)
+    assert snapshot(tmp_path) == before
+    return err
+
+
+def gltf_pair(tmp_path, builder=None, name="scene.gltf") -> tuple[Path, dict, Path]:
+    """Save a scene as .gltf + .bin; return the .gltf path, its JSON and the .bin path."""
+    path = (builder or small_scene()).save(tmp_path / name)
+    document = json.loads(path.read_text())
+    return path, document, path.with_name(document["buffers"][0]["uri"])
+
+
+def rewrite(path: Path, document: dict) -> Path:
+    path.write_text(json.dumps(document))
+    return path
+
+
+def poke_bin(bin_path: Path, document: dict, accessor: int, element: int, value: bytes) -> None:
+    """Overwrite element ``element`` of ``accessors[accessor]`` in the .bin with ``value``."""
+    acc = document["accessors"][accessor]
+    view = document["bufferViews"][acc["bufferView"]]
+    size = {5126: 4, 5125: 4}[acc["componentType"]] * {"SCALAR": 1, "VEC3": 3}[acc["type"]]
+    data = bytearray(bin_path.read_bytes())
+    at = view.get("byteOffset", 0) + acc.get("byteOffset", 0) + element * size
+    data[at:at + len(value)] = value
+    bin_path.write_bytes(bytes(data))
+
+
+def png_chunk(kind: bytes, payload: bytes) -> bytes:
+    return struct.pack(">I", len(payload)) + kind + payload + struct.pack(">I", zlib.crc32(kind + payload))
+
+
+def huge_png(width: int, height: int) -> bytes:
+    """A tiny PNG file whose header claims ``width`` × ``height`` RGBA pixels."""
+    header = struct.pack(">IIBBBBB", width, height, 8, 6, 0, 0, 0)
+    data = zlib.compress(b"\0" * 64)
+    return (b"\x89PNG\r\n\x1a\n" + png_chunk(b"IHDR", header) + png_chunk(b"IDAT", data)
+            + png_chunk(b"IEND", b""))
+
+
+# ------------------------------------------------------------------------------------------------
+# the file
+
+
+def test_not_a_gltf_file(tmp_path, capsys):
+    source = tmp_path / "holiday.glb"
+    source.write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(range(256)) * 4)
+    refuses(tmp_path, capsys, source, str(source), "not a glTF", ".gltf or .glb")
+
+
+def test_missing_input_file(tmp_path, capsys):
+    refuses(tmp_path, capsys, tmp_path / "nowhere.glb", "nowhere.glb", "not found")
+
+
+@pytest.mark.parametrize("cut", [5, 30, 1000])
+def test_truncated_glb(tmp_path, capsys, cut):
+    source = small_scene().save(tmp_path / "scene.glb")
+    data = source.read_bytes()
+    source.write_bytes(data[:cut] if cut < 100 else data[:-cut])
+    refuses(tmp_path, capsys, source, str(source), "truncated GLB", "GLB", "copy or export it again")
+
+
+def test_malformed_json(tmp_path, capsys):
+    source = tmp_path / "scene.gltf"
+    source.write_text('{\n  "asset": {"version": "2.0"},\n  "nodes": [ {"mesh": 0},, ]\n}\n')
+    refuses(tmp_path, capsys, source, str(source), "not valid JSON", "line 3", "fix the JSON at that line")
+
+
+@pytest.mark.parametrize("version", ["1.0", "3.0", None])
+def test_wrong_gltf_version(tmp_path, capsys, version):
+    source, document, _ = gltf_pair(tmp_path)
+    document["asset"]["version"] = version
+    refuses(tmp_path, capsys, rewrite(source, document), str(source), "asset.version", "glTF 2")
+
+
+def test_missing_bin(tmp_path, capsys):
+    source, _, bin_path = gltf_pair(tmp_path)
+    bin_path.unlink()
+    refuses(tmp_path, capsys, source, str(source), "buffers[0].uri", "not found", "beside the .gltf")
+
+
+def test_short_bin(tmp_path, capsys):
+    source, _, bin_path = gltf_pair(tmp_path)
+    bin_path.write_bytes(bin_path.read_bytes()[:100])
+    refuses(tmp_path, capsys, source, str(source), "buffers[0]", "byteLength", "export the asset again")
+
+
+@pytest.mark.parametrize("uri", ["data:application/octet-stream;base64,@@not base64@@",
+                                 "data:application/octet-stream;base64"])
+def test_bad_data_uri(tmp_path, capsys, uri):
+    source, document, _ = gltf_pair(tmp_path)
+    document["buffers"][0]["uri"] = uri
+    refuses(tmp_path, capsys, rewrite(source, document), str(source), "buffers[0].uri", "data URI")
+
+
+def test_accessor_out_of_bounds_names_the_attribute_and_the_accessor(tmp_path, capsys):
+    source, document, _ = gltf_pair(tmp_path)
+    position = document["meshes"][1]["primitives"][0]["attributes"]["POSITION"]
+    document["accessors"][position]["count"] += 1000
+    refuses(tmp_path, capsys, rewrite(source, document), str(source),
+            "meshes[1].primitives[0].attributes.POSITION", f"accessors[{position}]",
+            "export the asset again")
+
+
+def test_accessor_with_an_absurd_count_is_refused_without_allocating(tmp_path, capsys):
+    source, document, _ = gltf_pair(tmp_path)
+    position = document["meshes"][0]["primitives"][0]["attributes"]["POSITION"]
+    del document["accessors"][position]["bufferView"]  # all zeros, count elements
+    document["accessors"][position]["count"] = 10 ** 13
+    refuses(tmp_path, capsys, rewrite(source, document), str(source),
+            "meshes[0].primitives[0].attributes.POSITION", f"accessors[{position}]")
+
+
+def test_index_out_of_range(tmp_path, capsys):
+    source, document, bin_path = gltf_pair(tmp_path)
+    indices = document["meshes"][1]["primitives"][0]["indices"]
+    poke_bin(bin_path, document, indices, 7, struct.pack("<I", 4_000_000))
+    refuses(tmp_path, capsys, source, str(source), "meshes[1].primitives[0].indices",
+            "index 4000000", "out of range")
+
+
+@pytest.mark.parametrize("value", [float("nan"), float("inf"), -float("inf")])
+def test_nan_or_inf_in_positions(tmp_path, capsys, value):
+    source, document, bin_path = gltf_pair(tmp_path)
+    position = document["meshes"][1]["primitives"][0]["attributes"]["POSITION"]
+    poke_bin(bin_path, document, position, 5, struct.pack("<fff", 0.0, value, 0.0))
+    refuses(tmp_path, capsys, source, str(source), "meshes[1].primitives[0].attributes.POSITION",
+            "NaN or infinite", "vertex 5", "Clean Up")
+
+
+def test_unsupported_required_extension(tmp_path, capsys):
+    source, document, _ = gltf_pair(tmp_path)
+    document["extensionsUsed"] = document["extensionsRequired"] = ["KHR_draco_mesh_compression"]
+    refuses(tmp_path, capsys, rewrite(source, document), str(source), "extensionsRequired",
+            "KHR_draco_mesh_compression", "re-export without")
+
+
+def test_undecodable_texture_names_the_image_and_the_material(tmp_path, capsys):
+    source, document, bin_path = gltf_pair(tmp_path, small_scene(textured=True))
+    view = document["bufferViews"][document["images"][0]["bufferView"]]
+    data = bytearray(bin_path.read_bytes())
+    start = view.get("byteOffset", 0)
+    data[start + 16:start + view["byteLength"]] = b"\x17" * (view["byteLength"] - 16)
+    bin_path.write_bytes(bytes(data))
+    refuses(tmp_path, capsys, source, str(source), "images[0]",
+            "materials[0].pbrMetallicRoughness.baseColorTexture", "cannot decode",
+            "re-save the image")
+
+
+@pytest.mark.parametrize("side, says", [(60_000, "3,600,000,000 pixels"),
+                                        (12_000, "12000×12000 = 144,000,000 pixels")])
+def test_image_far_larger_than_memory_allows(tmp_path, capsys, side, says):
+    """A PNG whose header claims side² pixels (13 GiB of RGBA at 60 000²): refused from the
+    header alone, before a byte of pixels is decoded."""
+    source, document, _ = gltf_pair(tmp_path, small_scene(textured=True))
+    (tmp_path / "huge.png").write_bytes(huge_png(side, side))
+    document["images"][0] = {"uri": "huge.png"}
+    start = time.perf_counter()
+    refuses(tmp_path, capsys, rewrite(source, document), str(source),
+            "materials[0].pbrMetallicRoughness.baseColorTexture → images[0]", says,
+            "more than baker decodes", "downscale")
+    assert time.perf_counter() - start < 5
+
+
+# ------------------------------------------------------------------------------------------------
+# settings
+
+
+@pytest.mark.parametrize("option, value, name", [
+    ("--d-max", "0", "d_max"), ("--d-max", "-2", "d_max"), ("--d-max", "nan", "d_max"),
+    ("--rays", "0", "rays"), ("--rays", "-16", "rays"),
+    ("--texel-density", "0", "texel_density"), ("--texel-density", "-4", "texel_density"),
+    ("--texel-density", "inf", "texel_density"),
+])
+def test_bad_settings(tmp_path, capsys, option, value, name):
+    source = small_scene().save(tmp_path / "scene.glb")
+    refuses(tmp_path, capsys, source, name, option, args=(option, value))
+
+
+def test_a_page_too_small_for_the_density_says_what_would_fit(tmp_path, capsys):
+    """The 2 m floor needs ~200 texels a side at 100 texels/m: a 64-texel page cannot hold it.
+    xatlas would silently shrink the chart; baker refuses and says which density or page fits."""
+    source = small_scene().save(tmp_path / "scene.glb")
+    err = refuses(tmp_path, capsys, source, str(source), "--texel-density", "--page-size",
+                  args=("--texel-density", "100"))
+    fits = float(err.split("--texel-density ")[1].split()[0])
+    page = int(err.split("--page-size ")[1].split()[0])
+    assert 15 < fits < 32 and page >= 200
+    # Both suggestions work: the bake at either one succeeds and keeps the density asked for.
+    for args in (["--texel-density", f"{fits}"], ["--texel-density", "100", "--page-size", f"{page}"]):
+        out = tmp_path / f"ok{len(args)}.glb"
+        code, _, err = bake_cli(capsys, "bake", str(source), "-o", str(out), "--rays", "2",
+                                "--page-size", args[3] if len(args) > 2 else "64", "--quiet", *args[:2])
+        assert code == 0, err
+
+
+def test_a_density_no_memory_could_hold_is_refused_at_once(tmp_path, capsys):
+    """10⁵ texels/m on ~6 m² is 6·10¹⁰ texels: refused before xatlas runs, with what fits."""
+    source = small_scene().save(tmp_path / "scene.glb")
+    start = time.perf_counter()
+    err = refuses(tmp_path, capsys, source, str(source), "--texel-density", "texels",
+                  args=("--texel-density", "1e5"))
+    assert time.perf_counter() - start < 5
+    fits = float(err.split("--texel-density ")[1].split()[0])
+    assert 100 < fits < 10_000
+
+
+def test_default_density_shrinks_to_what_fits_a_long_wall(tmp_path, capsys):
+    """No density given: a 100 m × 1 m wall cannot fill half a 64-texel page at one density in
+    one chart, so the derived density drops until the wall fits; the report says which."""
+    b = GltfBuilder()
+    b.node("wall", b.shape_mesh("wall", quad(100.0, 1.0), material=b.material("w")))
+    source = b.save(tmp_path / "wall.glb")
+    result = baker.bake(source, tmp_path / "wall_baked.glb", baker.Settings(rays=2, page_size=64))
+    assert 0.4 < result.settings.texel_density <= 0.62  # ≤ 62 texels / 100 m
+    assert result.report["atlas"]["texel_density"] == result.settings.texel_density
+
+
+# ------------------------------------------------------------------------------------------------
+# the output
+
+
+def test_output_in_a_missing_folder(tmp_path, capsys):
+    source = small_scene().save(tmp_path / "scene.glb")
+    output = tmp_path / "no" / "such" / "folder" / "baked.glb"
+    before = snapshot(tmp_path)
+    code, _, err = bake_cli(capsys, "bake", str(source), "-o", str(output), *FAST)
+    assert code == 1
+    assert_one_clean_message(err, str(output), "does not exist", "create")
+    assert snapshot(tmp_path) == before and not (tmp_path / "no").exists()
+
+
+def test_report_in_a_missing_folder_is_refused_before_baking(tmp_path, capsys):
+    source = small_scene().save(tmp_path / "scene.glb")
+    report = tmp_path / "reports" / "r.json"
+    refuses(tmp_path, capsys, source, str(report), "does not exist", args=("--report", str(report)))
+
+
+def _without_file_permission_override() -> None:
+    """In the child: drop CAP_DAC_OVERRIDE and CAP_DAC_READ_SEARCH from the bounding set, so that
+    even root obeys file modes after exec (Linux prctl PR_CAPBSET_DROP = 24)."""
+    libc = ctypes.CDLL(None, use_errno=True)
+    for capability in (1, 2):
+        if libc.prctl(24, capability, 0, 0, 0) != 0:
+            raise OSError(ctypes.get_errno(), "prctl(PR_CAPBSET_DROP)")
+
+
+def _baker(*argv: str, **kwargs) -> subprocess.Popen:
+    """``baker`` as a real process (``python -m cli.main``), from the repository root."""
+    return subprocess.Popen([sys.executable, "-m", "cli.main", *argv], cwd=ROOT,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kwargs)
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="file modes and prctl are Linux-specific here")
+def test_output_folder_without_write_permission(tmp_path):
+    source = small_scene().save(tmp_path / "scene.glb")
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    (locked / "baked.glb").write_bytes(PREVIOUS)
+    locked.chmod(0o555)
+    try:
+        before = snapshot(tmp_path)
+        preexec = _without_file_permission_override if os.geteuid() == 0 else None
+        process = _baker("bake", str(source), "-o", str(locked / "baked.glb"), *FAST,
+                         preexec_fn=preexec)
+        out, err = process.communicate(timeout=120)
+        assert process.returncode == 1, err
+        assert_one_clean_message(err, str(locked), "permission", "fix: choose a folder you can write to")
+        assert snapshot(tmp_path) == before
+    finally:
+        locked.chmod(0o755)
+
+
+def test_output_equal_to_input_is_refused_without_overwrite(tmp_path, capsys):
+    source = small_scene().save(tmp_path / "scene.glb")
+    refuses(tmp_path, capsys, source, str(source), "is the input", "--overwrite", output=source)
+    same_via_other_spelling = tmp_path / "." / "scene.glb"
+    refuses(tmp_path, capsys, source, "is the input", output=same_via_other_spelling)
+
+
+def test_a_gltf_output_whose_bin_would_overwrite_the_inputs_bin_is_refused(tmp_path, capsys):
+    """scene.gltf keeps its buffer in other.bin; writing other.gltf would replace other.bin."""
+    source, document, bin_path = gltf_pair(tmp_path)
+    bin_path.rename(tmp_path / "other.bin")
+    document["buffers"][0]["uri"] = "other.bin"
+    rewrite(source, document)
+    refuses(tmp_path, capsys, source, "other.bin", "buffers[0]", "--overwrite",
+            output=tmp_path / "other.gltf")
+
+
+@pytest.mark.parametrize("suffix", [".glb", ".gltf"])
+def test_overwrite_replaces_the_input_with_its_bake(tmp_path, capsys, suffix):
+    source = small_scene().save(tmp_path / f"scene{suffix}")
+    original = load(source)
+    code, out, err = bake_cli(capsys, "bake", str(source), "-o", str(source), "--overwrite", *FAST)
+    assert code == 0, err
+    baked = load(source)
+    assert len(baked.instances) == len(original.instances)
+    assert _every_primitive_lightmapped(baked)
+    # Same geometry: the baked positions are the original ones, gathered through the new vertices.
+    np.testing.assert_allclose(np.sort(baked.primitives[0].positions, axis=0)[[0, -1]],
+                               np.sort(original.primitives[0].positions, axis=0)[[0, -1]])
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
+        [f"scene{suffix}"] + (["scene.bin"] if suffix == ".gltf" else []))
+
+
+def test_overwrite_through_the_python_api(tmp_path):
+    source = small_scene().save(tmp_path / "scene.glb")
+    with pytest.raises(baker.OutputError, match="is the input"):
+        baker.bake(source, source, baker.Settings(rays=2, page_size=64))
+    result = baker.bake(source, source, baker.Settings(rays=2, page_size=64), overwrite=True)
+    assert result.texels > 0 and _every_primitive_lightmapped(load(source))
+
+
+def _every_primitive_lightmapped(scene) -> bool:
+    document = scene.document
+    materials = [document.materials[p.material] for m in document.meshes for p in m.primitives]
+    return bool(materials) and all("MOZ_lightmap" in (m.extensions or {}) for m in materials)
+
+
+# ------------------------------------------------------------------------------------------------
+# interruption
+
+
+@pytest.mark.parametrize("stage", ["load", "unwrap", "integrate", "encode"])
+def test_ctrl_c_during_a_stage_leaves_the_previous_output(tmp_path, capsys, monkeypatch, stage):
+    source = small_scene().save(tmp_path / "scene.glb")
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(BAKE, stage, interrupted)
+    output = tmp_path / "baked.glb"
+    output.write_bytes(PREVIOUS)
+    before = snapshot(tmp_path)
+    code, out, err = bake_cli(capsys, "bake", str(source), "-o", str(output), *FAST,
+                              "--report", str(tmp_path / "report.json"))
+    assert code == 130
+    assert err.strip() == "baker: interrupted; no output was changed"
+    assert snapshot(tmp_path) == before
+
+
+@pytest.mark.parametrize("suffix", [".glb", ".gltf"])
+def test_ctrl_c_while_the_output_is_being_written(tmp_path, capsys, monkeypatch, suffix):
+    """Interrupted inside the writer, after its temporary file exists: the temporary goes, the
+    previous output (and its .bin) stays."""
+    (tmp_path / "in").mkdir()
+    source = small_scene().save(tmp_path / "in" / f"scene{suffix}")
+    output = tmp_path / f"baked{suffix}"
+    output.write_bytes(PREVIOUS)
+    output.with_suffix(".bin").write_bytes(PREVIOUS)
+    before = snapshot(tmp_path)
+    calls = []
+
+    def fsync(fd):
+        calls.append(fd)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(os, "fsync", fsync)
+    code, _, err = bake_cli(capsys, "bake", str(source), "-o", str(output), *FAST)
+    assert code == 130 and calls
+    assert snapshot(tmp_path) == before
+
+
+def _slow_bake_started(tmp_path: Path, marker: Path, *args: str) -> subprocess.Popen:
+    """A real ``baker bake`` of the Cornell box that takes seconds in ray casting; returns once
+    it has started casting rays (its integrate stage touched ``marker``)."""
+    source = cornell_box().save(tmp_path / "cornell.glb")
+    script = (
+        "import importlib, pathlib, sys\n"
+        "b = importlib.import_module('baker.bake')\n"
+        "from cli.main import main\n"
+        "real = b.integrate\n"
+        f"def integrate(*a, **k):\n    pathlib.Path({str(marker)!r}).touch()\n    return real(*a, **k)\n"
+        "b.integrate = integrate\n"
+        "sys.exit(main(sys.argv[1:]))\n")
+    process = subprocess.Popen(
+        [sys.executable, "-c", script, "bake", str(source), "-o", str(tmp_path / "baked.glb"),
+         "--rays", "4096", "--texel-density", "12", *args],
+        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while not marker.exists():
+        assert process.poll() is None, process.communicate()
+        assert time.monotonic() < deadline
+        time.sleep(0.02)
+    time.sleep(0.3)
+    assert process.poll() is None, "the bake finished before it could be interrupted"
+    return process
+
+
+@pytest.mark.parametrize("how", [signal.SIGINT, signal.SIGKILL])
+def test_killing_a_real_bake_leaves_the_previous_output(tmp_path, how):
+    (tmp_path / "baked.glb").write_bytes(PREVIOUS)
+    marker = tmp_path.parent / f"{tmp_path.name}.started"
+    process = _slow_bake_started(tmp_path, marker, "--threads", "1")
+    before = snapshot(tmp_path)
+    started = time.monotonic()
+    process.send_signal(how)
+    out, err = process.communicate(timeout=60)
+    if how == signal.SIGINT:
+        assert process.returncode == 130, err
+        assert err.strip().endswith("baker: interrupted; no output was changed")
+        assert time.monotonic() - started < 5  # Ctrl-C stops the bake, not the bake's end
+    else:
+        assert process.returncode == -signal.SIGKILL
+    assert snapshot(tmp_path) == before
+    assert (tmp_path / "baked.glb").read_bytes() == PREVIOUS
+    assert not [p for p in tmp_path.iterdir() if p.name.endswith(".tmp")]
