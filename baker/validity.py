@@ -37,6 +37,7 @@ import numpy as np
 from .geometry import World
 from .rasterise import Texels
 from .scene import Scene
+from .parallel import run_chunks
 from .trace import Tracer, ray_lift
 
 TANGENT_RAYS = 8
@@ -51,7 +52,7 @@ BACKFACE_TOLERANCE = 0.6
 VALID, MOVED, INVALID, ENCLOSED = 0, 1, 2, 3
 STATE_NAMES = ("valid", "moved", "invalid", "enclosed")
 
-_CHUNK = 1 << 15  # texels per ray batch
+_CHUNK = 1 << 13  # texels per ray batch (one thread's work unit)
 
 
 @dataclass(frozen=True)
@@ -158,35 +159,39 @@ def _back_fraction(tracer: Tracer, faces: _Faces, position: np.ndarray, normal: 
 
 
 def check_texels(scene: Scene, world: World, tracer: Tracer, texels: Texels,
-                 d_max: float) -> tuple[Texels, Validity]:
+                 d_max: float, threads: int = 0) -> tuple[Texels, Validity]:
     """Probe every texel's sample point; return the texels with moved positions and their states.
 
     ``d_max``: the hemisphere probes' length (the obscurance distance), world units.
-    Only ``Texels.position`` changes; normals, triangle and key stay (the point moves in the
-    texel's own plane).
+    ``threads``: 0 for one per core. Only ``Texels.position`` changes; normals, triangle and key
+    stay (the point moves in the texel's own plane). Chunks write only their own rows, so the
+    result does not depend on the chunking or the threads.
     """
     count = len(texels)
     faces = _Faces(scene, world)
     position = texels.position.copy()
     moved = np.zeros(count, bool)
     fraction = np.zeros(count)
-    for start in range(0, count, _CHUNK):
-        rows = slice(start, min(start + _CHUNK, count))
+
+    def work(rows: slice) -> None:
         normal, size = texels.geometric_normal[rows], texels.size[rows]
         usable = np.flatnonzero((size > 0) & (np.linalg.norm(normal, axis=1) > 0.5))
-        p = position[rows]
+        p = position[rows]  # a view: the chunk's own rows
         home = np.mean(world.corners(texels.triangle[rows]), axis=0)  # (k, 3) centroids
+        step_moved = moved[rows]
         for _ in range(TANGENT_ROUNDS):
             new, stepped = _tangent_step(tracer, faces, p[usable], normal[usable], size[usable],
                                          home[usable])
             p[usable] = new
-            moved[rows][usable] |= stepped  # a view of ``moved``: writes through
+            step_moved[usable] |= stepped
             usable = usable[stepped]
             if not len(usable):
                 break
-        position[rows] = p
         ok = np.flatnonzero(np.linalg.norm(normal, axis=1) > 0.5)
         fraction[rows][ok] = _back_fraction(tracer, faces, p[ok], normal[ok], size[ok], d_max)
+
+    run_chunks(work, [slice(start, min(start + _CHUNK, count))
+                      for start in range(0, count, _CHUNK)], threads)
     state = np.where(moved, MOVED, VALID).astype(np.int8)
     state[fraction >= BACKFACE_TOLERANCE] = INVALID
     state[fraction >= ENCLOSED_FRACTION] = ENCLOSED

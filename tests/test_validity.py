@@ -8,8 +8,9 @@ import pytest
 from assets.artifact_scenes import leak_room
 from baker.postprocess import fill_invalid
 from baker.rasterise import rasterise
+from baker.trace import Tracer
 from baker.validity import (ENCLOSED, INVALID, MOVED, PROBE_RADIUS, PUSH, TANGENT_ROUNDS,
-                            VALID, Validity)
+                            VALID, Validity, check_texels)
 from tests.bakehelp import computed
 
 DENSITY = 10.0  # texels per metre: texel 0.1 m
@@ -220,3 +221,14 @@ def test_invalid_texels_take_their_valid_neighbours_mean_within_their_chart():
     np.testing.assert_allclose(filled[0, 1:5, 7, 0], 5.0)
     unchanged = ~invalid
     np.testing.assert_array_equal(filled[unchanged], values[unchanged])
+
+
+def test_probes_do_not_depend_on_threads(room, tmp_path):
+    done = computed(room, tmp_path, texel_density=DENSITY, rays=4, d_max=6.0)
+    texels = rasterise(done.atlas, done.world)
+    tracer = Tracer(done.world)
+    one = check_texels(done.scene, done.world, tracer, texels, 6.0, threads=1)
+    two = check_texels(done.scene, done.world, tracer, texels, 6.0, threads=2)
+    np.testing.assert_array_equal(one[0].position, two[0].position)
+    np.testing.assert_array_equal(one[1].state, two[1].state)
+    np.testing.assert_array_equal(one[1].state, done.validity.state)
