@@ -27,6 +27,7 @@ from .direct import Direct, Power, Sources, delivered_power, direct_light, light
 from .encode import encode
 from .errors import BakerError, OutputError
 from .geometry import World, build_world
+from .gi import indirect_light
 from .integrate import Terms, integrate
 from .load import load
 from .plan import Plan, make_plan
@@ -184,7 +185,7 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True) -> Computed:
         world = build_world(scene)
     area, diagonal = _bounds_of_baked(world, scene)
     resolved = resolve(settings, area, diagonal)
-    with _timed(times, "trace"):
+    with _timed(times, "lights"):  # Embree's scene, the sources, the power they deliver (I_A)
         tracer = Tracer(world)
         sources = light_sources(scene, world, resolved)
         power = delivered_power(scene, world, tracer, sources, resolved)
@@ -212,8 +213,14 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True) -> Computed:
     with _timed(times, "direct"):
         with bar(len(texels), "direct light", wanted(quiet) and sources.any()) as advance:
             direct = direct_light(scene, world, tracer, texels, sources, resolved, advance)
+    indirect = None
+    if resolved.method == "gi":  # the full-GI reference instead of I_A·W (gi.py)
+        with _timed(times, "gi"):
+            indirect = indirect_light(scene, world, tracer, sources, texels, resolved,
+                                      resolved.rays).irradiance
     with _timed(times, "compose"):
-        lightmaps = postprocess(compose(atlas, texels, terms, ambient, resolved.rho, direct),
+        lightmaps = postprocess(compose(atlas, texels, terms, ambient, resolved.rho, direct,
+                                        indirect=indirect),
                                 resolved.padding, *validity.page_masks(
                                     texels, (atlas.page_count, atlas.height, atlas.width)),
                                 seams=find_seams(atlas, world))

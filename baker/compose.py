@@ -39,11 +39,13 @@ def effective_r_ave(ambient: Ambient, rho: str) -> np.ndarray:
 
 
 def compose(atlas: Atlas, texels: Texels, terms: Terms, ambient: Ambient, rho: str,
-            direct: Direct | None = None, light_colours: np.ndarray | None = None) -> Lightmaps:
+            direct: Direct | None = None, light_colours: np.ndarray | None = None,
+            indirect: np.ndarray | None = None) -> Lightmaps:
     """Scatter the texels' light L = D + I_A·W and obscurance W into page images.
 
     ``direct``: the texels' direct light (None: L = I_A·W); ``light_colours`` (L, 3) replaces the
-    baked colour × intensity of its punctual lights (relighting without rays).
+    baked colour × intensity of its punctual lights (relighting without rays). ``indirect``
+    (N, 3): path-traced indirect irradiance (``--method gi``) to use instead of I_A·W.
     """
     shape = (atlas.page_count, atlas.height, atlas.width)
     w = terms.obscurance(effective_r_ave(ambient, rho))
@@ -52,6 +54,8 @@ def compose(atlas: Atlas, texels: Texels, terms: Terms, ambient: Ambient, rho: s
     obscurance[texels.page, texels.y, texels.x] = w
     covered[texels.page, texels.y, texels.x] = True
     light = obscurance * ambient.intensity
+    if indirect is not None:
+        light[texels.page, texels.y, texels.x] = indirect
     if direct is not None:
         light[texels.page, texels.y, texels.x] += direct.irradiance(light_colours)
     return Lightmaps(light=light, obscurance=obscurance, covered=covered)

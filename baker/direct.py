@@ -444,6 +444,35 @@ def _texel_receivers(texels: Texels, rows: slice, center: np.ndarray) -> Receive
                      key=texels.key[rows])
 
 
+def direct_at(scene: Scene, world: World, tracer: Tracer, sources: Sources,
+              receivers: Receivers, seed: int, samples: int | None = None) -> Direct:
+    """Direct irradiance at ``receivers`` from every source, kept apart per source.
+
+    ``samples``: shadow/sky rays per receiver for every source (None: each source's own count,
+    as a bake uses them; the full-GI reference takes 1 at each bounce).
+    """
+    k = len(receivers.position)
+    punctual, punctual_var = np.zeros((k, len(sources.lights))), np.zeros((k, len(sources.lights)))
+    emitted, emitted_var = np.zeros((k, 3)), np.zeros(k)
+    sky, sky_var = np.zeros((k, 3)), np.zeros(k)
+    for l, light in enumerate(sources.lights):
+        punctual[:, l], punctual_var[:, l] = punctual_irradiance(
+            light, float(sources.spread[l]), samples or int(sources.samples[l]), receivers,
+            tracer, seed, light_dimension(l))
+    if sources.emitters is not None:
+        emitted, emitted_var = emissive_irradiance(
+            scene, world, sources.emitters, samples or sources.emissive_rays, receivers, tracer, seed)
+    if sources.sky is not None:
+        sky, sky_var = sky_irradiance(sources.sky, samples or sources.sky_rays, receivers,
+                                      tracer, seed)
+    return Direct(punctual=punctual, punctual_var=punctual_var,
+                  light_colours=sources.light_colours(), emission=emitted,
+                  emission_var=emitted_var, sky=sky, sky_var=sky_var,
+                  rays=k * (sources.rays_per_texel() if samples is None else
+                            samples * (len(sources.lights) + (sources.emitters is not None)
+                                       + (sources.sky is not None))))
+
+
 def direct_light(scene: Scene, world: World, tracer: Tracer, texels: Texels, sources: Sources,
                  settings: Resolved, progress: Callable[[int], None] | None = None) -> Direct:
     """Estimate every texel's direct irradiance from every source (no ray when there is none)."""
@@ -459,17 +488,11 @@ def direct_light(scene: Scene, world: World, tracer: Tracer, texels: Texels, sou
     chunks = [slice(start, min(start + step, count)) for start in range(0, count, step)]
 
     def work(rows: slice) -> None:
-        receivers = _texel_receivers(texels, rows, tracer.center)
-        for l, light in enumerate(sources.lights):
-            punctual[rows, l], punctual_var[rows, l] = punctual_irradiance(
-                light, float(sources.spread[l]), int(sources.samples[l]), receivers, tracer,
-                settings.seed, light_dimension(l))
-        if sources.emitters is not None:
-            emitted[rows], emitted_var[rows] = emissive_irradiance(
-                scene, world, sources.emitters, sources.emissive_rays, receivers, tracer, settings.seed)
-        if sources.sky is not None:
-            sky[rows], sky_var[rows] = sky_irradiance(sources.sky, sources.sky_rays, receivers,
-                                                      tracer, settings.seed)
+        part = direct_at(scene, world, tracer, sources,
+                         _texel_receivers(texels, rows, tracer.center), settings.seed)
+        punctual[rows], punctual_var[rows] = part.punctual, part.punctual_var
+        emitted[rows], emitted_var[rows] = part.emission, part.emission_var
+        sky[rows], sky_var[rows] = part.sky, part.sky_var
         if progress is not None:
             progress(rows.stop - rows.start)
 

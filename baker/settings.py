@@ -15,6 +15,7 @@ from .sampling import TECHNIQUES
 RHO_FUNCTIONS = ("sqrt", "step", "linear")
 ENCODINGS = ("linear", "srgb")
 OCCLUSION_MODES = ("none", "also", "only")
+METHODS = ("obscurance", "gi")
 
 
 @dataclass(frozen=True)
@@ -31,6 +32,9 @@ class Settings:
         until the standard error of its lightmap luminance is at most this, or it has
         ``max_rays``; None: every texel gets ``rays``.
     max_rays: the most rays a texel gets with ``target_error``.
+    method: "obscurance" (L = D + I_A·W, the product) or "gi": a full diffuse global
+        illumination reference, L = D + path-traced indirect light with ``rays`` paths per
+        texel (gi.py; slower, for judging the obscurance approximation).
     d_max: the obscurance distance; None takes ``d_max_fraction`` of the baked bounds' diagonal.
     rho: the obscurance function ρ(d): "sqrt" (the paper's sqrt(d/d_max)), "step" (classic
         ambient occlusion: a hit closer than d_max counts 0, R(Q) = 1) or "linear" (d/d_max).
@@ -63,6 +67,7 @@ class Settings:
     sampling: str = "sobol"
     target_error: float | None = None
     max_rays: int = 1024
+    method: str = "obscurance"
     d_max: float | None = None
     d_max_fraction: float = 0.2
     rho: str = "sqrt"
@@ -112,6 +117,7 @@ class Settings:
         for name, value, allowed in (("rho", self.rho, RHO_FUNCTIONS),
                                      ("encoding", self.encoding, ENCODINGS),
                                      ("sampling", self.sampling, TECHNIQUES),
+                                     ("method", self.method, METHODS),
                                      ("occlusion", self.occlusion, OCCLUSION_MODES)):
             if value not in allowed:
                 raise SettingsError(f"{name} must be one of {', '.join(allowed)}, not {value!r}",

@@ -17,6 +17,7 @@ import numpy as np
 
 from .bake import Computed
 from .compose import effective_r_ave
+from .gi import indirect_light
 from .integrate import Terms, integrate
 from .sampling import TECHNIQUES
 from .surface import LUMINANCE
@@ -48,6 +49,7 @@ class Study:
     texels: int
     reference_rays: int
     reference_seconds: float
+    gi: dict | None = None  # obscurances against full GI (``compare_with_gi``)
 
     def slope(self, technique: str, min_rays: int = 16) -> float:
         """Least-squares slope of log RMSE against log rays (−0.5 for plain Monte Carlo)."""
@@ -67,10 +69,17 @@ class Study:
             lines.append(f"{technique}: RMSE ∝ rays^{self.slope(technique):.2f}")
         lines.append(f"reference: {self.reference_rays} rays/texel (sobol), "
                      f"{self.reference_seconds:.1f} s, {self.texels:,} texels")
+        if self.gi:
+            g = self.gi
+            lines.append(
+                f"obscurances ({g['rays']} rays, {g['obscurance_seconds']:.2f} s) against full GI "
+                f"({g['paths']} paths, {g['gi_seconds']:.2f} s, {g['gi_seconds'] / max(g['obscurance_seconds'], 1e-9):.0f}× the time): "
+                f"lightmap RMSE {g['rmse']:.3g} = {g['relative']:.1%} of the GI lightmap's mean "
+                f"{g['gi_mean']:.3g}; mean obscurance/GI indirect light {g['indirect_ratio']:.2f}")
         return "\n".join(lines)
 
     def as_dict(self) -> dict:
-        return {"texels": self.texels, "reference_rays": self.reference_rays,
+        return {"texels": self.texels, "reference_rays": self.reference_rays, "gi": self.gi,
                 "reference_seconds": self.reference_seconds,
                 "rows": [r.as_dict() for r in self.rows],
                 "slopes": {t: self.slope(t) for t in dict.fromkeys(r.technique for r in self.rows)}}
@@ -168,3 +177,30 @@ def plot(study: Study, size: tuple[int, int] = (800, 560)) -> bytes:
     buffer = io.BytesIO()
     image.save(buffer, "PNG")
     return buffer.getvalue()
+
+
+def compare_with_gi(done: Computed, rays: int = 64, paths: int = 256) -> dict:
+    """How far the obscurance lightmap D + I_A·W sits from full GI, D + E_ind, and at what cost.
+
+    The paper's figure 13 comparison, on the bake's own texels and direct light: the obscurance
+    terms at ``rays`` Sobol rays per texel against the path tracer (gi.py) at ``paths`` paths.
+    Returns the lightmaps' RMSE (luminance, lightmap units), that RMSE over the GI lightmap's
+    mean, the ratio of the mean indirect light of both, and the seconds each took.
+    """
+    tracer = Tracer(done.world)
+    settings = replace(done.settings, rays=rays, sampling="sobol", target_error=None)
+    started = time.perf_counter()
+    terms = integrate(done.scene, done.world, tracer, done.texels, settings)
+    obscurance_seconds = time.perf_counter() - started
+    started = time.perf_counter()
+    indirect = indirect_light(done.scene, done.world, tracer, done.sources, done.texels,
+                              settings, paths).irradiance @ LUMINANCE
+    gi_seconds = time.perf_counter() - started
+    direct = done.direct.irradiance() @ LUMINANCE if done.direct is not None else 0.0
+    ambient = _luminance(done, terms)
+    gi = direct + indirect
+    rmse = float(np.sqrt(np.mean((direct + ambient - gi) ** 2)))
+    return {"rays": rays, "paths": paths, "obscurance_seconds": obscurance_seconds,
+            "gi_seconds": gi_seconds, "rmse": rmse, "gi_mean": float(gi.mean()),
+            "relative": rmse / max(float(gi.mean()), 1e-30),
+            "indirect_ratio": float(ambient.mean() / max(indirect.mean(), 1e-30))}

@@ -62,6 +62,10 @@ def add_parser(commands) -> None:
                        help="adaptive sampling: rays in rounds (--rays, then doubling) until each "
                             "texel's standard error is at most E in lightmap units, or it has "
                             "--max-rays (default: every texel gets --rays)")
+    model.add_argument("--method", choices=baker.settings.METHODS, default=d.method,
+                       help="obscurance: direct light + I_A·W (fast, the default); gi: direct "
+                            "light + path-traced indirect light, --rays paths per texel (a "
+                            "reference to judge obscurances by; slower)")
     model.add_argument("--max-rays", type=int, default=d.max_rays, metavar="N",
                        help=f"the most rays a texel gets with --target-error (default {d.max_rays})")
     direct = bake.add_argument_group("direct light (KHR_lights_punctual, emissive surfaces, sky)")
@@ -110,7 +114,7 @@ def settings_from(args: argparse.Namespace) -> baker.Settings:
     return baker.Settings(
         texel_density=args.texel_density, page_size=args.page_size, padding=args.padding,
         rays=args.rays, sampling=args.sampling, target_error=args.target_error,
-        max_rays=args.max_rays, d_max=args.d_max, rho=args.rho, ambient=args.ambient, seed=args.seed,
+        max_rays=args.max_rays, method=args.method, d_max=args.d_max, rho=args.rho, ambient=args.ambient, seed=args.seed,
         threads=args.threads, encoding=args.encoding, occlusion=args.occlusion,
         shadow_rays=args.shadow_rays, light_radius=args.light_radius, light_angle=args.light_angle,
         emissive_rays=args.emissive_rays, sky=args.sky, sky_horizon=args.sky_horizon,

@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import argparse
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import baker
 from baker.bake import compute, write_atomically
 from baker.load import load
-from baker.study import DEFAULT_RAYS, plot, run_study
+from baker.study import DEFAULT_RAYS, compare_with_gi, plot, run_study
 from cli.common import add_debug
 
 
@@ -34,6 +35,8 @@ def add_parser(commands) -> None:
                        help="rays per texel of the converged reference (default 4096)")
     study.add_argument("--d-max", type=float, metavar="DISTANCE",
                        help="obscurance distance (default: as a bake derives it)")
+    study.add_argument("--gi-paths", type=int, default=256, metavar="N",
+                       help="paths per texel of the full-GI comparison (0: skip it; default 256)")
     study.add_argument("--plot", type=Path, metavar="PNG", help="write the plot here")
     study.add_argument("--json", type=Path, metavar="FILE", help="write the table as JSON")
     add_debug(study)
@@ -45,6 +48,9 @@ def run(args: argparse.Namespace) -> int:
     done = compute(load(args.scene), settings)
     result = run_study(done, tuple(args.rays), tuple(args.techniques), args.reference_rays,
                        progress=lambda text: print(f"  {text}", flush=True))
+    if args.gi_paths:
+        print(f"  full GI: {args.gi_paths} paths per texel", flush=True)
+        result = replace(result, gi=compare_with_gi(done, paths=args.gi_paths))
     print(result.table())
     if args.plot:
         write_atomically(args.plot, plot(result))
