@@ -12,33 +12,8 @@ from pathlib import Path
 if __package__ in (None, ""):  # run as a script: make the repository root importable
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from assets.gltf_builder import (  # noqa: E402
-    GltfBuilder,
-    box,
-    quad,
-    rotation_matrix,
-    transformed,
-    uv_sphere,
-)
-
-WHITE = (0.73, 0.73, 0.73)
-
-# Rotations taking a quad's +Y normal to each direction.
-_FACING = {
-    "+y": ((0, 1, 0), 0.0),
-    "-y": ((1, 0, 0), 180.0),
-    "+x": ((0, 0, 1), -90.0),
-    "-x": ((0, 0, 1), 90.0),
-    "+z": ((1, 0, 0), 90.0),
-    "-z": ((1, 0, 0), -90.0),
-}
-
-
-def _panel(width: float, depth: float, facing: str, centre) -> tuple:
-    """A single-sided quad facing ``facing``, moved to ``centre``; ``width`` along x before the
-    rotation (the vertical for ±x), ``depth`` along z (the vertical for ±z)."""
-    return transformed(quad(width, depth), rotation=rotation_matrix(*_FACING[facing]),
-                       translation=centre)
+from assets.gltf_builder import GltfBuilder, box, quad, uv_sphere  # noqa: E402
+from assets.make_scenes import WHITE, panel  # noqa: E402
 
 
 def leak_room(half: float = 1.5, height: float = 2.5, floor_size: float = 8.0,
@@ -65,10 +40,10 @@ def leak_room(half: float = 1.5, height: float = 2.5, floor_size: float = 8.0,
     nodes["floor"] = b.node("floor", b.shape_mesh(
         "floor", quad(floor_size, floor_size), material=white))
     thin = {
-        "wall_back": _panel(2 * half + 2 * e, height + 2 * e, "+z", (0.0, height / 2, -half)),
-        "wall_front": _panel(2 * half + 2 * e, height + 2 * e, "-z", (0.0, height / 2, half)),
-        "wall_right": _panel(height + 2 * e, 2 * half + 2 * e, "-x", (half, height / 2, 0.0)),
-        "ceiling": _panel(2 * half + 2 * e, 2 * half + 2 * e, "-y", (0.0, height, 0.0)),
+        "wall_back": panel(2 * half + 2 * e, height + 2 * e, "+z", (0.0, height / 2, -half)),
+        "wall_front": panel(2 * half + 2 * e, height + 2 * e, "-z", (0.0, height / 2, half)),
+        "wall_right": panel(height + 2 * e, 2 * half + 2 * e, "-x", (half, height / 2, 0.0)),
+        "ceiling": panel(2 * half + 2 * e, 2 * half + 2 * e, "-y", (0.0, height, 0.0)),
     }
     for name, shape in thin.items():
         nodes[name] = b.node(name, b.shape_mesh(name, shape, material=white))

@@ -36,8 +36,8 @@ WHITE = (0.73, 0.73, 0.73)
 RED = (0.63, 0.065, 0.05)
 GREEN = (0.14, 0.45, 0.091)
 
-# Rotations (axis, degrees) taking a quad's +Y normal to each direction.
-_FACING_ROTATION = {
+# Rotations (axis, degrees) taking a quad's +Y normal to each direction (for ``panel``).
+FACING_ROTATION = {
     "+y": ((0, 1, 0), 0.0),
     "-y": ((1, 0, 0), 180.0),
     "+x": ((0, 0, 1), -90.0),
@@ -46,15 +46,15 @@ _FACING_ROTATION = {
     "-z": ((1, 0, 0), -90.0),
 }
 # The same as node rotations (quaternions x, y, z, w).
-_FACING = {k: quat_axis_angle(*v) for k, v in _FACING_ROTATION.items()}
+_FACING = {k: quat_axis_angle(*v) for k, v in FACING_ROTATION.items()}
 
 
-def _panel(width: float, depth: float, facing: str, centre) -> tuple:
+def panel(width: float, depth: float, facing: str, centre) -> tuple:
     """A quad of ``width`` x ``depth`` whose normal points along ``facing``, moved to ``centre``.
 
     The quad's x extent stays x for "+y"/"-y"/"+z"/"-z"; for "+x"/"-x" it becomes the vertical.
     """
-    return transformed(quad(width, depth), rotation=rotation_matrix(*_FACING_ROTATION[facing]), translation=centre)
+    return transformed(quad(width, depth), rotation=rotation_matrix(*FACING_ROTATION[facing]), translation=centre)
 
 
 # ---------------------------------------------------------------------- demo scenes
@@ -187,7 +187,7 @@ def parallel_planes(
     grey = b.material("ceiling", tuple(float(c) for c in ceiling_albedo))
     side = 2.0 * half_extent
     probe = b.shape_mesh("probe", quad(probe_size, probe_size), material=white)
-    ceiling = b.shape_mesh("ceiling", _panel(side, side, "-y", (0.0, height, 0.0)), material=grey)
+    ceiling = b.shape_mesh("ceiling", panel(side, side, "-y", (0.0, height, 0.0)), material=grey)
     b.info["nodes"] = {"probe": b.node("probe", probe), "ceiling": b.node("ceiling", ceiling)}
     return b
 
@@ -207,7 +207,7 @@ def red_wall_floor(
     white = b.material("floor", (floor_albedo,) * 3)
     red = b.material("red_wall", tuple(float(c) for c in wall_albedo))
     floor = b.shape_mesh("floor", quad(floor_size, floor_size), material=white)
-    wall_shape = _panel(floor_size, wall_height, "+z", (0.0, wall_height / 2.0, -floor_size / 2.0))
+    wall_shape = panel(floor_size, wall_height, "+z", (0.0, wall_height / 2.0, -floor_size / 2.0))
     wall = b.shape_mesh("red_wall", wall_shape, material=red)
     b.info["nodes"] = {"floor": b.node("floor", floor), "red_wall": b.node("red_wall", wall)}
     return b
@@ -235,8 +235,8 @@ def three_instances(
     h = floor_size / 2.0
     d = floor_size * 0.3125
     nodes = {"floor": b.node("floor", b.shape_mesh("floor", quad(floor_size, floor_size), material=white))}
-    wall_x = _panel(wall_height, floor_size, "+x", (-h, wall_height / 2.0, 0.0))
-    wall_z = _panel(floor_size, wall_height, "+z", (0.0, wall_height / 2.0, -h))
+    wall_x = panel(wall_height, floor_size, "+x", (-h, wall_height / 2.0, 0.0))
+    wall_z = panel(floor_size, wall_height, "+z", (0.0, wall_height / 2.0, -h))
     nodes["wall_x"] = b.node("wall_x", b.shape_mesh("wall_x", wall_x, material=white))
     nodes["wall_z"] = b.node("wall_z", b.shape_mesh("wall_z", wall_z, material=white))
     slab_t = 0.05
@@ -362,7 +362,7 @@ def textured_floor(
     positions, triangles, normals, uv0 = quad(size, size)
     vc = np.asarray(vertex_colors, dtype=np.float64)
     floor = b.mesh("floor", positions, triangles, normals=normals, uv0=uv0, colors=vc, material=tex)
-    wall = b.shape_mesh("wall", _panel(size, wall_height, "+z", (0.0, wall_height / 2.0, -size / 2.0)), material=white)
+    wall = b.shape_mesh("wall", panel(size, wall_height, "+z", (0.0, wall_height / 2.0, -size / 2.0)), material=white)
     b.info.update(nodes={"floor": b.node("floor", floor), "wall": b.node("wall", wall)}, image=image, vertex_colors=vc)
     return b
 
