@@ -13,7 +13,8 @@ The pipeline, one module per stage (DESIGN.md §3):
     direct.direct_light  Texels → Direct (lights, emitters, sky per texel, with shadow rays)
     compose.compose      Terms + Direct → Lightmaps (L = D + I_A · W per page)
     postprocess          dilation into the padding
-    encode.encode        Lightmaps → PNG pages
+    encode.encode        Lightmaps → 8-bit PNG pages, each scaled by a percentile of its texels
+    hdr.page_file        float pages as .hdr / .exr files (``--lightmaps DIR --format``)
     write.write          Scene + Atlas + pages → glTF file with MOZ_lightmap
 
 ``bake.bake`` runs them in order.

@@ -25,6 +25,7 @@ from .atlas import Atlas
 from .compose import Lightmaps, compose, effective_r_ave
 from .direct import Direct, Power, Sources, delivered_power, direct_light, light_sources
 from .encode import encode
+from .hdr import check_format, page_file
 from .errors import BakerError, OutputError
 from .geometry import World, build_world
 from .gi import indirect_light
@@ -232,12 +233,14 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True) -> Computed:
 
 def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings = Settings(), *,
          report_path: str | os.PathLike | None = None,
-         lightmaps_dir: str | os.PathLike | None = None, quiet: bool = True,
+         lightmaps_dir: str | os.PathLike | None = None, lightmaps_format: str = "png",
+         quiet: bool = True,
          overwrite: bool = False) -> BakeResult:
     """Bake the glTF scene at ``input`` into ``output`` (.glb or .gltf) with lightmaps.
 
-    ``report_path`` writes the JSON report; ``lightmaps_dir`` also writes each page as a PNG
-    file; ``quiet=False`` draws a progress bar when stderr is a terminal. ``overwrite`` lets
+    ``report_path`` writes the JSON report; ``lightmaps_dir`` also writes each page as a file,
+    ``lightmaps_format`` "png" (the embedded image), "hdr" or "exr" (the float page, hdr.py);
+    ``quiet=False`` draws a progress bar when stderr is a terminal. ``overwrite`` lets
     ``output`` be the input itself (or replace a file the input uses); it is replaced
     atomically, only once the bake has succeeded.
     """
@@ -245,6 +248,7 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
     check_output(input_path, output, overwrite,
                  None if report_path is None else Path(report_path))
     settings.check()
+    check_format(lightmaps_format)
     started = time.perf_counter()
     loading: dict[str, float] = {}
     with _timed(loading, "load"):
@@ -259,11 +263,14 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
     times["load"] += loading["load"]
     resolved = done.settings
     with _timed(times, "write"):
-        pages = encode(done.lightmaps, resolved.encoding, resolved.occlusion != "none")
+        pages = encode(done.lightmaps, resolved.encoding, resolved.occlusion != "none",
+                       resolved.clip_percentile)
         info = write(scene, done.atlas, pages, output,
-                     WriteOptions(encoding=resolved.encoding, occlusion=resolved.occlusion))
+                     WriteOptions(encoding=resolved.encoding, occlusion=resolved.occlusion,
+                                  clip_percentile=resolved.clip_percentile))
         if lightmaps_dir is not None:
-            write_page_files(Path(lightmaps_dir), output.stem, pages)
+            write_page_files(Path(lightmaps_dir), output.stem, pages, done.lightmaps.light,
+                             lightmaps_format)
     seconds = time.perf_counter() - started
     rmse = done.rmse_estimate()
     ambient, atlas = done.ambient, done.atlas
@@ -280,7 +287,9 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
         "rays_per_second": done.terms.rays / times["trace"] if times["trace"] > 0 else 0.0,
         "stage_seconds": times, "seconds": seconds,
         "rmse_estimate": rmse,
-        "notes": list(info.notes),
+        "notes": list(info.notes) + clipping_notes(pages),
+        "lightmap_pages": [{"intensity": page.intensity, "peak": page.peak,
+                            "clipped_fraction": page.clipped} for page in pages],
     }
     if report_path is not None:
         write_atomically(Path(report_path), json.dumps(report, indent=2).encode())
@@ -305,12 +314,21 @@ def write_atomically(path: Path, data: bytes) -> None:
         raise
 
 
-def write_page_files(folder: Path, stem: str, pages) -> list[Path]:
-    """Write each lightmap page as ``<stem>_lightmap_<p>.png`` in ``folder`` (made if needed)."""
+def clipping_notes(pages) -> list[str]:
+    """One report note per page whose intensity (a percentile, encode.py) clips texels."""
+    return [f"lightmap page {p}: {page.clipped:.2%} of its texels are brighter than its "
+            f"MOZ_lightmap intensity {page.intensity:.4g} (peak {page.peak:.4g}) and clip to it; "
+            "--clip-percentile 100 scales to the peak, --lightmaps DIR --format exr keeps floats"
+            for p, page in enumerate(pages) if page.clipped > 0]
+
+
+def write_page_files(folder: Path, stem: str, pages, light=None, format: str = "png") -> list[Path]:
+    """Write each lightmap page as ``<stem>_lightmap_<p>.<format>`` in ``folder`` (made if
+    needed): the embedded PNG, or with ``light`` (P, H, W, 3) the float page as .hdr or .exr."""
     folder.mkdir(parents=True, exist_ok=True)
     paths = []
     for p, page in enumerate(pages):
-        path = folder / f"{stem}_lightmap_{p}.png"
-        write_atomically(path, page.png)
+        path = folder / f"{stem}_lightmap_{p}.{format}"
+        write_atomically(path, page_file(None if light is None else light[p], page.png, format))
         paths.append(path)
     return paths

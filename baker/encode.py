@@ -1,10 +1,20 @@
 """Turning float lightmap pages into the images embedded in the glTF.
 
-Each page is scaled by its largest value (stored as MOZ_lightmap ``intensity``) and quantised to
-8-bit PNG, either linearly (``linear``: what the three.js MOZ_lightmap plugin and the Hubs client
-read) or through the sRGB curve (``srgb``: what the proposed MOZ_lightmap text says). The default
-is ``linear`` because that is what the viewers people use show correctly; docs/output.md says
-more.
+A viewer shows ``decoded(texel) × MOZ_lightmap.intensity``, from an 8-bit PNG: the three.js
+MOZ_lightmap plugin and the Hubs client load the lightmap as an ordinary glTF texture, and
+browsers hand WebGL 8 bits per channel even from a 16-bit PNG, so 8 bits and one scale per page
+are all the precision a viewer gets (docs/output.md gives the evidence and the measured error).
+
+What the encoder chooses is the scale. Irradiance has no upper bound — a texel beside a point
+light can be a hundred times its neighbours — so the page's *maximum* would spend the whole 8-bit
+range on a few hot texels and crush everything else. The scale is instead a high percentile
+(``CLIP_PERCENTILE``, default the 99.9th) of the covered texels' brightest channel: at most 0.1 %
+of the texels clip, the rest keep 8 bits of the range they actually span. ``EncodedPage`` reports
+the peak and the clipped fraction; the float pages are kept intact for ``--lightmaps DIR
+--format hdr|exr`` (``hdr.py``).
+
+Texels are quantised linearly (``linear``: what three.js and Hubs read, the default) or through
+the sRGB curve (``srgb``: what the proposed MOZ_lightmap text says; more precision in the darks).
 """
 
 from __future__ import annotations
@@ -18,6 +28,9 @@ from PIL import Image
 from .compose import Lightmaps
 from .surface import LUMINANCE
 
+CLIP_PERCENTILE = 99.9
+"""Default percentile of a page's covered texels (brightest channel) that becomes its intensity."""
+
 
 @dataclass(frozen=True)
 class EncodedPage:
@@ -27,17 +40,29 @@ class EncodedPage:
     "decoded" is the texel / 255 (encoding ``linear``) or the sRGB-decoded texel (encoding
     ``srgb``). ``occlusion_png`` is the obscurance W as a greyscale-in-red PNG for the core
     ``occlusionTexture``, or None when not asked for.
+
+    ``peak``: the page's largest covered value (any channel, linear light units); ``clipped``:
+    the fraction of covered texels whose brightest channel is above ``intensity`` (those texels
+    decode to ``intensity``, losing ``value − intensity``).
     """
 
     png: bytes
     intensity: float
     occlusion_png: bytes | None = None
+    peak: float = 0.0
+    clipped: float = 0.0
 
 
 def linear_to_srgb(x: np.ndarray) -> np.ndarray:
     """The sRGB transfer function on linear values in [0, 1]."""
     x = np.clip(x, 0.0, 1.0)
     return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+
+
+def srgb_to_linear(e: np.ndarray) -> np.ndarray:
+    """The inverse of ``linear_to_srgb`` on encoded values in [0, 1]."""
+    e = np.clip(e, 0.0, 1.0)
+    return np.where(e <= 0.04045, e / 12.92, np.power((e + 0.055) / 1.055, 2.4))
 
 
 def png_bytes(rgb: np.ndarray) -> bytes:
@@ -53,16 +78,63 @@ def quantise(values: np.ndarray, encoding: str) -> np.ndarray:
     return np.round(encoded * 255.0).astype(np.uint8)
 
 
-def encode(lightmaps: Lightmaps, encoding: str, occlusion: bool) -> list[EncodedPage]:
-    """One EncodedPage per page; ``occlusion`` adds the obscurance W as a greyscale PNG."""
+def decode(texels: np.ndarray, intensity: float, encoding: str) -> np.ndarray:
+    """What a viewer reads back: 8-bit ``texels`` (any shape) → linear light, float64."""
+    unit = texels.astype(np.float64) / 255.0
+    return (srgb_to_linear(unit) if encoding == "srgb" else unit) * intensity
+
+
+def error_bound(values: np.ndarray, intensity: float, encoding: str) -> np.ndarray:
+    """The largest |decoded − value| that encoding ``values`` (linear, ≥ 0, any shape) can give.
+
+    Below ``intensity``: half a code step of the curve at the value, measured exactly on the
+    curve (``linear``: intensity/510 everywhere; ``srgb``: smaller in the darks, larger near the
+    top). Above it the texel clips: the error is ``value − intensity``.
+    """
+    x = np.asarray(values, np.float64) / intensity
+    inside = np.clip(x, 0.0, 1.0)
+    if encoding == "srgb":
+        e = linear_to_srgb(inside)
+        half = 0.5 / 255.0
+        step = np.maximum(srgb_to_linear(e + half) - inside, inside - srgb_to_linear(e - half))
+    else:
+        step = np.full_like(inside, 0.5 / 255.0)
+    return np.where(x > 1.0, x - 1.0, step) * intensity
+
+
+def page_scale(light: np.ndarray, covered: np.ndarray,
+               percentile: float = CLIP_PERCENTILE) -> tuple[float, float, float]:
+    """(intensity, peak, clipped fraction) of one page.
+
+    light: (H, W, 3) linear; covered: (H, W) bool. The intensity is the ``percentile`` of the
+    covered texels' brightest channel among those above 0 (an actual texel value: numpy's
+    "higher" method), so a page mostly in the dark still scales to its lit part; 100 gives the
+    peak (nothing clips). A page with nothing above 0 gets intensity 1.
+    """
+    brightest = light[covered].max(axis=-1) if covered.any() else np.zeros(0)
+    lit = brightest[brightest > 0]
+    if not len(lit):
+        return 1.0, 0.0, 0.0
+    peak = float(lit.max())
+    intensity = float(np.percentile(lit, percentile, method="higher"))
+    return intensity, peak, float(np.count_nonzero(brightest > intensity) / len(brightest))
+
+
+def encode(lightmaps: Lightmaps, encoding: str, occlusion: bool,
+           clip_percentile: float = CLIP_PERCENTILE) -> list[EncodedPage]:
+    """One EncodedPage per page; ``occlusion`` adds the obscurance W as a greyscale PNG.
+
+    Each page's intensity is ``page_scale`` of its covered texels at ``clip_percentile``.
+    """
     pages = []
-    for light, obscurance in zip(lightmaps.light, lightmaps.obscurance):
-        peak = float(light.max())
-        intensity = peak if peak > 0 else 1.0
+    for light, obscurance, covered in zip(lightmaps.light, lightmaps.obscurance,
+                                          lightmaps.covered):
+        intensity, peak, clipped = page_scale(light, covered, clip_percentile)
         occlusion_png = None
         if occlusion:
             grey = np.repeat((obscurance @ LUMINANCE)[..., None], 3, axis=-1)
             occlusion_png = png_bytes(quantise(grey, "linear"))
         pages.append(EncodedPage(png=png_bytes(quantise(light / intensity, encoding)),
-                                 intensity=intensity, occlusion_png=occlusion_png))
+                                 intensity=intensity, occlusion_png=occlusion_png,
+                                 peak=peak, clipped=clipped))
     return pages

@@ -46,6 +46,8 @@ class Settings:
         "srgb", as the proposed MOZ_lightmap text says).
     occlusion: also write the obscurance W as the core occlusionTexture ("also"), instead of the
         lightmap ("only"), or not ("none").
+    clip_percentile: each page's MOZ_lightmap intensity is this percentile (in (50, 100]) of its
+        texels' brightest channel; brighter texels clip to it (encode.py). 100: the page's peak.
     shadow_rays: shadow rays per texel towards each light that has a size (radius or angular
         diameter: soft shadows); a light without size casts exactly 1.
     light_radius: sphere radius (scene units) of point and spot lights whose ``extras.radius``
@@ -77,6 +79,7 @@ class Settings:
     chunk_texels: int = 4096
     encoding: str = "linear"
     occlusion: str = "none"
+    clip_percentile: float = 99.9
     shadow_rays: int = 16
     light_radius: float = 0.0
     light_angle: float = 0.0
@@ -111,6 +114,10 @@ class Settings:
                 raise SettingsError(f"{name} must be a whole number of at least {low}, not {value}",
                                     fix=f"give --{name.replace('_', '-')} a whole number ≥ {low}")
         self._check_lights()
+        if not (isinstance(self.clip_percentile, (int, float)) and 50 < self.clip_percentile <= 100):
+            raise SettingsError(f"clip_percentile must be above 50 and at most 100, not "
+                                f"{self.clip_percentile}", fix="use --clip-percentile 99.9 (or 100: "
+                                                               "scale each page to its peak)")
         if self.page_size > 16384:
             raise SettingsError(f"page_size {self.page_size} is larger than 16384 texels",
                                 fix="use --page-size 16384 or less; large scenes get several pages")

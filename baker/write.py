@@ -74,10 +74,13 @@ class WriteOptions:
     ``occlusion``: ``none``; ``also`` writes ``EncodedPage.occlusion_png`` as the material's core
     ``occlusionTexture`` on the lightmap UV set next to ``MOZ_lightmap``; ``only`` writes the
     occlusion texture and no ``MOZ_lightmap``.
+    ``clip_percentile``: the percentile of each page's texels that its ``intensity`` is
+    (encode.py; 100: the page's peak), recorded in ``asset.extras["baker"]``.
     """
 
     encoding: str = "linear"
     occlusion: str = "none"
+    clip_percentile: float = 100.0
 
     def __post_init__(self) -> None:
         if self.encoding not in ENCODINGS:
@@ -514,6 +517,7 @@ class _Builder:
             "lightmap_encoding": self.options.encoding,
             "lightmap_extension": LIGHTMAP_EXTENSION if self.options.occlusion != "only" else None,
             "occlusion": self.options.occlusion,
+            "lightmap_intensity_percentile": self.options.clip_percentile,
         }
         asset["extras"] = extras
 

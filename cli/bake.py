@@ -95,11 +95,19 @@ def add_parser(commands) -> None:
     out.add_argument("--encoding", choices=baker.settings.ENCODINGS, default=d.encoding,
                      help="how PNG texels map to light: linear (three.js, Hubs) or srgb "
                           "(the MOZ_lightmap proposal) (default linear)")
+    out.add_argument("--clip-percentile", type=float, default=d.clip_percentile, metavar="P",
+                     help="each page's MOZ_lightmap intensity is this percentile of its texels' "
+                          "brightness; the few brighter texels clip (reported), the rest keep "
+                          f"the 8 bits; 100 scales to the peak (default {d.clip_percentile:g})")
     out.add_argument("--occlusion", choices=baker.settings.OCCLUSION_MODES, default=d.occlusion,
                      help="also (or only) write the obscurance as the core occlusionTexture, "
                           "which every viewer reads (default none)")
     out.add_argument("--lightmaps", type=Path, metavar="DIR",
-                     help="also write each lightmap page as a PNG file in DIR")
+                     help="also write each lightmap page as a file in DIR (see --format)")
+    out.add_argument("--format", choices=baker.hdr.FORMATS, default="png", dest="lightmaps_format",
+                     help="the --lightmaps files: png (the embedded 8-bit image) or the float "
+                          "pages, unclipped: hdr (Radiance RGBE, 0.4%%) or exr (float32) "
+                          "(default png)")
     out.add_argument("--report", type=Path, metavar="FILE",
                      help="write a JSON report: settings used, plan, stage times, rays/s")
     running = bake.add_argument_group("running")
@@ -116,6 +124,7 @@ def settings_from(args: argparse.Namespace) -> baker.Settings:
         rays=args.rays, sampling=args.sampling, target_error=args.target_error,
         max_rays=args.max_rays, method=args.method, d_max=args.d_max, rho=args.rho, ambient=args.ambient, seed=args.seed,
         threads=args.threads, encoding=args.encoding, occlusion=args.occlusion,
+        clip_percentile=args.clip_percentile,
         shadow_rays=args.shadow_rays, light_radius=args.light_radius, light_angle=args.light_angle,
         emissive_rays=args.emissive_rays, sky=args.sky, sky_horizon=args.sky_horizon,
         sky_rays=args.sky_rays)
@@ -154,7 +163,8 @@ def print_summary(result: baker.BakeResult) -> None:
 def run(args: argparse.Namespace) -> int:
     """Bake; exit code 0."""
     result = baker.bake(args.scene, args.output, settings_from(args), report_path=args.report,
-                        lightmaps_dir=args.lightmaps, quiet=args.quiet, overwrite=args.overwrite)
+                        lightmaps_dir=args.lightmaps, lightmaps_format=args.lightmaps_format,
+                        quiet=args.quiet, overwrite=args.overwrite)
     if not args.quiet:
         print_summary(result)
     return 0
