@@ -25,6 +25,7 @@ from .atlas import Atlas
 from .compose import Lightmaps, compose, effective_r_ave
 from .direct import Direct, Power, Sources, delivered_power, direct_light, light_sources
 from .encode import encode
+from .errormap import write_error_maps
 from .hdr import check_format, page_file
 from .errors import BakerError, OutputError
 from .geometry import World, build_world
@@ -234,12 +235,14 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True) -> Computed:
 def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings = Settings(), *,
          report_path: str | os.PathLike | None = None,
          lightmaps_dir: str | os.PathLike | None = None, lightmaps_format: str = "png",
+         error_map_dir: str | os.PathLike | None = None,
          quiet: bool = True,
          overwrite: bool = False) -> BakeResult:
     """Bake the glTF scene at ``input`` into ``output`` (.glb or .gltf) with lightmaps.
 
     ``report_path`` writes the JSON report; ``lightmaps_dir`` also writes each page as a file,
     ``lightmaps_format`` "png" (the embedded image), "hdr" or "exr" (the float page, hdr.py);
+    ``error_map_dir`` writes each page's per-texel standard error (errormap.py);
     ``quiet=False`` draws a progress bar when stderr is a terminal. ``overwrite`` lets
     ``output`` be the input itself (or replace a file the input uses); it is replaced
     atomically, only once the bake has succeeded.
@@ -271,6 +274,8 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
         if lightmaps_dir is not None:
             write_page_files(Path(lightmaps_dir), output.stem, pages, done.lightmaps.light,
                              lightmaps_format)
+        if error_map_dir is not None:  # per-texel standard error pages (errormap.py)
+            write_error_maps(Path(error_map_dir), output.stem, done, write_atomically)
     seconds = time.perf_counter() - started
     rmse = done.rmse_estimate()
     ambient, atlas = done.ambient, done.atlas

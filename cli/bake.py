@@ -108,6 +108,9 @@ def add_parser(commands) -> None:
                      help="the --lightmaps files: png (the embedded 8-bit image) or the float "
                           "pages, unclipped: hdr (Radiance RGBE, 0.4%%) or exr (float32) "
                           "(default png)")
+    out.add_argument("--error-map", type=Path, metavar="DIR",
+                     help="also write each page's per-texel standard error (lightmap units) "
+                          "as .hdr (values) and .png (scaled to the page's largest) in DIR")
     out.add_argument("--report", type=Path, metavar="FILE",
                      help="write a JSON report: settings used, plan, stage times, rays/s")
     running = bake.add_argument_group("running")
@@ -164,6 +167,7 @@ def run(args: argparse.Namespace) -> int:
     """Bake; exit code 0."""
     result = baker.bake(args.scene, args.output, settings_from(args), report_path=args.report,
                         lightmaps_dir=args.lightmaps, lightmaps_format=args.lightmaps_format,
+                        error_map_dir=args.error_map,
                         quiet=args.quiet, overwrite=args.overwrite)
     if not args.quiet:
         print_summary(result)

@@ -48,3 +48,25 @@ def test_the_table_and_plot_show_every_run(cornell):
     assert "RMSE ∝ rays^" in table
     png = plot(cornell)
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 5000
+
+
+def test_error_maps_show_where_the_lightmap_is_noisy(tmp_path):
+    """--error-map writes per-page errors whose RMS is the report's estimate."""
+    from PIL import Image
+
+    from assets.make_scenes import cornell_box as room
+    from baker.errormap import error_pages, texel_errors
+    from cli.main import main
+
+    done = computed(room(), tmp_path, page_size=48, rays=32)
+    errors = texel_errors(done)
+    assert np.isclose(np.sqrt(np.mean(errors ** 2)), done.rmse_estimate())
+    assert errors.min() >= 0 and errors.max() > 2 * np.median(errors)  # some texels are noisier
+    pages = error_pages(done)
+    assert np.isclose(pages.sum(), errors.sum())
+    scene = room().save(tmp_path / "room.glb")
+    assert main(["bake", str(scene), "-o", str(tmp_path / "out.glb"), "--page-size", "48",
+                 "--rays", "8", "--error-map", str(tmp_path / "errors"), "--quiet"]) == 0
+    png = Image.open(tmp_path / "errors" / "out_error_0.png")
+    assert png.size == (pages.shape[2], pages.shape[1])
+    assert (tmp_path / "errors" / "out_error_0.hdr").read_bytes().startswith(b"#?RADIANCE")
