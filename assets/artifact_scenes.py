@@ -6,13 +6,17 @@ built in ``builder.info`` for the tests. Metres, linear RGB.
 
 from __future__ import annotations
 
+import math
 import sys
 from pathlib import Path
+
+import numpy as np
 
 if __package__ in (None, ""):  # run as a script: make the repository root importable
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from assets.gltf_builder import GltfBuilder, box, quad, uv_sphere  # noqa: E402
+from assets.gltf_builder import (  # noqa: E402
+    GltfBuilder, box, quad, rotation_matrix, transformed, uv_sphere)
 from assets.make_scenes import WHITE, panel  # noqa: E402
 
 
@@ -76,6 +80,70 @@ def sphere_on_floor(radius: float = 0.5, rings: int = 12, segments: int = 24,
                          translation=(0.0, radius, 0.0)),
     }
     b.info.update(nodes=nodes, radius=radius)
+    return b
+
+
+def lit_leak_room(kind: str = "directional", position=(0.0, 10.0, 0.0),
+                  direction=(0.6, -1.0, 0.3), intensity: float = 1000.0, **room) -> GltfBuilder:
+    """``leak_room`` (keyword arguments ``room``) under one bright KHR_lights_punctual light of
+    ``kind`` placed outside the room at ``position``, shining along ``direction`` (a
+    directional light's position does not matter). ``info`` adds light_node and light
+    (kind, position, direction, intensity)."""
+    from assets.light_scenes import _add_light
+
+    b = leak_room(**room)
+    _add_light(b, kind, position, direction, intensity=intensity)
+    b.info["light"] = dict(kind=kind, position=tuple(position), direction=tuple(direction),
+                           intensity=intensity)
+    return b
+
+
+def shadow_edge(angle: float = 17.0, height: float = 0.5, size: float = 2.0) -> GltfBuilder:
+    """A ``size``-metre floor (node 0, y = 0, facing up) under a hard directional light of 1 lux
+    shining straight down, and above it at ``height`` a large occluder whose straight edge
+    passes over the origin at ``angle`` degrees to the z axis, so that its hard shadow edge
+    crosses the floor's texel rows at a slant.
+
+    A floor point (x, z) is lit where ``x·cos(angle) − z·sin(angle) < 0`` (``info["lit"]``
+    takes points (n, 3) and returns that as (n,) bool). ``info``: floor, occluder, angle.
+    """
+    from assets.light_scenes import _add_light
+
+    b = GltfBuilder()
+    white = b.material("white", WHITE)
+    floor = b.node("floor", b.shape_mesh("floor", quad(size, size), material=white))
+    rotation = rotation_matrix((0, 1, 0), angle)
+    blocker = transformed(transformed(quad(3 * size, 3 * size), translation=(1.5 * size, 0.0, 0.0)),
+                          rotation=rotation, translation=(0.0, height, 0.0))
+    occluder = b.node("occluder", b.shape_mesh("occluder", blocker, material=white))
+    _add_light(b, "directional", (0.0, 5.0, 0.0), (0.0, -1.0, 0.0), intensity=1.0)
+    edge_normal = rotation @ np.array([1.0, 0.0, 0.0])  # the occluder lies on this side
+
+    def lit(points: np.ndarray) -> np.ndarray:
+        return points @ edge_normal < 0
+
+    b.info.update(floor=floor, occluder=occluder, angle=angle, lit=lit)
+    return b
+
+
+def low_poly_sphere(radius: float = 0.5, rings: int = 8, segments: int = 12,
+                    elevation: float = 0.0, azimuth: float = 17.0) -> GltfBuilder:
+    """A smooth-shaded low-poly UV sphere (node 0, centred at the origin, ``rings`` × ``segments``
+    facets, normals of the true sphere) lit by a hard directional light of 1 lux from +x turned
+    ``azimuth`` degrees about +y and raised ``elevation`` degrees: the light's terminator runs
+    across facets that face a little away from it (the worst case for faceting). Nothing else in the scene. ``info``: sphere,
+    radius, rings, segments, light_direction (towards the light)."""
+    from assets.light_scenes import _add_light
+
+    b = GltfBuilder()
+    white = b.material("white", WHITE)
+    sphere = b.node("sphere", b.shape_mesh("sphere", uv_sphere(radius, rings, segments),
+                                           material=white))
+    e, a = math.radians(elevation), math.radians(azimuth)
+    towards = (math.cos(e) * math.cos(a), math.sin(e), -math.cos(e) * math.sin(a))
+    _add_light(b, "directional", (5.0, 0.0, 0.0), tuple(-c for c in towards), intensity=1.0)
+    b.info.update(sphere=sphere, radius=radius, rings=rings, segments=segments,
+                  light_direction=towards)
     return b
 
 

@@ -292,6 +292,7 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
         "rays_per_second": done.terms.rays / times["trace"] if times["trace"] > 0 else 0.0,
         "stage_seconds": times, "seconds": seconds,
         "rmse_estimate": rmse,
+        "validity": done.validity.counts() if done.validity is not None else None,
         "notes": list(info.notes) + clipping_notes(pages),
         "lightmap_pages": [{"intensity": page.intensity, "peak": page.peak,
                             "clipped_fraction": page.clipped} for page in pages],

@@ -23,6 +23,15 @@ emitters, lights, sky and the ambient term), never their own emission, which sta
 material (emissiveFactor) where every viewer adds it: nothing is counted twice. An emitter does
 not light itself (a flat triangle's points see it at cosθ = 0).
 
+Supersampling (``settings.supersample`` = S > 1, ``supersample.py``): each texel's shadow, emissive
+and sky rays start from S sub-positions spread over its square, ray s from sub-position s mod S,
+so a shadow edge crossing a texel gives it a partial value; a hard light then casts S rays.
+
+Shadow terminator: texels on smooth-shaded curved facets are raised towards the smooth surface
+(``rasterise.terminator_offset``, applied by ``validity.check_texels``); from there rays may leave
+a little below their own facet's plane (above the shading normal's), so the light fades smoothly
+across the facets instead of stopping at each facet's edge.
+
 Randomness is a pure function of (seed, texel key, sample, dimension) through
 ``sampling.sample_2d``; the dimensions are distinct from the obscurance's (0):
 ``SKY_DIMENSION``, ``EMISSIVE_DIMENSION`` and ``light_dimension(l)`` = 16 + 2·l. Chunks of texels
@@ -46,6 +55,7 @@ from .rasterise import Texels
 from .sampling import cosine_hemisphere, sample_2d, tangent_frames
 from .scene import Light, Scene
 from .settings import Resolved
+from .supersample import sub_positions
 from .surface import LUMINANCE, emission
 from .trace import Tracer, ray_lift
 
@@ -107,7 +117,8 @@ class Sources:
 
     lights: the scene's punctual lights (order of ``Scene.lights``). spread: (L,) float64, a
     point/spot light's sphere radius (scene units) or a directional light's cone half-angle
-    (radians), 0 for a hard light. samples: (L,) int64 shadow rays per texel (1 when hard).
+    (radians), 0 for a hard light. samples: (L,) int64 shadow rays per texel (1 when hard, or
+    the supersample count when that is more: one ray from each sub-position).
     emitters: the emissive triangles, None when nothing emits. emissive_rays: rays per texel
     towards them. sky: (2, 3) float64 zenith and horizon radiance, None for no sky. sky_rays.
     """
@@ -180,7 +191,7 @@ def light_sources(scene: Scene, world: World, settings: Resolved) -> Sources:
         else:
             size = light.radius if light.radius is not None else settings.light_radius
         spread.append(size)
-        samples.append(settings.shadow_rays if size > 0 else 1)
+        samples.append(max(settings.shadow_rays if size > 0 else 1, settings.supersample))
     sky = None
     if settings.sky is not None:
         zenith = np.asarray(settings.sky, np.float64)
@@ -203,6 +214,11 @@ class Receivers:
     position: (k, 3) float64 world. normal: (k, 3) unit shading normal (for cosθ).
     geometric: (k, 3) unit front-face normal (rays leave on this side). lift: (k,) float64 world
     offset of ray origins along ``geometric``. key: (k,) uint64 sampler key.
+    sub: None, or (k, S, 3) float64 world sub-positions (supersampling): ray s of a point starts
+    from its sub-position s mod S instead of ``position``. raised: None, or (k,) bool, the
+    point has a shadow-terminator push (``Texels.terminator``): its rays may leave below its
+    facet's plane (only the shading normal's hemisphere counts). Where the push was blocked
+    (validity.py) such rays meet the object itself, as they would anyway.
     """
 
     position: np.ndarray
@@ -210,10 +226,22 @@ class Receivers:
     geometric: np.ndarray
     lift: np.ndarray
     key: np.ndarray
+    sub: np.ndarray | None = None
+    raised: np.ndarray | None = None
+
+    def starts(self, n: int) -> np.ndarray:
+        """(k, n, 3) where each point's rays 0 … n − 1 start on the surface (before the lift):
+        the point itself, or sub-position s mod S."""
+        if self.sub is None:
+            return np.broadcast_to(self.position[:, None, :], (len(self.position), n, 3))
+        return self.sub[:, np.arange(n) % self.sub.shape[1]]
 
     def origins(self, n: int) -> np.ndarray:
-        """(k·n, 3) ray origins, each point's repeated n times (point-major)."""
-        return np.repeat(self.position + self.lift[:, None] * self.geometric, n, axis=0)
+        """(k·n, 3) ray origins, lifted off the surface, point-major (ray s of point i at row
+        i·n + s)."""
+        if self.sub is None:
+            return np.repeat(self.position + self.lift[:, None] * self.geometric, n, axis=0)
+        return (self.starts(n) + (self.lift[:, None] * self.geometric)[:, None]).reshape(-1, 3)
 
 
 def _cone_directions(axis: np.ndarray, cos_max: np.ndarray, u: np.ndarray) -> np.ndarray:
@@ -238,9 +266,13 @@ def _mean_and_variance(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def _facing(receivers: Receivers, directions: np.ndarray) -> np.ndarray:
     """cosθ (k, n) of directions (k, n, 3) against the shading normal, 0 where the direction is
-    below either the shading or the geometric surface (the ray could not leave there)."""
+    below either the shading or the geometric surface (the ray could not leave there) — except
+    that a point raised off its facet (``Receivers.raised``, the shadow-terminator offset)
+    may send rays below its facet's plane: they start above the neighbouring facets."""
     cos_n = np.einsum("kc,knc->kn", receivers.normal, directions)
     above = np.einsum("kc,knc->kn", receivers.geometric, directions) > 0
+    if receivers.raised is not None:
+        above |= receivers.raised[:, None]
     return np.where(above, np.maximum(cos_n, 0.0), 0.0)
 
 
@@ -275,48 +307,49 @@ def punctual_irradiance(light: Light, spread: float, n: int, receivers: Receiver
     if k == 0:
         return np.zeros(0), np.zeros(0)
     soft = spread > 0
-    n = n if soft else 1
+    n = n if soft or receivers.sub is not None else 1
     u = sample_2d(seed, receivers.key[:, None], np.arange(n)[None, :], dimension)  # (k, n, 2)
     if light.kind == "directional":
         axis = np.broadcast_to(-light.direction, (k, 3)).copy()
         if soft:
             cos_max = np.full(k, math.cos(spread))
             directions = _cone_directions(axis, cos_max, u)
-            scale = np.full(k, 2.0 / (1.0 + math.cos(spread)))  # normal irradiance of the disc = 1
+            scale = np.full((k, 1), 2.0 / (1.0 + math.cos(spread)))  # normal irradiance of the disc = 1
         else:
             directions = axis[:, None, :]
-            scale = np.ones(k)
+            scale = np.ones((k, 1))
         lengths = np.full(k * n, np.inf)
-    else:
-        offset = light.position - receivers.position
-        r = np.maximum(np.linalg.norm(offset, axis=1), receivers.lift)
-        axis = offset / r[:, None]
+    else:  # every ray from where it starts (a sub-position when supersampling): (k, n) values
+        offset = light.position - receivers.starts(n)  # (k, n, 3)
+        r = np.maximum(np.linalg.norm(offset, axis=2), receivers.lift[:, None])
+        axis = offset / r[..., None]
         factor = range_window(light, r)
         if light.kind == "spot":
             factor = factor * spot_attenuation(light, -axis)
         if soft:
             sin_max = np.minimum(spread / r, 1.0)
             cos_max = np.sqrt(1.0 - sin_max * sin_max)
-            directions = _cone_directions(axis, cos_max, u)
+            directions = _cone_directions(axis.reshape(-1, 3), cos_max.reshape(-1),
+                                          u.reshape(-1, 1, 2)).reshape(k, n, 3)
             # Radiance I / (πR²) times the cone's solid angle 2π(1 − cos α).
             scale = factor * 2.0 * (1.0 - cos_max) / (spread * spread)
-            b = np.einsum("knc,kc->kn", directions, offset)
-            to_sphere = b - np.sqrt(np.maximum(b * b - (r * r - spread * spread)[:, None], 0.0))
+            b = np.einsum("knc,knc->kn", directions, offset)
+            to_sphere = b - np.sqrt(np.maximum(b * b - (r * r - spread * spread), 0.0))
             lengths = (np.maximum(to_sphere, 0.0) * (1.0 - _SHORT)).reshape(-1)
         else:
-            directions = axis[:, None, :]
+            directions = axis
             scale = factor / (r * r)
-            lengths = r * (1.0 - _SHORT)
+            lengths = (r * (1.0 - _SHORT)).reshape(-1)
+    directions = np.broadcast_to(directions, (k, n, 3))
     cos = _facing(receivers, directions)
-    live = (cos > 0) & (scale[:, None] > 0)
+    live = (cos > 0) & (scale > 0)
     visible = np.zeros(k * n, bool)
     flat = live.reshape(-1)
     if flat.any():
         origins = receivers.origins(n)[flat]
-        rays = np.broadcast_to(directions, (k, n, 3)).reshape(-1, 3)[flat]
-        length = lengths[flat] if np.ndim(lengths) else lengths
-        visible[flat] = ~tracer.occluded(origins, rays, length)
-    values = cos * visible.reshape(k, n) * scale[:, None]
+        rays = directions.reshape(-1, 3)[flat]
+        visible[flat] = ~tracer.occluded(origins, rays, lengths[flat])
+    values = cos * visible.reshape(k, n) * scale
     return _mean_and_variance(values)
 
 
@@ -437,11 +470,22 @@ def no_direct(count: int) -> Direct:
                   np.zeros(count), zeros.copy(), np.zeros(count), 0)
 
 
-def _texel_receivers(texels: Texels, rows: slice, center: np.ndarray) -> Receivers:
+def _texel_receivers(texels: Texels, rows: slice, center: np.ndarray,
+                     tracer: Tracer | None = None, supersample: int = 1,
+                     seed: int = 0) -> Receivers:
+    """The texels ``rows`` as Receivers: their (moved, raised) sample points and, when
+    ``supersample`` > 1, their sub-positions (``supersample.sub_positions``, which need the
+    ``tracer`` and the ``seed``)."""
+    sub = None
+    if supersample > 1:
+        if tracer is None:
+            raise ValueError("supersampling needs the tracer (sub-positions are checked by rays)")
+        sub = sub_positions(tracer, texels, rows, supersample, seed)
     return Receivers(position=texels.position[rows], normal=texels.normal[rows],
                      geometric=texels.geometric_normal[rows],
                      lift=ray_lift(texels.position[rows], texels.size[rows], center),
-                     key=texels.key[rows])
+                     key=texels.key[rows], sub=sub,
+                     raised=np.any(texels.terminator[rows] != 0.0, axis=1))
 
 
 def direct_at(scene: Scene, world: World, tracer: Tracer, sources: Sources,
@@ -488,8 +532,9 @@ def direct_light(scene: Scene, world: World, tracer: Tracer, texels: Texels, sou
     chunks = [slice(start, min(start + step, count)) for start in range(0, count, step)]
 
     def work(rows: slice) -> None:
-        part = direct_at(scene, world, tracer, sources,
-                         _texel_receivers(texels, rows, tracer.center), settings.seed)
+        receivers = _texel_receivers(texels, rows, tracer.center, tracer, settings.supersample,
+                                     settings.seed)
+        part = direct_at(scene, world, tracer, sources, receivers, settings.seed)
         punctual[rows], punctual_var[rows] = part.punctual, part.punctual_var
         emitted[rows], emitted_var[rows] = part.emission, part.emission_var
         sky[rows], sky_var[rows] = part.sky, part.sky_var

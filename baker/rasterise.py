@@ -9,6 +9,15 @@ A texel touched by several triangles (along shared edges) is owned by the one wh
 deepest at the texel centre, ties going to the lower triangle index: a fixed rule, so the result
 does not depend on how the work is split. The texel's sample point is its centre's barycentric
 position in the owner, clamped into the triangle, mapped to world space.
+
+Shadow terminator: on a low-poly curved surface with smooth (interpolated) normals, the flat
+facets lie inside the surface the normals describe, so a point on a facet near the light's
+terminator sees the light only below its own facet's plane, or is shadowed by the next facet:
+the shading shows each facet as a step. As Hanika ("Hacking the shadow terminator", Ray Tracing
+Gems II, 2021) and the Godot and Bakery bakers do, the sample point is pushed off the facet
+towards the smooth surface: ``terminator_offset`` gives the push (``Texels.terminator``); the
+validity probes apply it where nothing is in the way (``validity.py``). Flat surfaces (shading
+normal = face normal) and concave ones get none.
 """
 
 from __future__ import annotations
@@ -35,6 +44,12 @@ class Texels:
     triangle: (N,) int64 owning world triangle (index into World.triangles); instance: (N,) int64.
     barycentric: (N, 3) float64 of the sample point in the owning triangle.
     size: (N,) float64 world length of one texel side on the owning triangle.
+    axes: (N, 2, 3) float64 world displacement of one texel step in x and in y on the owning
+    triangle's plane (the UV→world Jacobian; zeros for a triangle without UV area), for
+    sub-texel sample positions (``supersample.py``).
+    terminator: (N, 3) float64 world push of the sample point towards the smooth surface its
+    shading normals describe (``terminator_offset``; zeros on flat and concave surfaces). Not
+    yet applied to ``position``: ``validity.check_texels`` does that where the way is clear.
     triangle_texels: (T,) int64, for every world triangle, how many texels its UV footprint
     touches (0 for triangles that are not baked).
     """
@@ -51,6 +66,8 @@ class Texels:
     barycentric: np.ndarray
     size: np.ndarray
     triangle_texels: np.ndarray
+    axes: np.ndarray
+    terminator: np.ndarray
 
     def __len__(self) -> int:
         return len(self.key)
@@ -190,10 +207,50 @@ def rasterise(atlas: Atlas, world: World) -> Texels:
                            triangle_texels)
 
 
+def terminator_offset(world: World, tri: np.ndarray, bary: np.ndarray,
+                      position: np.ndarray, geometric: np.ndarray) -> np.ndarray:
+    """World offsets (k, 3) that move points on smooth-shaded facets towards the smooth surface.
+
+    Hanika 2021: project the point ``position`` (k, 3), at barycentrics ``bary`` (k, 3) of
+    triangles ``tri`` (k,), onto the tangent plane of each corner (through the vertex, normal to
+    its shading normal), keeping only projections that lie *above* the point (a convex
+    neighbourhood), and blend the displacements with the barycentrics:
+    ``Σ_i b_i · max(0, (v_i − p)·n_i) · n_i``. Zero at the corners, on flat surfaces (every n_i
+    the face normal) and on concave ones; about the sag of the facet below the smooth surface
+    in between (a few mm on a 12-ring sphere of 0.5 m). Corners without smooth normals, or whose
+    normal faces away from the front face ``geometric`` (k, 3), do not push.
+    """
+    vertices = world.triangles[tri]  # (k, 3)
+    corners = world.positions[vertices]  # (k, 3, 3)
+    normals = world.normals[vertices]
+    usable = world.smooth[vertices] & (np.einsum("kvc,kc->kv", normals, geometric) > 0)
+    height = np.einsum("kvc,kvc->kv", corners - position[:, None], normals)
+    push = np.where(usable, np.maximum(height, 0.0), 0.0) * bary
+    return np.einsum("kv,kvc->kc", push, normals)
+
+
+def _texel_axes(world: World, tri: np.ndarray, uv_corners: np.ndarray) -> np.ndarray:
+    """(k, 2, 3): the world step of one texel in x and in y on each owning triangle's plane.
+
+    Solves [P1 − P0, P2 − P0] = J · [uv1 − uv0, uv2 − uv0] for the (3, 2) Jacobian J (UV in
+    texel units); zeros where the triangle has no UV area."""
+    a, b, c = world.corners(tri)
+    edges = np.stack([b - a, c - a], axis=2)  # (k, 3, 2) world edge columns
+    uv = np.stack([uv_corners[:, 1] - uv_corners[:, 0], uv_corners[:, 2] - uv_corners[:, 0]],
+                  axis=2)  # (k, 2, 2) UV edge columns
+    det = uv[:, 0, 0] * uv[:, 1, 1] - uv[:, 0, 1] * uv[:, 1, 0]
+    ok = np.abs(det) > 1e-12
+    safe = np.where(ok, det, 1.0)
+    inverse = np.stack([np.stack([uv[:, 1, 1], -uv[:, 0, 1]], axis=1),
+                        np.stack([-uv[:, 1, 0], uv[:, 0, 0]], axis=1)], axis=1) / safe[:, None, None]
+    jacobian = np.einsum("kce,kej->kcj", edges, inverse)  # (k, 3, 2)
+    return np.where(ok[:, None, None], np.swapaxes(jacobian, 1, 2), 0.0)
+
+
 def _surface_points(world: World, tri: np.ndarray, bary: np.ndarray, uv_corners: np.ndarray,
                     page: np.ndarray, x: np.ndarray, y: np.ndarray, key: np.ndarray,
                     triangle_texels: np.ndarray) -> Texels:
-    """World position, normals and texel size of each texel's sample point."""
+    """World position, normals, size, axes and terminator push of each texel's sample point."""
     a, b, c = world.corners(tri)
     position = bary[:, :1] * a + bary[:, 1:2] * b + bary[:, 2:] * c
     geometric = world.geometric_normals(tri)
@@ -210,4 +267,5 @@ def _surface_points(world: World, tri: np.ndarray, bary: np.ndarray, uv_corners:
     return Texels(page=page, x=x, y=y, key=key.astype(np.uint64), position=position,
                   normal=normal, geometric_normal=geometric, triangle=tri,
                   instance=world.tri_instance[tri], barycentric=bary, size=size,
-                  triangle_texels=triangle_texels)
+                  triangle_texels=triangle_texels, axes=_texel_axes(world, tri, uv_corners),
+                  terminator=terminator_offset(world, tri, bary, position, geometric))

@@ -60,6 +60,9 @@ class Settings:
     sky_horizon: linear RGB radiance at and below the horizon, blended linearly in the sine of
         the elevation up to ``sky`` at the zenith; None: a uniform sky.
     sky_rays: rays per texel that look for the sky (escaping the scene entirely).
+    supersample: sub-positions per texel (1–64) that its shadow, emissive and sky rays start
+        from, ray s from sub-position s mod N: anti-aliased shadow edges (supersample.py). A hard
+        light casts N rays per texel then. 1: every ray from the texel's sample point.
     """
 
     texel_density: float | None = None
@@ -87,6 +90,7 @@ class Settings:
     sky: tuple[float, float, float] | None = None
     sky_horizon: tuple[float, float, float] | None = None
     sky_rays: int = 64
+    supersample: int = 1
 
     def check(self) -> None:
         """Raise SettingsError for a value that cannot work, saying which values can."""
@@ -108,7 +112,7 @@ class Settings:
                     "chunk_texels": (self.chunk_texels, 1), "padding": (self.padding, 0),
                     "threads": (self.threads, 0), "seed": (self.seed, 0),
                     "shadow_rays": (self.shadow_rays, 1), "emissive_rays": (self.emissive_rays, 1),
-                    "sky_rays": (self.sky_rays, 1)}
+                    "sky_rays": (self.sky_rays, 1), "supersample": (self.supersample, 1)}
         for name, (value, low) in integers.items():
             if int(value) != value or value < low:
                 raise SettingsError(f"{name} must be a whole number of at least {low}, not {value}",
@@ -118,6 +122,9 @@ class Settings:
             raise SettingsError(f"clip_percentile must be above 50 and at most 100, not "
                                 f"{self.clip_percentile}", fix="use --clip-percentile 99.9 (or 100: "
                                                                "scale each page to its peak)")
+        if self.supersample > 64:
+            raise SettingsError(f"supersample must be at most 64, not {self.supersample}",
+                                fix="use --supersample 4 to 16 (shadow edges gain little beyond)")
         if self.page_size > 16384:
             raise SettingsError(f"page_size {self.page_size} is larger than 16384 texels",
                                 fix="use --page-size 16384 or less; large scenes get several pages")

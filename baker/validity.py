@@ -8,6 +8,10 @@ inside of the box (a dark rim round a box that should have a contact shadow only
 
 What the mature bakers do (Bakery, Godot's LightmapperRD, Unity's backface tolerance), here:
 
+0. Shadow terminator: a texel on a smooth-shaded curved facet is first pushed towards the smooth
+   surface (``Texels.terminator``, rasterise.py), unless a ray along the push (lifted like a ray
+   origin, ``RAISE_MARGIN`` texel sides longer) meets something: a sphere's underside resting on
+   a floor is never pushed through the floor.
 1. Tangent probes: from the sample point, lifted off the surface by the integrator's offset,
    ``TANGENT_RAYS`` short rays in the texel's plane, ``PROBE_RADIUS`` texel sides long. A ray
    that meets the *back* of a single-sided surface first means the sample is behind it: the
@@ -45,6 +49,7 @@ TANGENT_ROUNDS = 3
 PROBE_RADIUS = 1.5  # texel sides: a texel centre up to one texel behind a wall, or diagonally (1.41) behind a corner
 PUSH = 0.1  # texel sides past the back face the point is moved to
 TIE = 0.25  # texel sides: back faces this close to the nearest count as equally near
+RAISE_MARGIN = 0.1  # texel sides: the terminator push is checked this much past its end
 HEMISPHERE_RAYS = 12
 ENCLOSED_FRACTION = 0.9
 BACKFACE_TOLERANCE = 0.6
@@ -61,7 +66,8 @@ class Validity:
 
     state: (N,) int8, one of VALID, MOVED (sample moved past a back face, then valid), INVALID
     (filled from neighbours later), ENCLOSED (inside a solid: value 0). moved_by: (N,) float64
-    world distance each sample point moved (0 for most). back_fraction: (N,) float64 fraction of
+    world distance each sample point moved past back faces (0 for most; the terminator push is
+    not counted). back_fraction: (N,) float64 fraction of
     the hemisphere probes that met a back face.
     """
 
@@ -158,18 +164,39 @@ def _back_fraction(tracer: Tracer, faces: _Faces, position: np.ndarray, normal: 
     return faces.back(hits.triangle, directions).reshape(k, HEMISPHERE_RAYS).mean(axis=1)
 
 
+def _raise(tracer: Tracer, position: np.ndarray, normal: np.ndarray, size: np.ndarray,
+           push: np.ndarray) -> np.ndarray:
+    """(k, 3) points ``position`` moved by their terminator ``push`` (k, 3) where a ray along it,
+    from the point lifted off the surface along ``normal`` (k, 3), meets nothing within the
+    push's length + ``RAISE_MARGIN`` texel sides ``size`` (k,); the others stay."""
+    length = np.linalg.norm(push, axis=1)
+    pushing = np.flatnonzero(length > 0)
+    if not len(pushing):
+        return position
+    p = position[pushing]
+    lift = ray_lift(p, size[pushing], tracer.center)
+    blocked = tracer.occluded(p + lift[:, None] * normal[pushing],
+                              push[pushing] / length[pushing, None],
+                              length[pushing] + RAISE_MARGIN * size[pushing])
+    out = position.copy()
+    out[pushing[~blocked]] += push[pushing[~blocked]]
+    return out
+
+
 def check_texels(scene: Scene, world: World, tracer: Tracer, texels: Texels,
                  d_max: float, threads: int = 0) -> tuple[Texels, Validity]:
     """Probe every texel's sample point; return the texels with moved positions and their states.
 
     ``d_max``: the hemisphere probes' length (the obscurance distance), world units.
     ``threads``: 0 for one per core. Only ``Texels.position`` changes; normals, triangle and key
-    stay (the point moves in the texel's own plane). Chunks write only their own rows, so the
+    stay (the point is pushed off its facet by the terminator push, then moves parallel to the
+    facet). Chunks write only their own rows, so the
     result does not depend on the chunking or the threads.
     """
     count = len(texels)
     faces = _Faces(scene, world)
     position = texels.position.copy()
+    start = position.copy()  # after the terminator push
     moved = np.zeros(count, bool)
     fraction = np.zeros(count)
 
@@ -177,6 +204,8 @@ def check_texels(scene: Scene, world: World, tracer: Tracer, texels: Texels,
         normal, size = texels.geometric_normal[rows], texels.size[rows]
         usable = np.flatnonzero((size > 0) & (np.linalg.norm(normal, axis=1) > 0.5))
         p = position[rows]  # a view: the chunk's own rows
+        p[:] = _raise(tracer, p, normal, texels.size[rows], texels.terminator[rows])
+        start[rows] = p
         home = np.mean(world.corners(texels.triangle[rows]), axis=0)  # (k, 3) centroids
         step_moved = moved[rows]
         for _ in range(TANGENT_ROUNDS):
@@ -195,6 +224,6 @@ def check_texels(scene: Scene, world: World, tracer: Tracer, texels: Texels,
     state = np.where(moved, MOVED, VALID).astype(np.int8)
     state[fraction >= BACKFACE_TOLERANCE] = INVALID
     state[fraction >= ENCLOSED_FRACTION] = ENCLOSED
-    moved_by = np.linalg.norm(position - texels.position, axis=1)
+    moved_by = np.linalg.norm(position - start, axis=1)
     return (replace(texels, position=position),
             Validity(state=state, moved_by=moved_by, back_fraction=fraction))

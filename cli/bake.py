@@ -91,6 +91,10 @@ def add_parser(commands) -> None:
                              "gradient (default: uniform)")
     direct.add_argument("--sky-rays", type=int, default=d.sky_rays, metavar="N",
                         help=f"rays per texel that look for the sky (default {d.sky_rays})")
+    direct.add_argument("--supersample", type=int, default=d.supersample, metavar="N",
+                        help="sub-texel positions the shadow, emissive and sky rays of each "
+                             "texel start from (ray s from position s mod N): anti-aliased shadow "
+                             f"edges; a hard light casts N rays (default {d.supersample}: none)")
     out = bake.add_argument_group("output")
     out.add_argument("--encoding", choices=baker.settings.ENCODINGS, default=d.encoding,
                      help="how PNG texels map to light: linear (three.js, Hubs) or srgb "
@@ -130,7 +134,7 @@ def settings_from(args: argparse.Namespace) -> baker.Settings:
         clip_percentile=args.clip_percentile,
         shadow_rays=args.shadow_rays, light_radius=args.light_radius, light_angle=args.light_angle,
         emissive_rays=args.emissive_rays, sky=args.sky, sky_horizon=args.sky_horizon,
-        sky_rays=args.sky_rays)
+        sky_rays=args.sky_rays, supersample=args.supersample)
 
 
 def rgb(text: str) -> tuple[float, float, float]:
