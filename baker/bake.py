@@ -255,7 +255,7 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
     started = time.perf_counter()
     loading: dict[str, float] = {}
     with _timed(loading, "load"):
-        scene = load(input_path)
+        scene = load(input_path, settings.mirror_roughness)
     check_input_kept(scene, output, overwrite)
     try:
         done = compute(scene, settings, quiet)

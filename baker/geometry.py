@@ -12,7 +12,7 @@ normal ``cross(b - a, c - a)`` points out of the front face.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -30,6 +30,8 @@ class World:
     float64 linear RGBA (ones where absent). triangles: (T, 3) int64 into positions.
     tri_instance / tri_local / tri_material: (T,) int64, the triangle's instance, its index inside
     the primitive, its material. vertex_start / tri_start: (I + 1,) int64 offsets of each instance.
+    alpha: ``materials.AlphaTest`` when some triangle may let rays through (alphaMode MASK or
+    BLEND), else None; the tracer reads it.
     """
 
     positions: np.ndarray
@@ -44,6 +46,7 @@ class World:
     vertex_start: np.ndarray
     tri_start: np.ndarray
     center: np.ndarray
+    alpha: object = field(default=None, compare=False, repr=False)
 
     def corners(self, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """World positions of the three corners of triangles ``tris`` (k,), each (k, 3)."""
@@ -132,7 +135,7 @@ def build_world(scene: Scene) -> World:
 
     positions = cat("positions", (0, 3), np.float64)
     center = (positions.min(0) + positions.max(0)) / 2 if len(positions) else np.zeros(3)
-    return World(
+    world = World(
         positions=positions,
         normals=cat("normals", (0, 3), np.float64),
         smooth=cat("smooth", (0,), bool),
@@ -146,3 +149,6 @@ def build_world(scene: Scene) -> World:
         tri_start=np.asarray(tri_start, np.int64),
         center=center,
     )
+    from .materials import alpha_test  # materials.py uses surface.py, which uses this module
+
+    return replace(world, alpha=alpha_test(scene, world))

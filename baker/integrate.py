@@ -14,7 +14,7 @@ so the result is the same bytes for any chunk size, thread count or order.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
@@ -26,7 +26,9 @@ from .rasterise import Texels
 from .sampling import TECHNIQUES, fill_cosine, fill_points, frame, jit
 from .scene import Scene
 from .settings import Resolved
-from .surface import LUMINANCE, albedo, triangle_albedo
+from .materials import DIFFUSE, SPECULAR, TRANSLUCENT, TRANSPARENT, MaterialTable, material_table
+from .sampling import hash_u32
+from .surface import LUMINANCE, albedo, base_colour, triangle_albedo
 from .trace import Tracer, ray_lift
 
 @dataclass(frozen=True)
@@ -39,7 +41,11 @@ class Terms:
     for the sample variance. counts: (N,) int64 rays cast per texel (all equal unless adaptive).
     half_split: (N, 2) mean over the first half of the texel's rays minus the mean over the
     second half, in luminance of R·ρ and in escaped fraction; quarter_split: (N, 2) the same
-    within the first half (first quarter minus second quarter). See ``rmse``.
+    within the first half (first quarter minus second quarter). See ``rmse``. chain_rays: (N,)
+    int64 rays cast beyond the texel's own, along mirror and glass chains (§3.1–3.2); capped:
+    (N,) int64 of its rays whose chain the depth cap stopped (both empty when not counted).
+    With mirrors, glass or translucency, a ray's escaped weight may be a fraction (the mean
+    of its chain's RGB throughput), and ``escaped`` the mean of those weights.
     """
 
     w_hit: np.ndarray
@@ -48,6 +54,8 @@ class Terms:
     counts: np.ndarray
     half_split: np.ndarray
     quarter_split: np.ndarray
+    chain_rays: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    capped: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
     @property
     def rays(self) -> int:
@@ -145,8 +153,11 @@ _HALF, _QUARTER = slice(5, 7), slice(7, 9)  # (hit luminance, escaped) over the 
 _COLUMNS = 9
 
 
+_CONSTANT, _VARYING, _SPECIAL = 0, 1, 2  # per-triangle kinds of ``_accumulate_kernel``
+
+
 @jit
-def _accumulate_kernel(rays, primitive, distance, d_max, rho_kind, table, varying, ray_albedo,
+def _accumulate_kernel(rays, primitive, distance, d_max, rho_kind, table, kind, ray_albedo,
                        luminance, sums):
     """Per texel, summed over its ``rays`` rays, into ``sums`` (k, 9): R(Q)·ρ(d) (RGB), escaped
     rays, squared luminance of R·ρ; then over the first ⌊rays/2⌋ rays and over the first
@@ -154,30 +165,44 @@ def _accumulate_kernel(rays, primitive, distance, d_max, rho_kind, table, varyin
     ``Terms.rmse``).
 
     primitive/distance: (k·rays,) Embree's primID (−1: no hit within d_max) and tfar.
-    table/varying: ``surface.triangle_albedo``; ray_albedo (k·rays, 3): the albedo at each
-    hit of a ``varying`` triangle (may be (0, 3) when the chunk hits none).
+    table: ``surface.triangle_albedo``'s; kind: (T,) uint8 per triangle, ``_CONSTANT`` (albedo
+    from ``table``), ``_VARYING`` (ray_albedo[r, :3] is the albedo at the hit) or ``_SPECIAL``
+    (a mirror, glass or translucent material, ``_special_hits``: ray_albedo[r, :3] is the ray's
+    R·ρ itself and ray_albedo[r, 3] its escaped weight, R_ave·ρ = 1 counting that fraction).
+    ray_albedo: (k·rays, 4), or (0, 4) when every kind is ``_CONSTANT``.
     """
     half, quarter = rays // 2, rays // 4
     for i in range(len(sums)):
         red = green = blue = square = half_hit = quarter_hit = 0.0
-        missed = half_missed = quarter_missed = 0
+        missed = half_missed = quarter_missed = 0.0
         for s in range(rays):
             r = i * rays + s
             t = primitive[r]
             if t < 0:
-                missed += 1
+                missed += 1.0
                 if s < half:
-                    half_missed += 1
+                    half_missed += 1.0
                 if s < quarter:
-                    quarter_missed += 1
+                    quarter_missed += 1.0
                 continue
-            weight = rho(rho_kind, distance[r] / d_max)
-            if weight == 0.0:
-                continue
-            if varying[t]:
+            k = kind[t]
+            if k == 2:
+                escape = ray_albedo[r, 3]
+                missed += escape
+                if s < half:
+                    half_missed += escape
+                if s < quarter:
+                    quarter_missed += escape
+                weight = 1.0
                 cr, cg, cb = ray_albedo[r, 0], ray_albedo[r, 1], ray_albedo[r, 2]
             else:
-                cr, cg, cb = table[t, 0], table[t, 1], table[t, 2]
+                weight = rho(rho_kind, distance[r] / d_max)
+                if weight == 0.0:
+                    continue
+                if k == 1:
+                    cr, cg, cb = ray_albedo[r, 0], ray_albedo[r, 1], ray_albedo[r, 2]
+                else:
+                    cr, cg, cb = table[t, 0], table[t, 1], table[t, 2]
             cr, cg, cb = cr * weight, cg * weight, cb * weight
             red += cr
             green += cg
@@ -196,45 +221,255 @@ def _accumulate_kernel(rays, primitive, distance, d_max, rho_kind, table, varyin
 
 @dataclass(frozen=True)
 class _Surfaces:
-    """What the shading of obscurance hits needs, built once per bake."""
+    """What the shading of obscurance hits needs, built once per bake.
+
+    kind: (T,) uint8 per world triangle for ``_accumulate_kernel`` (``_CONSTANT``, ``_VARYING``,
+    ``_SPECIAL``); materials: the scene's ``materials.MaterialTable``; normals: (T, 3) unit
+    geometric normals, only when some triangle is ``_SPECIAL`` (else (0, 3)); step: world
+    units a continued ray starts off its surface, besides 64 float32 ulps.
+    """
 
     scene: Scene
     world: World
     table: np.ndarray  # (T, 3) constant albedo per world triangle
     varying: np.ndarray  # (T,) bool: albedo varies over the triangle (texture, vertex colours)
+    kind: np.ndarray
+    materials: MaterialTable
+    normals: np.ndarray
+    step: float
+
+    @property
+    def special(self) -> bool:
+        """Whether any triangle needs ``_special_hits`` (mirrors, glass, translucency)."""
+        return len(self.normals) > 0
 
     def varying_albedo(self, primitive: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """(n, 3) albedo at the hits on varying triangles (other rows zero), or (0, 3) if none."""
-        hit = primitive >= 0
-        where = np.flatnonzero(hit)
-        where = where[self.varying[primitive[where]]]
-        if not len(where):
-            return np.zeros((0, 3))
-        out = np.zeros((len(primitive), 3))
-        uu, vv = u[where].astype(np.float64), v[where].astype(np.float64)
-        bary = np.stack([1.0 - uu - vv, uu, vv], axis=1)
-        out[where] = albedo(self.scene, self.world, primitive[where].astype(np.int64), bary)
+        """(n, 4) albedo at the hits on varying triangles in columns 0–2 (other rows zero)."""
+        out = np.zeros((len(primitive), 4))
+        where = np.flatnonzero(primitive >= 0)
+        where = where[self.kind[primitive[where]] == _VARYING]
+        if len(where):
+            uu, vv = u[where].astype(np.float64), v[where].astype(np.float64)
+            bary = np.stack([1.0 - uu - vv, uu, vv], axis=1)
+            out[where, :3] = albedo(self.scene, self.world, primitive[where].astype(np.int64), bary)
         return out
 
 
+def _surfaces(scene: Scene, world: World) -> _Surfaces:
+    """The shading tables of ``scene``: special triangles only where a material has a mirror,
+    glass or translucent branch (a scene of diffuse surfaces gets the diffuse kernel alone)."""
+    table, varying = triangle_albedo(scene, world)
+    materials = material_table(scene)
+    special = materials.special[world.tri_material] if len(world.triangles) else np.zeros(0, bool)
+    kind = np.where(special, _SPECIAL, np.where(varying, _VARYING, _CONSTANT)).astype(np.uint8)
+    normals = world.geometric_normals() if special.any() else np.zeros((0, 3))
+    extent = (float(np.linalg.norm(world.positions.max(0) - world.positions.min(0)))
+              if len(world.positions) else 1.0)
+    return _Surfaces(scene, world, table, varying, kind, materials, normals,
+                     max(extent, 1e-30) * 1e-6)
+
+
+# Russian roulette starts at this bounce of a chain (tests may raise it to switch it off).
+_ROULETTE_FROM = 2
+_MATERIAL_DIMENSION = 60  # sampling dimensions 60, 61, 62 + 3·bounce: branch, Fresnel, roulette
+
+
+def _uniform(seed: int, keys: np.ndarray, samples: np.ndarray, dimension: int) -> np.ndarray:
+    """(n,) uniform in (0, 1): a pure function of (seed, texel key, sample, dimension)."""
+    h = hash_u32(np.uint64(seed), keys, samples, np.uint64(dimension))
+    return ((h >> np.uint32(8)) + 0.5) * 2.0 ** -24
+
+
+def _reflect(d: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """Mirror directions d (k, 3) about unit normals n (k, 3)."""
+    return d - 2.0 * np.einsum("ij,ij->i", d, n)[:, None] * n
+
+
+def _refract(d: np.ndarray, n: np.ndarray, ior: np.ndarray, thin: np.ndarray,
+             u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """One path through a dielectric surface, chosen by importance: reflect with the Fresnel
+    probability F (unpolarised, exact), else refract by Snell's law; total internal reflection
+    always reflects. d, n (k, 3) unit (n either side); ior (k,); thin (k,) bool: a thin wall
+    (no KHR_materials_volume thickness) lets the refracted ray go on unbent. Returns the new
+    directions (k, 3) and whether each ray was refracted (k,) (the tint applies)."""
+    cos_d = np.einsum("ij,ij->i", d, n)
+    inside = cos_d > 0.0  # leaving the object through its back face
+    facing = np.where(inside[:, None], -n, n)  # normal on the incoming side
+    eta = np.where(inside & ~thin, ior, 1.0 / ior)  # n1 / n2
+    cos_i = np.abs(cos_d)
+    k = 1.0 - eta * eta * (1.0 - cos_i * cos_i)
+    cos_t = np.sqrt(np.maximum(k, 0.0))
+    r_s = (eta * cos_i - cos_t) / np.maximum(eta * cos_i + cos_t, 1e-300)
+    r_p = (cos_i - eta * cos_t) / np.maximum(cos_i + eta * cos_t, 1e-300)
+    fresnel = np.where(k <= 0.0, 1.0, 0.5 * (r_s * r_s + r_p * r_p))
+    refracted = u >= fresnel
+    bent = eta[:, None] * d + (eta * cos_i - cos_t)[:, None] * facing
+    through = np.where(thin[:, None], d, bent)
+    out = np.where(refracted[:, None], through, _reflect(d, facing))
+    return out / np.linalg.norm(out, axis=1, keepdims=True), refracted
+
+
+@dataclass
+class _Chains:
+    """Counts from ``_special_hits`` per texel of a chunk: rays cast along chains (k,) and
+    chains stopped by the depth cap (k,)."""
+
+    rays: np.ndarray
+    capped: np.ndarray
+
+
+def _special_hits(surfaces: _Surfaces, tracer: Tracer, origins: np.ndarray,
+                  directions: np.ndarray, hits: dict[str, np.ndarray], keys: np.ndarray,
+                  first: int, rays: int, settings: Resolved, out: np.ndarray,
+                  chains: _Chains) -> None:
+    """Shade the rays whose first hit is on a mirror, glass or translucent material (§3, §5).
+
+    Vectorised over those rays (only): at each hit one branch is chosen by importance from the
+    material's weights (``materials.classify``) — diffuse: R = base colour (the weight cancels),
+    ρ of the distance; translucent: R = ``settings.translucent``·R_ave, ρ = 1 (§3.3); specular:
+    reflect, tint by the base colour; transparent: Fresnel reflection or refraction (§3.2).
+    Reflected/refracted rays are cast from the hit (strategy "b": for what is left of d_max,
+    ρ of the summed length; "a": d_max each, ρ of the first distance; "c": none, R_ave and
+    ρ = 1). Chains end at a diffuse choice, a miss (escaped: weight R_ave·ρ), Russian roulette
+    from bounce ``_ROULETTE_FROM`` on (survival min(0.95, max throughput), throughput divided by
+    it: unbiased) or the hard cap ``settings.max_depth`` (nothing counted; ``chains.capped``).
+    Escaped weights are scalar: the mean of the RGB throughput.
+
+    origins, directions: (k·rays, 3) float32 as cast; hits: their embreex arrays; keys: (k,)
+    texel keys. Writes ``out`` (k·rays, 4): R·ρ (RGB) and escaped weight of each such ray.
+    """
+    m = surfaces.materials
+    world = surfaces.world
+    primitive = hits["primID"]
+    ray = np.flatnonzero(primitive >= 0)
+    ray = ray[surfaces.kind[primitive[ray]] == _SPECIAL]
+    if not len(ray):
+        return
+    unit = settings.rho in UNIT_REFLECTIVITY
+    rho_kind, d_max = RHO_KINDS[settings.rho], float(settings.d_max)
+    texel = ray // rays
+    key, sample = keys[texel], first + ray % rays
+    n = len(ray)
+    value, escape = np.zeros((n, 3)), np.zeros(n)
+    throughput = np.ones((n, 3))
+    start = origins[ray].astype(np.float64)
+    d = directions[ray].astype(np.float64)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    tri = primitive[ray].astype(np.int64)
+    dist = hits["tfar"][ray].astype(np.float64)
+    bu, bv = hits["u"][ray].astype(np.float64), hits["v"][ray].astype(np.float64)
+    first_dist = dist.copy()
+    total = np.zeros(n)
+    live = np.arange(n)
+    for depth in range(settings.max_depth + 1):
+        total[live] += dist[live]
+        mat = world.tri_material[tri[live]]
+        weights = m.weights[mat]
+        dim = _MATERIAL_DIMENSION + 3 * depth
+        u = _uniform(settings.seed, key[live], sample[live], dim)
+        branch = (u[:, None] >= np.cumsum(weights, axis=1)[:, :3]).sum(axis=1)
+        bary = np.stack([1.0 - bu[live] - bv[live], bu[live], bv[live]], axis=1)
+        colour = (np.ones((len(live), 3)) if unit else
+                  base_colour(surfaces.scene, world, tri[live], bary))
+        measured = first_dist[live] if settings.specular == "a" else total[live]
+        fade = _rho(rho_kind, measured / d_max)
+        diffuse = branch == DIFFUSE
+        value[live[diffuse]] = throughput[live[diffuse]] * colour[diffuse] * fade[diffuse, None]
+        translucent = branch == TRANSLUCENT
+        escape[live[translucent]] = throughput[live[translucent]].mean(axis=1) * settings.translucent
+        onward = (branch == SPECULAR) | (branch == TRANSPARENT)
+        if settings.specular == "c":  # R_ave, ρ = 1, no ray
+            escape[live[onward]] = throughput[live[onward]].mean(axis=1)
+            break
+        live, mat, colour, branch = live[onward], mat[onward], colour[onward], branch[onward]
+        if not len(live) or depth == settings.max_depth:
+            chains.capped += np.bincount(texel[live], minlength=len(chains.capped))
+            break
+        normal = surfaces.normals[tri[live]]
+        dirs = d[live]
+        hit_point = start[live] + dist[live, None] * dirs
+        specular = branch == SPECULAR
+        new = _reflect(dirs, normal)
+        tint = colour.copy()  # a mirror tints by its base colour (a metal's F0)
+        glass = ~specular
+        if glass.any():
+            thin = np.array([m.classes[j].thickness <= 0.0 for j in mat[glass]], bool)
+            bent, refracted = _refract(dirs[glass], normal[glass], m.ior[mat[glass]], thin,
+                                       _uniform(settings.seed, key[live[glass]],
+                                                sample[live[glass]], dim + 1))
+            new[glass] = bent
+            tint[glass] = np.where(refracted[:, None], colour[glass], 1.0)
+        throughput[live] *= tint
+        if depth + 1 >= _ROULETTE_FROM:
+            survive = np.minimum(0.95, throughput[live].max(axis=1))
+            kept = _uniform(settings.seed, key[live], sample[live], dim + 2) < survive
+            throughput[live[kept]] /= survive[kept, None]
+            live, hit_point, new, normal = live[kept], hit_point[kept], new[kept], normal[kept]
+        if not len(live):
+            break
+        side = np.where(np.einsum("ij,ij->i", new, normal) >= 0.0, 1.0, -1.0)
+        lift = np.maximum(surfaces.step, 64 * 2.0 ** -23 * np.abs(hit_point).max(axis=1))
+        start[live] = hit_point + (side * lift)[:, None] * normal
+        d[live] = new
+        length = d_max - total[live] if settings.specular == "b" else np.full(len(live), d_max)
+        going = length > 0
+        escape[live[~going]] = throughput[live[~going]].mean(axis=1)  # past d_max: ρ = 1
+        live = live[going]
+        if not len(live):
+            break
+        sub = tracer.cast_local(start[live].astype(np.float32), d[live].astype(np.float32),
+                                length[going].astype(np.float32))
+        chains.rays += np.bincount(texel[live], minlength=len(chains.rays))
+        hit = sub["primID"] >= 0
+        missed = live[~hit]
+        fade = (_rho(rho_kind, first_dist[missed] / d_max) if settings.specular == "a"
+                else np.ones(len(missed)))
+        escape[missed] = throughput[missed].mean(axis=1) * fade
+        live = live[hit]
+        tri[live] = sub["primID"][hit]
+        dist[live] = sub["tfar"][hit]
+        bu[live], bv[live] = sub["u"][hit], sub["v"][hit]
+    out[ray, :3] = value
+    out[ray, 3] = escape
+
+
+def _rho(kind: int, x: np.ndarray) -> np.ndarray:
+    """ρ (k,) at x = d / d_max (k,), as ``obscurance.rho``."""
+    x = np.clip(x, 0.0, 1.0)
+    if kind == 0:
+        return np.sqrt(x)
+    if kind == 1:
+        return x
+    return np.zeros_like(x)
+
+
 def _chunk_sums(surfaces: _Surfaces, tracer: Tracer, texels: Texels, rows: np.ndarray,
-                first: int, rays: int, settings: Resolved) -> np.ndarray:
-    """(k, 7) sums over samples ``first`` … ``first + rays − 1`` of the texels ``rows``, as
-    ``_accumulate_kernel`` lays them out."""
+                first: int, rays: int, settings: Resolved) -> tuple[np.ndarray, _Chains]:
+    """(k, 9) sums over samples ``first`` … ``first + rays − 1`` of the texels ``rows``, as
+    ``_accumulate_kernel`` lays them out, and the chunk's chain counts."""
     origins, directions = hemisphere_rays(texels, rows, rays, settings.seed, tracer.center,
                                           settings.sampling, first, _grid_size(settings))
     hits = tracer.cast_local(origins, directions, np.full(len(origins), settings.d_max, np.float32))
     primitive = hits["primID"]
-    if settings.rho in UNIT_REFLECTIVITY or not surfaces.varying.any():
-        ray_albedo = np.zeros((0, 3))
-    else:
+    chains = _Chains(np.zeros(len(rows), np.int64), np.zeros(len(rows), np.int64))
+    varying = surfaces.varying.any() and settings.rho not in UNIT_REFLECTIVITY
+    if varying:
         ray_albedo = surfaces.varying_albedo(primitive, hits["u"], hits["v"])
-    varying = surfaces.varying if len(ray_albedo) else np.zeros_like(surfaces.varying)
+    elif surfaces.special:
+        ray_albedo = np.zeros((len(primitive), 4))
+    else:
+        ray_albedo = np.zeros((0, 4))
+    if surfaces.special:
+        _special_hits(surfaces, tracer, origins, directions, hits, texels.key[rows], first, rays,
+                      settings, ray_albedo, chains)
+    kind = surfaces.kind if len(ray_albedo) else np.zeros_like(surfaces.kind)
+    if not varying and len(ray_albedo):
+        kind = np.where(kind == _VARYING, _CONSTANT, kind).astype(np.uint8)
     sums = np.empty((len(rows), _COLUMNS))
     _accumulate_kernel(rays, primitive, hits["tfar"], np.float32(settings.d_max),
-                       RHO_KINDS[settings.rho], surfaces.table, varying, ray_albedo, LUMINANCE,
+                       RHO_KINDS[settings.rho], surfaces.table, kind, ray_albedo, LUMINANCE,
                        sums)
-    return sums
+    return sums, chains
 
 
 def _grid_size(settings: Resolved) -> int:
@@ -256,9 +491,9 @@ def integrate(scene: Scene, world: World, tracer: Tracer, texels: Texels, settin
     texels each chunk of the first round finished.
     """
     rows = np.arange(len(texels)) if rows is None else np.asarray(rows, np.int64)
-    table, varying = triangle_albedo(scene, world)
-    surfaces = _Surfaces(scene, world, table, varying)
+    surfaces = _surfaces(scene, world)
     sums = np.zeros((len(rows), _COLUMNS))
+    chain_counts = np.zeros((len(rows), 2), np.int64)  # chain rays, capped chains
     counts = np.zeros(len(rows), np.int64)
     active = np.arange(len(rows))
     first, batch = 0, settings.rays
@@ -268,7 +503,10 @@ def integrate(scene: Scene, world: World, tracer: Tracer, texels: Texels, settin
             sums[active, _HALF] = _luminance_and_escaped(sums[active])
 
         def work(chunk: np.ndarray, first=first, batch=batch) -> None:
-            round_sums = _chunk_sums(surfaces, tracer, texels, rows[chunk], first, batch, settings)
+            round_sums, chains = _chunk_sums(surfaces, tracer, texels, rows[chunk], first, batch,
+                                             settings)
+            chain_counts[chunk, 0] += chains.rays
+            chain_counts[chunk, 1] += chains.capped
             if first:
                 round_sums[:, _HALF.start:] = 0.0
             sums[chunk] += round_sums
@@ -286,7 +524,7 @@ def integrate(scene: Scene, world: World, tracer: Tracer, texels: Texels, settin
         r_ave, scale = error_scale if error_scale is not None else (np.ones(3), 1.0)
         active = active[terms.standard_error(r_ave) * scale > settings.target_error]
         batch = first
-    return _means(sums, counts)
+    return replace(_means(sums, counts), chain_rays=chain_counts[:, 0], capped=chain_counts[:, 1])
 
 
 def _luminance_and_escaped(sums: np.ndarray) -> np.ndarray:

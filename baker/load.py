@@ -39,6 +39,7 @@ import base64
 import binascii
 import io
 import json
+import math
 import re
 import struct
 import urllib.parse
@@ -53,6 +54,7 @@ import pygltflib
 from PIL import Image as PILImage
 
 from baker.errors import InputError
+from baker.materials import MIRROR_ROUGHNESS, UNLIT_REASON, classify, no_lightmap_reason
 from baker.scene import REPEAT, Image, Instance, Light, Material, Primitive, Scene, Skipped, TextureRef
 
 SUPPORTED_EXTENSIONS = frozenset(
@@ -114,7 +116,8 @@ MAX_ACCESSOR_COMPONENTS = 1 << 28
 """Largest accessor without a bufferView (all zeros: nothing in the file bounds its count)."""
 _GPU_REASON = "GPU-instanced (EXT_mesh_gpu_instancing): occluder only"
 _SKIN_REASON = "skinned: occluder only (rest pose)"
-_UNLIT_REASON = "unlit material"
+_UNLIT_REASON = UNLIT_REASON
+_MORPH_REASON = "morph-animated (animated weights): occluder only (rest pose)"
 
 
 @dataclass
@@ -140,19 +143,22 @@ class _Context:
 # Entry point
 
 
-def load(path: str | Path) -> Scene:
+def load(path: str | Path, mirror_roughness: float = MIRROR_ROUGHNESS) -> Scene:
     """Read a ``.gltf`` or ``.glb`` file into a ``Scene`` (see ``baker.scene``).
 
     Geometry stays in each mesh's local space (glTF units, metres); ``Instance.world`` is the
     (4, 4) float64 local-to-world matrix. Raises ``InputError`` for anything in the file that
-    baker cannot read, naming the file, the glTF JSON path and what to do.
+    baker cannot read, naming the file, the glTF JSON path and what to do. ``mirror_roughness``:
+    metals smoother than this are mirrors (``materials.classify``), which get no lightmap.
     """
     path = Path(path)
     document = read_document(path)
     ctx = _Context(document, resolve_buffers(document, path), str(path), path.parent)
     materials = _read_materials(ctx)
     placements = _walk_nodes(ctx)
-    primitives, instances = _instantiate(ctx, placements, materials)
+    images = _images(ctx)
+    unbaked = [no_lightmap_reason(classify(m, images, mirror_roughness)) for m in materials]
+    primitives, instances = _instantiate(ctx, placements, materials, unbaked)
     lights = _read_lights(ctx, placements)
     return Scene(
         path=path,
@@ -160,9 +166,10 @@ def load(path: str | Path) -> Scene:
         primitives=tuple(primitives),
         instances=tuple(instances),
         materials=tuple(materials),
-        images=_images(ctx),
+        images=images,
         skipped=tuple(ctx.skipped),
         lights=lights,
+        mirror_roughness=float(mirror_roughness),
     )
 
 
@@ -633,12 +640,14 @@ def _read_material(ctx: _Context, i: int, material: pygltflib.Material) -> Mater
         raise _invalid(
             f"alphaMode {alpha_mode!r} is not OPAQUE, MASK or BLEND", ctx.file, f"{where}.alphaMode"
         )
+    volume = _extension(extensions, "KHR_materials_volume")
+    diffuse_transmission = _extension(extensions, "KHR_materials_diffuse_transmission")
     return Material(
         index=i,
         name=material.name or "",
         base_color=base_color,
         base_color_texture=_texture_ref(ctx, pbr.baseColorTexture, f"{pbr_where}.baseColorTexture"),
-        emissive=emissive * float(strength),
+        emissive=_emission(ctx, emissive, strength, where),
         emissive_texture=_texture_ref(ctx, material.emissiveTexture, f"{where}.emissiveTexture"),
         metallic=float(_default(pbr.metallicFactor, 1.0)),
         roughness=float(_default(pbr.roughnessFactor, 1.0)),
@@ -647,7 +656,59 @@ def _read_material(ctx: _Context, i: int, material: pygltflib.Material) -> Mater
         double_sided=bool(material.doubleSided),
         unlit="KHR_materials_unlit" in extensions,
         extensions=tuple(extensions),
+        metallic_roughness_texture=_optional_texture(ctx, pbr.metallicRoughnessTexture,
+                                                     f"{pbr_where}.metallicRoughnessTexture"),
+        transmission=_number(_extension(extensions, "KHR_materials_transmission"),
+                             "transmissionFactor", 0.0),
+        ior=_number(_extension(extensions, "KHR_materials_ior"), "ior", 1.5),
+        thickness=_number(volume, "thicknessFactor", 0.0),
+        attenuation_distance=_number(volume, "attenuationDistance", float("inf")),
+        attenuation_color=_factor(ctx, volume.get("attenuationColor"), [1.0, 1.0, 1.0],
+                                  f"{where}.extensions.KHR_materials_volume.attenuationColor"),
+        diffuse_transmission=_number(diffuse_transmission, "diffuseTransmissionFactor", 0.0),
+        diffuse_transmission_color=_factor(
+            ctx, diffuse_transmission.get("diffuseTransmissionColorFactor"), [1.0, 1.0, 1.0],
+            f"{where}.extensions.KHR_materials_diffuse_transmission.diffuseTransmissionColorFactor"),
     )
+
+
+def _optional_texture(ctx: _Context, info: Any, where: str) -> TextureRef | None:
+    """``_texture_ref`` for a texture the bake can do without (metallic-roughness): one it
+    cannot read is left out and recorded in ``ctx.skipped`` instead of stopping the bake."""
+    try:
+        return _texture_ref(ctx, info, where)
+    except InputError as error:
+        ctx.skip(where, f"cannot be read ({error.message}): metallic and roughness factors used alone")
+        return None
+
+
+def _extension(extensions: dict, name: str) -> dict:
+    """A material extension's object ({} when absent or not an object)."""
+    value = extensions.get(name)
+    return value if isinstance(value, dict) else {}
+
+
+def _number(values: dict, key: str, default: float) -> float:
+    """``values[key]`` as a float, or ``default`` when absent, not a number or not finite
+    (a material value baker cannot use is read as the extension's default, never a crash)."""
+    value = values.get(key, default)
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return default
+    value = float(value)
+    return value if math.isfinite(value) or (value == float("inf") and default == value) else default
+
+
+def _emission(ctx: _Context, factor: np.ndarray, strength: Any, where: str) -> np.ndarray:
+    """emissiveFactor × KHR_materials_emissive_strength, finite and ≥ 0 (1e-6 to 1e6 and beyond
+    bake; NaN, infinity or a negative value is refused)."""
+    strength_where = f"{where}.extensions.KHR_materials_emissive_strength.emissiveStrength"
+    if isinstance(strength, bool) or not isinstance(strength, (int, float)):
+        raise _invalid(f"emissiveStrength {strength!r} is not a number", ctx.file, strength_where)
+    emission = factor * float(strength)
+    if not (np.isfinite(emission).all() and (emission >= 0).all() and strength >= 0):
+        raise _invalid(f"emission {factor.tolist()} × {strength!r} is not a finite number ≥ 0",
+                       ctx.file, strength_where if not (factor < 0).any() else f"{where}.emissiveFactor")
+    return emission
 
 
 def _factor(ctx: _Context, value: Any, default: list[float], where: str) -> np.ndarray:
@@ -1008,6 +1069,17 @@ def trs_matrices(
     return out
 
 
+def _morph_animated_nodes(document: pygltflib.GLTF2) -> set[int]:
+    """Nodes whose morph target weights an animation channel drives (path "weights")."""
+    nodes = set()
+    for animation in document.animations or []:
+        for channel in animation.channels or []:
+            target = channel.target
+            if target is not None and target.path == "weights" and isinstance(target.node, int):
+                nodes.add(target.node)
+    return nodes
+
+
 def _gpu_instances(ctx: _Context, index: int, node: pygltflib.Node) -> np.ndarray | None:
     """(k, 4, 4) local matrices T_k @ R_k @ S_k of EXT_mesh_gpu_instancing, None without it."""
     extension = (node.extensions or {}).get("EXT_mesh_gpu_instancing")
@@ -1034,9 +1106,12 @@ def _gpu_instances(ctx: _Context, index: int, node: pygltflib.Node) -> np.ndarra
 
 
 def _instantiate(
-    ctx: _Context, placements: list[tuple[int, np.ndarray]], materials: list[Material]
+    ctx: _Context, placements: list[tuple[int, np.ndarray]], materials: list[Material],
+    unbaked: list[str],
 ) -> tuple[list[Primitive], list[Instance]]:
-    """Read the meshes the placed nodes use (in mesh order) and make their instances (in walk order)."""
+    """Read the meshes the placed nodes use (in mesh order) and make their instances (in walk order).
+
+    ``unbaked``: per material, why its primitives get no lightmap ("" when they do)."""
     document = ctx.document
     used = set()
     for index, _ in placements:
@@ -1053,6 +1128,7 @@ def _instantiate(
             if primitive is not None:
                 primitives.append(primitive)
     instances = []
+    morphed = _morph_animated_nodes(document)
     for index, world in placements:
         node = document.nodes[index]
         if node.mesh is None:
@@ -1062,10 +1138,12 @@ def _instantiate(
         worlds = [world] if gpu is None else list(world @ gpu)
         node_reasons = [_GPU_REASON] if gpu is not None else []
         node_reasons += [_SKIN_REASON] if node.skin is not None else []
+        node_reasons += [_MORPH_REASON] if index in morphed and node_reasons[-1:] != [_SKIN_REASON] else []
         for slot in slots[node.mesh]:
             if slot is None:
                 continue
-            reasons = node_reasons + ([_UNLIT_REASON] if materials[primitives[slot].material].unlit else [])
+            material_reason = unbaked[primitives[slot].material]
+            reasons = node_reasons + ([material_reason] if material_reason else [])
             for k, matrix in enumerate(worlds):
                 instances.append(
                     Instance(

@@ -12,6 +12,7 @@ import numpy as np
 
 from .ambient import Ambient
 from .direct import Sources
+from .materials import material_table
 from .scene import Scene
 
 
@@ -71,8 +72,36 @@ def make_plan(scene: Scene, ambient: Ambient, rho: str, sources: Sources | None 
                        else f"obscurance with colour bleeding, ρ = {rho}, R_ave = {_rgb(ambient.r_ave)}"),
         "ambient": ambient_text,
     }
+    stages.update(material_stages(scene))
     stages.update(_direct_stages(scene, sources))
     return Plan(stages=stages, baked=tuple(baked), left_out=tuple(left_out))
+
+
+def material_stages(scene: Scene) -> dict[str, str]:
+    """What the material stages do here (materials.py, integrate.py), or why they are off: a
+    scene of opaque diffuse surfaces runs none of them (the diffuse kernel alone)."""
+    table = material_table(scene)
+    used = sorted({scene.primitives[i.primitive].material for i in scene.instances})
+
+    def names(stage: str) -> tuple[str, int]:
+        hit = [scene.materials[m].name or f"materials[{m}]" for m in used
+               if stage in table.classes[m].stages()]
+        return ", ".join(hit[:4]) + (f" and {len(hit) - 4} more" if len(hit) > 4 else ""), len(hit)
+
+    out = {}
+    for stage, on, off in (
+            ("specular chains", "obscurance rays follow mirror reflections ({})",
+             "off: no mirror (metal smoother than mirror_roughness)"),
+            ("refraction", "obscurance rays refract through glass, Fresnel by importance ({})",
+             "off: no clear transmissive material"),
+            ("translucency", "translucent neighbours count a share of R_ave with ρ = 1 ({})",
+             "off: no translucent material"),
+            ("alpha testing", "rays pass alpha-cut and blended texels ({})",
+             "off: no MASK/BLEND material with alpha below opaque")):
+        text, count = names(stage)
+        out[stage] = on.format(text) if count else off
+    out["inner obscurances"] = "not computed (translucent objects are lit from outside only)"
+    return out
 
 
 def _direct_stages(scene: Scene, sources: Sources | None) -> dict[str, str]:

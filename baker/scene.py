@@ -64,6 +64,15 @@ class Material:
     double_sided: bool = False
     unlit: bool = False  # KHR_materials_unlit
     extensions: tuple[str, ...] = ()  # names of the material's extensions, for the plan
+    # metallicRoughnessTexture (linear: G roughness, B metallic), None when absent.
+    metallic_roughness_texture: TextureRef | None = None
+    transmission: float = 0.0  # KHR_materials_transmission transmissionFactor
+    ior: float = 1.5  # KHR_materials_ior
+    thickness: float = 0.0  # KHR_materials_volume thicknessFactor, mesh units (0: thin-walled)
+    attenuation_distance: float = float("inf")  # KHR_materials_volume, metres
+    attenuation_color: np.ndarray = field(default_factory=lambda: np.ones(3))  # (3,) linear
+    diffuse_transmission: float = 0.0  # KHR_materials_diffuse_transmission factor
+    diffuse_transmission_color: np.ndarray = field(default_factory=lambda: np.ones(3))  # (3,)
 
 
 @dataclass(frozen=True)
@@ -159,3 +168,5 @@ class Scene:
     images: tuple[Image, ...]
     skipped: tuple[Skipped, ...] = field(default=())
     lights: tuple[Light, ...] = field(default=())  # KHR_lights_punctual lights, in node order
+    # Metals smoother than this are mirrors (materials.py); a setting, carried with the scene.
+    mirror_roughness: float = 0.1

@@ -16,6 +16,7 @@ RHO_FUNCTIONS = ("sqrt", "step", "linear")
 ENCODINGS = ("linear", "srgb")
 OCCLUSION_MODES = ("none", "also", "only")
 METHODS = ("obscurance", "gi")
+SPECULAR_STRATEGIES = ("b", "a", "c")
 
 
 @dataclass(frozen=True)
@@ -60,6 +61,15 @@ class Settings:
     sky_horizon: linear RGB radiance at and below the horizon, blended linearly in the sine of
         the elevation up to ``sky`` at the zenith; None: a uniform sky.
     sky_rays: rays per texel that look for the sky (escaping the scene entirely).
+    mirror_roughness: metals with roughness below this are perfect mirrors (materials.py).
+    specular: what an obscurance ray does at a mirror or glass (paper §3.1–3.2): "b" follows
+        the reflected/refracted path and applies ρ to its summed length, stopping past d_max
+        (default); "a" follows it for the colour but applies ρ to the first distance; "c"
+        casts nothing more and counts R_ave with ρ = 1.
+    translucent: R(Q) of a translucent neighbour as a fraction of R_ave, with ρ = 1 (§3.3):
+        0 black, 1 R_ave.
+    max_depth: hard cap on the mirror/glass bounces of one obscurance ray (after Russian
+        roulette); the report counts the rays that reach it.
     supersample: sub-positions per texel (1–64) that its shadow, emissive and sky rays start
         from, ray s from sub-position s mod N: anti-aliased shadow edges (supersample.py). A hard
         light casts N rays per texel then. 1: every ray from the texel's sample point.
@@ -90,6 +100,10 @@ class Settings:
     sky: tuple[float, float, float] | None = None
     sky_horizon: tuple[float, float, float] | None = None
     sky_rays: int = 64
+    mirror_roughness: float = 0.1
+    specular: str = "b"
+    translucent: float = 0.5
+    max_depth: int = 16
     supersample: int = 1
 
     def check(self) -> None:
@@ -118,6 +132,7 @@ class Settings:
                 raise SettingsError(f"{name} must be a whole number of at least {low}, not {value}",
                                     fix=f"give --{name.replace('_', '-')} a whole number ≥ {low}")
         self._check_lights()
+        self._check_materials()
         if not (isinstance(self.clip_percentile, (int, float)) and 50 < self.clip_percentile <= 100):
             raise SettingsError(f"clip_percentile must be above 50 and at most 100, not "
                                 f"{self.clip_percentile}", fix="use --clip-percentile 99.9 (or 100: "
@@ -137,6 +152,20 @@ class Settings:
                 raise SettingsError(f"{name} must be one of {', '.join(allowed)}, not {value!r}",
                                     fix=f"use --{name} {allowed[0]}")
 
+
+    def _check_materials(self) -> None:
+        """Material settings (materials.py, integrate.py) within their ranges."""
+        for name, value in (("mirror_roughness", self.mirror_roughness),
+                            ("translucent", self.translucent)):
+            if not (isinstance(value, (int, float)) and 0 <= value <= 1):
+                raise SettingsError(f"{name} must be a number from 0 to 1, not {value!r}",
+                                    fix=f"give --{name.replace('_', '-')} a value such as 0.1")
+        if self.specular not in SPECULAR_STRATEGIES:
+            raise SettingsError(f"specular must be one of {', '.join(SPECULAR_STRATEGIES)}, not "
+                                f"{self.specular!r}", fix="use --specular b")
+        if int(self.max_depth) != self.max_depth or self.max_depth < 1:
+            raise SettingsError(f"max_depth must be a whole number of at least 1, not "
+                                f"{self.max_depth}", fix="use --max-depth 16")
 
     def _check_lights(self) -> None:
         """Light sizes finite and ≥ 0 (angle below 180°); sky colours three finite numbers ≥ 0."""

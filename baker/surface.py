@@ -1,7 +1,8 @@
 """What a surface looks like at a point: diffuse albedo and emission, linear RGB.
 
-Albedo R(Q) = baseColorFactor × baseColorTexture(uv) × COLOR_0, the texture sRGB-decoded and
-sampled bilinearly with its sampler's wrap modes. Emission = emissiveFactor × emissive strength ×
+Albedo R(Q) = baseColorFactor × baseColorTexture(uv) × COLOR_0 × the material's diffuse weight
+(``materials.classify``: metal mirrors, glass and translucency take their share), the texture
+sRGB-decoded and sampled bilinearly with its sampler's wrap modes. Emission = emissiveFactor × emissive strength ×
 emissiveTexture(uv). Work is vectorised over points, looping only over the scene's materials.
 """
 
@@ -75,8 +76,19 @@ def _textured(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray,
 
 
 def _base_colours(scene: Scene) -> np.ndarray:
-    """(M, 3) baseColorFactor RGB of every material."""
-    return np.array([m.base_color[:3] for m in scene.materials], np.float64).reshape(-1, 3)
+    """(M, 3) diffuse albedo factor of every material: baseColorFactor RGB × diffuse weight."""
+    from .materials import material_table  # materials → surface → geometry → materials
+
+    table = material_table(scene)
+    return np.array([c.diffuse for c in table.classes], np.float64).reshape(-1, 3)
+
+
+def base_colour(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray) -> np.ndarray:
+    """Base colour (k, 3), linear RGB, at barycentric points (k, 3) of world triangles (k,):
+    factor × texture × COLOR_0, every branch's weight left out (tints of mirrors and glass)."""
+    factor = np.array([m.base_color[:3] for m in scene.materials], np.float64).reshape(-1, 3)
+    colour = _textured(scene, world, tris, bary, factor, lambda m: m.base_color_texture)
+    return colour * _interpolate(world.colors[:, :3], world, tris, bary)
 
 
 def albedo(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray) -> np.ndarray:
@@ -84,6 +96,37 @@ def albedo(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray) -> np
     colour = _textured(scene, world, tris, bary, _base_colours(scene),
                        lambda m: m.base_color_texture)
     return colour * _interpolate(world.colors[:, :3], world, tris, bary)
+
+
+def sample_alpha(image: Image, ref: TextureRef, uv: np.ndarray) -> np.ndarray:
+    """Bilinear lookup of a texture's alpha channel (linear, [0, 1]) at glTF UVs (k, 2): (k,)."""
+    pixels = image.pixels
+    h, w = pixels.shape[:2]
+    x, y = uv[:, 0] * w - 0.5, uv[:, 1] * h - 0.5
+    x0, y0 = np.floor(x), np.floor(y)
+    fx, fy = x - x0, y - y0
+    x0, y0 = x0.astype(np.int64), y0.astype(np.int64)
+    xs = [_wrap(x0, w, ref.wrap_s), _wrap(x0 + 1, w, ref.wrap_s)]
+    ys = [_wrap(y0, h, ref.wrap_t), _wrap(y0 + 1, h, ref.wrap_t)]
+    a = pixels[..., 3]
+    top = a[ys[0], xs[0]] * (1 - fx) + a[ys[0], xs[1]] * fx
+    bottom = a[ys[1], xs[0]] * (1 - fx) + a[ys[1], xs[1]] * fx
+    return (top * (1 - fy) + bottom * fy) / 255.0
+
+
+def alpha(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray) -> np.ndarray:
+    """Coverage alpha (k,) at barycentric points (k, 3) of world triangles (k,): base colour
+    factor alpha × base colour texture alpha × COLOR_0 alpha (what alphaMode tests)."""
+    materials = world.tri_material[tris]
+    out = np.array([m.base_color[3] for m in scene.materials], np.float64)[materials]
+    for m, material in enumerate(scene.materials):
+        ref = material.base_color_texture
+        mask = materials == m
+        if ref is None or not mask.any():
+            continue
+        uv = _interpolate(world.texcoords[ref.texcoord], world, tris[mask], bary[mask])
+        out[mask] *= sample_alpha(scene.images[ref.image], ref, uv)
+    return out * _interpolate(world.colors[:, 3:4], world, tris, bary)[:, 0]
 
 
 def triangle_albedo(scene: Scene, world: World) -> tuple[np.ndarray, np.ndarray]:

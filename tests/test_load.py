@@ -610,7 +610,10 @@ def test_glass_vase_flowers_materials():
     assert glass.extensions == ("KHR_materials_transmission", "KHR_materials_volume")
     flower_nodes = {i.node for i in scene.instances if scene.primitives[i.primitive].material == 0}
     assert len(flower_nodes) == 2  # one mesh on two nodes
-    assert all(i.baked for i in scene.instances)
+    glass_material = [scene.primitives[i.primitive].material == 2 for i in scene.instances]
+    assert [i.baked for i in scene.instances] == [not g for g in glass_material]  # clear glass
+    assert all("clear glass" in i.reason for i, g in zip(scene.instances, glass_material) if g)
+    assert glass.transmission == 1.0 and glass.thickness == pytest.approx(0.075)
 
 
 def test_lights_punctual_lamp_reads_external_images():

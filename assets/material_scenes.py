@@ -1,0 +1,120 @@
+"""Small scenes with non-diffuse materials, for the material tests (issue 4, DESIGN.md §2).
+
+Every function returns a ``GltfBuilder`` and records in ``builder.info`` what the tests need.
+Metres, linear RGB. The floor is node 0 unless said otherwise: a horizontal quad at y = 0,
+normal +Y.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from assets.gltf_builder import GltfBuilder, box, box_face, quad, rotation_matrix, transformed
+
+# The extensions' own sample values (their README examples in the Khronos glTF repository).
+TRANSMISSION = {"KHR_materials_transmission": {"transmissionFactor": 1.0},
+                "KHR_materials_ior": {"ior": 1.5}}
+VOLUME = {"KHR_materials_volume": {"thicknessFactor": 1.0, "attenuationDistance": 0.006,
+                                   "attenuationColor": [0.5, 0.5, 0.5]}}
+DIFFUSE_TRANSMISSION = {"KHR_materials_diffuse_transmission": {
+    "diffuseTransmissionFactor": 0.25, "diffuseTransmissionColorFactor": [1.0, 0.5, 0.0]}}
+UNLIT = {"KHR_materials_unlit": {}}
+
+
+def mirror_wall(size: float = 4.0, height: float = 2.0, mirror: bool = True) -> GltfBuilder:
+    """A ``size``-metre white floor and, along its x = size/2 edge, a wall ``height`` tall
+    facing −x: a perfect mirror (metallic 1, roughness 0, base 0.9), or diffuse grey 0.9 when
+    not ``mirror``. info: floor, wall (nodes), wall_x (its plane)."""
+    b = GltfBuilder()
+    floor = b.material("floor", (0.8, 0.8, 0.8))
+    wall = b.material("mirror" if mirror else "wall", (0.9, 0.9, 0.9),
+                      metallic=1.0 if mirror else 0.0, roughness=0.0 if mirror else 1.0)
+    b.info["floor"] = b.node("floor", b.shape_mesh("floor", quad(size, size), material=floor))
+    face = transformed(box_face((0.0, height, size), "-x"),
+                       translation=(size / 2, height / 2, 0.0))
+    b.info["wall"] = b.node("wall", b.shape_mesh("wall", face, material=wall))
+    b.info["wall_x"] = size / 2
+    return b
+
+
+def facing_mirrors(gap: float = 1.0, size: float = 1.0) -> GltfBuilder:
+    """Two parallel square mirrors (size × size, base 0.9, metallic 1, roughness 0) facing
+    each other across ``gap`` on the x axis, and a small grey diffuse floor strip between them
+    at y = −size/2 (so long chains end somewhere). info: gap."""
+    b = GltfBuilder()
+    mirror = b.material("mirror", (0.9, 0.9, 0.9), metallic=1.0, roughness=0.0)
+    grey = b.material("floor", (0.5, 0.5, 0.5))
+    left = transformed(box_face((0.0, size, size), "+x"), translation=(-gap / 2, 0.0, 0.0))
+    right = transformed(box_face((0.0, size, size), "-x"), translation=(gap / 2, 0.0, 0.0))
+    b.node("mirrors", b.shape_mesh("mirrors", _merge(left, right), material=mirror))
+    strip = transformed(quad(gap, size), translation=(0.0, -size / 2, 0.0))
+    b.info["floor"] = b.node("floor", b.shape_mesh("floor", strip, material=grey))
+    b.info["gap"] = gap
+    return b
+
+
+def _merge(*shapes):
+    from assets.gltf_builder import merged
+
+    return merged(*shapes)
+
+
+def alpha_cut_quad(height: float = 0.5, size: float = 2.0, blend: bool = False) -> GltfBuilder:
+    """A 4 m white floor under a horizontal ``size``-metre quad at ``height`` facing down whose
+    texture is fully transparent (alpha 0) on its x < 0 half and opaque (alpha 255) on the
+    other: alphaMode MASK, cutoff 0.5, double-sided (or BLEND when ``blend``).
+    info: floor, leaf (nodes), height, size."""
+    b = GltfBuilder()
+    floor = b.material("floor", (0.8, 0.8, 0.8))
+    pixels = np.full((8, 8, 4), 255, np.uint8)
+    pixels[4:, :, 3] = 0  # v > 0.5: x < 0 (a quad's v runs along −x; turning it over keeps that)
+    leaf = b.material("leaf", (0.3, 0.6, 0.2), alpha_mode="BLEND" if blend else "MASK",
+                      alpha_cutoff=None if blend else 0.5, double_sided=True,
+                      base_color_image=pixels)
+    b.info["floor"] = b.node("floor", b.shape_mesh("floor", quad(4.0, 4.0), material=floor))
+    down = transformed(quad(size, size), rotation=rotation_matrix((1, 0, 0), 180),
+                       translation=(0.0, height, 0.0))
+    b.info["leaf"] = b.node("leaf", b.shape_mesh("leaf", down, material=leaf))
+    b.info["height"], b.info["size"] = height, size
+    return b
+
+
+def glass_slab(thickness: float = 0.2, ior: float = 1.5) -> GltfBuilder:
+    """A clear glass slab (transmission 1, IOR ``ior``, KHR_materials_volume thickness) 2 m
+    square, ``thickness`` thick, its top at y = 1, over a floor whose x > 0 half is red and
+    x < 0 half is green (two quads). info: floor_red, floor_green, slab (nodes)."""
+    b = GltfBuilder()
+    red = b.material("red", (0.9, 0.1, 0.1))
+    green = b.material("green", (0.1, 0.9, 0.1))
+    glass = b.material("glass", (1.0, 1.0, 1.0), roughness=0.0, extensions={
+        "KHR_materials_transmission": {"transmissionFactor": 1.0},
+        "KHR_materials_ior": {"ior": float(ior)},
+        "KHR_materials_volume": {"thicknessFactor": float(thickness)}})
+    b.info["floor_red"] = b.node("red", b.shape_mesh(
+        "red", transformed(quad(4.0, 4.0), translation=(2.0, 0.0, 0.0)), material=red))
+    b.info["floor_green"] = b.node("green", b.shape_mesh(
+        "green", transformed(quad(4.0, 4.0), translation=(-2.0, 0.0, 0.0)), material=green))
+    slab = transformed(box((2.0, thickness, 2.0)), translation=(0.0, 1.0 - thickness / 2, 0.0))
+    b.info["slab"] = b.node("slab", b.shape_mesh("slab", slab, material=glass))
+    return b
+
+
+def material_zoo() -> GltfBuilder:
+    """One box per kind of material, side by side on a floor: diffuse, mirror, clear glass,
+    unlit, translucent (diffuse transmission 1). info["boxes"]: kind → node index."""
+    b = GltfBuilder()
+    floor = b.material("floor", (0.8, 0.8, 0.8))
+    kinds = {
+        "diffuse": b.material("diffuse", (0.5, 0.5, 0.5)),
+        "mirror": b.material("mirror", (0.9, 0.9, 0.9), metallic=1.0, roughness=0.0),
+        "glass": b.material("glass", (1.0, 1.0, 1.0), roughness=0.0, extensions=TRANSMISSION),
+        "unlit": b.material("unlit", (0.7, 0.7, 0.7), extensions=UNLIT),
+        "translucent": b.material("wax", (0.9, 0.8, 0.6), extensions={
+            "KHR_materials_diffuse_transmission": {"diffuseTransmissionFactor": 1.0}}),
+    }
+    b.node("floor", b.shape_mesh("floor", quad(12.0, 4.0), material=floor))
+    b.info["boxes"] = {}
+    for i, (kind, material) in enumerate(kinds.items()):
+        mesh = b.shape_mesh(kind, box((0.8, 0.8, 0.8)), material=material)
+        b.info["boxes"][kind] = b.node(kind, mesh, translation=(-5.0 + 2.0 * i, 0.4, 0.0))
+    return b

@@ -1,0 +1,270 @@
+"""Materials in obscurances (issue 4): classification from glTF, alpha-cut surfaces, mirror and
+glass chains with strategies (a)/(b)/(c), Russian roulette, which surfaces get texels, the plan."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+import baker.integrate as integrate_module
+from assets.material_scenes import (DIFFUSE_TRANSMISSION, TRANSMISSION, VOLUME, alpha_cut_quad,
+                                    facing_mirrors, glass_slab, material_zoo, mirror_wall)
+from baker.geometry import build_world
+from baker.integrate import _Chains, _refract, _special_hits, _surfaces, integrate
+from baker.materials import (DIFFUSE, SPECULAR, TRANSLUCENT, TRANSPARENT, classify,
+                             no_lightmap_reason)
+from baker.scene import Material
+from baker.settings import Settings, resolve
+from baker.trace import Tracer
+from bakehelp import computed, loaded
+
+
+def _material(**values) -> Material:
+    fields = dict(index=0, name="m", base_color=np.array([0.8, 0.6, 0.4, 1.0]),
+                  base_color_texture=None, emissive=np.zeros(3), emissive_texture=None,
+                  metallic=0.0, roughness=1.0)
+    fields.update(values)
+    return Material(**fields)
+
+
+# ------------------------------------------------------------------------------- classification
+
+def test_diffuse_dielectric_keeps_its_base_colour():
+    c = classify(_material())
+    np.testing.assert_allclose(c.weights, [1, 0, 0, 0])
+    np.testing.assert_allclose(c.diffuse, [0.8, 0.6, 0.4])
+    assert c.stages() == set() and no_lightmap_reason(c) == ""
+
+
+def test_smooth_metal_is_a_mirror_and_rough_metal_stays_diffuse():
+    mirror = classify(_material(metallic=1.0, roughness=0.05))
+    assert mirror.weights[SPECULAR] == 1.0 and mirror.weights[DIFFUSE] == 0.0
+    assert "perfect mirror" in no_lightmap_reason(mirror)
+    half = classify(_material(metallic=0.5, roughness=0.0))
+    np.testing.assert_allclose(half.weights, [0.5, 0.5, 0, 0])
+    np.testing.assert_allclose(half.diffuse, 0.5 * np.array([0.8, 0.6, 0.4]))  # base × (1 − m)
+    rough = classify(_material(metallic=1.0, roughness=1.0))  # the glTF default material's
+    assert rough.weights[DIFFUSE] == 1.0
+    assert classify(_material(metallic=1.0, roughness=0.3), mirror_roughness=0.5).weights[SPECULAR] == 1
+
+
+def test_transmission_and_ior_sample_values():
+    c = classify(_material(roughness=0.0, transmission=1.0, ior=1.5))
+    np.testing.assert_allclose(c.weights, [0, 0, 1, 0])
+    assert c.ior == 1.5 and c.stages() == {"refraction"}
+    assert "clear glass" in no_lightmap_reason(c)
+    partly = classify(_material(roughness=0.0, transmission=0.4))
+    np.testing.assert_allclose(partly.weights, [0.6, 0, 0.4, 0])  # diffuse = base × (1 − t)
+    frosted = classify(_material(roughness=0.8, transmission=1.0))
+    assert frosted.weights[TRANSLUCENT] == 1.0  # rough transmission scatters: translucent
+
+
+def test_volume_and_diffuse_transmission_sample_values():
+    c = classify(_material(thickness=1.0, attenuation_distance=0.006,
+                           attenuation_color=np.array([0.5, 0.5, 0.5]),
+                           diffuse_transmission=0.25,
+                           diffuse_transmission_color=np.array([1.0, 0.5, 0.0])))
+    np.testing.assert_allclose(c.weights, [0.75, 0, 0, 0.25])
+    np.testing.assert_allclose(c.translucent_color, [0.8, 0.3, 0.0])
+    assert (c.thickness, c.attenuation_distance) == (1.0, 0.006)
+    assert c.stages() == {"translucency"}
+
+
+def test_alpha_modes():
+    assert classify(_material(alpha_mode="MASK", alpha_cutoff=0.5)).alpha_tested is False
+    cut = classify(_material(alpha_mode="MASK", base_color=np.array([1, 1, 1, 0.2])))
+    assert cut.alpha_tested and cut.invisible and "never drawn" in no_lightmap_reason(cut)
+    blend = classify(_material(alpha_mode="BLEND", base_color=np.array([1, 1, 1, 0.3])))
+    assert blend.alpha_tested and not blend.invisible and blend.stages() == {"alpha testing"}
+    opaque = classify(_material(alpha_mode="OPAQUE", base_color=np.array([1, 1, 1, 0.0])))
+    assert not opaque.alpha_tested  # OPAQUE ignores alpha
+    unlit = classify(_material(unlit=True))
+    assert no_lightmap_reason(unlit) == "unlit material"
+
+
+def test_loader_reads_every_extension(tmp_path):
+    from assets.gltf_builder import GltfBuilder, quad
+
+    b = GltfBuilder()
+    for i, ext in enumerate((TRANSMISSION, VOLUME, DIFFUSE_TRANSMISSION)):
+        m = b.material(f"m{i}", (0.5, 0.5, 0.5), roughness=0.0, extensions=ext)
+        b.node(f"n{i}", b.shape_mesh(f"q{i}", quad(), material=m), translation=(2.0 * i, 0, 0))
+    glass, volume, skin = loaded(b, tmp_path).materials[:3]
+    assert (glass.transmission, glass.ior) == (1.0, 1.5)
+    assert (volume.thickness, volume.attenuation_distance) == (1.0, 0.006)
+    np.testing.assert_allclose(volume.attenuation_color, [0.5, 0.5, 0.5])
+    assert skin.diffuse_transmission == 0.25
+    np.testing.assert_allclose(skin.diffuse_transmission_color, [1.0, 0.5, 0.0])
+
+
+# ------------------------------------------------------------------------------- alpha testing
+
+def _vertical_rays(xs: np.ndarray, z: float = 0.0):
+    origins = np.stack([xs, np.full(len(xs), 0.01), np.full(len(xs), z)], axis=1)
+    return origins, np.tile([0.0, 1.0, 0.0], (len(xs), 1))
+
+
+def test_rays_pass_the_hole_of_an_alpha_cut_quad_and_not_its_opaque_part(tmp_path):
+    tracer = Tracer(build_world(loaded(alpha_cut_quad(), tmp_path)))
+    xs = np.linspace(-0.95, 0.95, 40)
+    origins, directions = _vertical_rays(xs[np.abs(xs) > 0.05])
+    hole = origins[:, 0] < 0
+    hits = tracer.cast(origins, directions, 10.0)
+    assert (hits.triangle[hole] < 0).sum() == hole.sum()  # every ray under the hole escapes
+    assert (hits.triangle[~hole] >= 0).sum() == (~hole).sum()  # none through the opaque half
+    np.testing.assert_allclose(hits.distance[~hole], 0.49, atol=1e-5)
+    blocked = tracer.occluded(origins, directions, 10.0)  # shadow rays too
+    assert blocked.sum() == (~hole).sum() and not blocked[hole].any()
+
+
+def test_blend_lets_rays_through_by_alpha_deterministically(tmp_path):
+    from assets.gltf_builder import GltfBuilder, quad, rotation_matrix, transformed
+
+    b = GltfBuilder()
+    veil = b.material("veil", (0.5, 0.5, 0.5, 0.3), alpha_mode="BLEND", double_sided=True)
+    sheet = transformed(quad(2.0, 2.0), rotation=rotation_matrix((1, 0, 0), 180),
+                        translation=(0, 0.5, 0))
+    b.node("veil", b.shape_mesh("veil", sheet, material=veil))
+    tracer = Tracer(build_world(loaded(b, tmp_path)))
+    origins, directions = _vertical_rays(np.linspace(-0.9, 0.9, 4000))
+    through = tracer.cast(origins, directions, 10.0).triangle < 0
+    assert abs(through.mean() - 0.7) < 3 * np.sqrt(0.21 / len(through))  # 1 − alpha
+    again = tracer.cast(origins, directions, 10.0).triangle < 0
+    np.testing.assert_array_equal(through, again)
+
+
+def test_floor_under_the_hole_sees_the_sky(tmp_path):
+    done = computed(alpha_cut_quad(), tmp_path, rays=64, texel_density=6, d_max=1.0)
+    tx = done.texels
+    floor = done.world.tri_instance[tx.triangle] == 0
+    inner = floor & (np.abs(tx.position[:, 2]) < 0.5)
+    hole = inner & (tx.position[:, 0] < -0.4) & (tx.position[:, 0] > -0.7)
+    solid = inner & (tx.position[:, 0] > 0.4) & (tx.position[:, 0] < 0.7)
+    assert hole.sum() > 5 and solid.sum() > 5
+    escaped = done.terms.escaped
+    assert escaped[hole].mean() > 0.9 and escaped[solid].mean() < 0.5  # the hole's half is open
+    assert "rays pass" in done.plan.stages["alpha testing"]
+
+
+# ------------------------------------------------------------------------------- mirrors, glass
+
+def _near_and_far(done, wall_x):
+    tx = done.texels
+    floor = (done.world.tri_instance[tx.triangle] == 0) & (np.abs(tx.position[:, 2]) < 1.0)
+    near = floor & (tx.position[:, 0] > wall_x - 0.3)
+    return near, floor & (tx.position[:, 0] < -1.0)
+
+
+@pytest.fixture(scope="module")
+def mirror_bakes(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("mirror")
+    return {s: computed(mirror_wall(), folder, specular=s, rays=64, texel_density=6, d_max=1.0)
+            for s in "abc"}
+
+
+def test_mirror_strategy_b_is_less_dark_near_the_wall_than_a(mirror_bakes):
+    w = {}
+    for s, done in mirror_bakes.items():
+        near, far = _near_and_far(done, 2.0)
+        assert near.sum() > 10
+        w[s] = done.terms.obscurance(done.ambient.r_ave)[near].mean()
+    assert w["a"] + 0.03 < w["b"] <= w["c"] + 1e-12
+    assert mirror_bakes["a"].terms.chain_rays.sum() > 0
+    assert mirror_bakes["b"].terms.chain_rays.sum() > 0
+
+
+def test_strategy_c_casts_no_extra_ray(mirror_bakes):
+    c, b = mirror_bakes["c"], mirror_bakes["b"]
+    assert c.terms.chain_rays.sum() == 0 and c.terms.rays == b.terms.rays
+    near, _ = _near_and_far(c, 2.0)
+    assert c.terms.escaped[near].mean() > b.terms.escaped[near].mean()  # R_ave and ρ = 1
+
+
+def test_refraction_matches_snell_and_total_internal_reflection():
+    d = np.array([[1.0, -1.0, 0.0]]) / np.sqrt(2.0)
+    up = np.array([[0.0, 1.0, 0.0]])
+    out, refracted = _refract(d, up, np.array([1.5]), np.array([False]), np.array([0.99]))
+    sin_t = np.sqrt(0.5) / 1.5
+    np.testing.assert_allclose(out[0], [sin_t, -np.sqrt(1 - sin_t ** 2), 0.0], atol=1e-12)
+    assert refracted[0]
+    thin, _ = _refract(d, up, np.array([1.5]), np.array([True]), np.array([0.99]))
+    np.testing.assert_allclose(thin, d)  # a thin wall does not bend the ray
+    inside = np.array([[np.sin(np.radians(60)), 0.5, 0.0]])  # leaving glass at 60°: TIR
+    out, refracted = _refract(inside, up, np.array([1.5]), np.array([False]), np.array([0.99]))
+    np.testing.assert_allclose(out[0], [np.sin(np.radians(60)), -0.5, 0.0], atol=1e-12)
+    assert not refracted[0]
+
+
+def test_a_ray_through_a_glass_slab_finds_the_colour_along_the_refracted_path(tmp_path):
+    """From (−1.95, 2) at 45° down +x: unbent, the ray lands at x = +0.05 (red); refracted by
+    the 0.2-thick slab of IOR 1.5 it shifts by 0.2·(1 − tan θt) and lands at x = −0.0431 (green)."""
+    scene = loaded(glass_slab(), tmp_path)
+    world = build_world(scene)
+    tracer = Tracer(world)
+    settings = resolve(Settings(d_max=10.0, rays=1), 1.0, 1.0)
+    n = 256
+    origins = np.tile(np.array([-1.95, 2.0, 0.0]) - world.center, (n, 1)).astype(np.float32)
+    directions = np.tile(np.array([1.0, -1.0, 0.0]) / np.sqrt(2), (n, 1)).astype(np.float32)
+    hits = tracer.cast_local(origins, directions, np.full(n, 10.0, np.float32))
+    out = np.zeros((n, 4))
+    chains = _Chains(np.zeros(n, np.int64), np.zeros(n, np.int64))
+    _special_hits(_surfaces(scene, world), tracer, origins, directions, hits,
+                  np.arange(n, dtype=np.uint64), 0, 1, settings, out, chains)
+    landed = out[:, :3].sum(axis=1) > 0  # the rest escaped (Fresnel, ≈ 4 % per face) or
+    assert landed.mean() > 0.75  # ended by Russian roulette (5 % from the second bounce)
+    green = out[landed, 1] > out[landed, 0]
+    assert green.mean() > 0.95  # red only after two internal reflections (F² ≈ 0.2 %)
+    tan_t = np.tan(np.arcsin(np.sqrt(0.5) / 1.5))
+    assert -1.95 + 1.0 + 0.2 * tan_t + 0.8 < 0 < -1.95 + 2.0  # the hand-computed landings
+    assert chains.rays.sum() >= 2 * landed.sum()  # through the slab: two more rays each
+
+
+def test_russian_roulette_is_unbiased_between_facing_mirrors(tmp_path, monkeypatch):
+    done = computed(facing_mirrors(), tmp_path, rays=16, texel_density=8, d_max=3.0,
+                    specular="a", max_depth=8)
+    diffs = []
+    for seed in range(12):
+        settings = replace(done.settings, seed=seed)
+        rr = integrate(done.scene, done.world, Tracer(done.world), done.texels, settings)
+        with monkeypatch.context() as m:
+            m.setattr(integrate_module, "_ROULETTE_FROM", 10 ** 6)
+            exact = integrate(done.scene, done.world, Tracer(done.world), done.texels, settings)
+        r_ave = done.ambient.r_ave
+        diffs.append(float((rr.obscurance(r_ave) - exact.obscurance(r_ave)).mean()))
+        if seed == 0:
+            assert exact.capped.sum() > 0  # the deterministic chains reach the cap
+            assert rr.chain_rays.sum() < exact.chain_rays.sum()  # roulette ends chains early
+    diffs = np.array(diffs)
+    assert abs(diffs.mean()) <= 3 * diffs.std(ddof=1) / np.sqrt(len(diffs)) + 1e-12
+
+
+# ------------------------------------------------------------------------------- plan, texels
+
+def test_surfaces_that_would_not_show_a_lightmap_get_none(tmp_path):
+    b = material_zoo()
+    done = computed(b, tmp_path, rays=8, texel_density=4)
+    left = dict((where.split(" meshes")[0], reason) for where, reason in done.plan.left_out)
+    boxes = b.info["boxes"]
+    label = {kind: next(k for k in left if k.startswith(f"nodes[{node}]")) if any(
+        k.startswith(f"nodes[{node}]") for k in left) else None for kind, node in boxes.items()}
+    assert label["diffuse"] is None
+    assert "perfect mirror" in left[label["mirror"]]
+    assert "clear glass" in left[label["glass"]]
+    assert left[label["unlit"]] == "unlit material"
+    assert "fully translucent" in left[label["translucent"]]
+    baked_triangles = np.unique(done.texels.triangle)
+    baked_instances = set(np.unique(done.world.tri_instance[baked_triangles]).tolist())
+    assert len(baked_instances) == 2  # the floor and the diffuse box
+    stages = done.plan.stages
+    assert "mirror" in stages["specular chains"] and "glass" in stages["refraction"]
+    assert "wax" in stages["translucency"] and stages["alpha testing"].startswith("off")
+
+
+def test_a_diffuse_scene_runs_no_material_stage(tmp_path):
+    done = computed(mirror_wall(mirror=False), tmp_path, rays=16, texel_density=4)
+    assert done.world.alpha is None and not _surfaces(done.scene, done.world).special
+    assert all(done.plan.stages[s].startswith("off") for s in
+               ("specular chains", "refraction", "translucency", "alpha testing"))
+    assert done.terms.chain_rays.sum() == 0 and done.terms.capped.sum() == 0
