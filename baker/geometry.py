@@ -110,7 +110,11 @@ def build_world(scene: Scene) -> World:
         if np.linalg.det(linear) < 0:
             triangles = triangles[:, [0, 2, 1]]
         if prim.normals is not None:
-            normals = _unit(prim.normals @ np.linalg.inv(linear))  # (M^-T n) as row vectors
+            # (M^-T n) as row vectors, through the cofactor matrix det(M)·M^-T (sign kept), which
+            # exists for a singular M too: a zero scale flattens normals, never NaNs them.
+            cofactor = np.stack([np.cross(linear[:, 1], linear[:, 2]), np.cross(linear[:, 2], linear[:, 0]),
+                                 np.cross(linear[:, 0], linear[:, 1])])  # rows: det(M)·M^-1
+            normals = _unit(prim.normals @ (cofactor if np.linalg.det(linear) >= 0 else -cofactor))
             smooth = np.ones(len(positions), bool)
         else:
             normals = _unit(_flat_normals(positions, triangles))

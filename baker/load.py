@@ -884,6 +884,10 @@ def _read_primitive(
     colors = _attribute(ctx, attributes, "COLOR_0", (3, 4), n, where) if "COLOR_0" in attributes else None
     if colors is not None and colors.shape[1] == 3:
         colors = np.concatenate([colors, np.ones((n, 1))], axis=1)
+    triangles = _triangles(ctx, primitive, mode, n, where)
+    if not len(triangles):
+        ctx.skip(where, "no whole triangle: nothing to bake or to occlude")
+        return None
     return Primitive(
         mesh=mesh,
         index=j,
@@ -891,7 +895,7 @@ def _read_primitive(
         normals=normals,
         texcoords=_texcoords(ctx, attributes, n, where),
         colors=colors,
-        triangles=_triangles(ctx, primitive, mode, n, where),
+        triangles=triangles,
         material=_material_index(ctx, primitive.material, material_count, where),
         has_morph_targets=bool(primitive.targets),
     )
@@ -915,6 +919,13 @@ def _attribute(
         )
     if n is not None and len(values) != n:
         raise _invalid(f"{name} has {len(values)} vertices but POSITION has {n}", ctx.file, attribute_where)
+    bad = ~np.isfinite(values)
+    if name.startswith(("NORMAL", "TEXCOORD_", "COLOR_")) and bad.any():
+        fallback = 1.0 if name.startswith("COLOR_") else 0.0
+        values = np.where(bad, fallback, values)
+        used = " (the triangle's own normal is used)" if name == "NORMAL" else ""
+        ctx.skip(attribute_where, f"{int(bad.any(axis=1).sum())} vertices had NaN or infinite "
+                                  f"values: set to {fallback:g}{used}")
     return values
 
 

@@ -37,6 +37,7 @@ def sample_texture(image: Image, ref: TextureRef, uv: np.ndarray) -> np.ndarray:
     """
     pixels = image.pixels
     h, w = pixels.shape[:2]
+    uv = np.clip(uv, -1e6, 1e6)  # past this, float UVs hold no sub-texel position; int64-safe
     x = uv[:, 0] * w - 0.5
     y = uv[:, 1] * h - 0.5
     x0, y0 = np.floor(x), np.floor(y)

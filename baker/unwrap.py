@@ -76,6 +76,7 @@ def unwrap(scene: Scene, world: World, settings: Resolved) -> Atlas:
     area = float(sum(world.areas(world.instance_triangles(i)).sum() for i in instances))
     expected = area * settings.texel_density ** 2
     resolution = settings.page_size if expected > 0.5 * settings.page_size ** 2 else 0
+    _check_triangles_fit(world, scene, instances, settings)
     atlas = _generate(world, instances, settings, resolution)
     if max(atlas.width, atlas.height) > settings.page_size:
         atlas = _generate(world, instances, settings, settings.page_size)
@@ -139,7 +140,7 @@ def _check_not_shrunk(atlas: xatlas.Atlas, world: World, scene: Scene, instances
         corners = uv.astype(np.float64)[triangles.astype(np.int64)] * [atlas.width, atlas.height]
         charts = chart.astype(np.int64)[triangles[:, 0].astype(np.int64)]
         placed = (charts >= 0) & (charts < atlas.chart_count)
-        if not placed.any():
+        if not placed.any() or len(placed) != len(world.instance_triangles(i)):
             continue
         corners = corners[placed]
         a, b, c = world.corners(world.instance_triangles(i)[placed])
@@ -175,6 +176,37 @@ def _check_not_shrunk(atlas: xatlas.Atlas, world: World, scene: Scene, instances
         f"at texel density {settings.texel_density:g} a chart of {where} needs about "
         f"{need:.0f} texels a side, more than a page of {settings.page_size} holds",
         texel_density=fits, fix=f"use --texel-density {fits:g} or less{bigger}")
+
+
+def _check_triangles_fit(world: World, scene: Scene, instances: list[int], settings: Resolved) -> None:
+    """Raise PageTooSmall, before xatlas runs, when one triangle is longer than a page holds.
+
+    A chart holds at least one whole triangle, so such a triangle means a chart xatlas would
+    have to shrink; and xatlas, given triangles of 10⁷ texels next to ones of 10⁻⁷ in float32,
+    can spin for ever instead. Checked on the longest edge of every baked triangle.
+    """
+    room = settings.page_size - 2 * settings.padding - 2
+    longest, owner = 0.0, -1
+    for i in instances:
+        a, b, c = world.corners(world.instance_triangles(i))
+        if not len(a):
+            continue
+        edge = max(float(np.linalg.norm(p - q, axis=1).max()) for p, q in ((a, b), (b, c), (c, a)))
+        if edge > longest:
+            longest, owner = edge, i
+    if longest * settings.texel_density <= room:
+        return
+    fits = _round_down(room / longest * 0.98)
+    page = int(2 ** np.ceil(np.log2(longest * settings.texel_density + 2 * settings.padding + 2)))
+    bigger = f", or --page-size {page} or more" if page <= 16384 else ""
+    inst = scene.instances[owner]
+    prim = scene.primitives[inst.primitive]
+    where = f"nodes[{inst.node}] meshes[{prim.mesh}].primitives[{prim.index}]"
+    raise PageTooSmall(
+        f"at texel density {settings.texel_density:g} a triangle of {where} is "
+        f"{longest * settings.texel_density:.3g} texels long, more than a page of "
+        f"{settings.page_size} holds", texel_density=fits,
+        fix=f"use --texel-density {fits:g} or less{bigger}, or look for stray vertices")
 
 
 def _round_down(value: float, digits: int = 3) -> float:

@@ -1,0 +1,273 @@
+"""Fuzzing: mutated glTF documents end in a valid output or a clean BakerError (issue 7).
+
+Hypothesis mutates small valid scenes — a JSON field anywhere in the document, an accessor or
+bufferView field, bytes of the binary buffer (vertex data, indices, the embedded PNG), the GLB
+container itself — and bakes each one through ``baker.bake``. Every run must end in one of two
+ways:
+- a BakerError (InputError, SettingsError, OutputError) with a message and a fix, and no output
+  file nor temporary file left behind;
+- a bake whose output baker reads back, with finite lightmap texels.
+Anything else — another exception, a run longer than ``HANG_SECONDS``, a partial file — fails
+the test, and hypothesis shrinks it to the smallest mutation that does it.
+
+The CI budget is ``BAKER_FUZZ_EXAMPLES`` (default 2000) mutated inputs; the scenes are tiny and the
+bake settings minimal (2 rays, 32-texel pages) so that 2000 take well under a minute.
+``BAKER_FUZZ_EXAMPLES=20000 python -m pytest tests/test_fuzz.py`` runs a longer campaign.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+import os
+import signal
+import struct
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import baker
+from assets.gltf_builder import GltfBuilder, box, quad
+from assets.make_scenes import checker
+from baker.load import load
+
+EXAMPLES = int(os.environ.get("BAKER_FUZZ_EXAMPLES", "2000"))
+HANG_SECONDS = 20
+SCRATCH = "/dev/shm" if os.access("/dev/shm", os.W_OK) else None  # memory: thousands of folders
+SETTINGS = baker.Settings(rays=2, page_size=32, padding=1, threads=1, shadow_rays=1,
+                          emissive_rays=1, sky_rays=1)
+
+
+# ------------------------------------------------------------------------------------------------
+# the valid documents the mutations start from
+
+
+def _bases() -> list[tuple[dict, bytes]]:
+    """(glTF JSON, binary buffer) of each valid starting scene."""
+    out = []
+    # 1. a floor quad and a box over it: two meshes, two materials, node TRS.
+    b = GltfBuilder()
+    floor = b.material("floor", (0.8, 0.8, 0.8))
+    red = b.material("red", (0.7, 0.1, 0.1), emissive=(0.2, 0.1, 0.0))
+    b.node("floor", b.shape_mesh("floor", quad(1.0, 1.0), material=floor))
+    b.node("box", b.shape_mesh("box", box((0.3, 0.3, 0.3)), material=red),
+           translation=(0.1, 0.15, 0.0), rotation=(0.0, 0.38268343, 0.0, 0.92387953), scale=(1, 2, 1))
+    out.append(b)
+    # 2. a textured quad with vertex colours, the same mesh on a parent and a mirrored child.
+    b = GltfBuilder()
+    textured = b.material("checker", (1, 1, 1), base_color_image=checker(8, 2))
+    positions, triangles, normals, uv0 = quad(1.0, 1.0)
+    mesh = b.mesh("quad", positions, triangles, normals=normals, uv0=uv0,
+                  colors=np.tile([0.9, 0.8, 0.7, 1.0], (len(positions), 1)), material=textured)
+    child = b.node("child", mesh, translation=(0, 0.5, 0), scale=(-1, 1, 1))
+    b.node("parent", mesh, children=[child])
+    out.append(b)
+    documents = []
+    for b in out:
+        document = json.loads(b.document(bin_uri=None).gltf_to_json())
+        documents.append((document, b.binary()))
+    return documents
+
+
+BASES = _bases()
+
+
+# ------------------------------------------------------------------------------------------------
+# mutations
+
+INTERESTING_INTS = [-(2 ** 31), -1, 0, 1, 2, 3, 4, 5, 6, 7, 255, 256, 5120, 5121, 5122, 5123, 5125,
+                    5126, 34962, 34963, 2 ** 16, 2 ** 31 - 1, 2 ** 32, 2 ** 53, 10 ** 12]
+INTERESTING_FLOATS = [0.0, -0.0, 1e-300, 1e-38, 1e-7, 0.5, 1.0, -1.0, 1e7, 1e30, 1e38, 1e300,
+                      -1e300, math.inf, -math.inf, math.nan]
+INTERESTING_TEXT = ["", "VEC3", "VEC2", "SCALAR", "MAT4", "BLEND", "MASK", "2.0", "1.0",
+                    "data:", "data:application/octet-stream;base64,AAAA", "missing.bin",
+                    "../../outside.bin", "http://example.com/x.bin", "%zz", "KHR_draco_mesh_compression"]
+
+values = st.deferred(lambda: st.one_of(
+    st.sampled_from(INTERESTING_INTS),
+    st.integers(-10, 10 ** 6),
+    st.sampled_from(INTERESTING_FLOATS),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.sampled_from(INTERESTING_TEXT),
+    st.text(max_size=8),
+    st.none(),
+    st.booleans(),
+    st.lists(st.sampled_from(INTERESTING_FLOATS + [0.0, 1.0]), min_size=0, max_size=17),
+    st.just({}),
+    st.just([]),
+    st.dictionaries(st.sampled_from(["index", "count", "bufferView", "uri", "byteLength"]),
+                    st.sampled_from(INTERESTING_INTS), max_size=2),
+))
+
+
+def _paths(node, prefix=()) -> list[tuple]:
+    """Every path (tuple of keys / indices) into a JSON value, the root excluded."""
+    out = []
+    if isinstance(node, dict):
+        for key, value in node.items():
+            out.append(prefix + (key,))
+            out += _paths(value, prefix + (key,))
+    elif isinstance(node, list):
+        for i, value in enumerate(node):
+            out.append(prefix + (i,))
+            out += _paths(value, prefix + (i,))
+    return out
+
+
+def _parent(document, path):
+    node = document
+    for key in path[:-1]:
+        node = node[key]
+    return node
+
+
+@st.composite
+def json_mutation(draw, document: dict, focus: tuple[str, ...] = ()):
+    """Change, delete or duplicate one value of ``document`` (in place), optionally only under
+    the top-level keys ``focus``."""
+    paths = [p for p in _paths(document) if not focus or p[0] in focus] or _paths(document)
+    if not paths:  # everything was deleted already
+        return None
+    path = draw(st.sampled_from(paths))
+    parent, key = _parent(document, path), path[-1]
+    action = draw(st.sampled_from(["set", "set", "set", "delete", "duplicate"]))
+    if action == "delete":
+        del parent[key]
+    elif action == "duplicate" and isinstance(parent, list):
+        parent.insert(key, copy.deepcopy(parent[key]))
+    else:
+        parent[key] = draw(values)
+    return path
+
+
+FLOAT_BYTES = [struct.pack("<f", v) for v in (math.nan, math.inf, -math.inf, 3e38, -3e38, 1e-38,
+                                              0.0, 1e6, -1e6)]
+INT_BYTES = [struct.pack("<I", v) for v in (0, 1, 2 ** 31, 2 ** 32 - 1, 65535, 1000)]
+
+
+@st.composite
+def bytes_mutation(draw, blob: bytearray):
+    """Overwrite a few bytes of the binary buffer (in place), often with a special float or int."""
+    at = draw(st.integers(0, max(len(blob) - 1, 0)))
+    kind = draw(st.sampled_from(["float", "int", "random"]))
+    if kind == "random":
+        payload = draw(st.binary(min_size=1, max_size=16))
+    else:
+        at -= at % 4
+        payload = draw(st.sampled_from(FLOAT_BYTES if kind == "float" else INT_BYTES))
+    blob[at:at + len(payload)] = payload[:max(len(blob) - at, 0)]
+    return at
+
+
+def _glb(document: dict, blob: bytes) -> bytes:
+    text = json.dumps(document).encode()
+    text += b" " * (-len(text) % 4)
+    blob = blob + b"\0" * (-len(blob) % 4)
+    chunks = struct.pack("<II", len(text), 0x4E4F534A) + text
+    chunks += struct.pack("<II", len(blob), 0x004E4942) + blob
+    return b"glTF" + struct.pack("<II", 2, 12 + len(chunks)) + chunks
+
+
+@st.composite
+def mutated_files(draw):
+    """(file name, {name: bytes}) of one mutated scene: a .glb, or a .gltf with its .bin."""
+    document, blob = copy.deepcopy(draw(st.sampled_from(BASES)))
+    blob = bytearray(blob)
+    for _ in range(draw(st.integers(1, 3))):
+        kind = draw(st.sampled_from(["json", "accessor", "accessor", "bytes", "bytes"]))
+        if kind == "json":
+            draw(json_mutation(document))
+        elif kind == "accessor":
+            draw(json_mutation(document, ("accessors", "bufferViews")))
+        else:
+            draw(bytes_mutation(blob))
+    container = draw(st.sampled_from(["glb", "glb", "gltf", "glb-bytes"]))
+    if container == "gltf":
+        buffers = document.get("buffers")
+        if isinstance(buffers, list) and buffers and isinstance(buffers[0], dict) and "uri" not in buffers[0]:
+            buffers[0]["uri"] = "scene.bin"
+        text = json.dumps(document)  # NaN and Infinity as JS literals: not JSON, as some exporters write
+        return "scene.gltf", {"scene.gltf": text.encode(), "scene.bin": bytes(blob)}
+    data = bytearray(_glb(document, bytes(blob)))
+    if container == "glb-bytes":  # damage the container: header, chunk headers, or a cut
+        if draw(st.booleans()):
+            at = draw(st.sampled_from([0, 4, 8, 12, 16, 20 + len(json.dumps(document))]))
+            data[at:at + 4] = draw(st.sampled_from(INT_BYTES))
+        else:
+            data = data[:draw(st.integers(0, len(data)))]
+    return "scene.glb", {"scene.glb": bytes(data)}
+
+
+# ------------------------------------------------------------------------------------------------
+# the property
+
+
+class Hang(Exception):
+    """A run took longer than HANG_SECONDS."""
+
+
+def _alarm(signum, frame):
+    raise Hang(f"a bake ran longer than {HANG_SECONDS} s")
+
+
+OUTCOMES: dict[str, int] = {}
+
+
+def bake_ends_cleanly(name: str, files: dict[str, bytes]) -> str:
+    """Bake the mutated scene in a fresh folder; return "baked" or the error's class name, and
+    fail on anything but a valid output or a clean BakerError with nothing left behind."""
+    with tempfile.TemporaryDirectory(prefix="baker-fuzz-", dir=SCRATCH) as folder:
+        folder = Path(folder)
+        for file, data in files.items():
+            (folder / file).write_bytes(data)
+        out_dir = folder / "out"
+        out_dir.mkdir()
+        output = out_dir / ("baked" + Path(name).suffix)
+        previous = signal.signal(signal.SIGALRM, _alarm)
+        signal.setitimer(signal.ITIMER_REAL, HANG_SECONDS)
+        try:
+            baker.bake(folder / name, output, SETTINGS)
+        except baker.BakerError as error:
+            assert error.message and error.fix, f"an error without message or fix: {error!r}"
+            assert "Traceback" not in str(error)
+            left = sorted(p.name for p in out_dir.iterdir())
+            assert left == [], f"{type(error).__name__} ({error}) left {left} behind"
+            return type(error).__name__
+        finally:
+            signal.setitimer(signal.ITIMER_REAL, 0)
+            signal.signal(signal.SIGALRM, previous)
+        left = sorted(p.name for p in out_dir.iterdir())
+        assert output.name in left and not [n for n in left if n.endswith(".tmp")], left
+        scene = load(output)  # the output reads back: a whole, valid glTF
+        assert all(np.isfinite(p.positions).all() for p in scene.primitives)
+        lightmaps = [m for m in scene.document.materials if "MOZ_lightmap" in (m.extensions or {})]
+        assert lightmaps or not any(i.baked for i in load(folder / name).instances)
+        return "baked"
+
+
+@settings(max_examples=EXAMPLES, deadline=None, derandomize=True, database=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+@given(mutated_files())
+def test_mutated_gltf_bakes_or_fails_cleanly(case):
+    name, files = case
+    outcome = bake_ends_cleanly(name, files)
+    OUTCOMES[outcome] = OUTCOMES.get(outcome, 0) + 1
+
+
+def test_the_fuzzer_reaches_both_outcomes_and_its_budget():
+    """The run above covered both endings in fair numbers (a fuzzer whose every mutation fails
+    in the JSON parser, or none does, would test little), at the rate the CI budget needs."""
+    if sum(OUTCOMES.values()) == 0:  # run alone: do a short campaign here
+        start = time.perf_counter()
+        test_mutated_gltf_bakes_or_fails_cleanly()
+        seconds = time.perf_counter() - start
+        assert seconds < 60 * EXAMPLES / 2000 + 30, f"{EXAMPLES} inputs took {seconds:.0f} s"
+    total = sum(OUTCOMES.values())
+    assert total >= min(EXAMPLES, 2000) * 0.9, OUTCOMES
+    assert OUTCOMES.get("baked", 0) > 0.1 * total, OUTCOMES
+    assert OUTCOMES.get("InputError", 0) > 0.2 * total, OUTCOMES
