@@ -12,6 +12,7 @@ The pipeline, one module per stage (DESIGN.md §3):
     integrate.integrate  Texels → Terms (obscurance terms, rays cast with trace.Tracer)
     direct.direct_light  Texels → Direct (lights, emitters, sky per texel, with shadow rays)
     compose.compose      Terms + Direct → Lightmaps (L = D + I_A · W per page)
+    denoise.denoise      optional (--denoise): Open Image Denoise per chart, before dilation
     postprocess          dilation into the padding
     encode.encode        Lightmaps → 8-bit PNG pages, each scaled by a percentile of its texels
     hdr.page_file        float pages as .hdr / .exr files (``--lightmaps DIR --format``)

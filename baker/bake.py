@@ -26,6 +26,7 @@ from .compose import Lightmaps, compose, effective_r_ave
 from .direct import Direct, Power, Sources, delivered_power, direct_light, light_sources
 from .encode import encode
 from .errormap import write_error_maps
+from .denoise import DenoiseInfo, denoise
 from .hdr import check_format, page_file
 from .errors import BakerError, OutputError
 from .geometry import World, build_world
@@ -168,6 +169,7 @@ class Computed:
     power: Power | None = None  # what each source lays on the surfaces, for I_A
     direct: Direct | None = None  # the texels' direct light, per source
     validity: Validity | None = None  # which sample points were moved, flagged (validity.py)
+    denoised: DenoiseInfo | None = None  # what --denoise did (denoise.py); None: not denoised
 
     def rmse_estimate(self) -> float:
         """RMSE of the lightmap's luminance estimated from the rays (``Terms.rmse``)."""
@@ -221,15 +223,19 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True) -> Computed:
             indirect = indirect_light(scene, world, tracer, sources, texels, resolved,
                                       resolved.rays).irradiance
     with _timed(times, "compose"):
-        lightmaps = postprocess(compose(atlas, texels, terms, ambient, resolved.rho, direct,
-                                        indirect=indirect),
-                                resolved.padding, *validity.page_masks(
-                                    texels, (atlas.page_count, atlas.height, atlas.width)),
-                                seams=find_seams(atlas, world))
+        lightmaps = compose(atlas, texels, terms, ambient, resolved.rho, direct, indirect=indirect)
+        masks = validity.page_masks(texels, (atlas.page_count, atlas.height, atlas.width))
+    denoised = None
+    if resolved.denoise:  # per chart, before the fill of invalid texels and dilation (denoise.py)
+        with _timed(times, "denoise"):
+            lightmaps, denoised = denoise(lightmaps, texels, *masks, threads=resolved.threads,
+                                          obscurance=resolved.occlusion != "none")
+    with _timed(times, "compose"):
+        lightmaps = postprocess(lightmaps, resolved.padding, *masks, seams=find_seams(atlas, world))
     return Computed(scene=scene, world=world, settings=resolved, ambient=ambient, plan=plan,
                     atlas=atlas, texels=texels, terms=terms, lightmaps=lightmaps,
                     stage_seconds=times, sources=sources, power=power, direct=direct,
-                    validity=validity)
+                    validity=validity, denoised=denoised)
 
 
 def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings = Settings(), *,
@@ -293,6 +299,7 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
         "stage_seconds": times, "seconds": seconds,
         "rmse_estimate": rmse,
         "validity": done.validity.counts() if done.validity is not None else None,
+        "denoise": done.denoised.as_dict() if done.denoised is not None else {"denoised": False},
         "notes": list(info.notes) + clipping_notes(pages),
         "lightmap_pages": [{"intensity": page.intensity, "peak": page.peak,
                             "clipped_fraction": page.clipped} for page in pages],

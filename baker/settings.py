@@ -73,6 +73,8 @@ class Settings:
     supersample: sub-positions per texel (1–64) that its shadow, emissive and sky rays start
         from, ray s from sub-position s mod N: anti-aliased shadow edges (supersample.py). A hard
         light casts N rays per texel then. 1: every ray from the texel's sample point.
+    denoise: run Intel Open Image Denoise's lightmap filter on each chart of the composed
+        pages before dilation (denoise.py; needs ``pip install "baker[denoise]"``).
     """
 
     texel_density: float | None = None
@@ -105,6 +107,7 @@ class Settings:
     translucent: float = 0.5
     max_depth: int = 16
     supersample: int = 1
+    denoise: bool = False
 
     def check(self) -> None:
         """Raise SettingsError for a value that cannot work, saying which values can."""
@@ -132,6 +135,9 @@ class Settings:
                 raise SettingsError(f"{name} must be a whole number of at least {low}, not {value}",
                                     fix=f"give --{name.replace('_', '-')} a whole number ≥ {low}")
         self._check_lights()
+        if self.denoise:  # pyoidn is optional: say how to install it before any work
+            from .denoise import require_oidn
+            require_oidn()
         self._check_materials()
         if not (isinstance(self.clip_percentile, (int, float)) and 50 < self.clip_percentile <= 100):
             raise SettingsError(f"clip_percentile must be above 50 and at most 100, not "
