@@ -43,8 +43,10 @@ from .scene import Scene
 from .settings import Resolved, Settings, resolve
 from .surface import LUMINANCE
 from .trace import Tracer
-from .unwrap import PageTooSmall, baked_instances, unwrap
+from .unwrap import PageTooSmall, baked_instances, frame_area, unwrap
 from .write import WriteOptions, write
+from .incremental import bake_or_rebake, details, save_bake_state, summary
+from .state import default_path as default_state_path
 
 
 @dataclass(frozen=True)
@@ -60,6 +62,7 @@ class BakeResult:
     seconds: float
     rmse_estimate: float
     report: dict = field(repr=False)
+    rebake: dict | None = field(default=None, repr=False)  # incremental.summary: what changed
 
 
 @contextmanager
@@ -71,13 +74,16 @@ def _timed(times: dict[str, float], name: str) -> Iterator[None]:
 
 
 def _bounds_of_baked(world, scene) -> tuple[float, float]:
-    """World area and bounds diagonal of the baked instances (for default settings)."""
+    """Area and world bounds diagonal of the baked instances (for default settings).
+
+    The area is summed in each instance's rigid-free frame (``unwrap.frame_area``), so a rigid
+    move of a node leaves the derived texel density bit-identical (incremental rebake)."""
     tris = np.concatenate([world.instance_triangles(i) for i in baked_instances(scene)] or
                           [np.zeros(0, np.int64)])
     if len(tris) == 0:
         return 0.0, 0.0
     points = world.positions[world.triangles[tris].reshape(-1)]
-    return float(world.areas(tris).sum()), float(np.linalg.norm(points.max(0) - points.min(0)))
+    return frame_area(scene, world), float(np.linalg.norm(points.max(0) - points.min(0)))
 
 
 def check_output(input_path: Path, output: Path, overwrite: bool = False,
@@ -217,6 +223,15 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True) -> Computed:
     with _timed(times, "direct"):
         with bar(len(texels), "direct light", wanted(quiet) and sources.any()) as advance:
             direct = direct_light(scene, world, tracer, texels, sources, resolved, advance)
+    return finish(scene, world, resolved, tracer, sources, power, ambient, plan, atlas, texels,
+                  validity, terms, direct, times)
+
+
+def finish(scene: Scene, world: World, resolved: Resolved, tracer: Tracer, sources: Sources,
+           power: Power, ambient: Ambient, plan: Plan, atlas: Atlas, texels: Texels,
+           validity: Validity, terms: Terms, direct: Direct, times: dict[str, float]) -> Computed:
+    """From the texels' terms to the post-processed float lightmaps: what a full bake and an
+    incremental rebake (incremental.py) share after the rays, so both give the same bytes."""
     indirect = None
     if resolved.method == "gi":  # the full-GI reference instead of I_A·W (gi.py)
         with _timed(times, "gi"):
@@ -242,8 +257,8 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
          report_path: str | os.PathLike | None = None,
          lightmaps_dir: str | os.PathLike | None = None, lightmaps_format: str = "png",
          error_map_dir: str | os.PathLike | None = None,
-         quiet: bool = True,
-         overwrite: bool = False) -> BakeResult:
+         quiet: bool = True, overwrite: bool = False, incremental: bool = False,
+         state: str | os.PathLike | bool | None = None) -> BakeResult:
     """Bake the glTF scene at ``input`` into ``output`` (.glb or .gltf) with lightmaps.
 
     ``report_path`` writes the JSON report; ``lightmaps_dir`` also writes each page as a file,
@@ -252,6 +267,13 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
     ``quiet=False`` draws a progress bar when stderr is a terminal. ``overwrite`` lets
     ``output`` be the input itself (or replace a file the input uses); it is replaced
     atomically, only once the bake has succeeded.
+
+    ``state``: the bake state (docs/bake_state.md) written after the bake, ``<output>.bake`` by
+    default (None/True), another path, or False for none. ``incremental=True`` starts from that
+    state: only the texels the edit can reach are recomputed, bit-identical to a full bake; a
+    missing, damaged or mismatched state, or an edit that changes the atlas, falls back to a
+    full bake. ``BakeResult.rebake`` says which (``full_bake_reason``), what changed, and names
+    the recomputed texels (``dirty_keys``, ``dirty_reasons``).
     """
     input_path, output = Path(input), Path(output)
     check_output(input_path, output, overwrite,
@@ -263,8 +285,10 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
     with _timed(loading, "load"):
         scene = load(input_path, settings.mirror_roughness)
     check_input_kept(scene, output, overwrite)
+    state_path = None if state is False else (
+        default_state_path(output) if state is None or state is True else Path(state))
     try:
-        done = compute(scene, settings, quiet)
+        done, rebaked = bake_or_rebake(scene, settings, state_path, incremental, quiet)
     except BakerError as error:  # a setting this scene cannot meet: name the scene
         error.file = error.file or str(input_path)
         raise
@@ -282,6 +306,8 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
                              lightmaps_format)
         if error_map_dir is not None:  # per-texel standard error pages (errormap.py)
             write_error_maps(Path(error_map_dir), output.stem, done, write_atomically)
+        if state_path is not None:  # the sidecar a rebake starts from (docs/bake_state.md)
+            save_bake_state(state_path, done, rebaked, settings)
     seconds = time.perf_counter() - started
     rmse = done.rmse_estimate()
     ambient, atlas = done.ambient, done.atlas
@@ -303,12 +329,14 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
         "notes": list(info.notes) + clipping_notes(pages),
         "lightmap_pages": [{"intensity": page.intensity, "peak": page.peak,
                             "clipped_fraction": page.clipped} for page in pages],
+        "rebake": summary(rebaked, state_path, incremental),
     }
     if report_path is not None:
         write_atomically(Path(report_path), json.dumps(report, indent=2).encode())
     return BakeResult(output=output, settings=resolved, plan=done.plan, texels=len(done.texels),
                       rays=done.terms.rays, pages=atlas.page_count, seconds=seconds,
-                      rmse_estimate=rmse, report=report)
+                      rmse_estimate=rmse, report=report,
+                      rebake=details(report["rebake"], rebaked))
 
 
 def write_atomically(path: Path, data: bytes) -> None:

@@ -135,10 +135,10 @@ class Settings:
                 raise SettingsError(f"{name} must be a whole number of at least {low}, not {value}",
                                     fix=f"give --{name.replace('_', '-')} a whole number ≥ {low}")
         self._check_lights()
+        self._check_materials()
         if self.denoise:  # pyoidn is optional: say how to install it before any work
             from .denoise import require_oidn
             require_oidn()
-        self._check_materials()
         if not (isinstance(self.clip_percentile, (int, float)) and 50 < self.clip_percentile <= 100):
             raise SettingsError(f"clip_percentile must be above 50 and at most 100, not "
                                 f"{self.clip_percentile}", fix="use --clip-percentile 99.9 (or 100: "

@@ -1,7 +1,9 @@
 """Lay every baked instance out in lightmap pages with xatlas.
 
-All baked instances go into one xatlas run, in world space, so that one texel covers about
-1 / texel_density world units everywhere and every instance of a shared mesh gets its own area.
+All baked instances go into one xatlas run, so that one texel covers about 1 / texel_density
+world units everywhere and every instance of a shared mesh gets its own area. Each instance goes
+in its own rigid-free frame (``frame_positions``: local positions × the stretch part of its world
+matrix), so moving or turning a node leaves the atlas bit for bit as it was (incremental rebake).
 """
 
 from __future__ import annotations
@@ -44,8 +46,57 @@ def _pack_options(settings: Resolved, resolution: int) -> xatlas.PackOptions:
     return options
 
 
-def _generate(world: World, instances: list[int], settings: Resolved, resolution: int) -> xatlas.Atlas:
-    """One xatlas run over the instances' world triangles, recentred and scaled to texel units.
+def stretch(linear: np.ndarray) -> np.ndarray:
+    """The part of a (3, 3) world matrix that a rigid move of its node leaves alone.
+
+    Polar decomposition ``linear = R · S`` (S symmetric, |det R| = 1), with the signs chosen so
+    that det R = +1 (S is negated for a mirroring matrix): ``local @ S.T`` is then congruent to
+    the world shape by a proper rotation, winding included. S is rounded to 2^-30 of its
+    largest singular value, so that the rounding noise of a rotated matrix's SVD (~1e-16) does
+    not change it: a node moved or turned keeps bit-identical unwrap input (DESIGN.md §5).
+    """
+    _u, sigma, vt = np.linalg.svd(linear)
+    s = (vt.T * sigma) @ vt
+    if np.linalg.det(linear) < 0:
+        s = -s
+    top = float(sigma.max()) if len(sigma) else 0.0
+    if not (np.isfinite(top) and top > 0):
+        return s
+    quantum = 2.0 ** (np.round(np.log2(top)) - 30)
+    return np.round(s / quantum) * quantum
+
+
+def frame_positions(scene: Scene, instance: int) -> np.ndarray:
+    """(n, 3) float64 positions of an instance's primitive in its rigid-free frame.
+
+    The mesh's local positions times the stretch part of the world matrix (``stretch``),
+    recentred on their bounds' middle: what xatlas sees, and the same bits before and after a
+    rigid move of the node, so the atlas and every texel's (page, x, y, key, barycentric) stay.
+    """
+    inst = scene.instances[instance]
+    positions = scene.primitives[inst.primitive].positions @ stretch(inst.world[:3, :3]).T
+    if not len(positions):
+        return positions
+    return positions - (positions.min(0) + positions.max(0)) / 2
+
+
+def frame_area(scene: Scene, world: World, instances: list[int] | None = None) -> float:
+    """Summed area (scene units²) of the baked instances' triangles, in their rigid-free frames
+    (a rigid move of a node leaves it bit-identical, and with it the derived texel density)."""
+    total = 0.0
+    for i in baked_instances(scene) if instances is None else instances:
+        local = world.triangles[world.instance_triangles(i)] - world.vertex_start[i]
+        p = frame_positions(scene, i)
+        if len(local):
+            a, b, c = p[local[:, 0]], p[local[:, 1]], p[local[:, 2]]
+            total += float(0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum())
+    return total
+
+
+def _generate(scene: Scene, world: World, instances: list[int], settings: Resolved,
+              resolution: int) -> xatlas.Atlas:
+    """One xatlas run over the instances' triangles in their rigid-free frames
+    (``frame_positions``), scaled to texel units.
 
     xatlas takes float32 and ignores faces with an area under about 1e-7 of its units; in texel
     units only faces far below a texel's size fall under that, not merely small ones.
@@ -55,8 +106,7 @@ def _generate(world: World, instances: list[int], settings: Resolved, resolution
         tris = world.instance_triangles(i)
         vertices = world.triangles[tris]
         first = world.vertex_start[i]
-        count = world.vertex_start[i + 1] - first
-        positions = (world.positions[first:first + count] - world.center) * settings.texel_density
+        positions = frame_positions(scene, i) * settings.texel_density
         positions = positions.astype(np.float32)
         atlas.add_mesh(positions, (vertices - first).astype(np.uint32))
     atlas.generate(xatlas.ChartOptions(), _pack_options(settings, resolution))
@@ -73,13 +123,13 @@ def unwrap(scene: Scene, world: World, settings: Resolved) -> Atlas:
     if not instances:
         return Atlas(width=0, height=0, page_count=0, texel_density=settings.texel_density,
                      padding=settings.padding, instances=())
-    area = float(sum(world.areas(world.instance_triangles(i)).sum() for i in instances))
+    area = frame_area(scene, world, instances)
     expected = area * settings.texel_density ** 2
     resolution = settings.page_size if expected > 0.5 * settings.page_size ** 2 else 0
     _check_triangles_fit(world, scene, instances, settings)
-    atlas = _generate(world, instances, settings, resolution)
+    atlas = _generate(scene, world, instances, settings, resolution)
     if max(atlas.width, atlas.height) > settings.page_size:
-        atlas = _generate(world, instances, settings, settings.page_size)
+        atlas = _generate(scene, world, instances, settings, settings.page_size)
     if atlas.width == 0 or atlas.height == 0:
         raise SettingsError("no surface got any lightmap texels at this texel density",
                             fix="raise --texel-density, or check that the meshes have area")
@@ -89,7 +139,7 @@ def unwrap(scene: Scene, world: World, settings: Resolved) -> Atlas:
         vertices, triangles, uv = atlas[mesh]
         page_of_vertex, _chart = atlas.get_mesh_vertex_assignment(mesh)
         vertices, triangles = vertices.astype(np.int64), triangles.astype(np.int64)
-        uv, page = _snap_unplaced(world, i, vertices, uv.astype(np.float64),
+        uv, page = _snap_unplaced(frame_positions(scene, i), vertices, uv.astype(np.float64),
                                   page_of_vertex.astype(np.int64), int(_NO_PAGE))
         result.append(InstanceUV(instance=i, vertices=vertices, triangles=triangles, uv=uv,
                                  pages=page[triangles[:, 0]]))
@@ -98,12 +148,12 @@ def unwrap(scene: Scene, world: World, settings: Resolved) -> Atlas:
                  padding=int(settings.padding), instances=tuple(result))
 
 
-def _snap_unplaced(world: World, instance: int, vertices: np.ndarray, uv: np.ndarray,
+def _snap_unplaced(frame: np.ndarray, vertices: np.ndarray, uv: np.ndarray,
                    page: np.ndarray, no_page: int) -> tuple[np.ndarray, np.ndarray]:
     """Give vertices xatlas left unplaced the UV and page of the nearest placed vertex.
 
     xatlas leaves out faces it finds degenerate; collapsing them onto the closest placed point
-    (in world space) of the same instance gives them a real texel to read, so no face of the
+    (in the instance's rigid-free frame, ``frame`` (n, 3)) of the same instance gives them a real texel to read, so no face of the
     output samples outside the lightmap. Returns uv (k, 2) and page (k,), -1 where the instance
     has no placed vertex at all.
     """
@@ -114,8 +164,7 @@ def _snap_unplaced(world: World, instance: int, vertices: np.ndarray, uv: np.nda
     page = np.where(lost, -1, page)
     if placed.size == 0:
         return uv, page
-    first = world.vertex_start[instance]
-    where = world.positions[first + vertices]
+    where = frame[vertices]
     uv, page = uv.copy(), page.copy()
     for chunk in np.array_split(np.flatnonzero(lost), max(1, int(np.flatnonzero(lost).size // 256))):
         distance = np.linalg.norm(where[chunk, None] - where[None, placed], axis=-1)

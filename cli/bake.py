@@ -7,6 +7,7 @@ from pathlib import Path
 
 import baker
 from cli.common import add_debug, positive_float
+from cli.state import add_state_options, print_rebake, state_arguments
 
 EPILOG = """examples:
   baker bake level.glb -o level_baked.glb
@@ -125,6 +126,7 @@ def add_parser(commands) -> None:
     running.add_argument("--threads", type=int, default=d.threads,
                          help="ray-casting threads (default: one per core)")
     running.add_argument("--quiet", action="store_true", help="print nothing but errors")
+    add_state_options(running)
     add_debug(running)
 
 
@@ -176,7 +178,9 @@ def run(args: argparse.Namespace) -> int:
     result = baker.bake(args.scene, args.output, settings_from(args), report_path=args.report,
                         lightmaps_dir=args.lightmaps, lightmaps_format=args.lightmaps_format,
                         error_map_dir=args.error_map,
-                        quiet=args.quiet, overwrite=args.overwrite)
+                        quiet=args.quiet, overwrite=args.overwrite,
+                        **state_arguments(args))
     if not args.quiet:
+        print_rebake(result)
         print_summary(result)
     return 0

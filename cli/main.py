@@ -13,9 +13,9 @@ import argparse
 import sys
 
 import baker
-from cli import bake, preview, study
+from cli import bake, hook, preview, rebake, study, watch
 
-SUBCOMMANDS = (bake, preview, study)
+SUBCOMMANDS = (bake, rebake, watch, hook, preview, study)
 
 
 def build_parser() -> argparse.ArgumentParser:

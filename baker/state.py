@@ -1,0 +1,195 @@
+"""The bake state: a sidecar file that lets the next bake recompute only what changed.
+
+Written next to the output (``<output>.bake`` by default) after every bake; read by an
+incremental rebake (``incremental.py``), which diffs the new scene against its fingerprints
+(``diff.py``). The format is documented in ``docs/bake_state.md``:
+
+- a ZIP archive (stored, no compression) whose members have a fixed timestamp, so the same bake
+  gives the same bytes (DESIGN.md §4: an incremental rebake's state equals a full bake's);
+- ``header.json``: ``{"format": "baker-bake-state", "version": 1, "fingerprints": {...},
+  "groups": {name: {"class": ..., "fields": {...}, "scalars": {...}}}, "instances": [...]}``;
+- one ``<group>/<field>.npy`` member per array (numpy's .npy format), so ``numpy.load`` of the
+  file as an .npz reads every array.
+
+Dataclasses (Texels, Validity, Terms, Direct) are stored field by field, generically: a new term
+field needs no format change — a state that lacks a field the code now has is "old" and leads to
+a full bake, never to a wrong result. Anything unreadable (missing, truncated, foreign, another
+version, fields that do not match) raises ``StateUnusable`` with a one-line reason.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import zipfile
+from dataclasses import dataclass, fields, is_dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .atlas import Atlas, InstanceUV
+
+FORMAT = "baker-bake-state"
+VERSION = 1
+SUFFIX = ".bake"
+_DATE = (1980, 1, 1, 0, 0, 0)  # fixed member timestamp: same content, same bytes
+
+
+class StateUnusable(Exception):
+    """The bake state cannot be used; ``str(error)`` says why in one line."""
+
+
+def default_path(output: str | Path) -> Path:
+    """Where the state of a bake written to ``output`` lives by default: ``<output>.bake``."""
+    output = Path(output)
+    return output.with_name(output.name + SUFFIX)
+
+
+def digest(*parts: Any) -> str:
+    """A short hex SHA-256 of arrays (dtype, shape and bytes), strings and numbers, in order."""
+    h = hashlib.sha256()
+    for part in parts:
+        if isinstance(part, np.ndarray):
+            a = np.ascontiguousarray(part)
+            h.update(f"{a.dtype.str}{a.shape}".encode())
+            h.update(a.tobytes())
+        else:
+            h.update(repr(part).encode())
+        h.update(b"\x00")
+    return h.hexdigest()[:32]
+
+
+@dataclass(frozen=True)
+class BakeState:
+    """What a rebake needs of the last bake.
+
+    fingerprints: JSON-able dict from ``diff.fingerprints`` (settings, unwrap input, every
+    instance, material, light; the tracer's centre). atlas: the lightmap layout (UVs).
+    groups: name → dataclass instance, at least "texels" (Texels after the validity probes moved
+    their sample points), "validity", "terms", and "direct" when the scene has direct light;
+    rows of every per-texel array in texel order. instance_world: (I, 4, 4) float64 world matrix
+    of every instance as baked (to rebuild a moved node's old placement).
+    """
+
+    fingerprints: dict
+    atlas: Atlas
+    groups: dict[str, Any]
+    instance_world: np.ndarray
+
+
+def _npy(array: np.ndarray) -> bytes:
+    buffer = io.BytesIO()
+    np.lib.format.write_array(buffer, np.ascontiguousarray(array), allow_pickle=False)
+    return buffer.getvalue()
+
+
+def _member(archive: zipfile.ZipFile, name: str, data: bytes) -> None:
+    info = zipfile.ZipInfo(name, date_time=_DATE)
+    info.compress_type = zipfile.ZIP_STORED
+    info.external_attr = 0o644 << 16
+    archive.writestr(info, data)
+
+
+def _atlas_group(atlas: Atlas) -> tuple[dict, dict[str, np.ndarray]]:
+    """The atlas as scalars plus per-instance arrays."""
+    scalars = {"width": atlas.width, "height": atlas.height, "page_count": atlas.page_count,
+               "texel_density": atlas.texel_density, "padding": atlas.padding,
+               "instances": [u.instance for u in atlas.instances]}
+    arrays = {}
+    for k, u in enumerate(atlas.instances):
+        for name in ("vertices", "triangles", "uv", "pages"):
+            arrays[f"{k}.{name}"] = getattr(u, name)
+    return scalars, arrays
+
+
+def encode_state(state: BakeState) -> bytes:
+    """The state as the bytes of its file (deterministic: the same state, the same bytes)."""
+    arrays: dict[str, np.ndarray] = {}
+    groups: dict[str, dict] = {}
+    atlas_scalars, atlas_arrays = _atlas_group(state.atlas)
+    groups["atlas"] = {"class": "Atlas", "scalars": atlas_scalars, "fields": sorted(atlas_arrays)}
+    arrays.update({f"atlas/{k}": v for k, v in atlas_arrays.items()})
+    arrays["instance_world"] = np.asarray(state.instance_world, np.float64)
+    for group, obj in sorted(state.groups.items()):
+        if obj is None:
+            continue
+        assert is_dataclass(obj), group
+        scalars, names = {}, []
+        for f in fields(obj):
+            value = getattr(obj, f.name)
+            if isinstance(value, np.ndarray):
+                arrays[f"{group}/{f.name}"] = value
+                names.append(f.name)
+            else:
+                scalars[f.name] = value
+        groups[group] = {"class": type(obj).__name__, "fields": names, "scalars": scalars}
+    header = {"format": FORMAT, "version": VERSION, "fingerprints": state.fingerprints,
+              "groups": groups}
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(buffer, "w", zipfile.ZIP_STORED) as archive:
+        _member(archive, "header.json", json.dumps(header, sort_keys=True, indent=1).encode())
+        for name in sorted(arrays):
+            _member(archive, f"{name}.npy", _npy(arrays[name]))
+    return buffer.getvalue()
+
+
+def save(path: str | Path, state: BakeState) -> None:
+    """Write the state to ``path`` atomically (temporary file + rename)."""
+    from .bake import write_atomically  # bake imports this module
+
+    write_atomically(Path(path), encode_state(state))
+
+
+def load(path: str | Path, classes: dict[str, type]) -> BakeState:
+    """Read a state written by ``save``; ``classes`` maps group name → the dataclass to rebuild.
+
+    Raises StateUnusable (one-line reason) for a missing, truncated, foreign or other-version
+    file, or one whose groups or fields differ from the dataclasses' (written by older code).
+    """
+    path = Path(path)
+    if not path.exists():
+        raise StateUnusable(f"no bake state at {path}")
+    try:
+        with zipfile.ZipFile(path) as archive:
+            try:
+                header = json.loads(archive.read("header.json"))
+            except KeyError:
+                raise StateUnusable(f"{path} is not a baker bake state (no header)") from None
+            if not isinstance(header, dict) or header.get("format") != FORMAT:
+                raise StateUnusable(f"{path} is not a baker bake state")
+            if header.get("version") != VERSION:
+                raise StateUnusable(f"{path} is a bake state of version {header.get('version')!r}, "
+                                    f"this baker reads version {VERSION}")
+
+            def array(name: str) -> np.ndarray:
+                with archive.open(f"{name}.npy") as member:
+                    return np.lib.format.read_array(io.BytesIO(member.read()), allow_pickle=False)
+
+            groups = header["groups"]
+            a = groups["atlas"]["scalars"]
+            atlas = Atlas(width=a["width"], height=a["height"], page_count=a["page_count"],
+                          texel_density=a["texel_density"], padding=a["padding"],
+                          instances=tuple(InstanceUV(instance=i, **{
+                              n: array(f"atlas/{k}.{n}") for n in ("vertices", "triangles", "uv", "pages")})
+                              for k, i in enumerate(a["instances"])))
+            objects: dict[str, Any] = {}
+            for group, cls in classes.items():
+                if group not in groups:
+                    objects[group] = None
+                    continue
+                stored = groups[group]
+                names = {f.name for f in fields(cls)}
+                if stored["class"] != cls.__name__ or set(stored["fields"]) | set(stored["scalars"]) != names:
+                    raise StateUnusable(f"{path} was written by another baker version "
+                                        f"({group} fields differ)")
+                values = dict(stored["scalars"])
+                values.update({n: array(f"{group}/{n}") for n in stored["fields"]})
+                objects[group] = cls(**values)
+            return BakeState(fingerprints=header["fingerprints"], atlas=atlas, groups=objects,
+                             instance_world=array("instance_world"))
+    except StateUnusable:
+        raise
+    except (zipfile.BadZipFile, KeyError, ValueError, TypeError, OSError, EOFError) as error:
+        raise StateUnusable(f"{path} is damaged or truncated ({type(error).__name__})") from None

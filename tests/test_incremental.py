@@ -1,0 +1,220 @@
+"""Incremental rebake (issue 5): rigid-move-invariant atlas, bake state, diff, dirty texels, and
+the invariant everything leans on — an incremental rebake gives the same bytes as a full bake of
+the edited scene (DESIGN.md §4–5)."""
+
+from __future__ import annotations
+
+import shutil
+import zipfile
+from dataclasses import fields
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import baker
+from assets.gltf_builder import rotation_matrix
+from assets.rebake_scenes import box_room, grid_boxes, moved
+from baker.bake import compute
+from baker.geometry import build_world
+from baker.incremental import FullBake, rebake
+from baker.load import load
+from baker.rasterise import rasterise
+from baker.settings import resolve
+from baker.state import default_path
+from baker.unwrap import frame_area, stretch, unwrap
+from cli.main import main
+
+ROOM = (4.0, 3.0, 4.0)
+BOXES = grid_boxes(4, room=ROOM, size=0.4)
+LAMP = {"at": (0.3, 2.6, 0.2), "intensity": 5.0, "radius": 0.1}
+SETTINGS = baker.Settings(rays=16, page_size=128, shadow_rays=4, threads=1)
+
+
+def _room(boxes=BOXES, **kwargs):
+    return box_room(boxes, room=ROOM, lamp=kwargs.pop("lamp", LAMP), **kwargs)
+
+
+EDITS = {
+    "box moved across the room": lambda: _room(moved(BOXES, "box1", at=(1.2, -1.1))),
+    "box rotated": lambda: _room(moved(BOXES, "box2", turn=77.0)),
+    "base colour changed": lambda: _room(colours={"accent": (0.1, 0.5, 0.9)}),
+    "light moved": lambda: _room(lamp=dict(LAMP, at=(-1.0, 2.5, 0.5))),
+    "light intensity changed": lambda: _room(lamp=dict(LAMP, intensity=9.0)),
+    "object removed": lambda: _room(BOXES[:3]),
+    "object added": lambda: _room(BOXES + [dict(BOXES[1], name="box9", at=(0.0, 1.5))]),
+}
+NEEDS_NEW_ATLAS = {"object removed", "object added"}
+
+
+@pytest.fixture(scope="module")
+def base(tmp_path_factory) -> Path:
+    """The unedited room, fully baked, with its bake state."""
+    folder = tmp_path_factory.mktemp("base")
+    scene = _room().save(folder / "room.glb")
+    result = baker.bake(scene, folder / "room_baked.glb", SETTINGS)
+    assert result.rebake["incremental"] is False and default_path(folder / "room_baked.glb").exists()
+    return folder / "room_baked.glb"
+
+
+def _rebake_and_full(base: Path, builder, folder: Path, settings=SETTINGS):
+    """Rebake the edited scene from the base state, and bake it fully; return both results."""
+    scene = builder.save(folder / "edited.glb")
+    shutil.copy(default_path(base), default_path(folder / "incremental.glb"))
+    incremental = baker.bake(scene, folder / "incremental.glb", settings, incremental=True)
+    full = baker.bake(scene, folder / "full.glb", settings)
+    return incremental, full
+
+
+@pytest.mark.parametrize("edit", list(EDITS))
+def test_rebake_is_byte_identical_to_a_full_bake(base, tmp_path, edit):
+    incremental, full = _rebake_and_full(base, EDITS[edit](), tmp_path)
+    assert (tmp_path / "incremental.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()
+    assert (default_path(tmp_path / "incremental.glb").read_bytes()
+            == default_path(tmp_path / "full.glb").read_bytes())
+    info = incremental.rebake
+    if edit in NEEDS_NEW_ATLAS:  # packing changes: a full bake is the right answer, and says why
+        assert info["incremental"] is False and info["full_bake_reason"]
+        return
+    assert info["incremental"] is True, info.get("full_bake_reason")
+    fraction = info["dirty_fraction"]
+    if edit.startswith("light"):  # no obscurance ray: recomposition or one light's shadows
+        assert info["dirty_texels"] == 0
+        assert info["relit_lights"] == ([0] if edit == "light moved" else [])
+    else:
+        assert 0 < fraction < 0.5, fraction
+        assert len(incremental.rebake["dirty_keys"]) == info["dirty_texels"]
+
+
+def test_added_or_removed_node_names_the_reason(base, tmp_path):
+    density = baker.Settings(**{**{f.name: getattr(SETTINGS, f.name) for f in fields(SETTINGS)},
+                                "texel_density": 10.0})
+    scene = _room().save(tmp_path / "room.glb")
+    baker.bake(scene, tmp_path / "out.glb", density)
+    edited = _room(BOXES[:3]).save(tmp_path / "edited.glb")
+    result = baker.bake(edited, tmp_path / "out.glb", density, incremental=True)
+    assert result.rebake["incremental"] is False
+    assert "removed" in result.rebake["full_bake_reason"]
+
+
+def test_no_false_negatives_next_to_a_wall(tmp_path):
+    """Every texel whose full-bake terms change when a box moves against a wall is dirty."""
+    settings = baker.Settings(rays=16, page_size=128, shadow_rays=4, threads=1, d_max=0.3)
+    low = dict(LAMP, at=(0.9, 0.9, -0.5))  # low, beside the box: shadows reach past d_max
+    before = _room(lamp=low).save(tmp_path / "before.glb")
+    after = _room(moved(BOXES, "box1", at=(1.75, -0.5)), lamp=low).save(tmp_path / "after.glb")
+    baker.bake(before, tmp_path / "out.glb", settings)
+    result = baker.bake(after, tmp_path / "out.glb", settings, incremental=True)
+    assert result.rebake["incremental"]
+    a, b = compute(load(before), settings), compute(load(after), settings)
+    assert np.array_equal(a.texels.key, b.texels.key)
+    changed = ~(a.texels.position == b.texels.position).all(axis=1)
+    for x, y in ((a.terms, b.terms), (a.direct, b.direct), (a.validity, b.validity)):
+        for f in fields(x):
+            u, v = getattr(x, f.name), getattr(y, f.name)
+            if isinstance(u, np.ndarray) and len(u) == len(changed):
+                changed |= ~(u.reshape(len(u), -1) == v.reshape(len(v), -1)).all(axis=1)
+    dirty = np.isin(a.texels.key, result.rebake["dirty_keys"])
+    assert changed.sum() > 100  # the move changes plenty, near the wall and around
+    assert not (changed & ~dirty).any(), int((changed & ~dirty).sum())
+    assert result.rebake["dirty_by_reason"]["shadow"] > 0  # shadows reach past d_max here
+
+
+def test_atlas_and_texels_do_not_change_under_a_rigid_move(tmp_path):
+    """Moving and turning a (scaled) node leaves the atlas, and every texel's page, x, y, key
+    and barycentric placement, bit-identical; only its world positions move."""
+    scenes = [_room(), _room(moved(BOXES, "box0", at=(-1.0, 1.3), turn=131.0))]
+    out = []
+    for k, builder in enumerate(scenes):
+        scene = load(builder.save(tmp_path / f"s{k}.glb"))
+        world = build_world(scene)
+        settings = resolve(SETTINGS, frame_area(scene, world), 1.0)
+        atlas = unwrap(scene, world, settings)
+        out.append((settings, atlas, rasterise(atlas, world)))
+    (s0, a0, t0), (s1, a1, t1) = out
+    assert s0.texel_density == s1.texel_density
+    assert (a0.width, a0.height, a0.page_count) == (a1.width, a1.height, a1.page_count)
+    for u0, u1 in zip(a0.instances, a1.instances):
+        for name in ("vertices", "triangles", "uv", "pages"):
+            assert np.array_equal(getattr(u0, name), getattr(u1, name))
+    for name in ("page", "x", "y", "key", "barycentric", "triangle"):
+        assert np.array_equal(getattr(t0, name), getattr(t1, name)), name
+    assert not np.array_equal(t0.position, t1.position)
+
+
+def test_stretch_ignores_rotation_and_keeps_mirroring():
+    rng = np.random.default_rng(3)
+    scale = np.diag([0.3, 1.7, 0.9])
+    for _ in range(20):
+        r = rotation_matrix(rng.normal(size=3), float(rng.uniform(0, 360)))
+        assert np.array_equal(stretch(r @ scale), stretch(scale))
+        assert np.array_equal(stretch(r @ scale @ np.diag([1, 1, -1])),
+                              stretch(scale @ np.diag([1, 1, -1])))
+    assert np.linalg.det(stretch(np.diag([1.0, 1.0, -1.0]))) < 0
+
+
+@pytest.mark.parametrize("damage", ["missing", "truncated", "version", "foreign", "other scene"])
+def test_unusable_state_means_a_full_bake_with_a_reason(base, tmp_path, damage):
+    scene = EDITS["box moved across the room"]().save(tmp_path / "edited.glb")
+    state = default_path(tmp_path / "out.glb")
+    if damage == "truncated":
+        data = default_path(base).read_bytes()
+        state.write_bytes(data[: len(data) // 2])
+    elif damage == "version":
+        with zipfile.ZipFile(default_path(base)) as src, zipfile.ZipFile(state, "w") as dst:
+            for item in src.infolist():
+                data = src.read(item)
+                if item.filename == "header.json":
+                    data = data.replace(b'"version": 1', b'"version": 99')
+                dst.writestr(item, data)
+    elif damage == "foreign":
+        state.write_bytes(b"PK\x03\x04 not really a zip")
+    elif damage == "other scene":
+        other = box_room(grid_boxes(3, room=ROOM, seed=5), room=ROOM).save(tmp_path / "other.glb")
+        baker.bake(other, tmp_path / "out.glb", SETTINGS)
+    result = baker.bake(scene, tmp_path / "out.glb", SETTINGS, incremental=True)
+    assert result.rebake["incremental"] is False
+    reason = result.rebake["full_bake_reason"]
+    assert reason and "\n" not in reason
+    baker.bake(scene, tmp_path / "full.glb", SETTINGS, state=False)
+    assert (tmp_path / "out.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()
+
+
+def test_unchanged_scene_recomputes_nothing(base, tmp_path):
+    scene = _room().save(tmp_path / "same.glb")
+    shutil.copy(default_path(base), default_path(tmp_path / "out.glb"))
+    with pytest.raises(FullBake):  # the library-level call refuses a missing state
+        rebake(load(scene), SETTINGS, tmp_path / "nothing.bake")
+    result = baker.bake(scene, tmp_path / "out.glb", SETTINGS, incremental=True)
+    assert result.rebake["incremental"] and result.rebake["dirty_texels"] == 0
+    assert (tmp_path / "out.glb").read_bytes() == base.read_bytes()
+
+
+def test_cli_bakes_incrementally_rebakes_and_watches(base, tmp_path, capsys):
+    out = tmp_path / "out.glb"
+    scene = _room().save(tmp_path / "room.glb")
+    args = ["--rays", "16", "--page-size", "128", "--shadow-rays", "4", "--threads", "1"]
+    assert main(["bake", str(scene), "-o", str(out), *args]) == 0
+    assert "full bake: no bake state" in capsys.readouterr().out
+    EDITS["box moved across the room"]().save(scene)
+    assert main(["rebake", str(scene), "-o", str(out), "--moved", "box1"]) == 0
+    captured = capsys.readouterr()
+    assert "rebake: node box1 moved" in captured.out and "note:" not in captured.err
+    assert main(["bake", str(scene), "-o", str(out), *args, "--full"]) == 0
+    assert "rebake:" not in capsys.readouterr().out
+    assert main(["bake", str(scene), "-o", str(out), *args]) == 0  # the state is used by default
+    assert "0 of" in capsys.readouterr().out
+    assert main(["watch", str(scene), "-o", str(out), "--rays", "16", "--max-bakes", "1",
+                 "--interval", "0.01"]) == 0
+    assert "baked" in capsys.readouterr().out
+
+
+def test_pre_commit_hook_bakes_each_scene_beside_it(tmp_path, capsys):
+    hooks = (Path(__file__).resolve().parents[1] / ".pre-commit-hooks.yaml").read_text()
+    assert "entry: baker hook" in hooks and "id: baker-bake" in hooks
+    scene = box_room(BOXES[:1], room=ROOM).save(tmp_path / "crate.glb")
+    assert main(["hook", str(scene), str(tmp_path / "crate_baked.glb"), "--rays", "4",
+                 "--page-size", "64"]) == 0
+    assert (tmp_path / "crate_baked.glb").exists() and default_path(tmp_path / "crate_baked.glb").exists()
+    assert not (tmp_path / "crate_baked_baked.glb").exists()  # outputs are not baked again
+    assert main(["hook", str(tmp_path / "missing.glb")]) == 1
