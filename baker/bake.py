@@ -188,6 +188,20 @@ class Computed:
         return float(np.sqrt(obscurance ** 2 + direct))
 
 
+def lighting(scene: Scene, world: World, resolved: Resolved, times: dict[str, float]):
+    """Embree's scene, the light sources, the power they deliver, I_A and R_ave, and the plan:
+    what a bake and a rebake both need before any texel. Returns (tracer, sources, power,
+    ambient, plan); adds the stages "lights" and "plan" to ``times``."""
+    with _timed(times, "lights"):
+        tracer = Tracer(world)
+        sources = light_sources(scene, world, resolved)
+        power = delivered_power(scene, world, tracer, sources, resolved)
+    with _timed(times, "plan"):
+        ambient = ambient_terms(scene, world, resolved.ambient, power)
+        plan = make_plan(scene, ambient, resolved.rho, sources)
+    return tracer, sources, power, ambient, plan
+
+
 def compute(scene: Scene, settings: Settings, quiet: bool = True) -> Computed:
     """Run every stage from the loaded scene up to the post-processed float lightmaps."""
     times: dict[str, float] = {}
@@ -195,13 +209,7 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True) -> Computed:
         world = build_world(scene)
     area, diagonal = _bounds_of_baked(world, scene)
     resolved = resolve(settings, area, diagonal)
-    with _timed(times, "lights"):  # Embree's scene, the sources, the power they deliver (I_A)
-        tracer = Tracer(world)
-        sources = light_sources(scene, world, resolved)
-        power = delivered_power(scene, world, tracer, sources, resolved)
-    with _timed(times, "plan"):
-        ambient = ambient_terms(scene, world, resolved.ambient, power)
-        plan = make_plan(scene, ambient, resolved.rho, sources)
+    tracer, sources, power, ambient, plan = lighting(scene, world, resolved, times)
     with _timed(times, "unwrap"):
         try:
             atlas = unwrap(scene, world, resolved)

@@ -28,21 +28,18 @@ bit, the terms the last bake stored, and only the others need rays. The rebake:
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
 from . import state as state_file
-from .ambient import ambient_terms
 from .compose import effective_r_ave
 from .diff import Diff, diff, fingerprints
 from . import validity as validity_module
-from .direct import Direct, _texel_receivers, delivered_power, direct_light, \
-    light_dimension, light_sources, punctual_irradiance
+from .direct import Direct, _texel_receivers, direct_light, \
+    light_dimension, punctual_irradiance
 from .geometry import World, build_world
 from .integrate import Terms, hemisphere_rays, integrate
-from .plan import make_plan
 from .rasterise import Texels, rasterise
 from .scene import Scene
 from .settings import Settings, resolve
@@ -302,7 +299,7 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True) -> Rebake
     Raises FullBake (with the reason) when the state is unusable or the change needs a new
     atlas, new rays for every texel, or a new float32 frame.
     """
-    from .bake import _bounds_of_baked, _timed, finish  # bake.py imports this module
+    from .bake import _bounds_of_baked, _timed, finish, lighting  # bake.py imports this module
 
     times: dict[str, float] = {}
     with _timed(times, "load"):
@@ -327,13 +324,7 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True) -> Rebake
     old_terms, old_direct = stored.groups["terms"], stored.groups["direct"]
     if old_texels is None or old_validity is None or old_terms is None:
         raise FullBake("the bake state lacks the texels' terms")
-    with _timed(times, "trace"):
-        tracer = Tracer(world)
-        sources = light_sources(scene, world, resolved)
-        power = delivered_power(scene, world, tracer, sources, resolved)
-    with _timed(times, "plan"):
-        ambient = ambient_terms(scene, world, resolved.ambient, power)
-        plan = make_plan(scene, ambient, resolved.rho, sources)
+    tracer, sources, power, ambient, plan = lighting(scene, world, resolved, times)
     atlas = stored.atlas
     with _timed(times, "rasterise"):
         raw = rasterise(atlas, world)

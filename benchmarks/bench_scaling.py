@@ -22,7 +22,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
@@ -100,7 +99,7 @@ def adaptive_against_uniform() -> None:
         uniform = compute(scene, Settings(**{**base, "rays": rays}))
         if worst(uniform) <= target:
             break
-    print(f"\nadaptive sampling, Cornell room at 128², target error 0.004 (lightmap units):")
+    print("\nadaptive sampling, Cornell room at 128², target error 0.004 (lightmap units):")
     print(f"  adaptive: {adaptive.terms.rays:,} rays, worst texel error {target:.4g}, "
           f"rays per texel {adaptive.terms.counts.min()}–{adaptive.terms.counts.max()}")
     print(f"  uniform:  {uniform.terms.rays:,} rays ({rays} per texel) for worst texel error "

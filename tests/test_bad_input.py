@@ -25,13 +25,12 @@ import zlib
 from pathlib import Path
 
 import numpy as np
-import pygltflib
 import pytest
 
 import baker
 from assets.gltf_builder import GltfBuilder, box, quad
 from assets.make_scenes import checker, cornell_box
-from baker.load import load, read_accessor, resolve_buffers
+from baker.load import load
 from cli.main import main
 
 ROOT = Path(__file__).resolve().parents[1]

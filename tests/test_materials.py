@@ -13,7 +13,7 @@ from assets.material_scenes import (DIFFUSE_TRANSMISSION, TRANSMISSION, VOLUME, 
                                     facing_mirrors, glass_slab, material_zoo, mirror_wall)
 from baker.geometry import build_world
 from baker.integrate import _Chains, _refract, _special_hits, _surfaces, integrate
-from baker.materials import (DIFFUSE, SPECULAR, TRANSLUCENT, TRANSPARENT, classify,
+from baker.materials import (DIFFUSE, SPECULAR, TRANSLUCENT, classify,
                              no_lightmap_reason)
 from baker.scene import Material
 from baker.settings import Settings, resolve
