@@ -310,6 +310,13 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True) -> Rebake
         world = build_world(scene)
     area, diagonal = _bounds_of_baked(world, scene)
     resolved = resolve(settings, area, diagonal)
+    stored_density = stored.fingerprints["settings"]["values"].get("texel_density")
+    if settings.texel_density is None and stored_density is not None and (
+            stored_density < resolved.texel_density):
+        # The full bake lowered its derived density until the charts fit a page (bake.compute);
+        # the same scene derives the same density, so take the value it ended with. Were the
+        # geometry different, the unwrap fingerprint below would still call for a full bake.
+        resolved = replace(resolved, texel_density=stored_density)
     fingerprint = fingerprints(scene, world, resolved, settings)
     change = diff(stored.fingerprints, fingerprint)
     if change.full is not None:

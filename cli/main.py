@@ -40,6 +40,9 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f"baker: error: {error}", file=sys.stderr)
         return 1
+    except BrokenPipeError:  # the reader of our output went away (e.g. `| head`): not an error
+        sys.stderr.close()
+        return 0
     except KeyboardInterrupt:
         print("baker: interrupted; no output was changed", file=sys.stderr)
         return 130

@@ -218,3 +218,21 @@ def test_pre_commit_hook_bakes_each_scene_beside_it(tmp_path, capsys):
     assert (tmp_path / "crate_baked.glb").exists() and default_path(tmp_path / "crate_baked.glb").exists()
     assert not (tmp_path / "crate_baked_baked.glb").exists()  # outputs are not baked again
     assert main(["hook", str(tmp_path / "missing.glb")]) == 1
+
+
+def test_relight_after_a_shrunk_default_density_casts_no_ray(tmp_path):
+    """A default density too large for one page is lowered by the full bake; changing only the
+    light's intensity and colour still recomposes (no ray) to the full bake's bytes."""
+    from assets.light_scenes import lit_floor
+
+    lit_floor("point", intensity=10.0).save(tmp_path / "scene.glb")
+    settings = baker.Settings(rays=4, page_size=256, threads=1)
+    first = baker.bake(tmp_path / "scene.glb", tmp_path / "lit.glb", settings)
+    assert first.settings.texel_density < 0.99 * baker.settings.default_texel_density(
+        16.0, 256)  # the 4 m floor's derived density did not fit and was lowered
+    edited = lit_floor("point", intensity=40.0, color=(1.0, 0.5, 0.5)).save(tmp_path / "b.glb")
+    again = baker.bake(edited, tmp_path / "lit.glb", settings, incremental=True)
+    full = baker.bake(edited, tmp_path / "full.glb", settings)
+    assert again.rebake["incremental"] is True, again.rebake.get("full_bake_reason")
+    assert again.rebake["rays"] == 0
+    assert (tmp_path / "lit.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()
