@@ -266,7 +266,7 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
          lightmaps_dir: str | os.PathLike | None = None, lightmaps_format: str = "png",
          error_map_dir: str | os.PathLike | None = None,
          quiet: bool = True, overwrite: bool = False, incremental: bool = False,
-         state: str | os.PathLike | bool | None = None) -> BakeResult:
+         state: str | os.PathLike | bool | None = None, relight: bool = False) -> BakeResult:
     """Bake the glTF scene at ``input`` into ``output`` (.glb or .gltf) with lightmaps.
 
     ``report_path`` writes the JSON report; ``lightmaps_dir`` also writes each page as a file,
@@ -281,7 +281,9 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
     state: only the texels the edit can reach are recomputed, bit-identical to a full bake; a
     missing, damaged or mismatched state, or an edit that changes the atlas, falls back to a
     full bake. ``BakeResult.rebake`` says which (``full_bake_reason``), what changed, and names
-    the recomputed texels (``dirty_keys``, ``dirty_reasons``).
+    the recomputed texels (``dirty_keys``, ``dirty_reasons``). ``relight=True``: only light
+    colours and intensities may have changed; the lightmaps are recomposed from the state with
+    no ray cast, and anything else is an InputError (nothing written).
     """
     input_path, output = Path(input), Path(output)
     check_output(input_path, output, overwrite,
@@ -296,7 +298,8 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
     state_path = None if state is False else (
         default_state_path(output) if state is None or state is True else Path(state))
     try:
-        done, rebaked = bake_or_rebake(scene, settings, state_path, incremental, quiet)
+        done, rebaked = bake_or_rebake(scene, settings, state_path, incremental, quiet,
+                                       relight)
     except BakerError as error:  # a setting this scene cannot meet: name the scene
         error.file = error.file or str(input_path)
         raise

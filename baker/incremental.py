@@ -293,7 +293,8 @@ def _relight(texels: Texels, tracer: Tracer, sources, settings, light: int,
     return value, variance
 
 
-def rebake(scene: Scene, settings: Settings, path, quiet: bool = True) -> Rebaked:
+def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
+           relight: bool = False) -> Rebaked:
     """Recompute the scene's lightmaps from the bake state at ``path``; only what changed.
 
     Raises FullBake (with the reason) when the state is unusable or the change needs a new
@@ -321,6 +322,9 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True) -> Rebake
     change = diff(stored.fingerprints, fingerprint)
     if change.full is not None:
         raise FullBake(change.full)
+    if relight and (change.moved or change.recoloured or change.lights_placed):
+        raise FullBake("more than light colours and intensities changed: "
+                       + "; ".join(change.changes))
     if resolved.method != "obscurance":
         raise FullBake(f"method {resolved.method!r} traces paths through the whole scene from "
                        "every texel")
@@ -419,22 +423,27 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True) -> Rebake
 
 
 def bake_or_rebake(scene: Scene, settings: Settings, state_path, incremental: bool,
-                   quiet: bool = True):
+                   quiet: bool = True, relight: bool = False):
     """(``bake.Computed``, Rebaked | str | None): a rebake from the state at ``state_path`` when
     ``incremental`` and it can follow, else a full bake and the one-line reason (a str), or None
-    when no rebake was asked for."""
+    when no rebake was asked for. ``relight``: only a recomposition (light colours and
+    intensities) may follow; anything else raises InputError before any ray is cast."""
     from .bake import compute
+    from .errors import InputError
 
-    if not incremental:
+    if not incremental and not relight:
         return compute(scene, settings, quiet), None
     if state_path is None:
         reason = "no bake state (state=False)"
     else:
         try:
-            rebaked = rebake(scene, settings, state_path, quiet)
+            rebaked = rebake(scene, settings, state_path, quiet, relight)
             return rebaked.computed, rebaked
         except FullBake as why:
             reason = str(why)
+    if relight:
+        raise InputError(f"cannot relight without tracing: {reason}", file=str(scene.path),
+                         fix="use `baker bake` (it rebakes only what changed)")
     return compute(scene, settings, quiet), reason
 
 

@@ -13,9 +13,9 @@ import argparse
 import sys
 
 import baker
-from cli import bake, hook, preview, rebake, study, watch
+from cli import bake, hook, preview, rebake, relight, study, watch
 
-SUBCOMMANDS = (bake, rebake, watch, hook, preview, study)
+SUBCOMMANDS = (bake, rebake, relight, watch, hook, preview, study)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -236,3 +236,26 @@ def test_relight_after_a_shrunk_default_density_casts_no_ray(tmp_path):
     assert again.rebake["incremental"] is True, again.rebake.get("full_bake_reason")
     assert again.rebake["rays"] == 0
     assert (tmp_path / "lit.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()
+
+
+def test_baker_relight_recomposes_without_rays_and_refuses_other_edits(tmp_path, capsys):
+    from assets.light_scenes import lit_floor
+
+    lit_floor("point", intensity=10.0).save(tmp_path / "scene.glb")
+    out = tmp_path / "lit.glb"
+    assert main(["bake", str(tmp_path / "scene.glb"), "-o", str(out), "--rays", "4",
+                 "--page-size", "128", "--quiet"]) == 0
+    moved_light = lit_floor("point", position=(0.5, 2.0, 0.0), intensity=10.0).save(
+        tmp_path / "moved.glb")
+    before = out.read_bytes()
+    assert main(["relight", str(moved_light), "-o", str(out)]) == 1
+    assert "cannot relight without tracing" in capsys.readouterr().err
+    assert out.read_bytes() == before  # refused: nothing written
+    brighter = lit_floor("point", intensity=25.0, color=(0.2, 0.4, 1.0)).save(tmp_path / "b.glb")
+    assert main(["relight", str(brighter), "-o", str(out), "--report",
+                 str(tmp_path / "r.json"), "--quiet"]) == 0
+    import json
+    assert json.loads((tmp_path / "r.json").read_text())["rebake"]["rays"] == 0
+    assert main(["bake", str(brighter), "-o", str(tmp_path / "full.glb"), "--rays", "4",
+                 "--page-size", "128", "--quiet", "--no-state"]) == 0
+    assert out.read_bytes() == (tmp_path / "full.glb").read_bytes()

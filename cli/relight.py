@@ -1,0 +1,42 @@
+"""``baker relight``: new light colours and intensities, recomposed from the bake state, no ray."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import baker
+from baker.incremental import asked_settings
+from cli.bake import print_summary
+from cli.common import add_debug
+from cli.state import print_rebake
+
+
+def add_parser(commands) -> None:
+    """Register ``relight`` on the ``baker`` command's subparsers."""
+    parser = commands.add_parser(
+        "relight", help="recompose the lightmaps for new light colours/intensities (no rays)",
+        description="The scene's lights changed only in colour or intensity (KHR_lights_punctual "
+                    "color/intensity, emissive strength): recompose the lightmaps from the bake "
+                    "state of the last bake, casting no ray. The result equals a full bake. "
+                    "Any other change is refused, and nothing is written: use `baker bake`.")
+    parser.set_defaults(run=run)
+    parser.add_argument("scene", type=Path, help="the scene with its new lights, .glb or .gltf")
+    parser.add_argument("-o", "--output", type=Path, required=True,
+                        help="the baked scene to update (.glb or .gltf)")
+    parser.add_argument("--state", type=Path, metavar="FILE",
+                        help="the bake state (default: OUTPUT.bake)")
+    parser.add_argument("--report", type=Path, metavar="FILE", help="write the JSON report")
+    parser.add_argument("--quiet", action="store_true", help="print nothing but errors")
+    add_debug(parser)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Relight; exit code 0 (1 with a message when more than the lights' colours changed)."""
+    state = args.state or baker.state.default_path(args.output)
+    result = baker.bake(args.scene, args.output, asked_settings(state), report_path=args.report,
+                        quiet=args.quiet, relight=True, state=state)
+    if not args.quiet:
+        print_rebake(result)
+        print_summary(result)
+    return 0
