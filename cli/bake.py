@@ -67,6 +67,20 @@ def add_parser(commands) -> None:
                        help="obscurance: direct light + I_A·W (fast, the default); gi: direct "
                             "light + path-traced indirect light, --rays paths per texel (a "
                             "reference to judge obscurances by; slower)")
+    model.add_argument("--specular", choices=baker.settings.SPECULAR_STRATEGIES,
+                       default=d.specular,
+                       help="at a mirror or glass: b follows the path, ρ of its summed length "
+                            "(default); a follows it, ρ of the first distance; c counts R_ave "
+                            "and ρ = 1 with no extra ray")
+    model.add_argument("--mirror-roughness", type=positive_float, default=d.mirror_roughness,
+                       metavar="R", help="metals smoother than this are mirrors "
+                                         f"(default {d.mirror_roughness:g})")
+    model.add_argument("--translucent", type=positive_float, default=d.translucent,
+                       metavar="F", help="a translucent neighbour reflects F × R_ave, with ρ = 1 "
+                                         f"(default {d.translucent:g})")
+    model.add_argument("--max-depth", type=int, default=d.max_depth, metavar="N",
+                       help="most mirror/glass bounces of one ray (default "
+                            f"{d.max_depth}; rays that reach it are counted)")
     model.add_argument("--max-rays", type=int, default=d.max_rays, metavar="N",
                        help=f"the most rays a texel gets with --target-error (default {d.max_rays})")
     direct = bake.add_argument_group("direct light (KHR_lights_punctual, emissive surfaces, sky)")
@@ -140,7 +154,9 @@ def settings_from(args: argparse.Namespace) -> baker.Settings:
         clip_percentile=args.clip_percentile,
         shadow_rays=args.shadow_rays, light_radius=args.light_radius, light_angle=args.light_angle,
         emissive_rays=args.emissive_rays, sky=args.sky, sky_horizon=args.sky_horizon,
-        sky_rays=args.sky_rays, supersample=args.supersample, denoise=args.denoise)
+        sky_rays=args.sky_rays, supersample=args.supersample, denoise=args.denoise,
+        specular=args.specular, mirror_roughness=args.mirror_roughness,
+        translucent=args.translucent, max_depth=args.max_depth)
 
 
 def rgb(text: str) -> tuple[float, float, float]:

@@ -59,3 +59,16 @@ def test_bad_settings_say_what_to_do(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "rays" in err and "--rays" in err
     assert not out.exists()
+
+
+def test_material_and_sampling_options_reach_the_settings():
+    from cli.bake import settings_from
+    from cli.main import build_parser
+
+    args = build_parser().parse_args(
+        ["bake", "in.glb", "-o", "out.glb", "--specular", "c", "--mirror-roughness", "0.3",
+         "--translucent", "0.2", "--max-depth", "5", "--sampling", "random",
+         "--target-error", "0.01", "--max-rays", "256", "--method", "gi"])
+    s = settings_from(args)
+    assert (s.specular, s.mirror_roughness, s.translucent, s.max_depth) == ("c", 0.3, 0.2, 5)
+    assert (s.sampling, s.target_error, s.max_rays, s.method) == ("random", 0.01, 256, "gi")
