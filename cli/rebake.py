@@ -9,8 +9,7 @@ from pathlib import Path
 import baker
 from baker.incremental import asked_settings
 from cli.bake import print_summary
-from cli.common import add_debug
-from cli.state import print_rebake
+from cli.state import add_update_options, print_rebake
 
 EPILOG = """examples:
   baker rebake level.glb -o level_baked.glb
@@ -37,13 +36,9 @@ def add_parser(commands) -> None:
     parser.add_argument("--moved", nargs="+", default=(), metavar="NODE",
                         help="names (or indices) of the nodes that moved, to check the diff "
                              "against")
-    parser.add_argument("--state", type=Path, metavar="FILE",
-                        help="the bake state (default: OUTPUT.bake)")
     parser.add_argument("--threads", type=int, default=0,
                         help="ray-casting threads (default: one per core)")
-    parser.add_argument("--report", type=Path, metavar="FILE", help="write the JSON report")
-    parser.add_argument("--quiet", action="store_true", help="print nothing but errors")
-    add_debug(parser)
+    add_update_options(parser)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -8,8 +8,7 @@ from pathlib import Path
 import baker
 from baker.incremental import asked_settings
 from cli.bake import print_summary
-from cli.common import add_debug
-from cli.state import print_rebake
+from cli.state import add_update_options, print_rebake
 
 
 def add_parser(commands) -> None:
@@ -24,11 +23,7 @@ def add_parser(commands) -> None:
     parser.add_argument("scene", type=Path, help="the scene with its new lights, .glb or .gltf")
     parser.add_argument("-o", "--output", type=Path, required=True,
                         help="the baked scene to update (.glb or .gltf)")
-    parser.add_argument("--state", type=Path, metavar="FILE",
-                        help="the bake state (default: OUTPUT.bake)")
-    parser.add_argument("--report", type=Path, metavar="FILE", help="write the JSON report")
-    parser.add_argument("--quiet", action="store_true", help="print nothing but errors")
-    add_debug(parser)
+    add_update_options(parser)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 import baker
+from cli.common import add_debug
 
 
 def add_state_options(group) -> None:
@@ -51,3 +52,13 @@ def settings_for(output: Path, **given) -> baker.Settings:
         return asked_settings(baker.state.default_path(output), threads=given.get("threads", 0))
     except baker.SettingsError:
         return baker.Settings(**given)
+
+
+def add_update_options(parser) -> None:
+    """The options of the commands that update a baked scene from its state (rebake, relight):
+    --state, --report, --quiet, --debug."""
+    parser.add_argument("--state", type=Path, metavar="FILE",
+                        help="the bake state (default: OUTPUT.bake)")
+    parser.add_argument("--report", type=Path, metavar="FILE", help="write the JSON report")
+    parser.add_argument("--quiet", action="store_true", help="print nothing but errors")
+    add_debug(parser)
