@@ -432,6 +432,13 @@ def sky_irradiance(sky: np.ndarray, n: int, receivers: Receivers, tracer: Tracer
 # Per texel
 
 
+def _all_sources(terms, light_colours: np.ndarray | None) -> np.ndarray:
+    """punctual @ colours + emission + sky of a ``Direct`` or ``Power``: the per-light terms at
+    unit intensity times the light colours × intensities (L, 3), by default the baked ones."""
+    colours = terms.light_colours if light_colours is None else np.asarray(light_colours, np.float64)
+    return terms.punctual @ colours + terms.emission + terms.sky
+
+
 @dataclass(frozen=True)
 class Direct:
     """Direct irradiance at N texels (rows in ``Texels`` order), kept apart per source.
@@ -454,8 +461,7 @@ class Direct:
 
     def irradiance(self, light_colours: np.ndarray | None = None) -> np.ndarray:
         """D (N, 3) for the given light colour × intensity (L, 3), by default the baked ones."""
-        colours = self.light_colours if light_colours is None else np.asarray(light_colours, np.float64)
-        return self.punctual @ colours + self.emission + self.sky
+        return _all_sources(self, light_colours)
 
     def variance(self, light_colours: np.ndarray | None = None) -> np.ndarray:
         """(N,) variance of the luminance of D's estimate (the sources' estimates are independent)."""
@@ -569,8 +575,7 @@ class Power:
 
     def total(self, light_colours: np.ndarray | None = None) -> np.ndarray:
         """(3,) power from every source, with light colours × intensities (L, 3) if given."""
-        colours = self.light_colours if light_colours is None else np.asarray(light_colours, np.float64)
-        return self.punctual @ colours + self.emission + self.sky
+        return _all_sources(self, light_colours)
 
     def sources(self) -> tuple[str, ...]:
         """Which kinds of source the scene has: of "lights", "emission", "sky"."""

@@ -40,6 +40,7 @@ from .direct import Direct, _texel_receivers, direct_light, \
     light_dimension, punctual_irradiance
 from .geometry import World, build_world
 from .integrate import Terms, hemisphere_rays, integrate
+from .parallel import run_chunks
 from .rasterise import Texels, rasterise
 from .scene import Scene
 from .settings import Settings, resolve
@@ -189,37 +190,40 @@ def _rays_meet(tracer: Tracer, texels: Texels, rows: np.ndarray, settings) -> tu
     n = settings.rays
     grid = settings.max_rays if getattr(settings, "target_error", None) is not None else n
     meets = np.zeros(len(rows), bool)
-    step = max(1, _TEST_RAYS // n)
-    for start in range(0, len(rows), step):
-        part = rows[start:start + step]
-        origins, directions = hemisphere_rays(texels, part, n, settings.seed, tracer.center,
-                                              settings.sampling, 0, grid)
+
+    def work(part: slice) -> None:
+        origins, directions = hemisphere_rays(texels, rows[part], n, settings.seed,
+                                              tracer.center, settings.sampling, 0, grid)
         hits = tracer.cast_local(origins, directions,
                                  np.full(len(origins), settings.d_max, np.float32))
-        meets[start:start + len(part)] = (hits["primID"].reshape(len(part), n) >= 0).any(axis=1)
+        meets[part] = (hits["primID"].reshape(-1, n) >= 0).any(axis=1)
+
+    run_chunks(work, _slices(len(rows), max(1, _TEST_RAYS // n)), settings.threads)
     return meets, len(rows) * n
 
 
-def _probes_meet(tracer: Tracer, texels: Texels, rows: np.ndarray, d_max: float) -> tuple[np.ndarray, int]:
+def _probes_meet(tracer: Tracer, texels: Texels, rows: np.ndarray, d_max: float,
+                 threads: int = 0) -> tuple[np.ndarray, int]:
     """(k,) bool: whether any of the validity module's fixed hemisphere probes from each texel's
-    (probed) sample point meets ``tracer``'s triangles within d_max, built exactly as
-    ``validity.check_texels`` builds them; and the number of rays cast."""
-    from .validity import HEMISPHERE_RAYS, _frames, _hemisphere_directions
-
+    (probed) sample point meets ``tracer``'s triangles within d_max; and the rays cast."""
     meets = np.zeros(len(rows), bool)
-    step = max(1, _TEST_RAYS // HEMISPHERE_RAYS)
-    local = _hemisphere_directions(HEMISPHERE_RAYS)
-    for start in range(0, len(rows), step):
-        part = rows[start:start + step]
-        position, normal = texels.position[part], texels.geometric_normal[part]
-        t1, t2 = _frames(normal)
-        directions = (local[None, :, :1] * t1[:, None] + local[None, :, 1:2] * t2[:, None]
-                      + local[None, :, 2:] * normal[:, None]).reshape(-1, 3)
-        lift = ray_lift(position, texels.size[part], tracer.center)
-        origins = np.repeat(position + lift[:, None] * normal, HEMISPHERE_RAYS, axis=0)
+
+    def work(part: slice) -> None:
+        chosen = rows[part]
+        origins, directions = validity_module.hemisphere_probes(
+            texels.position[chosen], texels.geometric_normal[chosen], texels.size[chosen],
+            tracer.center)
         hits = tracer.cast(origins, directions, d_max)
-        meets[start:start + len(part)] = (hits.triangle.reshape(len(part), -1) >= 0).any(axis=1)
-    return meets, len(rows) * HEMISPHERE_RAYS
+        meets[part] = (hits.triangle.reshape(len(chosen), -1) >= 0).any(axis=1)
+
+    run_chunks(work, _slices(len(rows), max(1, _TEST_RAYS // validity_module.HEMISPHERE_RAYS)),
+               threads)
+    return meets, len(rows) * validity_module.HEMISPHERE_RAYS
+
+
+def _slices(count: int, step: int) -> list[slice]:
+    """Consecutive slices of ``step`` covering ``range(count)``."""
+    return [slice(start, min(start + step, count)) for start in range(0, count, step)]
 
 
 def _above(texels: Texels, rows: np.ndarray, corners: np.ndarray) -> np.ndarray:
@@ -368,7 +372,7 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
             # Validity: tangent probes reach a few texel sides; hemisphere probes d_max.
             close = own | _near(raw, boxes, 0.0)
             far = np.flatnonzero(near & ~close)
-            meets, n = _probes_meet(small, texels, far, resolved.d_max)
+            meets, n = _probes_meet(small, texels, far, resolved.d_max, resolved.threads)
             tested += n
             redo = np.union1d(np.flatnonzero(close), far[meets])
             checked, fresh = check_texels(scene, world, tracer, take(raw, redo), resolved.d_max)

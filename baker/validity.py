@@ -150,16 +150,24 @@ def _tangent_step(tracer: Tracer, faces: _Faces, position: np.ndarray, normal: n
     return new, moved
 
 
-def _back_fraction(tracer: Tracer, faces: _Faces, position: np.ndarray, normal: np.ndarray,
-                   size: np.ndarray, d_max: float) -> np.ndarray:
-    """(k,) fraction of the fixed hemisphere probes from each point that meet a back face."""
-    k = len(position)
+def hemisphere_probes(position: np.ndarray, normal: np.ndarray, size: np.ndarray,
+                      center: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The fixed hemisphere probes of k points: origins and directions, each (k·HEMISPHERE_RAYS,
+    3) float64 world, point-major; origins lifted off the surface by ``trace.ray_lift``."""
     t1, t2 = _frames(normal)
     local = _hemisphere_directions(HEMISPHERE_RAYS)
     directions = (local[None, :, :1] * t1[:, None] + local[None, :, 1:2] * t2[:, None]
                   + local[None, :, 2:] * normal[:, None]).reshape(-1, 3)
-    lift = ray_lift(position, size, tracer.center)
+    lift = ray_lift(position, size, center)
     origins = np.repeat(position + lift[:, None] * normal, HEMISPHERE_RAYS, axis=0)
+    return origins, directions
+
+
+def _back_fraction(tracer: Tracer, faces: _Faces, position: np.ndarray, normal: np.ndarray,
+                   size: np.ndarray, d_max: float) -> np.ndarray:
+    """(k,) fraction of the fixed hemisphere probes from each point that meet a back face."""
+    k = len(position)
+    origins, directions = hemisphere_probes(position, normal, size, tracer.center)
     hits = tracer.cast(origins, directions, d_max)
     return faces.back(hits.triangle, directions).reshape(k, HEMISPHERE_RAYS).mean(axis=1)
 
