@@ -16,7 +16,7 @@ if __package__ in (None, ""):  # run as a script: make the repository root impor
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from assets.gltf_builder import (  # noqa: E402
-    GltfBuilder, box, quad, rotation_matrix, transformed, uv_sphere)
+    GltfBuilder, box, cylinder, quad, quat_axis_angle, rotation_matrix, transformed, uv_sphere)
 from assets.make_scenes import WHITE, panel  # noqa: E402
 
 
@@ -80,6 +80,29 @@ def sphere_on_floor(radius: float = 0.5, rings: int = 12, segments: int = 24,
                          translation=(0.0, radius, 0.0)),
     }
     b.info.update(nodes=nodes, radius=radius)
+    return b
+
+
+def cylinder_on_floor(radius: float = 0.3, length: float = 1.4, segments: int = 24,
+                      floor_size: float = 3.0) -> GltfBuilder:
+    """A closed cylinder (smooth side, flat caps) lying on a floor quad, its axis along x: the
+    floor darkens the side's lower part, so the lightmap varies around it; xatlas cuts the
+    side into several charts (four at the defaults) whose borders run along the axis — seams,
+    one edge in 3D and two in the atlas. The caps meet the side at a crease (not a seam).
+
+    ``info``: nodes (cylinder, floor), radius, length.
+    """
+    b = GltfBuilder()
+    white = b.material("white", WHITE)
+    lying = quat_axis_angle((0, 0, 1), 90.0)
+    nodes = {
+        "floor": b.node("floor", b.shape_mesh("floor", quad(floor_size, floor_size),
+                                              material=white)),
+        "cylinder": b.node("cylinder", b.shape_mesh("cylinder", cylinder(radius, length, segments),
+                                                    material=white),
+                           translation=(0.0, radius, 0.0), rotation=lying),
+    }
+    b.info.update(nodes=nodes, radius=radius, length=length)
     return b
 
 
@@ -151,7 +174,8 @@ def main(out_dir: Path) -> list[Path]:
     """Write the scenes into ``out_dir``; return their paths."""
     out_dir.mkdir(parents=True, exist_ok=True)
     return [leak_room().save(out_dir / "leak_room.glb"),
-            sphere_on_floor().save(out_dir / "sphere_on_floor.glb")]
+            sphere_on_floor().save(out_dir / "sphere_on_floor.glb"),
+            cylinder_on_floor().save(out_dir / "cylinder_on_floor.glb")]
 
 
 if __name__ == "__main__":
