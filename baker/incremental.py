@@ -188,12 +188,11 @@ def _rays_meet(tracer: Tracer, texels: Texels, rows: np.ndarray, settings) -> tu
     """(k,) bool: whether any of each texel's own obscurance rays meets ``tracer``'s triangles
     within d_max; and the number of rays cast."""
     n = settings.rays
-    grid = settings.max_rays if getattr(settings, "target_error", None) is not None else n
     meets = np.zeros(len(rows), bool)
 
     def work(part: slice) -> None:
         origins, directions = hemisphere_rays(texels, rows[part], n, settings.seed,
-                                              tracer.center, settings.sampling, 0, grid)
+                                              tracer.center, settings.sampling)
         hits = tracer.cast_local(origins, directions,
                                  np.full(len(origins), settings.d_max, np.float32))
         meets[part] = (hits["primID"].reshape(-1, n) >= 0).any(axis=1)

@@ -79,23 +79,23 @@ class Terms:
 
         The sample variance assumes independent samples, so it overstates the error of
         stratified and low-discrepancy points (4–8× for Owen-scrambled Sobol at 64–1024 rays,
-        measured by ``baker study``). Instead: e = half the difference of the means of the two
-        halves of each texel's rays (each half of a scrambled Sobol net is a net itself). Were
-        the halves' errors independent, E[e²] would be the variance of the full mean; they are
-        anti-correlated (correlation c), and E[e²] = var·(1 − c)/(1 + c). The same split one
-        level down (quarters of the first half) measures the convergence: the ratio
+        3–6× for stratified, measured by ``baker study``). Instead: e = half the difference of
+        the means of the two halves of each texel's rays. ``stratified`` lays its grid twice,
+        once per half (sampling.py), so the halves are independent estimates of equal variance
+        and E[e²] is the variance of the full mean. A scrambled Sobol net's halves are nets
+        themselves, but anti-correlated (correlation c): E[e²] = var·(1 − c)/(1 + c). The same
+        split one level down (quarters of the first half) measures the convergence: the ratio
         r = E[e_half²] / E[e_quarter²] = 2^(−2α) for error ∝ N^(−α), and (1 + c)/2 = r, so
         var = E[e²]·r/(1 − r) — exact for independent samples (r = ½), and measured within
         1.5× of the true RMSE for Sobol at 64 rays and more. r is averaged over all texels
-        (one texel's is far too noisy) and kept within [0.05, 0.5]. For ``stratified`` points,
-        whose halves cover different cells, the sample variance is used (an overestimate).
+        (one texel's is far too noisy) and kept within [0.05, 0.5].
         """
         if not len(self.counts):
             return 0.0
-        if technique == "stratified":
-            return float(np.sqrt(np.mean(self.standard_error(r_ave) ** 2)))
         lum = np.array([1.0, float(r_ave @ LUMINANCE)])
         half = np.mean((0.5 * self.half_split @ lum) ** 2)
+        if technique == "stratified":
+            return float(np.sqrt(half))
         quarter = np.mean((0.5 * self.quarter_split @ lum) ** 2)
         ratio = float(np.clip(half / quarter, 0.05, 0.5)) if quarter > 0 else 0.5
         return float(np.sqrt(half * ratio / (1.0 - ratio)))
@@ -122,12 +122,12 @@ def _to_world_kernel(rays, positions, normals, offsets, center, x, y, z, origins
 
 
 def hemisphere_rays(texels: Texels, rows: np.ndarray | slice, rays: int, seed: int,
-                    center: np.ndarray, technique: str = "sobol", first: int = 0,
-                    total: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+                    center: np.ndarray, technique: str = "sobol",
+                    first: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """Cosine-distributed rays about each texel's front-face normal, ready for Embree.
 
-    rows: the texels (indices or a slice); their samples ``first`` … ``first + rays − 1`` of
-    ``total`` (default ``rays``; the stratified grid's size). Returns origins and directions,
+    rows: the texels (indices or a slice); their samples ``first`` … ``first + rays − 1`` (one
+    stratified grid, ``sampling.fill_points``). Returns origins and directions,
     each (k·rays, 3) float32 in the tracer's recentred frame (world − ``center``), texel-major
     (texel i's rays are rows i·rays … i·rays + rays − 1). Computed in float64 (points, then
     directions, in flat arrays that the compiler vectorises), rounded once at the end.
@@ -135,8 +135,8 @@ def hemisphere_rays(texels: Texels, rows: np.ndarray | slice, rays: int, seed: i
     keys = texels.key[rows]
     k = len(keys)
     u, v = np.empty(k * rays), np.empty(k * rays)
-    fill_points(TECHNIQUES.index(technique), np.uint64(seed), keys, first, rays,
-                total or rays, np.uint64(0), u, v)
+    fill_points(TECHNIQUES.index(technique), np.uint64(seed), keys, first, rays, np.uint64(0),
+                u, v)
     x, y, z = np.empty(k * rays), np.empty(k * rays), np.empty(k * rays)
     fill_cosine(u, v, x, y, z)
     origins = np.empty((k * rays, 3), np.float32)
@@ -448,7 +448,7 @@ def _chunk_sums(surfaces: _Surfaces, tracer: Tracer, texels: Texels, rows: np.nd
     """(k, 9) sums over samples ``first`` … ``first + rays − 1`` of the texels ``rows``, as
     ``_accumulate_kernel`` lays them out, and the chunk's chain counts."""
     origins, directions = hemisphere_rays(texels, rows, rays, settings.seed, tracer.center,
-                                          settings.sampling, first, _grid_size(settings))
+                                          settings.sampling, first)
     hits = tracer.cast_local(origins, directions, np.full(len(origins), settings.d_max, np.float32))
     primitive = hits["primID"]
     chains = _Chains(np.zeros(len(rows), np.int64), np.zeros(len(rows), np.int64))
@@ -470,11 +470,6 @@ def _chunk_sums(surfaces: _Surfaces, tracer: Tracer, texels: Texels, rows: np.nd
                        RHO_KINDS[settings.rho], surfaces.table, kind, ray_albedo, LUMINANCE,
                        sums)
     return sums, chains
-
-
-def _grid_size(settings: Resolved) -> int:
-    """Samples per texel the stratified grid is laid out for: the most a texel may get."""
-    return settings.max_rays if settings.target_error is not None else settings.rays
 
 
 def integrate(scene: Scene, world: World, tracer: Tracer, texels: Texels, settings: Resolved,

@@ -9,8 +9,13 @@ Three techniques (``TECHNIQUES``), all pure functions of those four numbers:
   base 2), Owen-scrambled per texel with the hash of Burley, "Practical Hash-based Owen
   Scrambling" (JCGT 2020); the sample index is Owen-scrambled too, so every texel walks its own
   permutation of a Sobol net. Error falls faster than 1/sqrt(N) on smooth integrands.
-- ``stratified``: a jittered ⌊√N⌋² grid (N the texel's sample count), the leftover samples
-  independent.
+- ``stratified``: a jittered grid of ⌊N/2⌋ cells (rows × columns, as square as N allows) laid
+  twice: the first half of the texel's N samples puts one point in every cell and so does the
+  second, independently (an odd last sample is independent). Two samples per stratum are what
+  make the error measurable (Cochran, "Sampling Techniques", §5A): the halves' means are
+  independent estimates of equal variance, so their difference gives the variance of the whole
+  mean without bias (``integrate.Terms.rmse``). Each call's samples form one such grid, so an
+  adaptive round (a batch of samples) is a stratified estimate of its own.
 - ``random``: independent uniform points (plain Monte Carlo).
 
 Each further 2D ``dimension`` is an independently randomised copy. The per-sample arithmetic is
@@ -145,13 +150,27 @@ def _sobol_point(sample, shuffle, sx, sy):
 
 
 @jit
-def _hashed_point(technique, sample, count, shuffle, sx, sy):
-    """Point ``sample`` of ``count`` for the ``stratified`` (1) or ``random`` (2) technique."""
+def _grid(count):
+    """(cells, columns) of the stratified grid for ``count`` samples: ⌊count/2⌋ cells in the
+    most nearly square rows × columns (rows the largest divisor of cells up to its root)."""
+    cells = count // 2
+    rows = max(int(np.sqrt(cells)), 1)
+    while cells % rows:
+        rows -= 1
+    return cells, max(cells // rows, 1)
+
+
+@jit
+def _hashed_point(technique, sample, local, cells, columns, shuffle, sx, sy):
+    """Point ``sample`` for the ``stratified`` (1) or ``random`` (2) technique: the jitter is
+    hashed from the sample index, the stratum is the ``local``-th of a grid of ``cells`` cells in
+    ``columns`` columns laid twice (``_grid``); samples past both layers are independent."""
     jitter_x = _unit(hash4(sx, sample, shuffle, 3))
     jitter_y = _unit(hash4(sy, sample, shuffle, 4))
-    side = int(np.sqrt(count))
-    if technique == 1 and sample < side * side:
-        return ((sample % side + jitter_x) / side, (sample // side + jitter_y) / side)
+    if technique == 1 and local < 2 * cells:
+        cell = local % cells
+        return ((cell % columns + jitter_x) / columns,
+                (cell // columns + jitter_y) / (cells // columns))
     return jitter_x, jitter_y
 
 
@@ -160,22 +179,26 @@ def point(technique, sample, count, scrambles):
     """Sample ``sample`` of ``count`` for one texel and dimension: a point (x, y) of (0, 1)².
 
     technique: 0 sobol, 1 stratified, 2 random (the order of ``TECHNIQUES``); scrambles: that
-    texel's ``texel_scrambles``. ``count`` matters to the stratified grid only.
+    texel's ``texel_scrambles``. ``count`` matters to the stratified grid only (samples
+    0 … count − 1 form one grid).
     """
     shuffle, sx, sy = scrambles
     if technique == 0:
         return _sobol_point(sample, shuffle, sx, sy)
-    return _hashed_point(technique, sample, count, shuffle, sx, sy)
+    cells, columns = _grid(count)
+    return _hashed_point(technique, sample, sample, cells, columns, shuffle, sx, sy)
 
 
 @jit
-def fill_points(technique, seed, keys, first, count, total, dimension, u, v):
-    """Samples ``first`` … ``first + count − 1`` of ``total`` of every texel in ``keys`` (k,)
-    into ``u``, ``v`` (k·count,), texel-major, as ``point`` gives them.
+def fill_points(technique, seed, keys, first, count, dimension, u, v):
+    """Samples ``first`` … ``first + count − 1`` of every texel in ``keys`` (k,) into ``u``, ``v``
+    (k·count,), texel-major, as ``point`` gives them; for ``stratified`` these samples form one
+    grid of their own (``_grid(count)``).
 
     The technique is chosen once per texel, outside the inner loop, so that the compiler
     vectorises the Sobol case.
     """
+    cells, columns = _grid(count)
     for i in range(len(keys)):
         shuffle, sx, sy = texel_scrambles(seed, keys[i], dimension)
         base = i * count - first
@@ -184,7 +207,8 @@ def fill_points(technique, seed, keys, first, count, total, dimension, u, v):
                 u[base + s], v[base + s] = _sobol_point(s, shuffle, sx, sy)
         else:
             for s in range(first, first + count):
-                u[base + s], v[base + s] = _hashed_point(technique, s, total, shuffle, sx, sy)
+                u[base + s], v[base + s] = _hashed_point(technique, s, s - first, cells, columns,
+                                                         shuffle, sx, sy)
 
 
 @jit

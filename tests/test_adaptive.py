@@ -52,3 +52,16 @@ def test_a_subset_of_rows_gets_the_same_terms_as_the_full_bake(tmp_path):
         assert np.array_equal(part.w_hit, done.terms.w_hit[rows])
         assert np.array_equal(part.escaped, done.terms.escaped[rows])
         assert np.array_equal(part.counts, done.terms.counts[rows])
+
+
+def test_a_texel_that_stops_after_one_round_has_the_uniform_bakes_terms(tmp_path):
+    """The first round is a whole stratified grid (not the first rows of a grid laid out for
+    max_rays), so texels that stop early are unbiased, for every technique."""
+    for technique in ("sobol", "stratified", "random"):
+        uniform = computed(cornell_box(), tmp_path, sampling=technique, **SETTINGS)
+        done = computed(cornell_box(), tmp_path, sampling=technique, target_error=0.01,
+                        **SETTINGS)
+        stopped = done.terms.counts == 16
+        assert 0 < stopped.sum() < len(stopped)
+        assert np.array_equal(done.terms.w_hit[stopped], uniform.terms.w_hit[stopped])
+        assert np.array_equal(done.terms.escaped[stopped], uniform.terms.escaped[stopped])

@@ -2,7 +2,8 @@
 
 import numpy as np
 
-from baker.sampling import cosine_hemisphere, hash_u32, owen_scramble, sample_2d, tangent_frames
+from baker.sampling import (cosine_hemisphere, fill_points, hash_u32, owen_scramble, sample_2d,
+                            tangent_frames)
 
 
 def test_same_arguments_same_numbers_however_split():
@@ -30,6 +31,22 @@ def test_every_power_of_two_prefix_is_a_stratified_net():
         cells = np.floor(points * 8).astype(int)
         assert len({(x, y) for x, y in cells}) == 64
         assert points.min() > 0 and points.max() < 1
+
+
+def test_stratified_lays_its_grid_once_in_each_half_of_every_batch():
+    """Each half of a batch of 2·m samples puts one point in each of the m cells (8 × 4 for
+    m = 32), independently of the other half, so the halves' difference measures the error."""
+    keys = np.arange(5, dtype=np.uint64)
+    for first, count in ((0, 64), (64, 64), (128, 128)):
+        u, v = np.empty(5 * count), np.empty(5 * count)
+        fill_points(1, np.uint64(3), keys, first, count, np.uint64(0), u, v)
+        rows, columns = (4, 8) if count == 64 else (8, 8)
+        cell = (np.floor(v * rows) * columns + np.floor(u * columns)).reshape(5, 2, count // 2)
+        assert np.all(np.sort(cell, axis=2) == np.arange(count // 2))
+        assert not np.allclose(u.reshape(5, 2, -1)[:, 0], u.reshape(5, 2, -1)[:, 1])
+    odd = sample_2d(3, np.uint64(1), np.arange(9), 0, "stratified")  # 4 cells twice, 1 free
+    cells = np.floor(odd[:8] * 2).astype(int) @ [1, 2]
+    assert sorted(cells[:4]) == sorted(cells[4:]) == [0, 1, 2, 3]
 
 
 def test_owen_scramble_is_a_permutation_of_aligned_blocks():
