@@ -14,6 +14,8 @@ when absent) and scaled by ``MOZ_lightmap.intensity``. Modes:
 - ``checker``: a checker of lightmap texels, tinted per page, to judge texel density: squares of
   one texel, or of 2, 4, 8… texels a side when single texels would be smaller than about four
   pixels in the picture (``Picture.checker_texels`` says which).
+- ``unlit``: albedo + emission with every lightmap left out (as if it were 1), the same view:
+  what the lightmap adds is the difference from ``lit``.
 
 Single-sided materials are culled from behind, as glTF viewers do, so the default view from
 outside a closed room looks in. Surfaces without a lightmap (unlit, skinned, GPU-instanced) are
@@ -40,7 +42,7 @@ from .scene import Scene
 from .surface import LUMINANCE, SRGB_TO_LINEAR, albedo, emission
 from .trace import Tracer
 
-MODES = ("lit", "lightmap", "checker")
+MODES = ("lit", "lightmap", "checker", "unlit")
 _RAYS_PER_CHUNK = 1 << 16
 _MAX_CULLED_LAYERS = 16  # back faces a primary ray may pass through before it gives up
 _BACKGROUND = np.array([0.02, 0.02, 0.025])  # linear RGB behind the scene
@@ -89,9 +91,10 @@ class Picture:
 
     rgb: (H, W, 3) uint8 sRGB, what the PNG holds. radiance: (H, W, 3) float64 linear value of
     each pixel before exposure (lightmap value × albedo + emission in ``lit`` mode, lightmap in
-    ``lightmap`` mode, checker shade in ``checker`` mode). triangle: (H, W) int64 world triangle
-    seen at the pixel, −1 for the background. lightmapped: (H, W) bool, pixels showing a
-    lightmapped surface. exposure: the factor applied before the sRGB curve.
+    ``lightmap`` mode, checker shade in ``checker`` mode, albedo + emission in ``unlit`` mode).
+    triangle: (H, W) int64 world triangle seen at the pixel, −1 for the background.
+    lightmapped: (H, W) bool, pixels showing a lightmapped surface. exposure: the factor
+    applied before the sRGB curve.
     """
 
     rgb: np.ndarray
@@ -307,13 +310,13 @@ def render(scene: Scene, mode: str = "lit", size: tuple[int, int] | None = None,
 
     mode: one of MODES. size: (width, height) pixels; None takes 640 wide and the camera's
     aspect ratio (480 high without one). exposure: factor on linear values before the sRGB curve;
-    None picks one so the 99th percentile of the lightmapped pixels' luminance maps to 0.85 (lit
-    and lightmap modes; checker shades are used as they are). view: None uses the scene's
+    None picks one so the 99th percentile of the lightmapped pixels' luminance maps to 0.85 (lit,
+    lightmap and unlit modes; checker shades are used as they are). view: None uses the scene's
     camera or the default view.
     """
     if mode not in MODES:
         raise SettingsError(f"preview mode must be one of {', '.join(MODES)}, not {mode!r}",
-                            fix="use lit, lightmap or checker")
+                            fix="use lit, lightmap, checker or unlit")
     if exposure is not None and not (np.isfinite(exposure) and exposure > 0):
         raise SettingsError(f"exposure must be a finite number above 0, not {exposure}",
                             fix="give --exposure a positive factor, or leave it out (automatic)")
@@ -420,7 +423,7 @@ def _shade(scene: Scene, world: World, lightmaps: SceneLightmaps, mode: str, tri
         radiance[hit] = np.where(baked[:, None], light, flat * 0.5)
     else:
         colour = albedo(scene, world, tris, b)
-        lit = np.where(baked[:, None], light, flat)
+        lit = np.where(baked[:, None], 1.0 if mode == "unlit" else light, flat)
         radiance[hit] = colour * lit + emission(scene, world, tris, b)
     lightmapped = np.zeros(n, bool)
     lightmapped[hit[baked]] = True

@@ -42,6 +42,8 @@ def add_parser(commands) -> None:
     what.add_argument("--checker", dest="mode", action="store_const", const="checker",
                       help="show a checker of lightmap texels (texel density), tinted per page; "
                            "surfaces without a lightmap are magenta")
+    what.add_argument("--unlit", dest="mode", action="store_const", const="unlit",
+                      help="show albedo + emission with the lightmaps left out, to compare")
     parser.set_defaults(mode=MODES[0])
     parser.add_argument("--size", type=_size, metavar="WxH",
                         help="picture size in pixels (default 640 wide, the camera's aspect "

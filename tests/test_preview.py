@@ -13,6 +13,7 @@ from assets.make_scenes import cornell_box
 from baker.geometry import build_world
 from baker.load import load
 from baker.preview import View, primary_rays, render
+from baker.surface import LUMINANCE
 from cli.main import main
 from tests.bakehelp import REAL_SCENES, saved
 
@@ -133,14 +134,68 @@ def test_scene_without_lightmaps_is_refused_cleanly(cornell, tmp_path, capsys):
     assert "PNG" in capsys.readouterr().err
 
 
-def test_preview_of_a_shared_scene_with_several_uv_sets(tmp_path):
+@pytest.fixture(scope="module")
+def small_bake(tmp_path_factory):
+    """name → baked output of the shared scene ``name`` (texel density 4, 8 rays: about 1 s),
+    each baked once for the whole module."""
+    done = {}
+
+    def get(name):
+        if name not in done:
+            out = tmp_path_factory.mktemp(name) / "out.glb"
+            baker.bake(REAL_SCENES[name], out, baker.Settings(texel_density=4.0, rays=8))
+            done[name] = out
+        return done[name]
+
+    return get
+
+
+def test_preview_of_a_shared_scene_with_several_uv_sets(small_bake):
     """MultiUVTest keeps its own TEXCOORD_0/1; the lightmap goes to another set, which the
     preview must read (MOZ_lightmap.texCoord), not TEXCOORD_1."""
-    out = tmp_path / "multi.glb"
-    baker.bake(REAL_SCENES["MultiUVTest"], out, baker.Settings(texel_density=4.0, rays=8))
+    out = small_bake("MultiUVTest")
     lit = render(load(out), "lit", (96, 64))
     alone = render(load(out), "lightmap", (96, 64))
     hit = lit.triangle >= 0
     assert hit.mean() > 0.1 and lit.lightmapped[hit].all()
     assert lit.rgb.std() > 10
     assert np.abs(lit.rgb.astype(int) - alone.rgb.astype(int))[hit].mean() > 10
+
+
+# A lone convex box: every obscurance ray escapes, so its lightmap is one value (R_ave).
+_UNIFORM = {"MultiUVTest"}
+# Only EXT_mesh_gpu_instancing meshes, which get no lightmap (occluders only, docs/output.md).
+_NOTHING_BAKED = {"SimpleInstancing"}
+
+
+@pytest.mark.parametrize("name", ["cornell", *REAL_SCENES])
+def test_command_previews_every_scene(name, cornell, small_bake, tmp_path):
+    """``baker preview`` writes the picture of the demo scene and of every shared scene; the
+    picture is not flat, and lightmapped surfaces differ from the same surfaces unlit (albedo +
+    emission alone): the lightmap is read, decoded and applied, and it varies across them."""
+    out = cornell["out"] if name == "cornell" else small_bake(name)
+    png = tmp_path / "preview.png"
+    assert main(["preview", str(out), "-o", str(png), "--size", "96x72"]) == 0
+    pixels = np.asarray(Image.open(io.BytesIO(png.read_bytes())))
+    scene = load(out)
+    lit = render(scene, "lit", (96, 72))
+    np.testing.assert_array_equal(pixels, lit.rgb)  # the command wrote this picture
+    hit = lit.triangle >= 0
+    assert hit.mean() > 0.05
+    assert pixels[hit].std() > 10  # not flat
+    unlit = render(scene, "unlit", (96, 72))
+    np.testing.assert_array_equal(unlit.triangle, lit.triangle)  # same view
+    assert main(["preview", str(out), "-o", str(png), "--size", "96x72", "--unlit"]) == 0
+    np.testing.assert_array_equal(np.asarray(Image.open(io.BytesIO(png.read_bytes()))), unlit.rgb)
+    shown = lit.lightmapped
+    if name in _NOTHING_BAKED:
+        assert not shown.any()
+        np.testing.assert_array_equal(lit.radiance, unlit.radiance)
+        return
+    assert shown[hit].mean() > 0.4
+    with_map = lit.radiance[shown] @ LUMINANCE
+    without = unlit.radiance[shown] @ LUMINANCE
+    assert np.mean(np.abs(with_map - without)) > 0.1 * np.mean(without)
+    alone = render(scene, "lightmap", (96, 72)).radiance[shown] @ LUMINANCE
+    spread = alone.std() / alone.mean()
+    assert spread < 0.01 if name in _UNIFORM else spread > 0.05, spread
