@@ -21,7 +21,7 @@ import numpy as np
 
 from .geometry import World
 from .obscurance import RHO_KINDS, UNIT_REFLECTIVITY, rho
-from .parallel import run_chunks
+from .parallel import run_chunks, texels_per_chunk
 from .rasterise import Texels
 from .sampling import TECHNIQUES, fill_cosine, fill_points, frame, jit
 from .scene import Scene
@@ -30,6 +30,10 @@ from .materials import DIFFUSE, SPECULAR, TRANSLUCENT, TRANSPARENT, MaterialTabl
 from .sampling import hash_u32
 from .surface import LUMINANCE, albedo, base_colour, triangle_albedo
 from .trace import Tracer, ray_lift
+
+_SPLIT_MAX = 1e100  # |half/quarter differences| beyond this (garbage albedos) are clipped, so
+# that their mean square cannot overflow float64: such an estimate is meaningless anyway
+
 
 @dataclass(frozen=True)
 class Terms:
@@ -93,10 +97,10 @@ class Terms:
         if not len(self.counts):
             return 0.0
         lum = np.array([1.0, float(r_ave @ LUMINANCE)])
-        half = np.mean((0.5 * self.half_split @ lum) ** 2)
+        half = np.mean(np.clip(0.5 * self.half_split @ lum, -_SPLIT_MAX, _SPLIT_MAX) ** 2)
         if technique == "stratified":
             return float(np.sqrt(half))
-        quarter = np.mean((0.5 * self.quarter_split @ lum) ** 2)
+        quarter = np.mean(np.clip(0.5 * self.quarter_split @ lum, -_SPLIT_MAX, _SPLIT_MAX) ** 2)
         ratio = float(np.clip(half / quarter, 0.05, 0.5)) if quarter > 0 else 0.5
         return float(np.sqrt(half * ratio / (1.0 - ratio)))
 
@@ -508,8 +512,8 @@ def integrate(scene: Scene, world: World, tracer: Tracer, texels: Texels, settin
             if progress is not None and first == 0:
                 progress(len(chunk))
 
-        run_chunks(work, [active[start:start + settings.chunk_texels]
-                          for start in range(0, len(active), settings.chunk_texels)],
+        step = texels_per_chunk(settings.chunk_texels, batch)
+        run_chunks(work, [active[start:start + step] for start in range(0, len(active), step)],
                    settings.threads)
         counts[active] += batch
         first += batch

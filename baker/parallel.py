@@ -8,10 +8,19 @@ size, thread count or order.
 from __future__ import annotations
 
 import os
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
 from typing import Callable, Iterable, TypeVar
 
 Chunk = TypeVar("Chunk")
+
+CHUNK_RAYS = 1 << 18  # rays per work unit at most: 4096 texels × 64 rays
+
+
+def texels_per_chunk(chunk_texels: int, rays: int) -> int:
+    """Texels per work unit when each texel casts ``rays``: at most ``chunk_texels`` and at most
+    ``CHUNK_RAYS`` rays. Bounds a chunk's memory (about 150 bytes per ray) and its time, which is
+    how long a worker thread runs on after Ctrl-C (a thread cannot be stopped inside a chunk)."""
+    return max(1, min(chunk_texels, CHUNK_RAYS // max(rays, 1)))
 
 
 def cores() -> int:
@@ -20,12 +29,24 @@ def cores() -> int:
 
 
 def run_chunks(work: Callable[[Chunk], None], chunks: Iterable[Chunk], threads: int = 0) -> None:
-    """Call ``work`` on every chunk, on ``threads`` threads (0: one per core; 1: in this one)."""
+    """Call ``work`` on every chunk, on ``threads`` threads (0: one per core; 1: in this one).
+
+    When a chunk raises, or this thread is interrupted (Ctrl-C raises KeyboardInterrupt here while
+    it waits), the chunks not yet started are cancelled: the error comes out once the chunks
+    already running end, about one chunk's time, not after the whole queue.
+    """
     chunks = list(chunks)
     threads = threads or cores()
     if threads == 1 or len(chunks) < 2:
         for chunk in chunks:
             work(chunk)
-    else:
-        with ThreadPoolExecutor(min(threads, len(chunks))) as pool:
-            list(pool.map(work, chunks))
+        return
+    pool = ThreadPoolExecutor(min(threads, len(chunks)))
+    try:
+        futures = [pool.submit(work, chunk) for chunk in chunks]
+        done, _ = wait(futures, return_when=FIRST_EXCEPTION)
+        for future in futures:  # re-raise the first error, in chunk order
+            if future in done:
+                future.result()
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
