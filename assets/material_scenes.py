@@ -118,3 +118,49 @@ def material_zoo() -> GltfBuilder:
         mesh = b.shape_mesh(kind, box((0.8, 0.8, 0.8)), material=material)
         b.info["boxes"][kind] = b.node(kind, mesh, translation=(-5.0 + 2.0 * i, 0.4, 0.0))
     return b
+
+
+WAX = {"KHR_materials_diffuse_transmission": {"diffuseTransmissionFactor": 0.5},
+       "KHR_materials_volume": {"thicknessFactor": 0.3, "attenuationDistance": 0.25,
+                                "attenuationColor": [0.9, 0.6, 0.4]}}
+"""A wax: half diffuse, half translucent, a closed volume whose light fades within 0.25 m."""
+
+
+def wax_cylinder(radius: float = 0.5, height: float = 0.2, extensions: dict | None = None,
+                 scale: float = 1.0) -> GltfBuilder:
+    """A closed wax cylinder (``WAX`` unless ``extensions``), ``radius`` × ``height``, standing
+    on a 3 m grey floor, scaled by ``scale`` about the origin: its top cap's texels near the rim
+    have little wax behind them, those at its centre ``height`` or more (§4 inner obscurances).
+    info: floor, wax (nodes), radius, height (unscaled)."""
+    from assets.gltf_builder import cylinder
+
+    b = GltfBuilder()
+    floor = b.material("floor", (0.5, 0.5, 0.5))
+    wax = b.material("wax", (0.9, 0.8, 0.6), extensions=WAX if extensions is None else extensions)
+    b.info["floor"] = b.node("floor", b.shape_mesh("floor", quad(3.0, 3.0), material=floor))
+    shape = transformed(cylinder(radius, height, segments=48), translation=(0.0, height / 2, 0.0))
+    b.info["wax"] = b.node("wax", b.shape_mesh("wax", shape, material=wax),
+                           scale=(scale, scale, scale))
+    b.info["radius"], b.info["height"] = radius, height
+    return b
+
+
+def leaf(height: float = 0.2, translucency: float = 0.4, facing: str = "up") -> GltfBuilder:
+    """A 1 m square leaf at ``height`` over a 4 m green-grey floor, under the open sky.
+
+    facing "up": double-sided, ``KHR_materials_diffuse_transmission`` factor ``translucency``,
+    colour (1, 0.8, 0.5) — a leaf (§4). "up-opaque" / "down-opaque": the same quad with an
+    opaque single-sided diffuse material, facing up or turned over (its front is then the
+    leaf's back face). info: floor, leaf (nodes)."""
+    b = GltfBuilder()
+    floor = b.material("floor", (0.3, 0.7, 0.4))
+    extensions = ({"KHR_materials_diffuse_transmission": {
+        "diffuseTransmissionFactor": float(translucency),
+        "diffuseTransmissionColorFactor": [1.0, 0.8, 0.5]}} if facing == "up" else None)
+    material = b.material("leaf", (0.4, 0.8, 0.3), double_sided=facing == "up",
+                          extensions=extensions)
+    b.info["floor"] = b.node("floor", b.shape_mesh("floor", quad(4.0, 4.0), material=floor))
+    turn = rotation_matrix((1, 0, 0), 180 if facing == "down-opaque" else 0)
+    sheet = transformed(quad(1.0, 1.0), rotation=turn, translation=(0.0, height, 0.0))
+    b.info["leaf"] = b.node("leaf", b.shape_mesh("leaf", sheet, material=material))
+    return b

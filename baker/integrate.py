@@ -46,10 +46,16 @@ class Terms:
     half_split: (N, 2) mean over the first half of the texel's rays minus the mean over the
     second half, in luminance of R·ρ and in escaped fraction; quarter_split: (N, 2) the same
     within the first half (first quarter minus second quarter). See ``rmse``. chain_rays: (N,)
-    int64 rays cast beyond the texel's own, along mirror and glass chains (§3.1–3.2); capped:
+    int64 rays cast beyond the texel's own, along mirror and glass chains (§3.1–3.2), and for
+    leaves and closed translucent objects their back-face and inner rays (§4); capped:
     (N,) int64 of its rays whose chain the depth cap stopped (both empty when not counted).
     With mirrors, glass or translucency, a ray's escaped weight may be a fraction (the mean
     of its chain's RGB throughput), and ``escaped`` the mean of those weights.
+    through_hit, through_ave: (N, 3) light through translucent surfaces (§4, ``inner.py``): the
+    part of W independent of R_ave (a leaf's translucency × its back face's hits) and the RGB
+    weight of R_ave (× the back face's escaped fraction, + the inner obscurance); None when the
+    scene has no leaf or closed translucent material. The error estimates cover the front's
+    rays only.
     """
 
     w_hit: np.ndarray
@@ -60,6 +66,8 @@ class Terms:
     quarter_split: np.ndarray
     chain_rays: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     capped: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    through_hit: np.ndarray | None = None
+    through_ave: np.ndarray | None = None
 
     @property
     def rays(self) -> int:
@@ -67,12 +75,18 @@ class Terms:
         return int(self.counts.sum())
 
     def obscurance(self, r_ave: np.ndarray) -> np.ndarray:
-        """W (N, 3) for average reflectivity ``r_ave`` (3,)."""
+        """W (N, 3) for average reflectivity ``r_ave`` (3,), with the light through
+        translucent surfaces (``through_hit``, ``through_ave``) when there is some."""
+        w = self._front(r_ave)
+        return w if self.through_hit is None else w + self.through_hit + self.through_ave * r_ave
+
+    def _front(self, r_ave: np.ndarray) -> np.ndarray:
+        """(N, 3) the part of W that the texel's own rays estimate."""
         return self.w_hit + self.escaped[:, None] * r_ave
 
     def standard_error(self, r_ave: np.ndarray) -> np.ndarray:
         """(N,) standard error of the luminance of W, from the rays' sample variance."""
-        mean = self.obscurance(r_ave) @ LUMINANCE
+        mean = self._front(r_ave) @ LUMINANCE
         second = self.hit_sq + self.escaped * float(r_ave @ LUMINANCE) ** 2
         n = np.maximum(self.counts, 1)
         variance = np.maximum(second - mean * mean, 0.0) * n / np.maximum(n - 1, 1)
@@ -478,7 +492,8 @@ def _chunk_sums(surfaces: _Surfaces, tracer: Tracer, texels: Texels, rows: np.nd
 
 def integrate(scene: Scene, world: World, tracer: Tracer, texels: Texels, settings: Resolved,
               progress: Callable[[int], None] | None = None, rows: np.ndarray | None = None,
-              error_scale: tuple[np.ndarray, float] | None = None) -> Terms:
+              error_scale: tuple[np.ndarray, float] | None = None,
+              translucency: bool = True) -> Terms:
     """Estimate the obscurance terms of the texels ``rows`` (default: all), in that order.
 
     Without ``settings.target_error`` every texel gets ``settings.rays`` rays. With it, rays come
@@ -487,7 +502,8 @@ def integrate(scene: Scene, world: World, tracer: Tracer, texels: Texels, settin
     once the standard error of its lightmap luminance, ``error_scale[1]`` × the standard error
     of W's luminance with R_ave = ``error_scale[0]``, is at most ``target_error``. The rounds
     are the same whatever the chunking, so the result is too. ``progress`` is told how many
-    texels each chunk of the first round finished.
+    texels each chunk of the first round finished. ``translucency``: add the leaves' back faces
+    and the inner obscurances of closed translucent objects (``inner.add_translucency``, §4).
     """
     rows = np.arange(len(texels)) if rows is None else np.asarray(rows, np.int64)
     surfaces = _surfaces(scene, world)
@@ -523,7 +539,11 @@ def integrate(scene: Scene, world: World, tracer: Tracer, texels: Texels, settin
         r_ave, scale = error_scale if error_scale is not None else (np.ones(3), 1.0)
         active = active[terms.standard_error(r_ave) * scale > settings.target_error]
         batch = first
-    return replace(_means(sums, counts), chain_rays=chain_counts[:, 0], capped=chain_counts[:, 1])
+    terms = replace(_means(sums, counts), chain_rays=chain_counts[:, 0], capped=chain_counts[:, 1])
+    if not translucency:
+        return terms
+    from .inner import add_translucency  # leaves and inner obscurances (§4); inner.py casts
+    return add_translucency(scene, world, tracer, texels, rows, settings, terms, error_scale)
 
 
 def _luminance_and_escaped(sums: np.ndarray) -> np.ndarray:

@@ -93,9 +93,31 @@ class Classification:
         return (self.alpha_mode == "MASK" and self.alpha < self.alpha_cutoff) or (
             self.alpha_mode == "BLEND" and self.alpha <= 0.0)
 
+    @property
+    def translucency(self) -> np.ndarray:
+        """(3,) the share of light that crosses the surface (§4): the translucent branch's
+        weight × its tint (base colour × diffuseTransmissionColor)."""
+        return self.weights[TRANSLUCENT] * self.translucent_color
+
+    @property
+    def leaf(self) -> bool:
+        """Thin double-sided translucent geometry (no KHR_materials_volume thickness): a leaf
+        (§4), whose texels add the back face's obscurance × ``translucency`` to the front's."""
+        return self.weights[TRANSLUCENT] > 0 and self.double_sided and self.thickness <= 0.0
+
+    @property
+    def inner(self) -> bool:
+        """A closed translucent object (KHR_materials_volume thickness > 0): its texels get the
+        inner obscurance (§4, equation 5)."""
+        return self.weights[TRANSLUCENT] > 0 and self.thickness > 0.0
+
     def stages(self) -> set[str]:
         """Which of the bake's material stages this material needs."""
         out = set()
+        if self.leaf:
+            out.add("leaves")
+        if self.inner:
+            out.add("inner obscurances")
         if self.weights[SPECULAR] > 0:
             out.add("specular chains")
         if self.weights[TRANSPARENT] > 0:

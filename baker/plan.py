@@ -97,10 +97,15 @@ def material_stages(scene: Scene) -> dict[str, str]:
             ("translucency", "translucent neighbours count a share of R_ave with ρ = 1 ({})",
              "off: no translucent material"),
             ("alpha testing", "rays pass alpha-cut and blended texels ({})",
-             "off: no MASK/BLEND material with alpha below opaque")):
+             "off: no MASK/BLEND material with alpha below opaque"),
+            ("inner obscurances", "rays into closed translucent objects, γ(d) = 1 − sqrt(d/d_in) "
+             "× absorption, t·R_ave·I_A added (§4, eq. 5; {})",
+             "off: no closed translucent material (translucency with KHR_materials_volume "
+             "thickness)"),
+            ("leaves", "the back face's obscurance × translucency is added to the front's "
+             "(§4; {})", "off: no thin double-sided translucent material")):
         text, count = names(stage)
         out[stage] = on.format(text) if count else off
-    out["inner obscurances"] = "not computed (translucent objects are lit from outside only)"
     return out
 
 

@@ -10,13 +10,15 @@ import pytest
 
 import baker.integrate as integrate_module
 from assets.material_scenes import (DIFFUSE_TRANSMISSION, TRANSMISSION, VOLUME, alpha_cut_quad,
-                                    facing_mirrors, glass_slab, material_zoo, mirror_wall)
+                                    facing_mirrors, glass_slab, leaf, material_zoo, mirror_wall,
+                                    wax_cylinder)
 from baker.geometry import build_world
 from baker.integrate import _Chains, _refract, _special_hits, _surfaces, integrate
 from baker.materials import (DIFFUSE, SPECULAR, TRANSLUCENT, classify,
                              no_lightmap_reason)
 from baker.scene import Material
 from baker.settings import Settings, resolve
+from baker.surface import LUMINANCE
 from baker.trace import Tracer
 from bakehelp import computed, loaded
 
@@ -69,7 +71,11 @@ def test_volume_and_diffuse_transmission_sample_values():
     np.testing.assert_allclose(c.weights, [0.75, 0, 0, 0.25])
     np.testing.assert_allclose(c.translucent_color, [0.8, 0.3, 0.0])
     assert (c.thickness, c.attenuation_distance) == (1.0, 0.006)
-    assert c.stages() == {"translucency"}
+    assert c.stages() == {"translucency", "inner obscurances"}  # a closed volume
+    assert c.inner and not c.leaf
+    thin = classify(_material(diffuse_transmission=0.25, double_sided=True))
+    assert thin.leaf and not thin.inner and thin.stages() == {"translucency", "leaves"}
+    assert not classify(_material(diffuse_transmission=0.25)).leaf  # single-sided: no back
 
 
 def test_alpha_modes():
@@ -268,3 +274,82 @@ def test_a_diffuse_scene_runs_no_material_stage(tmp_path):
     assert all(done.plan.stages[s].startswith("off") for s in
                ("specular chains", "refraction", "translucency", "alpha testing"))
     assert done.terms.chain_rays.sum() == 0 and done.terms.capped.sum() == 0
+
+
+# ------------------------------------------------------------------------------- §4: inner, leaves
+
+def _top_cap(done, node):
+    tx = done.texels
+    top = (done.world.tri_instance[tx.triangle] == node) & (tx.geometric_normal[:, 1] > 0.99)
+    return top, np.hypot(tx.position[:, 0], tx.position[:, 2])
+
+
+def test_a_wax_cylinders_thin_rim_is_brighter_than_its_thick_core(tmp_path):
+    b = wax_cylinder()
+    done = computed(b, tmp_path, rays=64, texel_density=20, d_max=1.0)
+    top, r = _top_cap(done, b.info["wax"])
+    rim, core = top & (r > 0.42), top & (r < 0.15)
+    assert rim.sum() > 50 and core.sum() > 20
+    inner = done.terms.through_ave @ LUMINANCE
+    assert 0 < inner[core].mean() and 1.5 * inner[core].mean() < inner[rim].mean()
+    light = done.lightmaps.light[done.texels.page, done.texels.y, done.texels.x] @ LUMINANCE
+    assert light[core].mean() < light[rim].mean()  # the front's W is the same: open sky
+    assert "wax" in done.plan.stages["inner obscurances"]
+    assert done.plan.stages["leaves"].startswith("off")
+    assert done.terms.chain_rays[rim].min() >= 64  # the inner rays are counted
+
+
+@pytest.mark.parametrize("scale", [1.0, 2.0])
+def test_inner_obscurance_of_a_wide_slab_matches_the_closed_form(tmp_path, scale):
+    """Under the centre of a wide slab of height h, rays into it leave through the floor at
+    d = h/cosθ; with reach R = the volume's thickness (mesh units, × the node's scale) and no
+    absorption, W_in = ∫ (1 − sqrt(d/R)) 2μ dμ over μ = cosθ > a = h/R: 1 − (4/3)√a + a²/3."""
+    slab = {"KHR_materials_diffuse_transmission": {"diffuseTransmissionFactor": 0.5},
+            "KHR_materials_volume": {"thicknessFactor": 0.3}}
+    b = wax_cylinder(radius=4.0, height=0.15, extensions=slab, scale=scale)
+    done = computed(b, tmp_path, only_nodes={b.info["wax"]}, rays=256, texel_density=2 / scale,
+                    d_max=1.0)
+    top, r = _top_cap(done, b.info["wax"])
+    centre = top & (r < 2.0 * scale)
+    assert centre.sum() > 10
+    t = classify(done.scene.materials[1]).translucency
+    w_in = done.terms.through_ave[centre] / t
+    a = 0.5
+    np.testing.assert_allclose(w_in.mean(), 1 - 4 / 3 * np.sqrt(a) + a * a / 3, rtol=0.02)
+
+
+def test_a_leaf_gets_its_front_plus_translucency_times_its_back(tmp_path):
+    """The leaf's W against an opaque quad facing up (its front) and one turned over (its back),
+    baked separately: W = front + t·back, t = diffuse transmission × its colour × base colour."""
+    settings = dict(rays=128, texel_density=16, d_max=1.0)
+    means = {}
+    r_ave = None
+    for facing in ("up", "up-opaque", "down-opaque"):
+        b = leaf(facing=facing)
+        done = computed(b, tmp_path / facing, only_nodes={b.info["leaf"]}, **settings)
+        r_ave = done.ambient.r_ave if r_ave is None else r_ave  # the leaf scene's R_ave
+        w = done.terms.obscurance(r_ave)
+        means[facing] = w.mean(axis=0)
+        if facing == "up":
+            t = classify(done.scene.materials[1]).translucency
+            np.testing.assert_allclose(t, 0.4 * np.array([1.0, 0.8, 0.5]) * [0.4, 0.8, 0.3])
+            assert "leaf" in done.plan.stages["leaves"]
+            assert done.plan.stages["inner obscurances"].startswith("off")
+    front, back = means["up-opaque"], means["down-opaque"]
+    assert back @ LUMINANCE < 0.8 * front @ LUMINANCE  # the back sees the floor: they differ
+    np.testing.assert_allclose(means["up"], front + t * back, rtol=0.01)
+
+
+def test_leaf_and_inner_terms_do_not_depend_on_chunks_or_threads(tmp_path):
+    from assets.gltf_builder import quad, transformed
+
+    b = wax_cylinder()
+    sheet = transformed(quad(0.6, 0.6), translation=(1.0, 0.3, 0.0))
+    b.node("leaf", b.shape_mesh("leaf", sheet, material=b.material(
+        "leaf", (0.4, 0.8, 0.3), double_sided=True,
+        extensions={"KHR_materials_diffuse_transmission": {"diffuseTransmissionFactor": 0.4}})))
+    one = computed(b, tmp_path / "one", rays=16, texel_density=12, threads=1, chunk_texels=4096)
+    two = computed(b, tmp_path / "two", rays=16, texel_density=12, threads=2, chunk_texels=37)
+    assert (one.terms.through_hit != 0).any() and (one.terms.through_ave != 0).any()
+    for name in ("w_hit", "escaped", "through_hit", "through_ave", "chain_rays"):
+        np.testing.assert_array_equal(getattr(one.terms, name), getattr(two.terms, name))
