@@ -149,6 +149,35 @@ def shadow_edge(angle: float = 17.0, height: float = 0.5, size: float = 2.0) -> 
     return b
 
 
+def obscurance_edge(angle: float = 17.0, gap: float = 0.01, thickness: float = 0.05,
+                    size: float = 2.0) -> GltfBuilder:
+    """A ``size``-metre floor (y = 0, facing up) and, ``gap`` metres above it, a closed slab
+    ``thickness`` thick covering half of it: the slab's straight edge passes over the origin at
+    ``angle`` degrees to the z axis, so the sharp step in obscurance under its edge (dark
+    beneath, open beside, over a width of about ``gap``) crosses the floor's texel rows at a
+    slant. No light: the lightmap is the obscurance.
+
+    A floor point (x, z) is under the slab where ``x·cos(angle) − z·sin(angle) > 0``
+    (``info["under"]`` takes points (n, 3) and returns that as (n,) bool). ``info``: floor,
+    slab, angle, gap.
+    """
+    b = GltfBuilder()
+    white = b.material("white", WHITE)
+    floor = b.node("floor", b.shape_mesh("floor", quad(size, size), material=white))
+    rotation = rotation_matrix((0, 1, 0), angle)
+    slab = transformed(transformed(box((3 * size, thickness, 3 * size)),
+                                   translation=(1.5 * size, 0.0, 0.0)),
+                       rotation=rotation, translation=(0.0, gap + thickness / 2, 0.0))
+    occluder = b.node("slab", b.shape_mesh("slab", slab, material=white))
+    edge_normal = rotation @ np.array([1.0, 0.0, 0.0])  # the slab lies on this side
+
+    def under(points: np.ndarray) -> np.ndarray:
+        return points @ edge_normal > 0
+
+    b.info.update(floor=floor, slab=occluder, angle=angle, gap=gap, under=under)
+    return b
+
+
 def low_poly_sphere(radius: float = 0.5, rings: int = 8, segments: int = 12,
                     elevation: float = 0.0, azimuth: float = 17.0) -> GltfBuilder:
     """A smooth-shaded low-poly UV sphere (node 0, centred at the origin, ``rings`` × ``segments``

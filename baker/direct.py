@@ -28,7 +28,7 @@ and sky rays start from S sub-positions spread over its square, ray s from sub-p
 so a shadow edge crossing a texel gives it a partial value; a hard light then casts S rays.
 
 Shadow terminator: texels on smooth-shaded curved facets are raised towards the smooth surface
-(``rasterise.terminator_offset``, applied by ``validity.check_texels``); from there rays may leave
+(``Texels.terminator``, applied by ``validity.check_texels``); from there rays may leave
 a little below their own facet's plane (above the shading normal's), so the light fades smoothly
 across the facets instead of stopping at each facet's edge.
 

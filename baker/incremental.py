@@ -8,7 +8,8 @@ bit, the terms the last bake stored, and only the others need rays. The rebake:
 1. loads the state (``state.py``) and diffs the scene against it (``diff.py``); anything that
    changes the atlas, the rays or the tracer's frame means a full bake (``FullBake``, with why);
 2. redoes the cheap scene-wide work exactly as a full bake does (world, tracer, sources, power
-   for I_A, R_ave, plan, rasterisation of the stored atlas);
+   for I_A, R_ave, plan; the texels' sample points from the stored atlas and coverage, so
+   nothing is rasterised again);
 3. finds the dirty texels (``Dirty``):
    - every texel of a moved node ("own");
    - texels near the node's old or new bounds (within d_max + 4 texel sides: the reach of the
@@ -41,11 +42,12 @@ from .direct import Direct, _texel_receivers, direct_light, \
 from .geometry import World, build_world
 from .integrate import Terms, hemisphere_rays, integrate
 from .parallel import run_chunks
-from .rasterise import Texels, rasterise
+from .rasterise import Coverage, Texels, texels_of
 from .scene import Scene
 from .settings import Settings, resolve
 from .surface import LUMINANCE
-from .trace import Tracer, ray_lift
+from .sampling import jit
+from .trace import Hits, Tracer, ray_lift
 from .validity import Validity, check_texels
 
 # Extra reach (in texel sides of each texel) beyond d_max: the validity probes move a sample
@@ -65,11 +67,15 @@ class FullBake(Exception):
 
 @dataclass(frozen=True)
 class TexelPoints:
-    """What the state keeps of the texels: key (N,) uint64 and position (N, 3) float64, the
-    world sample point after the validity probes moved it. The rest of ``Texels`` follows from
-    the stored atlas and the scene (``rasterise``), bit for bit."""
+    """What the state keeps of the texels: their coverage (``rasterise.Coverage``: key (N,)
+    uint64, owning world triangle (N,) int64, triangle_texels (T,) int64) and position (N, 3)
+    float64, the world sample point after the validity probes moved it. The rest of ``Texels``
+    follows from the stored atlas and the scene (``rasterise.texels_of``), bit for bit, without
+    rasterising again."""
 
     key: np.ndarray
+    triangle: np.ndarray
+    triangle_texels: np.ndarray
     position: np.ndarray
 
 
@@ -82,8 +88,9 @@ def make_state(done, fingerprint: dict) -> state_file.BakeState:
     """The bake state of a finished computation (``bake.Computed``)."""
     return state_file.BakeState(
         fingerprints=fingerprint, atlas=done.atlas,
-        groups={"texels": TexelPoints(done.texels.key, done.texels.position), "validity": done.validity, "terms": done.terms,
-                "direct": done.direct},
+        groups={"texels": TexelPoints(done.texels.key, done.texels.triangle,
+                                      done.texels.triangle_texels, done.texels.position),
+                "validity": done.validity, "terms": done.terms, "direct": done.direct},
         instance_world=np.array([inst.world for inst in done.scene.instances], np.float64
                                 ).reshape(-1, 4, 4))
 
@@ -126,6 +133,11 @@ def take(texels: Texels, rows: np.ndarray) -> Texels:
                               if f.name != "triangle_texels"})
 
 
+def _absent(value) -> bool:
+    """Whether an optional per-texel term is missing (None or an empty array)."""
+    return value is None or (isinstance(value, np.ndarray) and not len(value))
+
+
 def merge(stored, fresh, rows: np.ndarray, **overrides):
     """``stored`` (a dataclass of per-texel arrays) with rows ``rows`` replaced by ``fresh``'s
     rows (same fields, k rows); fields in ``overrides`` are taken as given (global values)."""
@@ -136,7 +148,11 @@ def merge(stored, fresh, rows: np.ndarray, **overrides):
             continue
         old = getattr(stored, f.name)
         new = getattr(fresh, f.name)
-        if isinstance(old, np.ndarray):
+        if _absent(old) or _absent(new):
+            if _absent(old) != _absent(new) and len(rows):  # an optional term (e.g. §4's)
+                raise FullBake(f"the bake state's term {f.name} does not fit the scene now")
+            values[f.name] = old
+        elif isinstance(old, np.ndarray):
             out = old.copy()
             out[rows] = new
             values[f.name] = out
@@ -155,6 +171,85 @@ def _small_world(corners: np.ndarray, center: np.ndarray) -> World:
                  triangles=np.arange(3 * k, dtype=np.int64).reshape(-1, 3), tri_instance=empty,
                  tri_local=empty, tri_material=empty, vertex_start=empty, tri_start=empty,
                  center=center)
+
+
+@jit
+def _crossing(origins: np.ndarray, directions: np.ndarray, lengths: np.ndarray,
+              low: np.ndarray, high: np.ndarray) -> np.ndarray:
+    """(n,) bool: whether each ray (origins, directions (n, 3) in the tracer's frame, lengths
+    (n,)) passes through any of the boxes [low, high] (b, 3) within its length (slab test)."""
+    n, boxes = len(origins), len(low)
+    out = np.zeros(n, np.bool_)
+    for i in range(n):
+        for b in range(boxes):
+            near, far = 0.0, float(lengths[i])
+            for c in range(3):
+                o, d = float(origins[i, c]), float(directions[i, c])
+                if d == 0.0:
+                    if o < low[b, c] or o > high[b, c]:
+                        near, far = 1.0, 0.0
+                else:
+                    t0, t1 = (low[b, c] - o) / d, (high[b, c] - o) / d
+                    near, far = max(near, min(t0, t1)), min(far, max(t0, t1))
+            if near <= far:
+                out[i] = True
+                break
+    return out
+
+
+class _Changed:
+    """An Embree scene of just the changed triangles, for the dirty search, with the boxes that
+    hold each group of them: a ray that crosses no box cannot meet them and is not cast, so the
+    search costs little more than generating each candidate texel's rays.
+
+    ``parts``: list of (t, 3, 3) world corners, one box each (a moved node's old and new
+    place). The boxes, in the tracer's float32 frame, are padded far beyond float32 rounding.
+    Offers the Tracer methods the searches use: ``cast_local``, ``cast`` and ``occluded``.
+    """
+
+    def __init__(self, parts: list[np.ndarray], center: np.ndarray):
+        parts = [p for p in parts if len(p)]
+        corners = np.concatenate(parts) if parts else np.zeros((0, 3, 3))
+        self.center = center
+        self._tracer = Tracer(_small_world(corners, center))
+        local = [p.reshape(-1, 3) - center for p in parts]
+        pad = [1e-4 * (np.abs(p).max() + np.ptp(p, axis=0).max()) + 1e-12 for p in local]
+        self._low = np.array([p.min(0) - e for p, e in zip(local, pad)]).reshape(-1, 3)
+        self._high = np.array([p.max(0) + e for p, e in zip(local, pad)]).reshape(-1, 3)
+
+    def _maybe(self, local: np.ndarray, directions: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+        return np.flatnonzero(_crossing(local, directions, lengths * (1 + 1e-6),
+                                        self._low, self._high))
+
+    def cast_local(self, origins, directions, lengths) -> dict[str, np.ndarray]:
+        """As ``Tracer.cast_local``, but only ``primID`` (−1 for rays that cross no box)."""
+        primitive = np.full(len(origins), -1, np.int32)
+        rows = self._maybe(origins, directions, lengths)
+        if len(rows):
+            primitive[rows] = self._tracer.cast_local(origins[rows], directions[rows],
+                                                      lengths[rows].copy())["primID"]
+        return {"primID": primitive}
+
+    def _local(self, origins, directions, length):
+        lengths = np.empty(len(origins), np.float32)
+        lengths[:] = length
+        return ((origins - self.center).astype(np.float32), directions.astype(np.float32),
+                lengths)
+
+    def cast(self, origins, directions, length) -> Hits:
+        """As ``Tracer.cast``; the triangle only (distances and barycentrics left empty)."""
+        triangle = self.cast_local(*self._local(origins, directions, length))["primID"]
+        n = len(origins)
+        return Hits(triangle.astype(np.int64), np.full(n, np.inf), np.zeros(n), np.zeros(n))
+
+    def occluded(self, origins, directions, length) -> np.ndarray:
+        """As ``Tracer.occluded``."""
+        blocked = np.zeros(len(origins), bool)
+        rows = self._maybe(*self._local(origins, directions, length))
+        if len(rows):
+            lengths = np.broadcast_to(np.asarray(length, np.float64), (len(origins),))[rows]
+            blocked[rows] = self._tracer.occluded(origins[rows], directions[rows], lengths)
+        return blocked
 
 
 def _placed_corners(scene: Scene, world: World, instance: int, matrix: np.ndarray) -> np.ndarray:
@@ -227,17 +322,33 @@ def _slices(count: int, step: int) -> list[slice]:
 
 def _above(texels: Texels, rows: np.ndarray, corners: np.ndarray) -> np.ndarray:
     """(k,) bool: texels ``rows`` for which some corner of the triangles ``corners`` (t, 3, 3)
-    lies above (or within a texel side below) the texel's tangent plane: only those can have a
-    hemisphere ray meet them. Vectorised over texels, a loop over triangles in blocks."""
+    lies above (or within a texel side, plus float32 rounding, below) the texel's tangent
+    plane: only those can have a hemisphere ray meet them."""
     points = corners.reshape(-1, 3)
-    above = np.zeros(len(rows), bool)
-    p, n = texels.position[rows], texels.geometric_normal[rows]
-    extent = float(np.abs(points - points.mean(0)).max()) if len(points) else 0.0
-    slack = texels.size[rows] + 1e-5 * (extent + np.abs(p - points.mean(0)).max(axis=1))
-    for start in range(0, len(points), 64):
-        height = n @ points[start:start + 64].T - np.einsum("ij,ij->i", n, p)[:, None]
-        above |= (height > -slack[:, None]).any(axis=1)
-    return above
+    if not len(points) or not len(rows):
+        return np.zeros(len(rows), bool)
+    middle = points.mean(0)
+    p = texels.position[rows]
+    slack = texels.size[rows] + 1e-5 * (float(np.abs(points - middle).max())
+                                        + np.abs(p - middle).max(axis=1))
+    return _any_above(p, texels.geometric_normal[rows], slack, points)
+
+
+@jit
+def _any_above(position: np.ndarray, normal: np.ndarray, slack: np.ndarray,
+               points: np.ndarray) -> np.ndarray:
+    """(k,) bool: whether any of ``points`` (m, 3) lies higher than −slack (k,) above the plane
+    through position (k, 3) with normal (k, 3)."""
+    out = np.zeros(len(position), np.bool_)
+    for i in range(len(position)):
+        for j in range(len(points)):
+            height = ((points[j, 0] - position[i, 0]) * normal[i, 0]
+                      + (points[j, 1] - position[i, 1]) * normal[i, 1]
+                      + (points[j, 2] - position[i, 2]) * normal[i, 2])
+            if height > -slack[i]:
+                out[i] = True
+                break
+    return out
 
 
 class _Recorder:
@@ -340,11 +451,12 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
         raise FullBake("the bake state lacks the texels' terms")
     tracer, sources, power, ambient, plan = lighting(scene, world, resolved, times)
     atlas = stored.atlas
-    with _timed(times, "rasterise"):
-        raw = rasterise(atlas, world)
+    if len(old_texels.triangle_texels) != len(world.triangles):
+        raise FullBake("the stored texels belong to other triangles")
+    with _timed(times, "rasterise"):  # the stored coverage: no rasterising again
+        raw = texels_of(atlas, world, Coverage(old_texels.key, old_texels.triangle,
+                                               old_texels.triangle_texels))
     count = len(raw)
-    if count != len(old_texels.key) or not np.array_equal(raw.key, old_texels.key):
-        raise FullBake("the stored atlas no longer gives the same texels")
     if old_direct is None or len(old_direct.punctual) != count or (
             old_direct.punctual.shape[1] != len(sources.lights)):
         raise FullBake("the bake state's direct light does not match the scene's lights")
@@ -366,11 +478,12 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
             corners = np.concatenate(old_corners + new_corners)
             boxes = [(c.reshape(-1, 3).min(0), c.reshape(-1, 3).max(0))
                      for c in old_corners + new_corners if len(c)]
-            small = Tracer(_small_world(corners, world.center))
+            small = _Changed(old_corners + new_corners, world.center)
             near = _near(raw, boxes, resolved.d_max)
             # Validity: tangent probes reach a few texel sides; hemisphere probes d_max.
             close = own | _near(raw, boxes, 0.0)
             far = np.flatnonzero(near & ~close)
+            far = far[_above(texels, far, corners)]  # the probes too stay in the hemisphere
             meets, n = _probes_meet(small, texels, far, resolved.d_max, resolved.threads)
             tested += n
             redo = np.union1d(np.flatnonzero(close), far[meets])
@@ -393,7 +506,7 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
             tris = np.flatnonzero(np.isin(world.tri_material, change.recoloured))
             a, b, c = world.corners(tris)
             corners = np.stack([a, b, c], axis=1)
-            small = Tracer(_small_world(corners, world.center))
+            small = _Changed([corners], world.center)
             box = [(corners.reshape(-1, 3).min(0), corners.reshape(-1, 3).max(0))] if len(tris) else []
             test = np.flatnonzero(_near(texels, box, resolved.d_max) & (reason < 0))
             meets, n = _rays_meet(small, texels, test, resolved)

@@ -28,6 +28,7 @@ from .scene import Scene
 from .settings import Resolved
 from .materials import DIFFUSE, SPECULAR, TRANSLUCENT, TRANSPARENT, MaterialTable, material_table
 from .sampling import hash_u32
+from .supersample import sub_positions
 from .surface import LUMINANCE, albedo, base_colour, triangle_albedo
 from .trace import Tracer, ray_lift
 
@@ -120,32 +121,38 @@ class Terms:
 
 
 @jit
-def _to_world_kernel(rays, positions, normals, offsets, center, x, y, z, origins, directions):
+def _to_world_kernel(rays, first, starts, normals, offsets, center, x, y, z, origins, directions):
     """Turn local cosine directions (x, y, z) (k·rays,) into Embree's float32 rays.
 
-    Each texel's directions go into the frame of its normal; its origin (lifted off the surface
-    by its offset, recentred on ``center``) is repeated for each of its rays.
+    Each texel's directions go into the frame of its normal; ray s of texel i (its sample
+    ``first`` + s) starts from ``starts[i, (first + s) mod S]`` (starts: (k, S, 3) world points
+    on the texel's plane, S = 1 without supersampling), lifted off the surface by the texel's
+    offset along the normal and recentred on ``center``.
     """
-    for i in range(len(positions)):
+    count = starts.shape[1]
+    for i in range(len(starts)):
         nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
         f = frame(nx, ny, nz)
-        ox = positions[i, 0] - center[0] + offsets[i] * nx
-        oy = positions[i, 1] - center[1] + offsets[i] * ny
-        oz = positions[i, 2] - center[2] + offsets[i] * nz
         for r in range(i * rays, (i + 1) * rays):
-            origins[r, 0], origins[r, 1], origins[r, 2] = ox, oy, oz
+            j = (first + r - i * rays) % count
+            origins[r, 0] = starts[i, j, 0] - center[0] + offsets[i] * nx
+            origins[r, 1] = starts[i, j, 1] - center[1] + offsets[i] * ny
+            origins[r, 2] = starts[i, j, 2] - center[2] + offsets[i] * nz
             directions[r, 0] = x[r] * f[0] + y[r] * f[3] + z[r] * nx
             directions[r, 1] = x[r] * f[1] + y[r] * f[4] + z[r] * ny
             directions[r, 2] = x[r] * f[2] + y[r] * f[5] + z[r] * nz
 
 
 def hemisphere_rays(texels: Texels, rows: np.ndarray | slice, rays: int, seed: int,
-                    center: np.ndarray, technique: str = "sobol",
-                    first: int = 0) -> tuple[np.ndarray, np.ndarray]:
+                    center: np.ndarray, technique: str = "sobol", first: int = 0,
+                    sub: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Cosine-distributed rays about each texel's front-face normal, ready for Embree.
 
     rows: the texels (indices or a slice); their samples ``first`` … ``first + rays − 1`` (one
-    stratified grid, ``sampling.fill_points``). Returns origins and directions,
+    stratified grid, ``sampling.fill_points``). sub: None (every ray starts at the texel's
+    sample point), or (k, S, 3) world sub-positions of the texels (``supersample.sub_positions``,
+    on the texel's plane, so the same normal and frame): sample j starts from sub-position
+    j mod S. Returns origins and directions,
     each (k·rays, 3) float32 in the tracer's recentred frame (world − ``center``), texel-major
     (texel i's rays are rows i·rays … i·rays + rays − 1). Computed in float64 (points, then
     directions, in flat arrays that the compiler vectorises), rounded once at the end.
@@ -159,7 +166,8 @@ def hemisphere_rays(texels: Texels, rows: np.ndarray | slice, rays: int, seed: i
     fill_cosine(u, v, x, y, z)
     origins = np.empty((k * rays, 3), np.float32)
     directions = np.empty((k * rays, 3), np.float32)
-    _to_world_kernel(rays, texels.position[rows], texels.geometric_normal[rows],
+    starts = texels.position[rows][:, None, :] if sub is None else sub
+    _to_world_kernel(rays, first, starts, texels.geometric_normal[rows],
                      ray_lift(texels.position[rows], texels.size[rows], center), center, x, y, z,
                      origins, directions)
     return origins, directions
@@ -465,8 +473,10 @@ def _chunk_sums(surfaces: _Surfaces, tracer: Tracer, texels: Texels, rows: np.nd
                 first: int, rays: int, settings: Resolved) -> tuple[np.ndarray, _Chains]:
     """(k, 9) sums over samples ``first`` … ``first + rays − 1`` of the texels ``rows``, as
     ``_accumulate_kernel`` lays them out, and the chunk's chain counts."""
+    sub = (sub_positions(tracer, texels, rows, settings.supersample, settings.seed)
+           if settings.supersample > 1 else None)
     origins, directions = hemisphere_rays(texels, rows, rays, settings.seed, tracer.center,
-                                          settings.sampling, first)
+                                          settings.sampling, first, sub)
     hits = tracer.cast_local(origins, directions, np.full(len(origins), settings.d_max, np.float32))
     primitive = hits["primID"]
     chains = _Chains(np.zeros(len(rows), np.int64), np.zeros(len(rows), np.int64))

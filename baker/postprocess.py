@@ -15,20 +15,41 @@ from __future__ import annotations
 import numpy as np
 
 from .compose import Lightmaps
+from .sampling import jit
 from .seams import Seams, stitch
 
-_NEIGHBOURS = [(dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1) if (dy, dx) != (0, 0)]
+_NEIGHBOURS = np.array([(dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1) if (dy, dx) != (0, 0)],
+                       np.int64)
 _FILL_RINGS = 8  # how far (texels) valid values reach into a patch of invalid texels
 
 
-def _shift(a: np.ndarray, dy: int, dx: int) -> np.ndarray:
-    """``a`` (P, H, W, …) moved by (dy, dx) within each page, zeros shifted in."""
-    out = np.zeros_like(a)
-    h, w = a.shape[1], a.shape[2]
-    ys, yd = (slice(0, h - dy), slice(dy, h)) if dy >= 0 else (slice(-dy, h), slice(0, h + dy))
-    xs, xd = (slice(0, w - dx), slice(dx, w)) if dx >= 0 else (slice(-dx, w), slice(0, w + dx))
-    out[:, yd, xd] = a[:, ys, xs]
-    return out
+@jit
+def _grow_ring(values: np.ndarray, filled: np.ndarray, into: np.ndarray,
+               out: np.ndarray, grown: np.ndarray) -> bool:
+    """One ring of dilation: every texel of ``into`` not ``filled`` (P, H, W) with filled
+    8-neighbours gets their mean (neighbours summed in ``_NEIGHBOURS`` order) in ``out``
+    (P, H, W, C) and is marked in ``grown``; False when no texel grew. Reads only ``values`` and
+    ``filled`` as they were before the ring, so the result does not depend on the scan order."""
+    pages, height, width, channels = values.shape
+    total = np.zeros(channels)
+    any_grown = False
+    for p in range(pages):
+        for y in range(height):
+            for x in range(width):
+                if filled[p, y, x] or not into[p, y, x]:
+                    continue
+                count = 0.0
+                total[:] = 0.0
+                for k in range(len(_NEIGHBOURS)):
+                    v, u = y + _NEIGHBOURS[k, 0], x + _NEIGHBOURS[k, 1]
+                    if 0 <= v < height and 0 <= u < width and filled[p, v, u]:
+                        total += values[p, v, u]
+                        count += 1.0
+                if count > 0:
+                    out[p, y, x] = total / count
+                    grown[p, y, x] = True
+                    any_grown = True
+    return any_grown
 
 
 def dilate(values: np.ndarray, filled: np.ndarray, rings: int,
@@ -38,20 +59,14 @@ def dilate(values: np.ndarray, filled: np.ndarray, rings: int,
     ``into`` (P, H, W) bool, when given, limits the growth to those texels (e.g. the invalid
     texels inside charts, so that the fill never crosses the padding to another chart).
     """
-    values, filled = values.copy(), filled.copy()
+    values = np.ascontiguousarray(values, np.float64).copy()
+    filled = filled.copy()
+    into = np.ones(filled.shape, bool) if into is None else np.ascontiguousarray(into)
     for _ in range(rings):
-        total = np.zeros_like(values)
-        count = np.zeros(filled.shape)
-        for dy, dx in _NEIGHBOURS:
-            total += _shift(values * filled[..., None], dy, dx)
-            count += _shift(filled.astype(np.float64), dy, dx)
-        grow = ~filled & (count > 0)
-        if into is not None:
-            grow &= into
-        if not grow.any():
+        grown = np.zeros(filled.shape, bool)
+        if not _grow_ring(values.copy(), filled, into, values, grown):
             break
-        values[grow] = total[grow] / count[grow][:, None]
-        filled = filled | grow
+        filled |= grown
     return values, filled
 
 

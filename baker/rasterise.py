@@ -15,7 +15,7 @@ facets lie inside the surface the normals describe, so a point on a facet near t
 terminator sees the light only below its own facet's plane, or is shadowed by the next facet:
 the shading shows each facet as a step. As Hanika ("Hacking the shadow terminator", Ray Tracing
 Gems II, 2021) and the Godot and Bakery bakers do, the sample point is pushed off the facet
-towards the smooth surface: ``terminator_offset`` gives the push (``Texels.terminator``); the
+towards the smooth surface: ``_texel_points`` gives the push (``Texels.terminator``); the
 validity probes apply it where nothing is in the way (``validity.py``). Flat surfaces (shading
 normal = face normal) and concave ones get none.
 """
@@ -28,6 +28,7 @@ import numpy as np
 
 from .atlas import Atlas
 from .geometry import World
+from .sampling import jit
 
 # Candidate (triangle, texel) pairs examined at once; bounds memory at ~100 bytes a pair.
 _CANDIDATES_PER_CHUNK = 2_000_000
@@ -48,7 +49,7 @@ class Texels:
     triangle's plane (the UV→world Jacobian; zeros for a triangle without UV area), for
     sub-texel sample positions (``supersample.py``).
     terminator: (N, 3) float64 world push of the sample point towards the smooth surface its
-    shading normals describe (``terminator_offset``; zeros on flat and concave surfaces). Not
+    shading normals describe (``_texel_points``; zeros on flat and concave surfaces). Not
     yet applied to ``position``: ``validity.check_texels`` does that where the way is clear.
     triangle_texels: (T,) int64, for every world triangle, how many texels its UV footprint
     touches (0 for triangles that are not baked).
@@ -73,13 +74,22 @@ class Texels:
         return len(self.key)
 
 
+def degenerate(world: World, tris: np.ndarray) -> np.ndarray:
+    """(k,) bool: world triangles ``tris`` without a usable area — collinear or collapsed corners,
+    area at most 1e-12 of their longest edge squared (a sliver of aspect 10⁶ has 10⁻⁶). They
+    have no front face to cast rays from, so they own no texel (the report counts them)."""
+    a, b, c = world.corners(tris)
+    longest = np.max([np.sum((b - a) ** 2, 1), np.sum((c - b) ** 2, 1), np.sum((a - c) ** 2, 1)], 0)
+    return world.areas(tris) <= 1e-12 * longest
+
+
 def _baked_triangles(atlas: Atlas, world: World) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Texel-space corners (k, 3, 2), page (k,) and world triangle index (k,) of every baked
-    triangle that xatlas placed on a page."""
+    triangle that xatlas placed on a page, degenerate ones left out."""
     corners, pages, tris = [], [], []
     scale = np.array([atlas.width, atlas.height], np.float64)
     for unwrap in atlas.instances:
-        placed = unwrap.pages >= 0
+        placed = (unwrap.pages >= 0) & ~degenerate(world, world.instance_triangles(unwrap.instance))
         corners.append(unwrap.uv[unwrap.triangles[placed]] * scale)
         pages.append(unwrap.pages[placed])
         tris.append(world.instance_triangles(unwrap.instance)[placed])
@@ -171,8 +181,29 @@ def _barycentric(corners: np.ndarray, points: np.ndarray) -> np.ndarray:
     return bary
 
 
+@dataclass(frozen=True)
+class Coverage:
+    """Which baked triangle owns each texel: the UV-space half of rasterising, which depends on
+    the atlas and the world's triangle numbering only, not on where the instances stand (a
+    rebake of moved nodes reuses it from the bake state, ``incremental.py``).
+
+    key: (N,) uint64 texel keys, sorted (``Texels.key``). triangle: (N,) int64 owning world
+    triangle. triangle_texels: (T,) int64 texels each world triangle's footprint touches.
+    """
+
+    key: np.ndarray
+    triangle: np.ndarray
+    triangle_texels: np.ndarray
+
+
 def rasterise(atlas: Atlas, world: World) -> Texels:
     """All texels touched by baked triangles, with their world sample points and normals."""
+    return texels_of(atlas, world, cover(atlas, world))
+
+
+def cover(atlas: Atlas, world: World) -> Coverage:
+    """The owner of every texel that a baked triangle touches (conservative coverage, the
+    deepest triangle at the texel centre, ties to the lower index; see the module notes)."""
     corners, pages, tris = _baked_triangles(atlas, world)
     width, height = atlas.width, atlas.height
     page_texels = max(atlas.page_count, 1) * width * height
@@ -198,35 +229,73 @@ def rasterise(atlas: Atlas, world: World) -> Texels:
         best_depth[texel[better]] = depth[better]
         best_owner[texel[better]] = owner[better]
     key = np.flatnonzero(best_owner >= 0)
-    owner = best_owner[key]
-    page, rest = np.divmod(key, width * height)
-    y, x = np.divmod(rest, width)
+    return Coverage(key=key.astype(np.uint64), triangle=tris[best_owner[key]],
+                    triangle_texels=triangle_texels)
+
+
+def texels_of(atlas: Atlas, world: World, coverage: Coverage) -> Texels:
+    """The texels of ``coverage`` with their sample points on ``world`` as it stands now: each
+    texel centre's barycentrics in its owner's UV triangle (clamped into it), mapped to world."""
+    corners, _, tris = _baked_triangles(atlas, world)
+    slot = np.full(len(world.triangles), -1, np.int64)
+    slot[tris] = np.arange(len(tris))
+    uv = corners[slot[coverage.triangle]]
+    key = coverage.key.astype(np.int64)
+    page, rest = np.divmod(key, atlas.width * atlas.height)
+    y, x = np.divmod(rest, atlas.width)
     centre = np.stack([x + 0.5, y + 0.5], axis=1)
-    bary = _barycentric(corners[owner], centre)
-    return _surface_points(world, tris[owner], bary, corners[owner], page, x, y, key,
-                           triangle_texels)
+    bary = _barycentric(uv, centre)
+    return _surface_points(world, coverage.triangle, bary, uv, page, x, y, key,
+                           coverage.triangle_texels)
 
 
-def terminator_offset(world: World, tri: np.ndarray, bary: np.ndarray,
-                      position: np.ndarray, geometric: np.ndarray) -> np.ndarray:
-    """World offsets (k, 3) that move points on smooth-shaded facets towards the smooth surface.
+@jit
+def _texel_points(positions: np.ndarray, normals: np.ndarray, smooth: np.ndarray,
+                  triangles: np.ndarray, tri: np.ndarray, bary: np.ndarray,
+                  geometric: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per texel, from its owning triangle ``tri`` (k,) and barycentrics ``bary`` (k, 3): the
+    world sample point (k, 3), the unit shading normal (k, 3) (the front-face normal
+    ``geometric`` where the corners are not all smooth or the normals cancel) and the
+    terminator push (k, 3), in one compiled pass over the texels.
 
-    Hanika 2021: project the point ``position`` (k, 3), at barycentrics ``bary`` (k, 3) of
-    triangles ``tri`` (k,), onto the tangent plane of each corner (through the vertex, normal to
-    its shading normal), keeping only projections that lie *above* the point (a convex
-    neighbourhood), and blend the displacements with the barycentrics:
-    ``Σ_i b_i · max(0, (v_i − p)·n_i) · n_i``. Zero at the corners, on flat surfaces (every n_i
-    the face normal) and on concave ones; about the sag of the facet below the smooth surface
-    in between (a few mm on a 12-ring sphere of 0.5 m). Corners without smooth normals, or whose
-    normal faces away from the front face ``geometric`` (k, 3), do not push.
+    Terminator push (Hanika 2021): project the point onto the tangent plane of each corner
+    (through the vertex, normal to its shading normal), keep only projections that lie *above*
+    the point (a convex neighbourhood), and blend the displacements with the barycentrics:
+    ``Σ_i b_i · max(0, (v_i − p)·n_i) · n_i``. Zero at the corners, on flat surfaces (every
+    n_i the face normal) and on concave ones; about the sag of the facet below the smooth
+    surface in between (a few mm on a 12-ring sphere of 0.5 m). Corners without smooth
+    normals, or whose normal faces away from the front face, do not push.
     """
-    vertices = world.triangles[tri]  # (k, 3)
-    corners = world.positions[vertices]  # (k, 3, 3)
-    normals = world.normals[vertices]
-    usable = world.smooth[vertices] & (np.einsum("kvc,kc->kv", normals, geometric) > 0)
-    height = np.einsum("kvc,kvc->kv", corners - position[:, None], normals)
-    push = np.where(usable, np.maximum(height, 0.0), 0.0) * bary
-    return np.einsum("kv,kvc->kc", push, normals)
+    k = len(tri)
+    position = np.empty((k, 3))
+    normal = np.empty((k, 3))
+    terminator = np.zeros((k, 3))
+    for i in range(k):
+        v0, v1, v2 = triangles[tri[i], 0], triangles[tri[i], 1], triangles[tri[i], 2]
+        b0, b1, b2 = bary[i, 0], bary[i, 1], bary[i, 2]
+        for c in range(3):
+            position[i, c] = b0 * positions[v0, c] + b1 * positions[v1, c] + b2 * positions[v2, c]
+        sx = b0 * normals[v0, 0] + b1 * normals[v1, 0] + b2 * normals[v2, 0]
+        sy = b0 * normals[v0, 1] + b1 * normals[v1, 1] + b2 * normals[v2, 1]
+        sz = b0 * normals[v0, 2] + b1 * normals[v1, 2] + b2 * normals[v2, 2]
+        length = np.sqrt(sx * sx + sy * sy + sz * sz)
+        if smooth[v0] and smooth[v1] and smooth[v2] and length > 1e-12:
+            normal[i, 0], normal[i, 1], normal[i, 2] = sx / length, sy / length, sz / length
+        else:
+            normal[i, 0], normal[i, 1], normal[i, 2] = geometric[i, 0], geometric[i, 1], geometric[i, 2]
+        for corner, weight in ((v0, b0), (v1, b1), (v2, b2)):
+            n0, n1, n2 = normals[corner, 0], normals[corner, 1], normals[corner, 2]
+            facing = n0 * geometric[i, 0] + n1 * geometric[i, 1] + n2 * geometric[i, 2]
+            if not smooth[corner] or facing <= 0:
+                continue
+            height = ((positions[corner, 0] - position[i, 0]) * n0
+                      + (positions[corner, 1] - position[i, 1]) * n1
+                      + (positions[corner, 2] - position[i, 2]) * n2)
+            if height > 0:
+                terminator[i, 0] += weight * height * n0
+                terminator[i, 1] += weight * height * n1
+                terminator[i, 2] += weight * height * n2
+    return position, normal, terminator
 
 
 def _texel_axes(world: World, tri: np.ndarray, uv_corners: np.ndarray) -> np.ndarray:
@@ -250,22 +319,29 @@ def _texel_axes(world: World, tri: np.ndarray, uv_corners: np.ndarray) -> np.nda
 def _surface_points(world: World, tri: np.ndarray, bary: np.ndarray, uv_corners: np.ndarray,
                     page: np.ndarray, x: np.ndarray, y: np.ndarray, key: np.ndarray,
                     triangle_texels: np.ndarray) -> Texels:
-    """World position, normals, size, axes and terminator push of each texel's sample point."""
-    a, b, c = world.corners(tri)
-    position = bary[:, :1] * a + bary[:, 1:2] * b + bary[:, 2:] * c
+    """World position, normals, size, axes and terminator push of each texel's sample point.
+
+    What depends on the owning triangle alone (front-face normal, texel size, texel axes) is
+    computed once per distinct owner and gathered: scenes have far fewer triangles than texels.
+    """
+    owners, first, inverse = np.unique(tri, return_index=True, return_inverse=True)
+    per_geometric, per_size, per_axes = _triangle_terms(world, owners, uv_corners[first])
+    geometric, size, axes = per_geometric[inverse], per_size[inverse], per_axes[inverse]
+    position, normal, terminator = _texel_points(world.positions, world.normals, world.smooth,
+                                                 world.triangles, tri, bary, geometric)
+    return Texels(page=page, x=x, y=y, key=key.astype(np.uint64), position=position,
+                  normal=normal, geometric_normal=geometric, triangle=tri,
+                  instance=world.tri_instance[tri], barycentric=bary, size=size,
+                  triangle_texels=triangle_texels, axes=axes, terminator=terminator)
+
+
+def _triangle_terms(world: World, tri: np.ndarray, uv_corners: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per triangle ``tri`` (k,) with texel-space UV corners (k, 3, 2): unit front-face normal
+    (k, 3), world length of one texel side (k,) (0 without UV area) and texel axes (k, 2, 3)."""
     geometric = world.geometric_normals(tri)
-    vertices = world.triangles[tri]
-    shading = np.einsum("ck,ckj->cj", bary, world.normals[vertices])
-    smooth = world.smooth[vertices].all(axis=1)
-    length = np.linalg.norm(shading, axis=1, keepdims=True)
-    usable = smooth & (length[:, 0] > 1e-12)
-    normal = np.where(usable[:, None], shading / np.where(length > 0, length, 1.0), geometric)
     world_area = world.areas(tri)
     uv_edges = uv_corners[:, 1:] - uv_corners[:, :1]
     uv_area = 0.5 * np.abs(uv_edges[:, 0, 0] * uv_edges[:, 1, 1] - uv_edges[:, 0, 1] * uv_edges[:, 1, 0])
     size = np.sqrt(np.divide(world_area, uv_area, out=np.zeros_like(world_area), where=uv_area > 0))
-    return Texels(page=page, x=x, y=y, key=key.astype(np.uint64), position=position,
-                  normal=normal, geometric_normal=geometric, triangle=tri,
-                  instance=world.tri_instance[tri], barycentric=bary, size=size,
-                  triangle_texels=triangle_texels, axes=_texel_axes(world, tri, uv_corners),
-                  terminator=terminator_offset(world, tri, bary, position, geometric))
+    return geometric, size, _texel_axes(world, tri, uv_corners)

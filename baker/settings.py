@@ -70,9 +70,10 @@ class Settings:
         0 black, 1 R_ave.
     max_depth: hard cap on the mirror/glass bounces of one obscurance ray (after Russian
         roulette); the report counts the rays that reach it.
-    supersample: sub-positions per texel (1–64) that its shadow, emissive and sky rays start
-        from, ray s from sub-position s mod N: anti-aliased shadow edges (supersample.py). A hard
-        light casts N rays per texel then. 1: every ray from the texel's sample point.
+    supersample: sub-positions per texel (1–64) that its shadow, emissive, sky and obscurance
+        rays start from, ray s from sub-position s mod N: anti-aliased shadow edges and
+        obscurance details (supersample.py). A hard light casts N rays per texel then. 1: every
+        ray from the texel's sample point.
     denoise: run Intel Open Image Denoise's lightmap filter on each chart of the composed
         pages before dilation (denoise.py; needs ``pip install "baker[denoise]"``).
     """

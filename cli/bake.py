@@ -107,9 +107,10 @@ def add_parser(commands) -> None:
     direct.add_argument("--sky-rays", type=int, default=d.sky_rays, metavar="N",
                         help=f"rays per texel that look for the sky (default {d.sky_rays})")
     direct.add_argument("--supersample", type=int, default=d.supersample, metavar="N",
-                        help="sub-texel positions the shadow, emissive and sky rays of each "
-                             "texel start from (ray s from position s mod N): anti-aliased shadow "
-                             f"edges; a hard light casts N rays (default {d.supersample}: none)")
+                        help="sub-texel positions the shadow, emissive, sky and obscurance "
+                             "rays of each texel start from (ray s from position s mod N): "
+                             "anti-aliased shadow edges and obscurance details; a hard light "
+                             f"casts N rays (default {d.supersample}: none)")
     out = bake.add_argument_group("output")
     out.add_argument("--encoding", choices=baker.settings.ENCODINGS, default=d.encoding,
                      help="how PNG texels map to light: linear (three.js, Hubs) or srgb "
