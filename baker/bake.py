@@ -31,6 +31,7 @@ from .hdr import check_format, page_file
 from .errors import BakerError, OutputError
 from .geometry import World, build_world
 from .gi import indirect_light
+from .input_warnings import input_warnings
 from .integrate import Terms, integrate
 from .load import load
 from .plan import Plan, make_plan
@@ -338,6 +339,7 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
         "validity": done.validity.counts() if done.validity is not None else None,
         "denoise": done.denoised.as_dict() if done.denoised is not None else {"denoised": False},
         "notes": list(info.notes) + clipping_notes(pages),
+        "warnings": input_warnings(done.scene, done.world),  # dropped or changed, counted
         "lightmap_pages": [{"intensity": page.intensity, "peak": page.peak,
                             "clipped_fraction": page.clipped} for page in pages],
         "rebake": summary(rebaked, state_path, incremental),

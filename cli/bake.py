@@ -184,6 +184,8 @@ def print_summary(result: baker.BakeResult) -> None:
     print("\n".join(result.plan.lines()))
     for note in result.report["notes"]:
         print(f"  note: {note}")
+    for warning, count in result.report["warnings"].items():
+        print(f"  warning: {count} × {warning}")
     print(f"  {result.rays:,} obscurance rays, {result.report['rays_per_second'] / 1e6:.2f} M rays/s, "
           f"{result.report.get('shadow_rays', 0):,} shadow/sky rays; "
           f"estimated RMSE {result.rmse_estimate:.3g}; {result.seconds:.1f} s "
