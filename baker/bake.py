@@ -319,7 +319,7 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
         if error_map_dir is not None:  # per-texel standard error pages (errormap.py)
             write_error_maps(Path(error_map_dir), output.stem, done, write_atomically)
         if state_path is not None:  # the sidecar a rebake starts from (docs/bake_state.md)
-            save_bake_state(state_path, done, rebaked, settings)
+            save_bake_state(state_path, done, rebaked, settings, time.perf_counter() - started)
     seconds = time.perf_counter() - started
     rmse = done.rmse_estimate()
     ambient, atlas = done.ambient, done.atlas
@@ -342,7 +342,7 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
         "warnings": input_warnings(done.scene, done.world),  # dropped or changed, counted
         "lightmap_pages": [{"intensity": page.intensity, "peak": page.peak,
                             "clipped_fraction": page.clipped} for page in pages],
-        "rebake": summary(rebaked, state_path, incremental),
+        "rebake": summary(rebaked, state_path, incremental, seconds),
     }
     if report_path is not None:
         write_atomically(Path(report_path), json.dumps(report, indent=2).encode())

@@ -563,17 +563,22 @@ def bake_or_rebake(scene: Scene, settings: Settings, state_path, incremental: bo
     return compute(scene, settings, quiet), reason
 
 
-def save_bake_state(path, done, rebaked, settings: Settings | None = None) -> None:
+def save_bake_state(path, done, rebaked, settings: Settings | None = None,
+                    seconds: float | None = None) -> None:
     """Write the state of ``done`` (``bake.Computed``) baked with ``settings`` to ``path``,
-    atomically."""
+    atomically; after a full bake, also the ``seconds`` it took (``state.timing_path``), which
+    the reports of the rebakes that follow compare their own time with."""
     fingerprint = rebaked.fingerprints if isinstance(rebaked, Rebaked) else fingerprints(
         done.scene, done.world, done.settings, settings)
     state_file.save(path, make_state(done, fingerprint))
+    if not isinstance(rebaked, Rebaked) and seconds is not None:
+        state_file.save_full_bake_seconds(path, seconds)
 
 
-def summary(rebaked, state_path, incremental: bool) -> dict:
+def summary(rebaked, state_path, incremental: bool, seconds: float | None = None) -> dict:
     """The JSON-able account of the rebake for the report: full or incremental, why, what
-    changed, how many texels were dirty for which reason, rays cast."""
+    changed, how many texels were dirty for which reason, rays cast, and its ``seconds``
+    against the last full bake's (``last_full_bake_seconds``, None when not recorded)."""
     out: dict = {"incremental": isinstance(rebaked, Rebaked),
                  "state": None if state_path is None else str(state_path)}
     if isinstance(rebaked, str):
@@ -590,7 +595,9 @@ def summary(rebaked, state_path, incremental: bool) -> dict:
             "relit_lights": list(rebaked.dirty.relit),
             "moved_nodes": sorted({rebaked.fingerprints["instances"][i]["name"]
                                    for i in rebaked.diff.moved}),
-            "rays": int(rebaked.rays), "test_rays": int(rebaked.dirty.tested_rays)})
+            "rays": int(rebaked.rays), "test_rays": int(rebaked.dirty.tested_rays),
+            "seconds": seconds,
+            "last_full_bake_seconds": state_file.last_full_bake_seconds(state_path)})
     return out
 
 

@@ -47,6 +47,30 @@ def default_path(output: str | Path) -> Path:
     return output.with_name(output.name + SUFFIX)
 
 
+def timing_path(state_path: str | Path) -> Path:
+    """Where the time of the last full bake is kept beside the state: ``<state>.json``. Apart
+    from the state, because the state's bytes must not depend on how long the bake took."""
+    state_path = Path(state_path)
+    return state_path.with_name(state_path.name + ".json")
+
+
+def save_full_bake_seconds(state_path: str | Path, seconds: float) -> None:
+    """Record, atomically, that a full bake for this state took ``seconds``."""
+    from .bake import write_atomically  # bake imports this module
+
+    write_atomically(timing_path(state_path),
+                     json.dumps({"full_bake_seconds": round(float(seconds), 3)}).encode())
+
+
+def last_full_bake_seconds(state_path: str | Path) -> float | None:
+    """The seconds of the last full bake recorded beside the state (None if none or unreadable)."""
+    try:
+        seconds = json.loads(timing_path(state_path).read_text())["full_bake_seconds"]
+        return float(seconds) if seconds > 0 else None
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
 def digest(*parts: Any) -> str:
     """A short hex SHA-256 of arrays (dtype, shape and bytes), strings and numbers, in order."""
     h = hashlib.sha256()

@@ -4,11 +4,12 @@ Bakes a floor under a point light at a 1024² page with its bake state, changes 
 colour and intensity, and times ``baker.bake(..., relight=True)`` (recomposition from the state,
 no ray) against a full bake of the edited scene; prints both and the rays each cast.
 
-    python benchmarks/bench_relight.py
+    python benchmarks/bench_relight.py [--rays 64]
 """
 
 from __future__ import annotations
 
+import argparse
 import sys
 import tempfile
 import time
@@ -21,7 +22,9 @@ from assets.light_scenes import lit_floor  # noqa: E402
 
 
 def main() -> None:
-    settings = baker.Settings(page_size=1024, rays=64)
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--rays", type=int, default=64, help="obscurance rays per texel")
+    settings = baker.Settings(page_size=1024, rays=parser.parse_args().rays)
     with tempfile.TemporaryDirectory() as name:
         folder = Path(name)
         scene = lit_floor("point", intensity=10.0).save(folder / "scene.glb")
@@ -38,6 +41,9 @@ def main() -> None:
     print(f"  full bake: {full_seconds:6.2f} s, {full.rays:,} obscurance rays")
     print(f"  relight:   {relight_seconds:6.2f} s, {relit.rebake['rays']:,} rays "
           f"({relight_seconds / full_seconds:.0%} of the full bake); identical output: {same}")
+    for name, result in (("full", full), ("relight", relit)):
+        times = result.report["stage_seconds"]
+        print(f"  {name:8s} " + ", ".join(f"{k} {v:.2f}" for k, v in times.items()))
 
 
 if __name__ == "__main__":

@@ -36,9 +36,13 @@ def print_rebake(result: baker.BakeResult) -> None:
         reasons = ", ".join(f"{k} {v:,}" for k, v in info["dirty_by_reason"].items() if v)
         relit = (f"; shadow rays recast for light(s) {', '.join(map(str, info['relit_lights']))}"
                  if info["relit_lights"] else "")
+        full = info.get("last_full_bake_seconds")
+        against = (f" = {100 * info['seconds'] / full:.0f} % of the last full bake ({full:.2f} s)"
+                   if full and info.get("seconds") is not None else "")
         print(f"rebake: {changes}: {info['dirty_texels']:,} of {info['texels']:,} texels "
               f"({100 * info['dirty_fraction']:.2f} %) recomputed"
-              f"{' (' + reasons + ')' if reasons else ''}{relit}; {info['rays']:,} rays")
+              f"{' (' + reasons + ')' if reasons else ''}{relit}; {info['rays']:,} rays; "
+              f"{info['seconds']:.2f} s{against}")
     elif info.get("full_bake_reason") and info["full_bake_reason"] != "full bake asked for":
         print(f"full bake: {info['full_bake_reason']}")
 

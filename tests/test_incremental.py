@@ -259,3 +259,41 @@ def test_baker_relight_recomposes_without_rays_and_refuses_other_edits(tmp_path,
     assert main(["bake", str(brighter), "-o", str(tmp_path / "full.glb"), "--rays", "4",
                  "--page-size", "128", "--quiet", "--no-state"]) == 0
     assert out.read_bytes() == (tmp_path / "full.glb").read_bytes()
+
+
+def test_moving_an_alpha_cut_quad_rebakes_like_a_full_bake(tmp_path):
+    """The dirty search casts against the moved geometry without its alpha (a ray through a hole
+    counts as meeting it: more texels recomputed, never fewer); the recomputed texels use the
+    full tracer with alpha tests, so the result is the full bake's, to the byte."""
+    from assets.material_scenes import alpha_cut_quad
+
+    settings = baker.Settings(rays=16, page_size=128, threads=1, texel_density=12.0, d_max=0.8)
+    base = alpha_cut_quad()
+    base.save(tmp_path / "before.glb")
+    baker.bake(tmp_path / "before.glb", tmp_path / "incremental.glb", settings)
+    edited = alpha_cut_quad()
+    edited._nodes[edited.info["leaf"]].translation = [0.4, 0.0, -0.3]
+    edited.save(tmp_path / "after.glb")
+    result = baker.bake(tmp_path / "after.glb", tmp_path / "incremental.glb", settings,
+                        incremental=True)
+    baker.bake(tmp_path / "after.glb", tmp_path / "full.glb", settings)
+    assert result.rebake["incremental"], result.rebake.get("full_bake_reason")
+    assert 0 < result.rebake["dirty_fraction"] < 1
+    assert (tmp_path / "incremental.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()
+    assert (default_path(tmp_path / "incremental.glb").read_bytes()
+            == default_path(tmp_path / "full.glb").read_bytes())
+
+
+def test_rebake_reports_its_time_against_the_last_full_bake(base, tmp_path, capsys):
+    scene = EDITS["box moved across the room"]().save(tmp_path / "edited.glb")
+    shutil.copy(default_path(base), default_path(tmp_path / "out.glb"))
+    assert baker.state.last_full_bake_seconds(default_path(tmp_path / "out.glb")) is None
+    shutil.copy(baker.state.timing_path(default_path(base)),
+                baker.state.timing_path(default_path(tmp_path / "out.glb")))
+    full = baker.state.last_full_bake_seconds(default_path(base))
+    assert full is not None and full > 0
+    result = baker.bake(scene, tmp_path / "out.glb", SETTINGS, incremental=True)
+    assert result.rebake["last_full_bake_seconds"] == full
+    assert 0 < result.rebake["seconds"] == result.seconds
+    assert main(["rebake", str(scene), "-o", str(tmp_path / "out.glb")]) == 0
+    assert f"of the last full bake ({full:.2f} s)" in capsys.readouterr().out
