@@ -106,6 +106,25 @@ def cylinder_on_floor(radius: float = 0.3, length: float = 1.4, segments: int = 
     return b
 
 
+def tiled_floor(tile: float = 1.0, depth: float = 2.0, radius: float = 0.4) -> GltfBuilder:
+    """Two floor tiles, separate nodes, ``tile`` × ``depth`` quads at y = 0 side by side along
+    x, touching along the line x = 0 (one edge in 3D, one in each tile's own chart), and a
+    smooth sphere of ``radius`` resting on the joint: its shadow and occlusion make the light
+    vary across the joint. ``info``: nodes (tile_left, tile_right, sphere).
+    """
+    b = GltfBuilder()
+    white = b.material("white", WHITE)
+    nodes = {}
+    for name, x in (("tile_left", -tile / 2), ("tile_right", tile / 2)):
+        nodes[name] = b.node(name, b.shape_mesh(name, quad(tile, depth), material=white),
+                             translation=(x, 0.0, 0.0))
+    nodes["sphere"] = b.node("sphere", b.shape_mesh("sphere", uv_sphere(radius, 12, 24),
+                                                    material=white),
+                             translation=(0.0, radius, 0.0))
+    b.info.update(nodes=nodes)
+    return b
+
+
 def lit_leak_room(kind: str = "directional", position=(0.0, 10.0, 0.0),
                   direction=(0.6, -1.0, 0.3), intensity: float = 1000.0, **room) -> GltfBuilder:
     """``leak_room`` (keyword arguments ``room``) under one bright KHR_lights_punctual light of

@@ -16,8 +16,11 @@ conjugate gradients, vectorised (np.bincount for the sparse products): no scipy 
 
 Only *smooth* seams are stitched: both sides must have the same shading normals at the edge's
 ends. At a crease (a box's edge) the light really differs on either side; blending it would
-blur a true edge. Seams are found within each instance (an object); objects that merely touch
-are left apart.
+blur a true edge. Seams are found within each instance (an object) and between instances that
+touch along a whole edge (two floor tiles side by side): an edge of one whose two end points
+are those of an edge of the other, smooth across, is a seam like any other. Objects that touch
+only partly (a T-junction: one long edge against two short ones) or where more than two
+triangles meet at an edge are left apart.
 """
 
 from __future__ import annotations
@@ -60,72 +63,70 @@ def _empty() -> Seams:
 
 
 def find_seams(atlas: Atlas, world: World) -> Seams:
-    """Every smooth seam edge of every baked instance, sampled ``SAMPLES_PER_TEXEL`` per texel."""
-    pages_a, uvs_a, pages_b, uvs_b = [], [], [], []
-    edges = 0
-    scale = np.array([atlas.width, atlas.height], np.float64)
-    for unwrap in atlas.instances:
-        tris = world.instance_triangles(unwrap.instance)
-        if len(tris) < 2:
-            continue
-        vertices = world.triangles[tris]  # (m, 3) world vertex ids, unwrap's corner order
-        # Same 3D point ⇔ same rounded position (the mesh may split vertices at its own seams).
-        points = world.positions[vertices.reshape(-1)]
-        extent = max(float(np.abs(points).max()), 1e-30)
-        _, point_id = np.unique(np.round(points / (extent * 1e-7)).astype(np.int64), axis=0,
-                                return_inverse=True)
-        point_id = point_id.reshape(-1, 3)
-        uv = unwrap.uv[unwrap.triangles]  # (m, 3, 2)
-        normal = world.normals[vertices]  # (m, 3, 3)
-        smooth = world.smooth[vertices]  # (m, 3)
-        page = unwrap.pages
-        a_corner = np.array([0, 1, 2])
-        b_corner = np.array([1, 2, 0])
-        tri = np.repeat(np.arange(len(tris)), 3)
-        ca, cb = np.tile(a_corner, len(tris)), np.tile(b_corner, len(tris))
-        ia, ib = point_id[tri, ca], point_id[tri, cb]
-        swap = ia > ib  # orient every edge from its lower point id to its higher
-        lo_c, hi_c = np.where(swap, cb, ca), np.where(swap, ca, cb)
-        key = np.minimum(ia, ib) * (point_id.max() + 1) + np.maximum(ia, ib)
-        order = np.argsort(key, kind="stable")
-        key_sorted = key[order]
-        pair = np.flatnonzero((key_sorted[1:] == key_sorted[:-1])
-                              & ((np.r_[key_sorted[2:], -1] != key_sorted[1:]))
-                              & ((np.r_[-1, key_sorted[:-2]] != key_sorted[:-1])))
-        first, second = order[pair], order[pair + 1]  # edges shared by exactly two triangles
-        ta, tb = tri[first], tri[second]
-        placed = (page[ta] >= 0) & (page[tb] >= 0)
-        uv_a0, uv_a1 = uv[ta, lo_c[first]], uv[ta, hi_c[first]]
-        uv_b0, uv_b1 = uv[tb, lo_c[second]], uv[tb, hi_c[second]]
-        split = (page[ta] != page[tb]) | (np.abs(uv_a0 - uv_b0).max(axis=1) > 1e-9) | (
-            np.abs(uv_a1 - uv_b1).max(axis=1) > 1e-9)
-        same_normals = ((np.einsum("ij,ij->i", normal[ta, lo_c[first]], normal[tb, lo_c[second]])
-                         > _SMOOTH_COS)
-                        & (np.einsum("ij,ij->i", normal[ta, hi_c[first]], normal[tb, hi_c[second]])
-                           > _SMOOTH_COS))
-        is_smooth = (smooth[ta, lo_c[first]] & smooth[ta, hi_c[first]]
-                     & smooth[tb, lo_c[second]] & smooth[tb, hi_c[second]])
-        keep = placed & split & same_normals & is_smooth
-        if not keep.any():
-            continue
-        uv_a0, uv_a1, uv_b0, uv_b1 = uv_a0[keep], uv_a1[keep], uv_b0[keep], uv_b1[keep]
-        ta, tb = ta[keep], tb[keep]
-        length = np.maximum(np.linalg.norm((uv_a1 - uv_a0) * scale, axis=1),
-                            np.linalg.norm((uv_b1 - uv_b0) * scale, axis=1))
-        count = np.maximum(2, np.ceil(length * SAMPLES_PER_TEXEL)).astype(np.int64)
-        edge = np.repeat(np.arange(len(count)), count)
-        start = np.cumsum(count) - count
-        t = ((np.arange(count.sum()) - start[edge]) + 0.5) / count[edge]
-        t = t[:, None]
-        uvs_a.append(uv_a0[edge] + t * (uv_a1 - uv_a0)[edge])
-        uvs_b.append(uv_b0[edge] + t * (uv_b1 - uv_b0)[edge])
-        pages_a.append(page[ta][edge])
-        pages_b.append(page[tb][edge])
-        edges += len(count)
-    if not edges:
+    """Every smooth seam edge of the baked instances, sampled ``SAMPLES_PER_TEXEL`` per texel:
+    within each instance, and between instances that touch along a whole edge."""
+    baked = [u for u in atlas.instances if len(world.instance_triangles(u.instance))]
+    if not baked:
         return _empty()
-    return Seams(np.concatenate(pages_a), np.concatenate(uvs_a), np.concatenate(pages_b),
-                 np.concatenate(uvs_b), edges)
+    tris = np.concatenate([world.instance_triangles(u.instance) for u in baked])
+    uv = np.concatenate([u.uv[u.triangles] for u in baked])  # (m, 3, 2), world corner order
+    page = np.concatenate([u.pages for u in baked])
+    ta, tb, lo_a, hi_a, lo_b, hi_b = _shared_edges(world, tris)
+    uv_a0, uv_a1 = uv[ta, lo_a], uv[ta, hi_a]
+    uv_b0, uv_b1 = uv[tb, lo_b], uv[tb, hi_b]
+    placed = (page[ta] >= 0) & (page[tb] >= 0)
+    split = (page[ta] != page[tb]) | (np.abs(uv_a0 - uv_b0).max(axis=1) > 1e-9) | (
+        np.abs(uv_a1 - uv_b1).max(axis=1) > 1e-9)
+    vertices = world.triangles[tris]  # (m, 3) world vertex ids
+    normal, smooth = world.normals[vertices], world.smooth[vertices]  # (m, 3, 3), (m, 3)
+    same_normals = ((np.einsum("ij,ij->i", normal[ta, lo_a], normal[tb, lo_b]) > _SMOOTH_COS)
+                    & (np.einsum("ij,ij->i", normal[ta, hi_a], normal[tb, hi_b]) > _SMOOTH_COS))
+    is_smooth = smooth[ta, lo_a] & smooth[ta, hi_a] & smooth[tb, lo_b] & smooth[tb, hi_b]
+    keep = placed & split & same_normals & is_smooth
+    if not keep.any():
+        return _empty()
+    uv_a0, uv_a1, uv_b0, uv_b1 = uv_a0[keep], uv_a1[keep], uv_b0[keep], uv_b1[keep]
+    ta, tb = ta[keep], tb[keep]
+    scale = np.array([atlas.width, atlas.height], np.float64)
+    length = np.maximum(np.linalg.norm((uv_a1 - uv_a0) * scale, axis=1),
+                        np.linalg.norm((uv_b1 - uv_b0) * scale, axis=1))
+    count = np.maximum(2, np.ceil(length * SAMPLES_PER_TEXEL)).astype(np.int64)
+    edge = np.repeat(np.arange(len(count)), count)
+    start = np.cumsum(count) - count
+    t = (((np.arange(count.sum()) - start[edge]) + 0.5) / count[edge])[:, None]
+    return Seams(page[ta][edge], uv_a0[edge] + t * (uv_a1 - uv_a0)[edge], page[tb][edge],
+                 uv_b0[edge] + t * (uv_b1 - uv_b0)[edge], len(count))
+
+
+def _shared_edges(world: World, tris: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The edges of triangles ``tris`` (m,) (world triangle ids) that exactly two of them share,
+    in 3D: same two end points, whichever instance each triangle belongs to.
+
+    Same 3D point ⇔ same position rounded to 1e-7 of the largest coordinate (meshes split
+    vertices at their own seams; touching objects have vertices of their own). An edge used by
+    three or more triangles (a fin, two objects overlapping) is left out. Returns, per edge, the
+    two triangles' positions in ``tris`` (first, second) and the corners (0–2) of its lower and
+    higher end point in each (lo_a, hi_a, lo_b, hi_b): ends matched, whatever the windings.
+    """
+    points = world.positions[world.triangles[tris].reshape(-1)]
+    extent = max(float(np.abs(points).max()), 1e-30)
+    _, point_id = np.unique(np.round(points / (extent * 1e-7)).astype(np.int64), axis=0,
+                            return_inverse=True)
+    point_id = point_id.reshape(-1, 3)
+    m = len(tris)
+    tri = np.repeat(np.arange(m), 3)
+    ca, cb = np.tile([0, 1, 2], m), np.tile([1, 2, 0], m)
+    ia, ib = point_id[tri, ca], point_id[tri, cb]
+    swap = ia > ib  # orient every edge from its lower point id to its higher
+    lo_c, hi_c = np.where(swap, cb, ca), np.where(swap, ca, cb)
+    key = np.minimum(ia, ib) * (point_id.max() + 1) + np.maximum(ia, ib)
+    order = np.argsort(key, kind="stable")
+    key_sorted = key[order]
+    pair = np.flatnonzero((key_sorted[1:] == key_sorted[:-1])
+                          & ((np.r_[key_sorted[2:], -1] != key_sorted[1:]))
+                          & ((np.r_[-1, key_sorted[:-2]] != key_sorted[:-1])))
+    one, two = order[pair], order[pair + 1]  # edges shared by exactly two triangles
+    return tri[one], tri[two], lo_c[one], hi_c[one], lo_c[two], hi_c[two]
 
 
 def _taps(page: np.ndarray, uv: np.ndarray, shape: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray]:

@@ -4,7 +4,7 @@ level never read an empty texel."""
 import numpy as np
 import pytest
 
-from assets.artifact_scenes import cylinder_on_floor, sphere_on_floor
+from assets.artifact_scenes import cylinder_on_floor, sphere_on_floor, tiled_floor
 from assets.make_scenes import cornell_box
 from baker.compose import Lightmaps, compose
 from baker.postprocess import postprocess
@@ -76,6 +76,25 @@ def test_seams_agree_after_stitching(shape, request):
     change = np.abs(done.lightmaps.obscurance - _unstitched(done).obscurance)[
         done.lightmaps.covered]
     assert (change > 0).mean() < 0.5 and change.mean() < noise
+
+
+def test_seams_between_touching_objects_agree(tmp_path):
+    """Two floor tiles (separate nodes, separate charts) meet along one edge under a sphere:
+    the joint is a seam like one inside an object. Measured (density 16, 64 rays): largest step
+    0.025 → 0.0002, noise (median standard error of a tile texel) 0.0005."""
+    builder = tiled_floor()
+    nodes = builder.info["nodes"]
+    tiles = {nodes["tile_left"], nodes["tile_right"]}
+    done = computed(builder, tmp_path, only_nodes=tiles, texel_density=16.0, rays=64)
+    seams = find_seams(done.atlas, done.world)
+    assert seams.edges == 1 and len(seams) > 30  # the joint (the sphere is not baked)
+    # Side A and side B sample the same 3D points on different tiles' charts.
+    assert np.abs(seams.uv_a - seams.uv_b).max(axis=1).min() > 1e-3
+    before = seam_steps(_unstitched(done).obscurance, seams)
+    after = seam_steps(done.lightmaps.obscurance, seams)
+    noise = float(np.median(done.terms.standard_error(done.ambient.r_ave)))
+    assert before.max() > 5 * noise
+    assert after.max() < noise and after.max() < before.max() / 10
 
 
 def test_creases_are_not_seams(tmp_path):
