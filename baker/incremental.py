@@ -443,8 +443,8 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
         raise FullBake(f"method {resolved.method!r} traces paths through the whole scene from "
                        "every texel")
     if getattr(resolved, "supersample", 1) > 1:
-        raise FullBake("supersampled shadow rays start from sub-texel points the rebake does "
-                       "not track yet")
+        raise FullBake("supersampled shadow and obscurance rays start from sub-texel points "
+                       "the rebake does not track yet")
     old_texels, old_validity = stored.groups["texels"], stored.groups["validity"]
     old_terms, old_direct = stored.groups["terms"], stored.groups["direct"]
     if old_texels is None or old_validity is None or old_terms is None:
