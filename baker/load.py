@@ -74,6 +74,19 @@ SUPPORTED_EXTENSIONS = frozenset(
 )
 """Extensions a file may list in ``extensionsRequired`` and still be baked."""
 
+MATERIAL_EXTENSIONS = frozenset(
+    {
+        "KHR_materials_emissive_strength",
+        "KHR_materials_unlit",
+        "KHR_materials_transmission",
+        "KHR_materials_volume",
+        "KHR_materials_ior",
+        "KHR_materials_diffuse_transmission",
+    }
+)
+"""Material extensions the bake understands (``materials.classify``); any other one on a material
+(clearcoat, sheen, specular, iridescence, a vendor's …) is left out with a warning."""
+
 # componentType → little-endian numpy dtype, and the divisor of normalized integers (glTF §3.11).
 _COMPONENT_DTYPES = {
     5120: np.dtype("<i1"),
@@ -637,11 +650,19 @@ def _read_material(ctx: _Context, i: int, material: pygltflib.Material) -> Mater
     emissive = _factor(ctx, material.emissiveFactor, [0.0, 0.0, 0.0], f"{where}.emissiveFactor")
     alpha_mode = material.alphaMode or "OPAQUE"
     if alpha_mode not in ("OPAQUE", "MASK", "BLEND"):
-        raise _invalid(
-            f"alphaMode {alpha_mode!r} is not OPAQUE, MASK or BLEND", ctx.file, f"{where}.alphaMode"
-        )
+        ctx.skip(f"{where}.alphaMode", f"alphaMode {alpha_mode!r} is not OPAQUE, MASK or BLEND: "
+                                       "baked as OPAQUE")
+        alpha_mode = "OPAQUE"
+    for name in extensions:
+        if name not in MATERIAL_EXTENSIONS:
+            ctx.skip(f"{where}.extensions.{name}", f"{name} is not understood by baker: baked "
+                                                   "without it (core metallic-roughness material)")
     volume = _extension(extensions, "KHR_materials_volume")
     diffuse_transmission = _extension(extensions, "KHR_materials_diffuse_transmission")
+    ext = f"{where}.extensions"
+
+    def value(values: Any, key: str, default: float, low: float, high: float, at: str) -> float:
+        return _material_number(ctx, values, key, default, low, high, f"{at}.{key}")
     return Material(
         index=i,
         name=material.name or "",
@@ -649,23 +670,30 @@ def _read_material(ctx: _Context, i: int, material: pygltflib.Material) -> Mater
         base_color_texture=_texture_ref(ctx, pbr.baseColorTexture, f"{pbr_where}.baseColorTexture"),
         emissive=_emission(ctx, emissive, strength, where),
         emissive_texture=_texture_ref(ctx, material.emissiveTexture, f"{where}.emissiveTexture"),
-        metallic=float(_default(pbr.metallicFactor, 1.0)),
-        roughness=float(_default(pbr.roughnessFactor, 1.0)),
+        metallic=value({"metallicFactor": pbr.metallicFactor}, "metallicFactor", 1.0, 0.0, 1.0,
+                       pbr_where),
+        roughness=value({"roughnessFactor": pbr.roughnessFactor}, "roughnessFactor", 1.0, 0.0,
+                        1.0, pbr_where),
         alpha_mode=alpha_mode,
-        alpha_cutoff=float(_default(material.alphaCutoff, 0.5)),
+        alpha_cutoff=value({"alphaCutoff": material.alphaCutoff}, "alphaCutoff", 0.5, 0.0,
+                           math.inf, where),
         double_sided=bool(material.doubleSided),
         unlit="KHR_materials_unlit" in extensions,
         extensions=tuple(extensions),
         metallic_roughness_texture=_optional_texture(ctx, pbr.metallicRoughnessTexture,
                                                      f"{pbr_where}.metallicRoughnessTexture"),
-        transmission=_number(_extension(extensions, "KHR_materials_transmission"),
-                             "transmissionFactor", 0.0),
-        ior=_number(_extension(extensions, "KHR_materials_ior"), "ior", 1.5),
-        thickness=_number(volume, "thicknessFactor", 0.0),
-        attenuation_distance=_number(volume, "attenuationDistance", float("inf")),
+        transmission=value(_extension(extensions, "KHR_materials_transmission"),
+                           "transmissionFactor", 0.0, 0.0, 1.0, f"{ext}.KHR_materials_transmission"),
+        ior=value(_extension(extensions, "KHR_materials_ior"), "ior", 1.5, 1.0, math.inf,
+                  f"{ext}.KHR_materials_ior"),
+        thickness=value(volume, "thicknessFactor", 0.0, 0.0, math.inf,
+                        f"{ext}.KHR_materials_volume"),
+        attenuation_distance=value(volume, "attenuationDistance", math.inf, 1e-300, math.inf,
+                                   f"{ext}.KHR_materials_volume"),
         attenuation_color=_factor(ctx, volume.get("attenuationColor"), [1.0, 1.0, 1.0],
                                   f"{where}.extensions.KHR_materials_volume.attenuationColor"),
-        diffuse_transmission=_number(diffuse_transmission, "diffuseTransmissionFactor", 0.0),
+        diffuse_transmission=value(diffuse_transmission, "diffuseTransmissionFactor", 0.0, 0.0, 1.0,
+                                   f"{ext}.KHR_materials_diffuse_transmission"),
         diffuse_transmission_color=_factor(
             ctx, diffuse_transmission.get("diffuseTransmissionColorFactor"), [1.0, 1.0, 1.0],
             f"{where}.extensions.KHR_materials_diffuse_transmission.diffuseTransmissionColorFactor"),
@@ -688,14 +716,22 @@ def _extension(extensions: dict, name: str) -> dict:
     return value if isinstance(value, dict) else {}
 
 
-def _number(values: dict, key: str, default: float) -> float:
-    """``values[key]`` as a float, or ``default`` when absent, not a number or not finite
-    (a material value baker cannot use is read as the extension's default, never a crash)."""
-    value = values.get(key, default)
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
+def _material_number(ctx: _Context, values: dict, key: str, default: float, low: float,
+                     high: float, where: str) -> float:
+    """``values[key]`` as a float in [low, high]: ``default`` when absent (None), and a warning in
+    ``ctx.skipped`` when it is not a number or not finite (``default`` used) or out of range
+    (clamped). A material value baker cannot use is baked with the default, never a crash."""
+    value = values.get(key)
+    if value is None:
         return default
-    value = float(value)
-    return value if math.isfinite(value) or (value == float("inf") and default == value) else default
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not (
+            math.isfinite(value) or value == default == math.inf):
+        ctx.skip(where, f"{value!r} is not a usable number: the default {default} is used")
+        return default
+    clamped = min(max(float(value), low), high)
+    if clamped != value:
+        ctx.skip(where, f"{value!r} is outside [{low:g}, {high:g}]: {clamped:g} is used")
+    return clamped
 
 
 def _emission(ctx: _Context, factor: np.ndarray, strength: Any, where: str) -> np.ndarray:

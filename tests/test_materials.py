@@ -20,7 +20,9 @@ from baker.scene import Material
 from baker.settings import Settings, resolve
 from baker.surface import LUMINANCE
 from baker.trace import Tracer
-from bakehelp import computed, loaded
+from baker.load import load
+from bakehelp import computed, loaded, saved
+from gltf_validator import issue_codes, validate
 
 
 def _material(**values) -> Material:
@@ -353,3 +355,54 @@ def test_leaf_and_inner_terms_do_not_depend_on_chunks_or_threads(tmp_path):
     assert (one.terms.through_hit != 0).any() and (one.terms.through_ave != 0).any()
     for name in ("w_hit", "escaped", "through_hit", "through_ave", "chain_rays"):
         np.testing.assert_array_equal(getattr(one.terms, name), getattr(two.terms, name))
+
+
+# ------------------------------------------------------------------------------- not understood
+
+def test_materials_baker_does_not_understand_bake_as_diffuse_with_a_warning(tmp_path):
+    """Unknown extensions (not required), clearcoat/sheen/specular, values that are not numbers
+    or out of range, an unknown alphaMode: the bake goes on, the material bakes from what it
+    understands, and each is a warning (``Scene.skipped``) that the report lists."""
+    import baker
+    from assets.gltf_builder import GltfBuilder, box, quad
+
+    b = GltfBuilder()
+    floor = b.material("floor", (0.8, 0.8, 0.8))
+    odd = b.material("odd", (0.6, 0.5, 0.4), metallic=0.0, roughness=0.2, extensions={
+        "KHR_materials_clearcoat": {"clearcoatFactor": 1.0},
+        "KHR_materials_sheen": {"sheenColorFactor": [1, 1, 1]},
+        "KHR_materials_specular": {"specularFactor": 0.5},
+        "VENDOR_materials_magic": {"sparkle": True},
+        "KHR_materials_transmission": {"transmissionFactor": "lots"},
+        "KHR_materials_diffuse_transmission": {"diffuseTransmissionFactor": 3.0},
+        "KHR_materials_ior": {"ior": 0.5},
+    })
+    b._materials[odd].pbrMetallicRoughness.metallicFactor = -2.0
+    b._materials[odd].alphaMode = "CUTOUT"
+    b.node("floor", b.shape_mesh("floor", quad(3.0, 3.0), material=floor))
+    b.node("odd", b.shape_mesh("odd", box((0.5, 0.5, 0.5)), material=odd),
+           translation=(0.0, 0.25, 0.0))
+    path = saved(b, tmp_path)
+    scene = load(path)
+    warned = {s.where: s.reason for s in scene.skipped}
+    m = "materials[1]"
+    for name in ("KHR_materials_clearcoat", "KHR_materials_sheen", "KHR_materials_specular",
+                 "VENDOR_materials_magic"):
+        assert "not understood" in warned[f"{m}.extensions.{name}"]
+    assert "not a usable number" in warned[
+        f"{m}.extensions.KHR_materials_transmission.transmissionFactor"]
+    assert "outside [0, 1]: 1 is used" in warned[
+        f"{m}.extensions.KHR_materials_diffuse_transmission.diffuseTransmissionFactor"]
+    assert "outside [1, inf]: 1 is used" in warned[f"{m}.extensions.KHR_materials_ior.ior"]
+    assert "outside [0, 1]: 0 is used" in warned[f"{m}.pbrMetallicRoughness.metallicFactor"]
+    assert "baked as OPAQUE" in warned[f"{m}.alphaMode"]
+    material = scene.materials[1]
+    assert (material.metallic, material.transmission, material.ior, material.alpha_mode) == (
+        0.0, 0.0, 1.0, "OPAQUE")
+    assert len(scene.materials) == 3 and classify(scene.materials[0]).weights[DIFFUSE] == 1.0
+    result = baker.bake(path, tmp_path / "out.glb", baker.Settings(rays=8, texel_density=4),
+                        report_path=tmp_path / "report.json")
+    reported = {entry["where"] for entry in result.report["plan"]["left_out"]}
+    assert set(warned) <= reported
+    errors = [set(issue_codes(validate(p), 0).items()) for p in (path, tmp_path / "out.glb")]
+    assert errors[1] <= errors[0], errors  # the bake adds no error to the file's own
