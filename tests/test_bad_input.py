@@ -401,7 +401,8 @@ def test_overwrite_replaces_the_input_with_its_bake(tmp_path, capsys, suffix):
     np.testing.assert_allclose(np.sort(baked.primitives[0].positions, axis=0)[[0, -1]],
                                np.sort(original.primitives[0].positions, axis=0)[[0, -1]])
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
-        [f"scene{suffix}", f"scene{suffix}.bake"] + (["scene.bin"] if suffix == ".gltf" else []))
+        [f"scene{suffix}", f"scene{suffix}.bake", f"scene{suffix}.bake.json"]
+        + (["scene.bin"] if suffix == ".gltf" else []))
 
 
 def test_overwrite_through_the_python_api(tmp_path):
