@@ -404,5 +404,6 @@ def test_materials_baker_does_not_understand_bake_as_diffuse_with_a_warning(tmp_
                         report_path=tmp_path / "report.json")
     reported = {entry["where"] for entry in result.report["plan"]["left_out"]}
     assert set(warned) <= reported
+    assert set(warned.values()) <= set(result.report["warnings"])  # the report's warnings
     errors = [set(issue_codes(validate(p), 0).items()) for p in (path, tmp_path / "out.glb")]
     assert errors[1] <= errors[0], errors  # the bake adds no error to the file's own
