@@ -419,7 +419,7 @@ def _special_hits(surfaces: _Surfaces, tracer: Tracer, origins: np.ndarray,
         tint = colour.copy()  # a mirror tints by its base colour (a metal's F0)
         glass = ~specular
         if glass.any():
-            thin = np.array([m.classes[j].thickness <= 0.0 for j in mat[glass]], bool)
+            thin = m.thin[mat[glass]]
             bent, refracted = _refract(dirs[glass], normal[glass], m.ior[mat[glass]], thin,
                                        _uniform(settings.seed, key[live[glass]],
                                                 sample[live[glass]], dim + 1))

@@ -203,7 +203,8 @@ class MaterialTable:
     """Every material's classification as arrays, for vectorised shading of hits.
 
     weights: (M, 4) branch weights; specular / transmission / translucent: (M, 3) tints;
-    ior: (M,); special: (M,) bool, some branch other than diffuse has weight. Rows follow
+    ior: (M,); special: (M,) bool, some branch other than diffuse has weight; thin: (M,) bool,
+    no KHR_materials_volume thickness (a thin wall: refraction does not bend). Rows follow
     ``Scene.materials``.
     """
 
@@ -214,6 +215,7 @@ class MaterialTable:
     translucent: np.ndarray
     ior: np.ndarray
     special: np.ndarray
+    thin: np.ndarray
 
     def stages(self) -> set[str]:
         """Union of the material stages the materials need."""
@@ -239,7 +241,8 @@ def material_table(scene) -> MaterialTable:
                           transmission=rows(lambda c: c.transmission_color, 3),
                           translucent=rows(lambda c: c.translucent_color, 3),
                           ior=rows(lambda c: [c.ior], 1)[:, 0],
-                          special=weights[:, DIFFUSE] < 1.0)
+                          special=weights[:, DIFFUSE] < 1.0,
+                          thin=np.array([c.thickness <= 0.0 for c in classes], bool))
     object.__setattr__(scene, "_material_table", table)
     return table
 
