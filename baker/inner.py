@@ -39,6 +39,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .geometry import World
+from .integrate import Terms, hemisphere_rays, integrate
+from .materials import material_table
 from .parallel import run_chunks
 from .rasterise import Texels
 from .scene import Scene
@@ -73,8 +75,6 @@ class Translucent:
 
 def translucent(scene: Scene) -> Translucent:
     """The scene's ``Translucent`` table, from ``materials.material_table``."""
-    from .materials import material_table
-
     classes = material_table(scene).classes
     finite = np.array([np.isfinite(c.attenuation_distance) and c.attenuation_distance > 0
                        for c in classes], bool)
@@ -101,7 +101,8 @@ def _instance_scale(scene: Scene) -> np.ndarray:
 
 
 def add_translucency(scene: Scene, world: World, tracer: Tracer, texels: Texels,
-                     rows: np.ndarray, settings: Resolved, terms, error_scale=None):
+                     rows: np.ndarray, settings: Resolved, terms: Terms,
+                     error_scale: tuple[np.ndarray, float] | None = None) -> Terms:
     """``terms`` (of the texels ``rows``) with the leaves' and inner obscurances' terms set.
 
     ``through_hit``/``through_ave`` are (k, 3) when the scene has leaf or closed translucent
@@ -116,8 +117,6 @@ def add_translucency(scene: Scene, world: World, tracer: Tracer, texels: Texels,
     extra = terms.chain_rays.copy()
     leaves = np.flatnonzero(table.leaf[material])
     if len(leaves):
-        from .integrate import integrate
-
         back = integrate(scene, world, tracer, other_side(texels), settings, rows=rows[leaves],
                          error_scale=error_scale, translucency=False)
         t = table.factor[material[leaves]]
@@ -127,14 +126,53 @@ def add_translucency(scene: Scene, world: World, tracer: Tracer, texels: Texels,
     inside = np.flatnonzero(table.inner[material])
     if len(inside):
         texel_rows = rows[inside]
-        reach = table.reach[material[inside]] * np.where(
-            table.by_thickness[material[inside]], _instance_scale(scene)[texels.instance[texel_rows]],
-            1.0)
-        w_in = inner_obscurance(tracer, texels, texel_rows, reach,
+        w_in = inner_obscurance(tracer, texels, texel_rows,
+                                _reach(scene, table, material[inside], texels.instance[texel_rows]),
                                 table.sigma[material[inside]], settings)
         ave[inside] += table.factor[material[inside]] * w_in
         extra[inside] += settings.rays
     return replace(terms, through_hit=hit, through_ave=ave, chain_rays=extra)
+
+
+def _reach(scene: Scene, table: Translucent, material: np.ndarray,
+           instance: np.ndarray) -> np.ndarray:
+    """(k,) d_in in world units of texels of ``material`` (k,) on ``instance`` (k,)."""
+    return table.reach[material] * np.where(table.by_thickness[material],
+                                            _instance_scale(scene)[instance], 1.0)
+
+
+def _inner_rays(texels: Texels, rows: np.ndarray, reach: np.ndarray, settings: Resolved,
+                center: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The inner rays of the texels ``rows`` (k,): origins, directions (k·rays, 3) float32 in
+    ``center``'s frame and lengths (k·rays,) float32, their d_in ``reach`` (k,)."""
+    origins, directions = hemisphere_rays(other_side(texels), rows, settings.rays, settings.seed,
+                                          center, settings.sampling)
+    return origins, directions, np.repeat(reach, settings.rays).astype(np.float32)
+
+
+def other_side_rays(scene: Scene, world: World, texels: Texels, rows: np.ndarray,
+                    settings: Resolved, center: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The rays the texels ``rows`` cast from their other side, for a rebake's dirty search
+    (geometry that meets one of them changes the texel, as for its own rays): leaves' back-face
+    rays (first ``settings.rays`` samples, d_max long) and closed translucent objects' inner rays
+    (d_in long). Returns (m,) the positions in ``rows`` of the texels that cast such rays, and
+    their origins, directions (m·rays, 3) float32 in ``center``'s frame and lengths (m·rays,)
+    float32, texel-major. The back faces' mirror/glass chains are not included (nor are the
+    front's in ``integrate.hemisphere_rays``)."""
+    rows = np.asarray(rows, np.int64)
+    table = translucent(scene)
+    material = world.tri_material[texels.triangle[rows]] if len(rows) else np.zeros(0, np.int64)
+    leaves = np.flatnonzero(table.leaf[material]) if table.any else np.zeros(0, np.int64)
+    inside = np.flatnonzero(table.inner[material]) if table.any else np.zeros(0, np.int64)
+    origins, directions = hemisphere_rays(other_side(texels), rows[leaves], settings.rays,
+                                          settings.seed, center, settings.sampling)
+    lengths = np.full(len(origins), settings.d_max, np.float32)
+    inner = _inner_rays(texels, rows[inside], _reach(scene, table, material[inside],
+                                                     texels.instance[rows[inside]]),
+                        settings, center)
+    return (np.concatenate([leaves, inside]), np.concatenate([origins, inner[0]]),
+            np.concatenate([directions, inner[1]]), np.concatenate([lengths, inner[2]]))
 
 
 def inner_obscurance(tracer: Tracer, texels: Texels, rows: np.ndarray, reach: np.ndarray,
@@ -142,17 +180,13 @@ def inner_obscurance(tracer: Tracer, texels: Texels, rows: np.ndarray, reach: np
     """W_in (k, 3) of the texels ``rows`` (k,): the mean over ``settings.rays`` rays into the
     object of γ(d)·A(d) (module docstring). reach: (k,) d_in, world units; sigma: (k, 3)
     absorption per world unit. Chunked over texels on ``settings.threads`` threads."""
-    from .integrate import hemisphere_rays
-
-    inside = other_side(texels)
     rays = settings.rays
     out = np.empty((len(rows), 3))
 
     def work(chunk: np.ndarray) -> None:
-        origins, directions = hemisphere_rays(inside, rows[chunk], rays, settings.seed,
-                                              tracer.center, settings.sampling)
-        length = np.repeat(reach[chunk], rays).astype(np.float32)
-        hits = tracer.cast_local(origins, directions, length.copy())
+        origins, directions, length = _inner_rays(texels, rows[chunk], reach[chunk], settings,
+                                                  tracer.center)
+        hits = tracer.cast_local(origins, directions, length)
         d = hits["tfar"].astype(np.float64)
         x = np.minimum(d / np.maximum(np.repeat(reach[chunk], rays), 1e-300), 1.0)
         gamma = np.where(hits["primID"] >= 0, 1.0 - np.sqrt(x), 0.0)

@@ -9,11 +9,12 @@ import numpy as np
 import pytest
 
 import baker.integrate as integrate_module
-from assets.material_scenes import (DIFFUSE_TRANSMISSION, TRANSMISSION, VOLUME, alpha_cut_quad,
-                                    facing_mirrors, glass_slab, leaf, material_zoo, mirror_wall,
-                                    wax_cylinder)
+from assets.material_scenes import (DIFFUSE_TRANSMISSION, TRANSMISSION, VOLUME, WAX,
+                                    alpha_cut_quad, facing_mirrors, glass_slab, leaf, material_zoo,
+                                    mirror_wall, wax_cylinder)
 from baker.geometry import build_world
-from baker.integrate import _Chains, _refract, _special_hits, _surfaces, integrate
+from baker.integrate import (_Chains, _refract, _special_hits, _surfaces, hemisphere_rays,
+                             integrate)
 from baker.materials import (DIFFUSE, SPECULAR, TRANSLUCENT, classify,
                              no_lightmap_reason)
 from baker.scene import Material
@@ -407,3 +408,36 @@ def test_materials_baker_does_not_understand_bake_as_diffuse_with_a_warning(tmp_
     assert set(warned.values()) <= set(result.report["warnings"])  # the report's warnings
     errors = [set(issue_codes(validate(p), 0).items()) for p in (path, tmp_path / "out.glb")]
     assert errors[1] <= errors[0], errors  # the bake adds no error to the file's own
+
+
+def test_other_side_rays_are_what_a_rebake_must_test(tmp_path):
+    """A crate under a leaf is met by the leaf's back-face rays, not by its own (front) rays; a
+    wax cylinder's inner rays are as long as its d_in and reach its far side."""
+    from assets.gltf_builder import box
+    from baker.inner import other_side_rays
+
+    b = leaf()
+    b.node("crate", b.shape_mesh("crate", box((0.4, 0.1, 0.4)), material=b.material(
+        "crate", (0.9, 0.2, 0.2))), translation=(0.0, 0.05, 0.0))
+    b.node("wax", b.shape_mesh("wax", box((0.3, 0.3, 0.3)), material=b.material(
+        "wax", (0.9, 0.8, 0.6), extensions=WAX)), translation=(1.5, 0.15, 0.0))
+    done = computed(b, tmp_path, rays=16, texel_density=12, d_max=1.0)
+    tracer, tx, s = Tracer(done.world), done.texels, done.settings
+    node = done.world.tri_instance[tx.triangle]
+    rows = np.flatnonzero((node == b.info["leaf"]) | (node == 0) | (node == 3))
+    which, origins, directions, lengths = other_side_rays(done.scene, done.world, tx, rows, s,
+                                                          tracer.center)
+    owner = node[rows[which]]
+    assert set(owner.tolist()) == {b.info["leaf"], 3}  # leaves and closed translucency only
+    per_texel = np.repeat(owner, s.rays)
+    np.testing.assert_array_equal(lengths[per_texel == b.info["leaf"]], np.float32(s.d_max))
+    np.testing.assert_allclose(lengths[per_texel == 3], 0.25, rtol=1e-6)  # WAX's d_in
+    hits = tracer.cast_local(origins, directions, lengths.copy())
+    hit_node = np.where(hits["primID"] >= 0, done.world.tri_instance[hits["primID"]], -1)
+    leaf_rays = per_texel == b.info["leaf"]
+    assert (hit_node[leaf_rays] == 2).any()  # the back face sees the crate
+    assert (hit_node[per_texel == 3] == 3).mean() > 0.5  # inner rays leave through the wax
+    front_o, front_d = hemisphere_rays(tx, rows[which][owner == b.info["leaf"]], s.rays, s.seed,
+                                       tracer.center, s.sampling)
+    front = tracer.cast_local(front_o, front_d, np.full(len(front_o), s.d_max, np.float32))
+    assert not (done.world.tri_instance[front["primID"][front["primID"] >= 0]] == 2).any()
