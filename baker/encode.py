@@ -78,6 +78,18 @@ def quantise(values: np.ndarray, encoding: str) -> np.ndarray:
     return np.round(encoded * 255.0).astype(np.uint8)
 
 
+_ROWS = 128  # page rows converted at once: the float temporaries stay a few MB at any page size
+
+
+def _page_texels(page: np.ndarray, convert) -> np.ndarray:
+    """(H, W, 3) uint8: ``convert`` (rows of ``page`` → their 8-bit texels) on ``_ROWS`` rows at
+    a time. A whole 4096² page at once would hold several float copies of it (400 MB each)."""
+    out = np.empty(page.shape[:2] + (3,), np.uint8)
+    for start in range(0, len(page), _ROWS):
+        out[start:start + _ROWS] = convert(page[start:start + _ROWS])
+    return out
+
+
 def decode(texels: np.ndarray, intensity: float, encoding: str) -> np.ndarray:
     """What a viewer reads back: 8-bit ``texels`` (any shape) → linear light, float64."""
     unit = texels.astype(np.float64) / 255.0
@@ -132,9 +144,10 @@ def encode(lightmaps: Lightmaps, encoding: str, occlusion: bool,
         intensity, peak, clipped = page_scale(light, covered, clip_percentile)
         occlusion_png = None
         if occlusion:
-            grey = np.repeat((obscurance @ LUMINANCE)[..., None], 3, axis=-1)
-            occlusion_png = png_bytes(quantise(grey, "linear"))
-        pages.append(EncodedPage(png=png_bytes(quantise(light / intensity, encoding)),
+            occlusion_png = png_bytes(_page_texels(obscurance, lambda rows: quantise(
+                np.repeat((rows @ LUMINANCE)[..., None], 3, axis=-1), "linear")))
+        texels = _page_texels(light, lambda rows: quantise(rows / intensity, encoding))
+        pages.append(EncodedPage(png=png_bytes(texels),
                                  intensity=intensity, occlusion_png=occlusion_png,
                                  peak=peak, clipped=clipped))
     return pages
