@@ -16,7 +16,7 @@ import urllib.parse
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Iterator
+from typing import BinaryIO, Callable, Iterator
 
 import numpy as np
 
@@ -352,15 +352,19 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
                       rebake=details(report["rebake"], rebaked))
 
 
-def write_atomically(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` through a temporary file and a rename."""
+def write_atomically(path: Path, data: bytes | Callable[[BinaryIO], None]) -> None:
+    """Write ``data`` to ``path`` through a temporary file and a rename; ``data`` is the bytes,
+    or a function that writes them to the open file (to stream large files)."""
     if not path.parent.exists():
         raise OutputError("the folder does not exist", file=str(path),
                           fix=f"create {path.parent} first")
     handle, temp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
         with os.fdopen(handle, "wb") as f:
-            f.write(data)
+            if callable(data):
+                data(f)
+            else:
+                f.write(data)
         os.replace(temp, path)
     except BaseException:
         if os.path.exists(temp):

@@ -6,10 +6,11 @@ incremental rebake (``incremental.py``), which diffs the new scene against its f
 
 - a ZIP archive (stored, no compression) whose members have a fixed timestamp, so the same bake
   gives the same bytes (DESIGN.md §4: an incremental rebake's state equals a full bake's);
-- ``header.json``: ``{"format": "baker-bake-state", "version": 1, "fingerprints": {...},
-  "groups": {name: {"class": ..., "fields": {...}, "scalars": {...}}}, "instances": [...]}``;
+- ``header.json``: ``{"format": "baker-bake-state", "version": 2, "fingerprints": {...},
+  "groups": {name: {"class": ..., "fields": {...}, "scalars": {...}}}, "zeros": {...}}``;
 - one ``<group>/<field>.npy`` member per array (numpy's .npy format), so ``numpy.load`` of the
-  file as an .npz reads every array.
+  file as an .npz reads the arrays; arrays that are all zero are listed under ``zeros`` (shape,
+  dtype) instead of stored.
 
 Dataclasses (Texels, Validity, Terms, Direct) are stored field by field, generically: a new term
 field needs no format change — a state that lacks a field the code now has is "old" and leads to
@@ -25,14 +26,14 @@ import json
 import zipfile
 from dataclasses import dataclass, fields, is_dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import numpy as np
 
 from .atlas import Atlas, InstanceUV
 
 FORMAT = "baker-bake-state"
-VERSION = 1
+VERSION = 2
 SUFFIX = ".bake"
 _DATE = (1980, 1, 1, 0, 0, 0)  # fixed member timestamp: same content, same bytes
 
@@ -103,17 +104,22 @@ class BakeState:
     instance_world: np.ndarray
 
 
-def _npy(array: np.ndarray) -> bytes:
-    buffer = io.BytesIO()
-    np.lib.format.write_array(buffer, np.ascontiguousarray(array), allow_pickle=False)
-    return buffer.getvalue()
-
-
-def _member(archive: zipfile.ZipFile, name: str, data: bytes) -> None:
+def _member(archive: zipfile.ZipFile, name: str, data: bytes | np.ndarray) -> None:
+    """Add one stored member dated ``_DATE``: bytes as they are, an array as ``.npy``,
+    streamed into the archive (no in-memory copy of the array's bytes)."""
     info = zipfile.ZipInfo(name, date_time=_DATE)
     info.compress_type = zipfile.ZIP_STORED
     info.external_attr = 0o644 << 16
-    archive.writestr(info, data)
+    if isinstance(data, bytes):
+        archive.writestr(info, data)
+        return
+    with archive.open(info, "w", force_zip64=data.nbytes > 2**31) as member:
+        np.lib.format.write_array(member, np.ascontiguousarray(data), allow_pickle=False)
+
+
+def _all_zero(array: np.ndarray) -> bool:
+    """Whether every byte of ``array`` is 0 (so +0.0, not −0.0: the rebuilt array is the same)."""
+    return array.size > 0 and not np.ascontiguousarray(array).view(np.uint8).any()
 
 
 def _atlas_group(atlas: Atlas) -> tuple[dict, dict[str, np.ndarray]]:
@@ -128,8 +134,12 @@ def _atlas_group(atlas: Atlas) -> tuple[dict, dict[str, np.ndarray]]:
     return scalars, arrays
 
 
-def encode_state(state: BakeState) -> bytes:
-    """The state as the bytes of its file (deterministic: the same state, the same bytes)."""
+def write_state(file: BinaryIO, state: BakeState) -> None:
+    """Write the state's file to ``file`` (deterministic: the same state, the same bytes).
+
+    Arrays whose bytes are all zero (a sky term in a scene without sky, chain counts without
+    mirrors) are not stored: ``header.json`` lists them under ``zeros`` with shape and dtype.
+    """
     arrays: dict[str, np.ndarray] = {}
     groups: dict[str, dict] = {}
     atlas_scalars, atlas_arrays = _atlas_group(state.atlas)
@@ -149,21 +159,21 @@ def encode_state(state: BakeState) -> bytes:
             else:
                 scalars[f.name] = value
         groups[group] = {"class": type(obj).__name__, "fields": names, "scalars": scalars}
+    zeros = {name: {"shape": list(a.shape), "dtype": a.dtype.str}
+             for name, a in arrays.items() if _all_zero(a)}
     header = {"format": FORMAT, "version": VERSION, "fingerprints": state.fingerprints,
-              "groups": groups}
-    buffer = io.BytesIO()
-    with zipfile.ZipFile(buffer, "w", zipfile.ZIP_STORED) as archive:
+              "groups": groups, "zeros": zeros}
+    with zipfile.ZipFile(file, "w", zipfile.ZIP_STORED) as archive:
         _member(archive, "header.json", json.dumps(header, sort_keys=True, indent=1).encode())
-        for name in sorted(arrays):
-            _member(archive, f"{name}.npy", _npy(arrays[name]))
-    return buffer.getvalue()
+        for name in sorted(set(arrays) - set(zeros)):
+            _member(archive, f"{name}.npy", arrays[name])
 
 
 def save(path: str | Path, state: BakeState) -> None:
-    """Write the state to ``path`` atomically (temporary file + rename)."""
+    """Write the state to ``path`` atomically (temporary file + rename), streamed."""
     from .bake import write_atomically  # bake imports this module
 
-    write_atomically(Path(path), encode_state(state))
+    write_atomically(Path(path), lambda file: write_state(file, state))
 
 
 def load(path: str | Path, classes: dict[str, type]) -> BakeState:
@@ -187,7 +197,11 @@ def load(path: str | Path, classes: dict[str, type]) -> BakeState:
                 raise StateUnusable(f"{path} is a bake state of version {header.get('version')!r}, "
                                     f"this baker reads version {VERSION}")
 
+            zeros = header.get("zeros", {})
+
             def array(name: str) -> np.ndarray:
+                if name in zeros:
+                    return np.zeros(zeros[name]["shape"], np.dtype(zeros[name]["dtype"]))
                 with archive.open(f"{name}.npy") as member:
                     return np.lib.format.read_array(io.BytesIO(member.read()), allow_pickle=False)
 

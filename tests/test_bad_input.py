@@ -138,6 +138,16 @@ def test_not_a_gltf_file(tmp_path, capsys):
     refuses(tmp_path, capsys, source, str(source), "not a glTF", ".gltf or .glb")
 
 
+def test_debug_raises_the_typed_error_with_its_traceback(tmp_path):
+    """``--debug`` lets the library's typed error through (the traceback), with the same
+    message: one exception family, rendered as one line only without it."""
+    source = tmp_path / "holiday.glb"
+    source.write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(64))
+    with pytest.raises(baker.InputError, match="not a glTF file"):
+        main(["bake", str(source), "-o", str(tmp_path / "out.glb"), "--debug", *FAST])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["holiday.glb"]
+
+
 def test_missing_input_file(tmp_path, capsys):
     refuses(tmp_path, capsys, tmp_path / "nowhere.glb", "nowhere.glb", "not found")
 
@@ -391,7 +401,8 @@ def test_overwrite_replaces_the_input_with_its_bake(tmp_path, capsys, suffix):
     np.testing.assert_allclose(np.sort(baked.primitives[0].positions, axis=0)[[0, -1]],
                                np.sort(original.primitives[0].positions, axis=0)[[0, -1]])
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
-        [f"scene{suffix}", f"scene{suffix}.bake"] + (["scene.bin"] if suffix == ".gltf" else []))
+        [f"scene{suffix}", f"scene{suffix}.bake", f"scene{suffix}.bake.json"]
+        + (["scene.bin"] if suffix == ".gltf" else []))
 
 
 def test_overwrite_through_the_python_api(tmp_path):
@@ -496,7 +507,8 @@ def _slow_bake_started(tmp_path: Path, marker: Path, *args: str) -> subprocess.P
 
 
 @pytest.mark.parametrize("how,threads", [(signal.SIGINT, "1"), (signal.SIGINT, "2"),
-                                         (signal.SIGKILL, "1")])
+                                         (signal.SIGKILL, "1")],
+                         ids=["SIGINT-1-thread", "SIGINT-2-threads", "SIGKILL"])
 def test_killing_a_real_bake_leaves_the_previous_output(tmp_path, how, threads):
     """With 2 threads, Ctrl-C cancels the chunks not yet started and waits only for the running
     ones (``parallel.texels_per_chunk``: 64 texels × 4096 rays here, tens of milliseconds): it

@@ -231,3 +231,11 @@ def test_a_sparse_page_of_8192_squared(tmp_path, side):
     assert done.atlas.page_count == 1 and min(done.atlas.width, done.atlas.height) > 0.98 * side - 92
     np.testing.assert_allclose(_w(done), done.ambient.r_ave.mean(), rtol=1e-12)
     assert np.isfinite(done.lightmaps.light).all()
+
+
+def test_black_room_has_no_obscurance(tmp_path):
+    """Albedo exactly 0 everywhere: R_ave = 0 and every hit reflects nothing, so W = 0 exactly
+    on every texel (no 0/0, no NaN from the R_ave series)."""
+    done = computed(closed_room(albedo=0.0), tmp_path, texel_density=4.0, rays=8)
+    assert (done.ambient.r_ave == 0).all() and np.isfinite(done.lightmaps.light).all()
+    assert (_w(done) == 0).all()

@@ -165,7 +165,8 @@ def test_unusable_state_means_a_full_bake_with_a_reason(base, tmp_path, damage):
             for item in src.infolist():
                 data = src.read(item)
                 if item.filename == "header.json":
-                    data = data.replace(b'"version": 1', b'"version": 99')
+                    data = data.replace(f'"version": {baker.state.VERSION}'.encode(),
+                                        b'"version": 99')
                 dst.writestr(item, data)
     elif damage == "foreign":
         state.write_bytes(b"PK\x03\x04 not really a zip")
@@ -176,6 +177,8 @@ def test_unusable_state_means_a_full_bake_with_a_reason(base, tmp_path, damage):
     assert result.rebake["incremental"] is False
     reason = result.rebake["full_bake_reason"]
     assert reason and "\n" not in reason
+    if damage == "version":
+        assert "version 99" in reason
     baker.bake(scene, tmp_path / "full.glb", SETTINGS, state=False)
     assert (tmp_path / "out.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()
 
@@ -297,3 +300,22 @@ def test_rebake_reports_its_time_against_the_last_full_bake(base, tmp_path, caps
     assert 0 < result.rebake["seconds"] == result.seconds
     assert main(["rebake", str(scene), "-o", str(tmp_path / "out.glb")]) == 0
     assert f"of the last full bake ({full:.2f} s)" in capsys.readouterr().out
+
+
+def test_state_leaves_out_arrays_of_zeros_and_reads_them_back(base):
+    """A room without sky or mirrors: its sky terms and chain counts are zeros, listed in the
+    header instead of stored, and read back equal (same dtype, shape and bytes)."""
+    import json
+
+    from baker.incremental import state_classes
+
+    path = default_path(base)
+    with zipfile.ZipFile(path) as archive:
+        names = set(archive.namelist())
+        zeros = json.loads(archive.read("header.json"))["zeros"]
+    assert "direct/sky" in zeros and "direct/sky.npy" not in names
+    assert "terms/w_hit" not in zeros and "terms/w_hit.npy" in names
+    stored = baker.state.load(path, state_classes())
+    sky = stored.groups["direct"].sky
+    assert sky.shape == tuple(zeros["direct/sky"]["shape"]) and sky.dtype == np.float64
+    assert not sky.any() and len(sky) == len(stored.groups["texels"].key)
