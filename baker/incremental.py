@@ -40,13 +40,13 @@ from . import validity as validity_module
 from .direct import Direct, _texel_receivers, direct_light, \
     light_dimension, punctual_irradiance
 from .geometry import World, build_world
-from .integrate import Terms, hemisphere_rays, integrate
+from .integrate import Terms, cosine_directions, hemisphere_rays, integrate
 from .parallel import run_chunks
 from .rasterise import Coverage, Texels, texels_of
 from .scene import Scene
 from .settings import Settings, resolve
 from .surface import LUMINANCE
-from .sampling import jit
+from .sampling import jit, tangent_frames
 from .trace import Hits, Tracer, ray_lift
 from .validity import Validity, check_texels
 
@@ -197,6 +197,51 @@ def _crossing(origins: np.ndarray, directions: np.ndarray, lengths: np.ndarray,
     return out
 
 
+@jit
+def _may_meet(rays: int, x: np.ndarray, y: np.ndarray, z: np.ndarray, starts: np.ndarray,
+              t1: np.ndarray, t2: np.ndarray, normals: np.ndarray, centres: np.ndarray,
+              radii: np.ndarray, length: float) -> np.ndarray:
+    """(k·rays,) bool: whether ray r of texel i = r // rays — local direction (x, y, z)[r] in
+    the frame (t1, t2, normals)[i] (k, 3) each, from ``starts[i]`` (k, 3), in the tracer's
+    frame — passes within ``radii[b]`` of some ``centres[b]`` (b, 3) before ``length``.
+    Conservative for the float32 rays Embree gets when the radii are padded beyond their
+    rounding. A sphere's centre goes into each texel's frame once, so a ray costs a dot
+    product, not a transform."""
+    k, spheres = len(starts), len(centres)
+    out = np.zeros(k * rays, np.bool_)
+    local = np.empty((spheres, 3))
+    distance_sq = np.empty(spheres)
+    for i in range(k):
+        for b in range(spheres):
+            c = centres[b] - starts[i]
+            local[b, 0] = c[0] * t1[i, 0] + c[1] * t1[i, 1] + c[2] * t1[i, 2]
+            local[b, 1] = c[0] * t2[i, 0] + c[1] * t2[i, 1] + c[2] * t2[i, 2]
+            local[b, 2] = c[0] * normals[i, 0] + c[1] * normals[i, 1] + c[2] * normals[i, 2]
+            distance_sq[b] = c[0] * c[0] + c[1] * c[1] + c[2] * c[2]
+        for r in range(i * rays, (i + 1) * rays):
+            for b in range(spheres):
+                along = x[r] * local[b, 0] + y[r] * local[b, 1] + z[r] * local[b, 2]
+                radius = radii[b]
+                if along < -radius or along > length + radius:
+                    continue
+                if distance_sq[b] - along * along <= radius * radius:
+                    out[r] = True
+                    break
+    return out
+
+
+def _candidates(tracer: "_Changed", x, y, z, position, normal, size, t1, t2, rays: int,
+                length: float) -> np.ndarray:
+    """(k, rays) bool: which of k texels' rays (local directions x, y, z (k·rays,) in the frames
+    t1, t2, normal (k, 3), from ``position`` (k, 3) lifted by ``trace.ray_lift``) may meet the
+    changed geometry within ``length`` (``_may_meet`` against its padded bounding spheres)."""
+    lift = ray_lift(position, size, tracer.center)
+    starts = position - tracer.center + lift[:, None] * normal
+    slack = 1e-5 * (length + np.abs(starts).max(initial=0.0))  # float32 directions, origins
+    return _may_meet(rays, x, y, z, starts, t1, t2, normal, tracer.sphere_centres,
+                     tracer.sphere_radii + slack, length).reshape(-1, rays)
+
+
 class _Changed:
     """An Embree scene of just the changed triangles, for the dirty search, with the boxes that
     hold each group of them: a ray that crosses no box cannot meet them and is not cast, so the
@@ -216,6 +261,9 @@ class _Changed:
         pad = [1e-4 * (np.abs(p).max() + np.ptp(p, axis=0).max()) + 1e-12 for p in local]
         self._low = np.array([p.min(0) - e for p, e in zip(local, pad)]).reshape(-1, 3)
         self._high = np.array([p.max(0) + e for p, e in zip(local, pad)]).reshape(-1, 3)
+        # The boxes' bounding spheres, for the cheaper test on local directions (``_rays_meet``).
+        self.sphere_centres = (self._low + self._high) / 2
+        self.sphere_radii = np.linalg.norm(self._high - self._low, axis=1) / 2
 
     def _maybe(self, local: np.ndarray, directions: np.ndarray, lengths: np.ndarray) -> np.ndarray:
         return np.flatnonzero(_crossing(local, directions, lengths * (1 + 1e-6),
@@ -286,11 +334,24 @@ def _rays_meet(tracer: Tracer, texels: Texels, rows: np.ndarray, settings) -> tu
     meets = np.zeros(len(rows), bool)
 
     def work(part: slice) -> None:
-        origins, directions = hemisphere_rays(texels, rows[part], n, settings.seed,
+        chosen = rows[part]
+        x, y, z = cosine_directions(texels.key[chosen], n, settings.seed, settings.sampling)
+        normal = texels.geometric_normal[chosen]
+        maybe = _candidates(tracer, x, y, z, texels.position[chosen], normal,
+                            texels.size[chosen], *tangent_frames(normal), n, settings.d_max)
+        some = np.flatnonzero(maybe.any(axis=1))
+        if not len(some):
+            return
+        origins, directions = hemisphere_rays(texels, chosen[some], n, settings.seed,
                                               tracer.center, settings.sampling)
-        hits = tracer.cast_local(origins, directions,
-                                 np.full(len(origins), settings.d_max, np.float32))
-        meets[part] = (hits["primID"].reshape(-1, n) >= 0).any(axis=1)
+        cast = maybe[some].ravel()
+        primitive = np.full(len(cast), -1, np.int32)
+        primitive[cast] = tracer.cast_local(origins[cast], directions[cast],
+                                            np.full(int(cast.sum()), settings.d_max,
+                                                    np.float32))["primID"]
+        found = meets[part]
+        found[some] = (primitive.reshape(-1, n) >= 0).any(axis=1)
+        meets[part] = found
 
     run_chunks(work, _slices(len(rows), max(1, _TEST_RAYS // n)), settings.threads)
     return meets, len(rows) * n
@@ -301,14 +362,26 @@ def _probes_meet(tracer: Tracer, texels: Texels, rows: np.ndarray, d_max: float,
     """(k,) bool: whether any of the validity module's fixed hemisphere probes from each texel's
     (probed) sample point meets ``tracer``'s triangles within d_max; and the rays cast."""
     meets = np.zeros(len(rows), bool)
+    m = validity_module.HEMISPHERE_RAYS
+    x, y, z = validity_module._hemisphere_directions(m).T
 
     def work(part: slice) -> None:
         chosen = rows[part]
+        normal = texels.geometric_normal[chosen]
+        k = len(chosen)
+        maybe = _candidates(tracer, np.tile(x, k), np.tile(y, k), np.tile(z, k),
+                            texels.position[chosen], normal, texels.size[chosen],
+                            *validity_module._frames(normal), m, d_max)
+        some = np.flatnonzero(maybe.any(axis=1))
+        if not len(some):
+            return
         origins, directions = validity_module.hemisphere_probes(
-            texels.position[chosen], texels.geometric_normal[chosen], texels.size[chosen],
+            texels.position[chosen[some]], normal[some], texels.size[chosen[some]],
             tracer.center)
         hits = tracer.cast(origins, directions, d_max)
-        meets[part] = (hits.triangle.reshape(len(chosen), -1) >= 0).any(axis=1)
+        found = meets[part]
+        found[some] = (hits.triangle.reshape(len(some), -1) >= 0).any(axis=1)
+        meets[part] = found
 
     run_chunks(work, _slices(len(rows), max(1, _TEST_RAYS // validity_module.HEMISPHERE_RAYS)),
                threads)

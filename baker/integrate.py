@@ -143,6 +143,19 @@ def _to_world_kernel(rays, first, starts, normals, offsets, center, x, y, z, ori
             directions[r, 2] = x[r] * f[2] + y[r] * f[5] + z[r] * nz
 
 
+def cosine_directions(keys: np.ndarray, rays: int, seed: int, technique: str = "sobol",
+                      first: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The local cosine-distributed directions x, y, z (k·rays,) float64 of samples ``first`` …
+    ``first + rays − 1`` of the texels ``keys`` (k,), texel-major, about +z (the normal)."""
+    k = len(keys)
+    u, v = np.empty(k * rays), np.empty(k * rays)
+    fill_points(TECHNIQUES.index(technique), np.uint64(seed), keys, first, rays, np.uint64(0),
+                u, v)
+    x, y, z = np.empty(k * rays), np.empty(k * rays), np.empty(k * rays)
+    fill_cosine(u, v, x, y, z)
+    return x, y, z
+
+
 def hemisphere_rays(texels: Texels, rows: np.ndarray | slice, rays: int, seed: int,
                     center: np.ndarray, technique: str = "sobol", first: int = 0,
                     sub: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -159,11 +172,7 @@ def hemisphere_rays(texels: Texels, rows: np.ndarray | slice, rays: int, seed: i
     """
     keys = texels.key[rows]
     k = len(keys)
-    u, v = np.empty(k * rays), np.empty(k * rays)
-    fill_points(TECHNIQUES.index(technique), np.uint64(seed), keys, first, rays, np.uint64(0),
-                u, v)
-    x, y, z = np.empty(k * rays), np.empty(k * rays), np.empty(k * rays)
-    fill_cosine(u, v, x, y, z)
+    x, y, z = cosine_directions(keys, rays, seed, technique, first)
     origins = np.empty((k * rays, 3), np.float32)
     directions = np.empty((k * rays, 3), np.float32)
     starts = texels.position[rows][:, None, :] if sub is None else sub
