@@ -223,8 +223,8 @@ def test_a_mesh_instanced_many_times(tmp_path, count):
 @pytest.mark.parametrize("side", [8192 if HEAVY else 1024])
 def test_a_sparse_page_of_8192_squared(tmp_path, side):
     """An L-shaped strip two texels wide whose chart only fits a ``side``² page (8192: 48.6k
-    texels on an 8101² page with BAKER_HEAVY=1; measured 110 s and 8.2 GB peak, nearly all in
-    compose/post-processing of the full page): every texel baked, open sky (W = R_ave)."""
+    texels on an 8101² page with BAKER_HEAVY=1; measured 12.8 s and 6.7 GB peak, most of it
+    the float pages: 1.6 GB each): every texel baked, open sky (W = R_ave)."""
     length = (side - 92) / 8.0
     done = computed(l_strip(length, 0.25), tmp_path, texel_density=8.0, rays=4, d_max=1.0,
                     page_size=side)
