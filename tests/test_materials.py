@@ -441,3 +441,31 @@ def test_other_side_rays_are_what_a_rebake_must_test(tmp_path):
                                        tracer.center, s.sampling)
     front = tracer.cast_local(front_o, front_d, np.full(len(front_o), s.d_max, np.float32))
     assert not (done.world.tri_instance[front["primID"][front["primID"] >= 0]] == 2).any()
+
+
+def test_leaves_and_wax_survive_the_bake_state(tmp_path):
+    """Their terms are stored with the state: a relight (no ray) and a rebake of an unchanged
+    scene give the full bake's bytes."""
+    import baker
+    from assets.gltf_builder import box
+
+    def scene(intensity):
+        b = leaf()
+        b.node("wax", b.shape_mesh("wax", box((0.3, 0.3, 0.3)), material=b.material(
+            "wax", (0.9, 0.8, 0.6), extensions=WAX)), translation=(1.5, 0.15, 0.0))
+        lamp = b.light("point", intensity=intensity)
+        b.node("lamp", translation=(0.0, 2.0, 0.0),
+               extensions={"KHR_lights_punctual": {"light": lamp}})
+        return b
+
+    settings = baker.Settings(rays=8, texel_density=12, d_max=1.0)
+    baker.bake(saved(scene(10.0), tmp_path, "a.glb"), tmp_path / "out.glb", settings)
+    edited = saved(scene(30.0), tmp_path, "b.glb")
+    full = baker.bake(edited, tmp_path / "full.glb", settings, state=False)
+    assert full.report["plan"]["stages"]["leaves"].startswith("the back face")
+    relit = baker.bake(edited, tmp_path / "out.glb", settings, relight=True)
+    assert relit.rebake["rays"] == 0
+    assert (tmp_path / "out.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()
+    again = baker.bake(edited, tmp_path / "out.glb", settings, incremental=True)
+    assert again.rebake["incremental"] is True
+    assert (tmp_path / "out.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()
