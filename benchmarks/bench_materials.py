@@ -10,6 +10,10 @@
    material stage to run) against the same bake with every material stage cut out of the code
    (no special-hit shading, no alpha table, no leaves/inner pass): the bytes written must be the
    same and the time the same within noise. Bakes alternate, best of ``--repeat``.
+3. What leaves and inner obscurances cost when they run: a leaf over a floor and a wax cylinder
+   (assets ``material_scenes.leaf``, ``wax_cylinder``): the trace stage with and without them,
+   and the rays they add (a leaf's back face doubles its texels' rays; a wax texel casts
+   ``rays`` more into the object).
 
     python benchmarks/bench_materials.py [--rays 64] [--repeat 5]
 
@@ -34,7 +38,7 @@ import baker.inner as inner_module  # noqa: E402
 import baker.integrate as integrate_module  # noqa: E402
 import baker.materials as materials_module  # noqa: E402
 from assets.make_scenes import cornell_box  # noqa: E402
-from assets.material_scenes import mirror_wall  # noqa: E402
+from assets.material_scenes import leaf, mirror_wall, wax_cylinder  # noqa: E402
 from baker.bake import compute  # noqa: E402
 from baker.load import load  # noqa: E402
 from baker.surface import LUMINANCE  # noqa: E402
@@ -72,8 +76,7 @@ def _trace_seconds(done) -> float:
 def diffuse_only():
     """The baker with every material stage cut out: no special-hit shading, no alpha table, no
     leaves or inner obscurances (what the bake was before issue 4, for a diffuse scene)."""
-    surfaces, alpha, translucency = (integrate_module._surfaces, materials_module.alpha_test,
-                                     inner_module.add_translucency)
+    surfaces, alpha = integrate_module._surfaces, materials_module.alpha_test
 
     def plain_surfaces(scene, world):
         s = surfaces(scene, world)
@@ -84,11 +87,21 @@ def diffuse_only():
 
     integrate_module._surfaces = plain_surfaces
     materials_module.alpha_test = lambda scene, world: None
+    try:
+        with without_translucency():
+            yield
+    finally:
+        integrate_module._surfaces, materials_module.alpha_test = surfaces, alpha
+
+
+@contextmanager
+def without_translucency():
+    """The baker without leaves and inner obscurances (every other stage as it is)."""
+    translucency = inner_module.add_translucency
     inner_module.add_translucency = lambda *args, **kwargs: args[6]
     try:
         yield
     finally:
-        integrate_module._surfaces, materials_module.alpha_test = surfaces, alpha
         inner_module.add_translucency = translucency
 
 
@@ -123,6 +136,20 @@ def plan_cost(folder: Path, rays: int, repeat: int) -> None:
           f" same bytes: {outputs['as it runs'] == outputs['diffuse only']}")
 
 
+def translucency_cost(folder: Path, rays: int, repeat: int) -> None:
+    """Part 3: the trace stage of the leaf and wax scenes with and without their §4 terms."""
+    print(f"\nleaves and inner obscurances: {rays} rays/texel, best of {repeat}")
+    for name, builder in (("leaf", leaf()), ("wax cylinder", wax_cylinder())):
+        scene = load(builder.save(folder / f"{name.replace(' ', '_')}.glb"))
+        settings = baker.Settings(rays=rays, texel_density=48, d_max=1.0)
+        on = min((compute(scene, settings) for _ in range(repeat)), key=_trace_seconds)
+        with without_translucency():
+            off = min((compute(scene, settings) for _ in range(repeat)), key=_trace_seconds)
+        extra = int(on.terms.chain_rays.sum() - off.terms.chain_rays.sum())
+        print(f"  {name:13} {len(on.texels):8,} texels: trace {_trace_seconds(off):.3f} s -> "
+              f"{_trace_seconds(on):.3f} s, rays {on.terms.rays:,} + {extra:,} for §4")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--rays", type=int, default=64)
@@ -131,6 +158,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as name:
         strategies(Path(name), args.rays, args.repeat)
         plan_cost(Path(name), args.rays, args.repeat)
+        translucency_cost(Path(name), args.rays, args.repeat)
 
 
 if __name__ == "__main__":
