@@ -88,11 +88,13 @@ def _baked_triangles(atlas: Atlas, world: World) -> tuple[np.ndarray, np.ndarray
     triangle that xatlas placed on a page, degenerate ones left out."""
     corners, pages, tris = [], [], []
     scale = np.array([atlas.width, atlas.height], np.float64)
+    usable = ~degenerate(world, np.arange(len(world.triangles)))  # once, not per instance
     for unwrap in atlas.instances:
-        placed = (unwrap.pages >= 0) & ~degenerate(world, world.instance_triangles(unwrap.instance))
+        own = world.instance_triangles(unwrap.instance)
+        placed = (unwrap.pages >= 0) & usable[own]
         corners.append(unwrap.uv[unwrap.triangles[placed]] * scale)
         pages.append(unwrap.pages[placed])
-        tris.append(world.instance_triangles(unwrap.instance)[placed])
+        tris.append(own[placed])
     if not corners:
         return np.zeros((0, 3, 2)), np.zeros(0, np.int64), np.zeros(0, np.int64)
     return np.concatenate(corners), np.concatenate(pages), np.concatenate(tris)

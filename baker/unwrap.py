@@ -8,6 +8,8 @@ matrix), so moving or turning a node leaves the atlas bit for bit as it was (inc
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import xatlas
 
@@ -55,15 +57,24 @@ def stretch(linear: np.ndarray) -> np.ndarray:
     largest singular value, so that the rounding noise of a rotated matrix's SVD (~1e-16) does
     not change it: a node moved or turned keeps bit-identical unwrap input (DESIGN.md §5).
     """
+    return _stretch_of(np.ascontiguousarray(linear, np.float64).tobytes())
+
+
+@functools.lru_cache(maxsize=1 << 16)
+def _stretch_of(raw: bytes) -> np.ndarray:
+    """``stretch`` of the (3, 3) float64 matrix whose bytes are ``raw``, computed once per
+    matrix (a scene's many instances each ask for theirs several times); read-only."""
+    linear = np.frombuffer(raw, np.float64).reshape(3, 3)
     _u, sigma, vt = np.linalg.svd(linear)
     s = (vt.T * sigma) @ vt
     if np.linalg.det(linear) < 0:
         s = -s
     top = float(sigma.max()) if len(sigma) else 0.0
-    if not (np.isfinite(top) and top > 0):
-        return s
-    quantum = 2.0 ** (np.round(np.log2(top)) - 30)
-    return np.round(s / quantum) * quantum
+    if np.isfinite(top) and top > 0:
+        quantum = 2.0 ** (np.round(np.log2(top)) - 30)
+        s = np.round(s / quantum) * quantum
+    s.flags.writeable = False
+    return s
 
 
 def frame_positions(scene: Scene, instance: int) -> np.ndarray:
