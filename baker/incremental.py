@@ -309,22 +309,34 @@ def _placed_corners(scene: Scene, world: World, instance: int, matrix: np.ndarra
     return positions[local]
 
 
-def _box_distance(points: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
-    """(n,) Euclidean distance from points (n, 3) to the box [low, high] (0 inside)."""
-    return np.linalg.norm(np.maximum(np.maximum(low - points, points - high), 0.0), axis=1)
+@jit
+def _within(points: np.ndarray, reach: np.ndarray, low: np.ndarray,
+            high: np.ndarray) -> np.ndarray:
+    """(n,) bool: whether each point (n, 3) lies within ``reach`` (n,) of some box
+    [low[b], high[b]] (b, 3) (Euclidean distance to the box, 0 inside)."""
+    out = np.zeros(len(points), np.bool_)
+    for i in range(len(points)):
+        for b in range(len(low)):
+            squared = 0.0
+            for c in range(3):
+                gap = max(low[b, c] - points[i, c], points[i, c] - high[b, c], 0.0)
+                squared += gap * gap
+            if np.sqrt(squared) <= reach[i]:
+                out[i] = True
+                break
+    return out
 
 
 def _near(texels: Texels, boxes: list[tuple[np.ndarray, np.ndarray]], d_max: float) -> np.ndarray:
     """(N,) bool: texels whose sample point lies within reach (d_max + a few texel sides) of any
     box — a conservative bound on where their validity probes and obscurance rays can go."""
+    if not boxes:
+        return np.zeros(len(texels), bool)
     reach = d_max * (1 + 1e-9) + _REACH_TEXELS * texels.size
-    if boxes:  # plus the float32 spacing part of the rays' lift, generously
-        middle = (boxes[0][0] + boxes[0][1]) / 2
-        reach = reach + 1e-4 * np.abs(texels.position - middle).max(axis=1)
-    near = np.zeros(len(texels), bool)
-    for low, high in boxes:
-        near |= _box_distance(texels.position, low, high) <= reach
-    return near
+    middle = (boxes[0][0] + boxes[0][1]) / 2  # plus the float32 spacing part of the rays' lift
+    reach = reach + 1e-4 * np.abs(texels.position - middle).max(axis=1)
+    return _within(texels.position, reach, np.array([b[0] for b in boxes]),
+                   np.array([b[1] for b in boxes]))
 
 
 def _rays_meet(tracer: Tracer, texels: Texels, rows: np.ndarray, settings) -> tuple[np.ndarray, int]:

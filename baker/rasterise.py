@@ -159,27 +159,31 @@ def _chunks(counts: np.ndarray, limit: int) -> list[slice]:
     return [slice(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:]) if b > a]
 
 
+@jit
 def _barycentric(corners: np.ndarray, points: np.ndarray) -> np.ndarray:
     """Barycentric coordinates (c, 3) of ``points`` (c, 2) in triangles (c, 3, 2), clamped into
     the triangle (negative weights cut to 0 and the rest renormalised); degenerate triangles
     give their centroid."""
-    a, b, c = corners[:, 0], corners[:, 1], corners[:, 2]
-    v0, v1, v2 = b - a, c - a, points - a
-    d00 = np.einsum("ij,ij->i", v0, v0)
-    d01 = np.einsum("ij,ij->i", v0, v1)
-    d11 = np.einsum("ij,ij->i", v1, v1)
-    d20 = np.einsum("ij,ij->i", v2, v0)
-    d21 = np.einsum("ij,ij->i", v2, v1)
-    denom = d00 * d11 - d01 * d01
-    ok = np.abs(denom) > 1e-30 * np.maximum(d00 * d11, 1e-300)
-    safe = np.where(ok, denom, 1.0)
-    v = (d11 * d20 - d01 * d21) / safe
-    w = (d00 * d21 - d01 * d20) / safe
-    bary = np.stack([1.0 - v - w, v, w], axis=1)
-    bary = np.clip(bary, 0.0, None)
-    total = bary.sum(axis=1, keepdims=True)
-    bary = np.divide(bary, total, out=np.full_like(bary, 1 / 3), where=total > 0)
-    bary[~ok] = 1.0 / 3.0
+    bary = np.empty((len(points), 3))
+    for i in range(len(points)):
+        ax, ay = corners[i, 0, 0], corners[i, 0, 1]
+        x0, y0 = corners[i, 1, 0] - ax, corners[i, 1, 1] - ay
+        x1, y1 = corners[i, 2, 0] - ax, corners[i, 2, 1] - ay
+        x2, y2 = points[i, 0] - ax, points[i, 1] - ay
+        d00, d01, d11 = x0 * x0 + y0 * y0, x0 * x1 + y0 * y1, x1 * x1 + y1 * y1
+        d20, d21 = x2 * x0 + y2 * y0, x2 * x1 + y2 * y1
+        denom = d00 * d11 - d01 * d01
+        if not abs(denom) > 1e-30 * max(d00 * d11, 1e-300):
+            bary[i, 0] = bary[i, 1] = bary[i, 2] = 1.0 / 3.0
+            continue
+        v = (d11 * d20 - d01 * d21) / denom
+        w = (d00 * d21 - d01 * d20) / denom
+        u, v, w = max(1.0 - v - w, 0.0), max(v, 0.0), max(w, 0.0)
+        total = u + v + w
+        if total > 0:
+            bary[i, 0], bary[i, 1], bary[i, 2] = u / total, v / total, w / total
+        else:
+            bary[i, 0] = bary[i, 1] = bary[i, 2] = 1.0 / 3.0
     return bary
 
 
