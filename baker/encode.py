@@ -123,7 +123,9 @@ def page_scale(light: np.ndarray, covered: np.ndarray,
     "higher" method), so a page mostly in the dark still scales to its lit part; 100 gives the
     peak (nothing clips). A page with nothing above 0 gets intensity 1.
     """
-    brightest = light[covered].max(axis=-1) if covered.any() else np.zeros(0)
+    brightest = np.concatenate([np.zeros(0)] + [  # by rows: no (N, 3) copy of the texels
+        light[start:start + _ROWS][covered[start:start + _ROWS]].max(axis=-1)
+        for start in range(0, len(light), _ROWS)])
     lit = brightest[brightest > 0]
     if not len(lit):
         return 1.0, 0.0, 0.0

@@ -578,11 +578,20 @@ def _split(part: np.ndarray, part_count: np.ndarray, whole: np.ndarray,
     return np.where((part_count >= 1)[:, None] & (whole_count > part_count)[:, None], split, 0.0)
 
 
+_MEAN_ROWS = 1 << 16  # texels ``_means`` works on at once
+
+
 def _means(sums: np.ndarray, counts: np.ndarray) -> Terms:
-    """Terms from per-texel sums (k, 9) over ``counts`` (k,) rays."""
-    means = sums[:, :_HALF.start] / np.maximum(counts, 1)[:, None]
-    half, quarter = counts // 2, counts // 4
-    first_half = _split(sums[:, _HALF], half, _luminance_and_escaped(sums), counts)
-    first_quarter = _split(sums[:, _QUARTER], quarter, sums[:, _HALF], half)
+    """Terms from per-texel sums (k, 9) over ``counts`` (k,) rays, ``_MEAN_ROWS`` rows at a time
+    (the splits' temporaries for every texel at once would be larger than the terms)."""
+    means = np.empty((len(counts), _HALF.start))
+    first_half, first_quarter = np.empty((len(counts), 2)), np.empty((len(counts), 2))
+    for start in range(0, len(counts), _MEAN_ROWS):
+        rows = slice(start, start + _MEAN_ROWS)
+        part, count = sums[rows], counts[rows]
+        means[rows] = part[:, :_HALF.start] / np.maximum(count, 1)[:, None]
+        half, quarter = count // 2, count // 4
+        first_half[rows] = _split(part[:, _HALF], half, _luminance_and_escaped(part), count)
+        first_quarter[rows] = _split(part[:, _QUARTER], quarter, part[:, _HALF], half)
     return Terms(w_hit=means[:, _RGB], escaped=means[:, _ESCAPED], hit_sq=means[:, _SQUARE],
                  counts=counts, half_split=first_half, quarter_split=first_quarter)

@@ -1,0 +1,76 @@
+"""Peak memory: the stages after the rays work on the lightmap pages in place or in blocks, so a
+large page costs little more than itself, and blocks never change a value."""
+
+import tracemalloc
+
+import numpy as np
+import pytest
+
+from assets.make_scenes import cornell_box
+from baker import compose as compose_module
+from baker import encode as encode_module
+from baker import integrate as integrate_module
+from baker.compose import compose
+from baker.encode import encode
+from baker.postprocess import postprocess
+from baker.seams import find_seams
+from tests.bakehelp import computed
+
+
+@pytest.fixture(scope="module")
+def done(tmp_path_factory):
+    return computed(cornell_box(), tmp_path_factory.mktemp("memory"), page_size=384, rays=4)
+
+
+def _composed(done):
+    return compose(done.atlas, done.texels, done.terms, done.ambient, done.settings.rho,
+                   done.direct)
+
+
+def _extra_bytes(run) -> int:
+    """Bytes ``run()`` allocates at its peak beyond what is allocated when it starts."""
+    tracemalloc.start()
+    try:
+        before = tracemalloc.get_traced_memory()[0]
+        run()
+        return tracemalloc.get_traced_memory()[1] - before
+    finally:
+        tracemalloc.stop()
+
+
+def test_post_processing_and_encoding_hold_no_whole_page_temporaries(done, monkeypatch):
+    """Beyond their inputs and outputs they need a fraction of a page (blocks of 16 rows here:
+    the encoder's temporaries follow its block, not the page)."""
+    monkeypatch.setattr(encode_module, "_ROWS", 16)
+    page = done.lightmaps.light.nbytes  # the light pages, float64 RGB
+    masks = done.validity.page_masks(done.texels, done.lightmaps.covered.shape)
+    seams = find_seams(done.atlas, done.world)
+    composed = _composed(done)
+    assert _extra_bytes(lambda: postprocess(composed, done.settings.padding, *masks,
+                                            seams=seams)) < 0.5 * page  # (was 4.4 pages)
+    # the 8-bit pages, PIL's copy and the percentile's copy of the texels remain (whole-page
+    # float temporaries were 4 pages and more)
+    assert _extra_bytes(lambda: encode(done.lightmaps, "srgb", True)) < page
+    # compose: its two pages, the texels' W and D (N, 3) each, no gathered copies (was 4.3)
+    assert _extra_bytes(lambda: _composed(done)) < 3.75 * page
+
+
+def test_blocks_give_the_same_values_as_one_block(done, monkeypatch):
+    """Compose, the integrator's means and the encoder work in blocks; tiny blocks change
+    nothing (the bytes of a bake do not depend on the block sizes)."""
+    whole = _composed(done)
+    pages = encode(done.lightmaps, "srgb", True)
+    means = integrate_module._means(np.arange(9 * 1000.0).reshape(1000, 9) % 17,
+                                    np.arange(1000) % 40)
+    monkeypatch.setattr(compose_module, "_TEXELS_AT_ONCE", 7)
+    monkeypatch.setattr(encode_module, "_ROWS", 5)
+    monkeypatch.setattr(integrate_module, "_MEAN_ROWS", 3)
+    blocked = _composed(done)
+    assert np.array_equal(blocked.light, whole.light)
+    assert np.array_equal(blocked.obscurance, whole.obscurance)
+    assert [(p.png, p.occlusion_png, p.intensity) for p in encode(done.lightmaps, "srgb", True)] \
+        == [(p.png, p.occlusion_png, p.intensity) for p in pages]
+    again = integrate_module._means(np.arange(9 * 1000.0).reshape(1000, 9) % 17,
+                                    np.arange(1000) % 40)
+    for name in ("w_hit", "escaped", "hit_sq", "half_split", "quarter_split"):
+        assert np.array_equal(getattr(again, name), getattr(means, name)), name
