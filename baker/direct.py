@@ -52,7 +52,7 @@ import numpy as np
 from .geometry import World
 from .parallel import run_chunks
 from .rasterise import Texels
-from .sampling import cosine_hemisphere, sample_2d, tangent_frames
+from .sampling import cosine_hemisphere, jit, sample_2d, tangent_frames
 from .scene import Light, Scene
 from .settings import Resolved
 from .supersample import sub_positions
@@ -353,6 +353,50 @@ def punctual_irradiance(light: Light, spread: float, n: int, receivers: Receiver
     return _mean_and_variance(values)
 
 
+@jit
+def _emitter_samples(u, n, cdf, probability, corners, normals, two_sided, areas, origins, lift,
+                     shading, geometric, raised):
+    """The geometry of the k·n emissive samples (``emissive_irradiance``), one compiled pass.
+
+    Sample j of receiver i = j // n: its first coordinate u[j, 0] picks the emitter triangle by
+    the power ``cdf`` (E,) (``probability`` (E,) each), then is stretched back to [0, 1)
+    within the triangle's slice to place a uniform point with u[j, 1] (one stratified 2D sample
+    does both). Returns chosen (k·n,) triangle, bary (k·n, 3) of the point, unit directions
+    (k·n, 3) from ``origins`` (k·n, 3) to it, distance (k·n,) (at least the receiver's ``lift``)
+    and weight (k·n,) = cosθ_p·cosθ_q / d² · A / p (0 where the point cannot see it: cosθ_p
+    as ``_facing`` gives it, with ``raised`` (k,) receivers free to look below their facet;
+    cosθ_q only from the front unless ``two_sided``).
+    """
+    count = len(u)
+    chosen = np.empty(count, np.int64)
+    bary = np.empty((count, 3))
+    directions = np.empty((count, 3))
+    distance = np.empty(count)
+    weight = np.zeros(count)
+    last = len(cdf) - 1
+    for j in range(count):
+        i = j // n
+        e = min(np.searchsorted(cdf, u[j, 0], side="right"), last)
+        chosen[j] = e
+        start = cdf[e] - probability[e]
+        root = np.sqrt(min(max((u[j, 0] - start) / probability[e], 0.0), 1.0))
+        b0, b1, b2 = 1.0 - root, u[j, 1] * root, (1.0 - u[j, 1]) * root
+        bary[j, 0], bary[j, 1], bary[j, 2] = b0, b1, b2
+        ox = b0 * corners[e, 0, 0] + b1 * corners[e, 1, 0] + b2 * corners[e, 2, 0] - origins[j, 0]
+        oy = b0 * corners[e, 0, 1] + b1 * corners[e, 1, 1] + b2 * corners[e, 2, 1] - origins[j, 1]
+        oz = b0 * corners[e, 0, 2] + b1 * corners[e, 1, 2] + b2 * corners[e, 2, 2] - origins[j, 2]
+        d = max(np.sqrt(ox * ox + oy * oy + oz * oz), lift[i])
+        dx, dy, dz = ox / d, oy / d, oz / d
+        directions[j, 0], directions[j, 1], directions[j, 2] = dx, dy, dz
+        distance[j] = d
+        above = raised[i] or dx * geometric[i, 0] + dy * geometric[i, 1] + dz * geometric[i, 2] > 0
+        cos_p = max(dx * shading[i, 0] + dy * shading[i, 1] + dz * shading[i, 2], 0.0) if above else 0.0
+        cos_q = -(normals[e, 0] * dx + normals[e, 1] * dy + normals[e, 2] * dz)
+        cos_q = abs(cos_q) if two_sided[e] else max(cos_q, 0.0)
+        weight[j] = cos_p * cos_q / (d * d) * areas[e] / probability[e]
+    return chosen, bary, directions, distance, weight
+
+
 def emissive_irradiance(scene: Scene, world: World, emitters: Emitters, n: int,
                         receivers: Receivers, tracer: Tracer, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """Irradiance (k, 3) from the emissive triangles, and the variance (k,) of its luminance.
@@ -365,25 +409,12 @@ def emissive_irradiance(scene: Scene, world: World, emitters: Emitters, n: int,
     if k == 0:
         return np.zeros((0, 3)), np.zeros(0)
     u = sample_2d(seed, receivers.key[:, None], np.arange(n)[None, :], EMISSIVE_DIMENSION).reshape(-1, 2)
-    # The first coordinate picks the triangle, then is stretched back to [0, 1) within the
-    # triangle's slice of the CDF to place the point: one stratified 2D sample does both.
-    chosen = np.minimum(np.searchsorted(emitters.cdf, u[:, 0], side="right"), len(emitters.cdf) - 1)
-    start = emitters.cdf[chosen] - emitters.probability[chosen]
-    where = np.stack([np.clip((u[:, 0] - start) / emitters.probability[chosen], 0.0, 1.0), u[:, 1]],
-                     axis=1)
-    root = np.sqrt(where[:, 0])
-    bary = np.stack([1.0 - root, where[:, 1] * root, (1.0 - where[:, 1]) * root], axis=1)
-    points = np.einsum("sv,svc->sc", bary, emitters.corners[chosen])
     origins = receivers.origins(n)
-    offset = points - origins
-    distance = np.linalg.norm(offset, axis=1)
-    lift = np.repeat(receivers.lift, n)
-    distance = np.maximum(distance, lift)
-    directions = offset / distance[:, None]
-    cos_p = _facing(receivers, directions.reshape(k, n, 3)).reshape(-1)
-    cos_q = -np.einsum("ec,ec->e", emitters.normals[chosen], directions)
-    cos_q = np.where(emitters.two_sided[chosen], np.abs(cos_q), np.maximum(cos_q, 0.0))
-    weight = cos_p * cos_q / (distance * distance) * emitters.areas[chosen] / emitters.probability[chosen]
+    raised = np.zeros(k, bool) if receivers.raised is None else receivers.raised
+    chosen, bary, directions, distance, weight = _emitter_samples(
+        u, n, emitters.cdf, emitters.probability, emitters.corners, emitters.normals,
+        emitters.two_sided, emitters.areas, origins, receivers.lift, receivers.normal,
+        receivers.geometric, raised)
     live = weight > 0
     value = np.zeros((k * n, 3))
     if live.any():
