@@ -235,7 +235,7 @@ def test_relight_after_a_shrunk_default_density_casts_no_ray(tmp_path):
         16.0, 256)  # the 4 m floor's derived density did not fit and was lowered
     edited = lit_floor("point", intensity=40.0, color=(1.0, 0.5, 0.5)).save(tmp_path / "b.glb")
     again = baker.bake(edited, tmp_path / "lit.glb", settings, incremental=True)
-    full = baker.bake(edited, tmp_path / "full.glb", settings)
+    baker.bake(edited, tmp_path / "full.glb", settings)
     assert again.rebake["incremental"] is True, again.rebake.get("full_bake_reason")
     assert again.rebake["rays"] == 0
     assert (tmp_path / "lit.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()
