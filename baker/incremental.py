@@ -22,6 +22,10 @@ bit, the terms the last bake stored, and only the others need rays. The rebake:
      ``_Recorder``) meet them ("shadow");
    - for a material whose base colour changed: texels whose obscurance rays meet its triangles
      ("colour");
+   - the obscurance tests count the rays a texel casts from its other side too (a leaf's back
+     face, a translucent object's inside: ``inner.other_side_rays``);
+   - when the scene has mirrors or glass, texels whose rays meet them ("chain": their reflected
+     and refracted rays go on where the tests above do not follow);
 4. re-integrates the dirty rows (obscurance and direct light), recomputes the shadow rays of a
    light that moved for every texel (its column of the direct term only), takes the new light
    colours, and composes, post-processes, encodes and writes like a full bake.
@@ -41,6 +45,7 @@ from .direct import Direct, _texel_receivers, direct_light, \
     light_dimension, punctual_irradiance
 from .geometry import World, build_world
 from .integrate import Terms, cosine_directions, hemisphere_rays, integrate
+from .materials import SPECULAR, TRANSPARENT, material_table
 from .parallel import run_chunks
 from .rasterise import Coverage, Texels, texels_of
 from .scene import Scene
@@ -58,7 +63,7 @@ _REACH_TEXELS = (getattr(validity_module, "TANGENT_ROUNDS", 2)
 # Rays per batch when testing candidates against the changed geometry (bounds memory).
 _TEST_RAYS = 1 << 21
 
-REASONS = ("own", "validity", "obscurance", "shadow", "colour")
+REASONS = ("own", "validity", "obscurance", "shadow", "colour", "chain")
 
 
 class FullBake(Exception):
@@ -436,6 +441,40 @@ def _any_above(position: np.ndarray, normal: np.ndarray, slack: np.ndarray,
     return out
 
 
+def _mark_seen(scene: Scene, world: World, changed: _Changed, boxes: list, corners: np.ndarray,
+               texels: Texels, reason: np.ndarray, why: str, settings) -> int:
+    """Mark with ``why`` (in ``reason`` (N,), in place) the texels not yet dirty whose
+    obscurance rays — their own (within d_max of ``boxes``, above their plane) and those from
+    their other side (leaves' back faces, translucent insides: ``inner.other_side_rays``) —
+    meet the ``changed`` geometry (``corners`` (t, 3, 3)); return the rays cast."""
+    from .inner import other_side_rays
+
+    test = np.flatnonzero(_near(texels, boxes, settings.d_max) & (reason < 0))
+    test = test[_above(texels, test, corners)]
+    meets, tested = _rays_meet(changed, texels, test, settings)
+    reason[test[meets]] = REASONS.index(why)
+    rest = np.flatnonzero(reason < 0)
+    for part in _slices(len(rest), max(1, _TEST_RAYS // settings.rays)):
+        which, origins, directions, lengths = other_side_rays(scene, world, texels, rest[part],
+                                                              settings, changed.center)
+        if not len(which):
+            continue
+        hit = changed.cast_local(origins, directions, lengths.copy())["primID"] >= 0
+        reason[rest[part][which[hit.reshape(len(which), -1).any(axis=1)]]] = REASONS.index(why)
+        tested += len(origins)
+    return tested
+
+
+def _chain_corners(scene: Scene, world: World) -> np.ndarray:
+    """(t, 3, 3) world corners of the triangles whose material reflects or refracts rays on
+    (a mirror or glass branch, ``materials.SPECULAR``/``TRANSPARENT``)."""
+    weights = material_table(scene).weights
+    chained = (weights[:, SPECULAR] > 0) | (weights[:, TRANSPARENT] > 0)
+    tris = np.flatnonzero(chained[world.tri_material]) if len(weights) else np.zeros(0, np.int64)
+    a, b, c = world.corners(tris)
+    return np.stack([a, b, c], axis=1)
+
+
 class _Recorder:
     """A tracer for ``direct.py``'s estimators that casts against the changed geometry only and
     remembers the origins of the rays that met it (every ray of a texel starts at the same
@@ -578,11 +617,9 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
             texels.position[redo] = checked.position
             validity = merge(old_validity, fresh, redo)
             reason[redo[reason[redo] < 0]] = REASONS.index("validity")
-            test = np.flatnonzero(near & (reason < 0))
-            test = test[_above(texels, test, corners)]
-            meets, n = _rays_meet(small, texels, test, resolved)
+            n = _mark_seen(scene, world, small, boxes, corners, texels, reason, "obscurance",
+                           resolved)
             tested += n
-            reason[test[meets]] = REASONS.index("obscurance")
             rest = np.flatnonzero(reason < 0)
             shadow, n = _shadow_dirty(scene, world, small, texels, rest, sources, resolved)
             tested += n
@@ -591,12 +628,16 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
             tris = np.flatnonzero(np.isin(world.tri_material, change.recoloured))
             a, b, c = world.corners(tris)
             corners = np.stack([a, b, c], axis=1)
-            small = _Changed([corners], world.center)
             box = [(corners.reshape(-1, 3).min(0), corners.reshape(-1, 3).max(0))] if len(tris) else []
-            test = np.flatnonzero(_near(texels, box, resolved.d_max) & (reason < 0))
-            meets, n = _rays_meet(small, texels, test, resolved)
-            tested += n
-            reason[test[meets]] = REASONS.index("colour")
+            tested += _mark_seen(scene, world, _Changed([corners], world.center), box, corners,
+                                 texels, reason, "colour", resolved)
+        chains = _chain_corners(scene, world)
+        if (len(moved) or change.recoloured) and len(chains):
+            # A ray that meets a mirror or glass goes on where the searches above do not follow:
+            # every texel whose rays meet one is recomputed.
+            box = [(chains.reshape(-1, 3).min(0), chains.reshape(-1, 3).max(0))]
+            tested += _mark_seen(scene, world, _Changed([chains], world.center), box, chains,
+                                 texels, reason, "chain", resolved)
     rows = np.flatnonzero(reason >= 0)
     with _timed(times, "trace"):
         error_scale = (effective_r_ave(ambient, resolved.rho), float(ambient.intensity @ LUMINANCE))

@@ -319,3 +319,34 @@ def test_state_leaves_out_arrays_of_zeros_and_reads_them_back(base):
     sky = stored.groups["direct"].sky
     assert sky.shape == tuple(zeros["direct/sky"]["shape"]) and sky.dtype == np.float64
     assert not sky.any() and len(sky) == len(stored.groups["texels"].key)
+
+
+def _with_crate(builder, at):
+    """``builder`` with a 0.3 m grey crate standing at ``at`` (x, z) on its floor."""
+    from assets.gltf_builder import box
+
+    grey = builder.material("crate", (0.5, 0.4, 0.3))
+    builder.node("crate", builder.shape_mesh("crate", box((0.3, 0.3, 0.3)), material=grey),
+                 translation=(at[0], 0.15, at[1]))
+    return builder
+
+
+@pytest.mark.parametrize("scene", ["mirror", "leaf"])
+def test_moves_seen_through_mirrors_and_leaves_rebake_like_a_full_bake(tmp_path, scene):
+    """A crate moved where a floor texel sees it only in a mirror (its rays reflected), or under a
+    leaf (the leaf's back-face rays): the rebake still gives the full bake's bytes."""
+    from assets.material_scenes import leaf, mirror_wall
+
+    make = {"mirror": lambda: mirror_wall(size=4.0, height=2.0),
+            "leaf": lambda: leaf(height=1.2, translucency=0.5)}[scene]
+    start, end = {"mirror": ((-1.5, -1.5), (1.6, 1.2)), "leaf": ((-1.6, 1.6), (0.2, 0.1))}[scene]
+    settings = baker.Settings(rays=16, page_size=128, threads=1, texel_density=10.0, d_max=1.5)
+    _with_crate(make(), start).save(tmp_path / "before.glb")
+    _with_crate(make(), end).save(tmp_path / "after.glb")
+    baker.bake(tmp_path / "before.glb", tmp_path / "incremental.glb", settings)
+    result = baker.bake(tmp_path / "after.glb", tmp_path / "incremental.glb", settings,
+                        incremental=True)
+    baker.bake(tmp_path / "after.glb", tmp_path / "full.glb", settings)
+    assert result.rebake["incremental"], result.rebake.get("full_bake_reason")
+    assert (tmp_path / "incremental.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()
+    assert result.rebake["dirty_fraction"] < 1
