@@ -9,9 +9,14 @@ lights, albedos and direct-light estimators (direct.py): the indirect irradiance
 with Le the emitted radiance, estimated with cosine-distributed directions (pdf cosθ/π) as the
 mean over paths of Σ_b T_b·(R(Q_b)·D'(Q_b) + π·Le(Q_{b+1})·[b ≥ 1]), where Q_1, Q_2, … are the
 path's vertices and T_b the product of the albedos met before Q_b. D' is the direct light of
-punctual lights and sky by next-event estimation (one shadow ray per source); emitters are met
-by the paths themselves (their light from the first vertex on is in D(P) already, hence b ≥ 1),
-which keeps every term bounded where an area light's next-event estimate near its edges is not.
+punctual lights and sky by next-event estimation (one shadow ray per source). Emissive
+triangles are reached both ways, combined by multiple importance sampling (Veach's power
+heuristic): at each vertex one next-event sample picks an emitter point as direct.py does
+(in proportion to power, pdf p_l in solid angle), and the path's next direction (pdf
+cosθ/π = p_b) may meet an emitter too (counted from b ≥ 1: the light of emitters seen from P
+is in D(P) already); each counts with weight p²/(p_l² + p_b²) of its own pdf. A small lamp,
+which cosine paths seldom meet, is then found by every vertex, and the next-event estimate's
+peaks near an emitter's edges (p_l ≫ p_b there) are weighted down to the paths' bounded one.
 Paths end by Russian roulette after two bounces (unbiased) or at ``max_bounces``. The lightmap is then L(P) = D(P) + E_ind(P), what
 ``--method gi`` bakes and what ``baker study`` compares obscurances with.
 
@@ -26,7 +31,7 @@ from typing import Callable
 
 import numpy as np
 
-from .direct import Receivers, Sources, direct_at
+from .direct import _SHORT, Emitters, Receivers, Sources, _emitter_samples, direct_at
 from .geometry import World
 from .parallel import run_chunks
 from .rasterise import Texels
@@ -39,6 +44,7 @@ from .trace import Tracer, ray_lift
 FIRST_DIMENSION = 40  # the texel's Sobol points for the first bounce
 BOUNCE_DIMENSION = 41  # per-path directions of later bounces
 ROULETTE_DIMENSION = 42
+EMITTER_DIMENSION = 43  # the next-event sample of an emitter point at each vertex
 _FAR = 1e30  # "no length limit" for Embree's float32 tfar
 
 
@@ -88,7 +94,8 @@ def _chunk(scene: Scene, world: World, tracer: Tracer, sources: Sources, texels:
     throughput = np.ones((k * paths, 3))
     total = np.zeros((k * paths, 3))
     others = replace(sources, emitters=None)  # punctual lights and sky: next-event estimation
-    lit, emitters = others.any(), sources.emitters is not None
+    lit, emitters = others.any(), sources.emitters
+    emitter_of = _emitter_index(world, emitters)
     two_sided = np.array([m.double_sided for m in scene.materials], bool)
     alive = np.arange(k * paths)
     rays = 0
@@ -99,12 +106,13 @@ def _chunk(scene: Scene, world: World, tracer: Tracer, sources: Sources, texels:
             points = sample_2d(settings.seed, _bounce_keys(path_keys[alive], bounce), 0,
                                BOUNCE_DIMENSION)
         directions = _cosine_directions(normal, points)
+        cos_out = np.einsum("ij,ij->i", directions, normal)  # the direction's pdf × π
         origins = position + ray_lift(position, size, tracer.center)[:, None] * normal
         hits = tracer.cast(origins, directions, _FAR)
         rays += len(alive)
         hit = hits.triangle >= 0
         alive, directions, hits = alive[hit], directions[hit], _select(hits, hit)
-        size = size[hit]
+        size, cos_out = size[hit], cos_out[hit]
         if not len(alive):
             break
         tris = hits.triangle
@@ -114,11 +122,20 @@ def _chunk(scene: Scene, world: World, tracer: Tracer, sources: Sources, texels:
         back = np.einsum("ij,ij->i", facing, directions) > 0
         normal = np.where(back[:, None], -facing, facing)
         throughput = throughput[hit]
-        if bounce and emitters:  # single-sided emitters emit from their front face only
+        if bounce and emitters is not None:  # single-sided emitters emit from the front only
             front = ~back | two_sided[world.tri_material[tris]]
+            cos_in = np.abs(np.einsum("ij,ij->i", facing, directions))
+            mis = _power_heuristic(cos_out / np.pi,
+                                   _light_pdf(emitters, emitter_of[tris], hits.distance, cos_in))
             total[alive] += (throughput * np.pi * emission(scene, world, tris, bary)
-                             * front[:, None])
+                             * (front * mis)[:, None])
         reflectance = albedo(scene, world, tris, bary)
+        if emitters is not None:
+            light, cast = _emitter_light(scene, world, tracer, emitters, position, normal,
+                                         ray_lift(position, size, tracer.center),
+                                         _bounce_keys(path_keys[alive], bounce), settings.seed)
+            rays += cast
+            total[alive] += throughput * reflectance * light
         if lit:
             receivers = Receivers(position=position, normal=normal, geometric=normal,
                                   lift=ray_lift(position, size, tracer.center),
@@ -135,6 +152,63 @@ def _chunk(scene: Scene, world: World, tracer: Tracer, sources: Sources, texels:
             throughput = throughput[keep] / survive[keep, None]
             alive, position, normal, size = alive[keep], position[keep], normal[keep], size[keep]
     return total.reshape(k, paths, 3).mean(axis=1), rays
+
+
+def _emitter_index(world: World, emitters: Emitters | None) -> np.ndarray:
+    """(T,) int64: each world triangle's row in ``emitters`` (−1: not an emitter)."""
+    index = np.full(len(world.triangles), -1, np.int64)
+    if emitters is not None:
+        index[emitters.triangles] = np.arange(len(emitters.triangles))
+    return index
+
+
+def _light_pdf(emitters: Emitters, row: np.ndarray, distance: np.ndarray,
+               cos_emitter: np.ndarray) -> np.ndarray:
+    """(m,) solid-angle pdf with which the next-event sample picks a point of emitter ``row``
+    (−1: none, pdf 0) seen at ``distance`` under cosθ ``cos_emitter``: (P_e / A_e)·d²/cosθ."""
+    pdf = np.zeros(len(row))
+    ok = (row >= 0) & (cos_emitter > 0)
+    e = row[ok]
+    pdf[ok] = emitters.probability[e] / emitters.areas[e] * distance[ok] ** 2 / cos_emitter[ok]
+    return pdf
+
+
+def _power_heuristic(mine: np.ndarray, other: np.ndarray) -> np.ndarray:
+    """Veach's power-heuristic weight of a sample drawn with pdf ``mine`` against ``other``."""
+    total = mine * mine + other * other
+    return np.where(total > 0, mine * mine / np.where(total > 0, total, 1.0), 0.0)
+
+
+def _emitter_light(scene: Scene, world: World, tracer: Tracer, emitters: Emitters,
+                   position: np.ndarray, normal: np.ndarray, lift: np.ndarray, keys: np.ndarray,
+                   seed: int) -> tuple[np.ndarray, int]:
+    """One next-event sample of the emitters' irradiance (m, 3) at each vertex (position,
+    normal (m, 3), ``lift`` (m,) off the surface), sampled as ``direct.emissive_irradiance``
+    does and weighted against the cosine-sampled direction that may meet the same point; and
+    the shadow rays cast."""
+    m = len(position)
+    origins = position + lift[:, None] * normal
+    chosen, bary, directions, distance, weight = _emitter_samples(
+        sample_2d(seed, keys, 0, EMITTER_DIMENSION), 1, emitters.cdf, emitters.probability,
+        emitters.corners, emitters.normals, emitters.two_sided, emitters.areas, origins, lift,
+        normal, normal, np.zeros(m, bool))
+    light = np.zeros((m, 3))
+    live = np.flatnonzero(weight > 0)
+    if not len(live):
+        return light, 0
+    visible = ~tracer.occluded(origins[live], directions[live], distance[live] * (1.0 - _SHORT))
+    live = live[visible]
+    picked = chosen[live]
+    radiance = emitters.radiance[picked]
+    textured = emitters.textured[picked]
+    if textured.any():
+        radiance[textured] = emission(scene, world, emitters.triangles[picked[textured]],
+                                      bary[live][textured])
+    cos_p = np.einsum("ij,ij->i", directions[live], normal[live])
+    cos_q = np.abs(np.einsum("ij,ij->i", directions[live], emitters.normals[picked]))
+    mis = _power_heuristic(_light_pdf(emitters, picked, distance[live], cos_q), cos_p / np.pi)
+    light[live] = radiance * (weight[live] * mis)[:, None]
+    return light, int(len(visible))
 
 
 def _select(hits, mask):

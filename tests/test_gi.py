@@ -33,6 +33,26 @@ def test_furnace_a_glowing_closed_room_reaches_pi_over_one_minus_albedo(tmp_path
         assert indirect.rays > len(done.texels) * 64
 
 
+def test_a_small_lamp_is_found_from_every_path_vertex(tmp_path):
+    """The Cornell room's lamp is a small emissive quad that cosine-sampled paths seldom meet;
+    next-event estimation (weighted against the paths by MIS) finds it from every vertex: at
+    64 paths two seeds' indirect light differ by about 15 % of its mean (paths alone: 160 %),
+    and their means agree."""
+    from dataclasses import replace
+
+    from assets.make_scenes import cornell_box
+    from baker.surface import LUMINANCE
+
+    done = computed(cornell_box(), tmp_path, page_size=48, rays=4)
+    tracer = Tracer(done.world)
+    a, b = (indirect_light(done.scene, done.world, tracer, done.sources, done.texels,
+                           replace(done.settings, seed=seed), paths=64).irradiance @ LUMINANCE
+            for seed in (1, 2))
+    noise = np.sqrt(np.mean((a - b) ** 2) / 2)
+    assert noise < 0.3 * a.mean(), noise / a.mean()
+    assert abs(a.mean() - b.mean()) < 0.03 * a.mean()
+
+
 def _lamp_room() -> GltfBuilder:
     """A closed 3 m white room with red and green side walls, a block on the floor and a point
     light of 20 cd under the ceiling: light reaches the walls mostly after a bounce."""
