@@ -31,6 +31,7 @@ import numpy as np
 
 from .atlas import Atlas
 from .geometry import World
+from .sampling import jit
 
 DATA_WEIGHT = 0.02  # λ of a covered texel: how strongly it keeps its baked value
 PADDING_WEIGHT = 0.002  # λ of a padding texel the seam lookups read
@@ -156,6 +157,25 @@ def seam_steps(values: np.ndarray, seams: Seams) -> np.ndarray:
     return np.abs(a - b).max(axis=1)
 
 
+@jit
+def _normal_product(weight: np.ndarray, local: np.ndarray, lam: np.ndarray, x: np.ndarray,
+                    out: np.ndarray) -> np.ndarray:
+    """``out`` (n, C) = (MᵀM + diag(lam)) x: M the seam rows, row s having ``weight[s, k]`` at
+    column ``local[s, k]`` (S, K); one compiled pass over the rows, scattered in row order."""
+    out[:] = 0.0
+    for s in range(weight.shape[0]):
+        for c in range(x.shape[1]):
+            row = 0.0
+            for k in range(weight.shape[1]):
+                row += weight[s, k] * x[local[s, k], c]
+            for k in range(weight.shape[1]):
+                out[local[s, k], c] += weight[s, k] * row
+    for i in range(x.shape[0]):
+        for c in range(x.shape[1]):
+            out[i, c] += lam[i] * x[i, c]
+    return out
+
+
 def stitch(values: np.ndarray, covered: np.ndarray, seams: Seams) -> np.ndarray:
     """``values`` (P, H, W, C) with the texels the seam lookups read re-solved so that both
     sides of every seam agree (least squares, see the module's docstring); others unchanged.
@@ -169,18 +189,13 @@ def stitch(values: np.ndarray, covered: np.ndarray, seams: Seams) -> np.ndarray:
     weight = np.concatenate([wa, -wb], axis=1)  # row · x = lookup A − lookup B
     used, local = np.unique(index, return_inverse=True)
     local = local.reshape(index.shape)
-    n = len(used)
     flat = values.reshape(-1, values.shape[-1])
     x0 = flat[used]
     lam = np.where(covered.reshape(-1)[used], DATA_WEIGHT, PADDING_WEIGHT)[:, None]
 
     def normal_matrix(x: np.ndarray) -> np.ndarray:
         """(MᵀM + Λ) x for x (n, C): M the seam rows (S, n) with 8 entries each."""
-        row = np.einsum("sk,skc->sc", weight, x[local])
-        back = np.stack([np.bincount(local.reshape(-1), (weight[..., None] * row[:, None])
-                                     [..., c].reshape(-1), n) for c in range(x.shape[1])],
-                        axis=1)
-        return back + lam * x
+        return _normal_product(weight, local, lam[:, 0], x, np.empty_like(x))
 
     # Conjugate gradients on every channel at once (the channels share the matrix).
     x = x0.copy()
