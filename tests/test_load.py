@@ -624,3 +624,20 @@ def test_lights_punctual_lamp_reads_external_images():
     assert scene.images[body.base_color_texture.image].pixels.shape == (2048, 2048, 4)
     assert "KHR_materials_transmission" in scene.materials[2].extensions
     assert len(scene.document.extensions["KHR_lights_punctual"]["lights"]) == 5
+
+
+def test_plain_nodes_parse_as_pygltflib_parses_them():
+    """Nodes made directly (the fast path for scenes of many nodes) equal pygltflib's own; a node
+    with a field of another type sends the document through pygltflib whole."""
+    from baker.load import _document_from_json
+
+    nodes = [{"name": "a", "mesh": 0, "translation": [1, 2, 3], "rotation": [0, 0, 0, 1]},
+             {"children": [0], "scale": [2, 2.5, 1], "extras": {"k": 1}},
+             {"matrix": [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1], "camera": 0,
+              "extensions": {"KHR_lights_punctual": {"light": 0}}}]
+    for extra in ({}, {"mesh": 1.0}, {"weights": [0.5]}):
+        raw = {"asset": {"version": "2.0"}, "nodes": [*nodes, dict(nodes[0], **extra)]}
+        text = json.dumps(raw)
+        fast = _document_from_json(text, raw)
+        assert fast.to_json() == pygltflib.GLTF2.gltf_from_json(text).to_json()
+        assert fast.nodes[0].translation == [1.0, 2.0, 3.0]
