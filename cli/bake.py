@@ -186,9 +186,13 @@ def print_summary(result: baker.BakeResult) -> None:
         print(f"  note: {note}")
     for warning, count in result.report["warnings"].items():
         print(f"  warning: {count} × {warning}")
-    print(f"  {result.rays:,} obscurance rays, {result.report['rays_per_second'] / 1e6:.2f} M rays/s, "
-          f"{result.report.get('shadow_rays', 0):,} shadow/sky rays; "
-          f"estimated RMSE {result.rmse_estimate:.3g}; {result.seconds:.1f} s "
+    rebake = result.rebake or {}
+    rays = (f"{rebake['rays']:,} rays cast (the lightmaps rest on {result.rays:,} obscurance "
+            f"and {result.report.get('shadow_rays', 0):,} shadow/sky rays)"
+            if rebake.get("incremental") else
+            f"{result.rays:,} obscurance rays, {result.report['rays_per_second'] / 1e6:.2f} M rays/s, "
+            f"{result.report.get('shadow_rays', 0):,} shadow/sky rays")
+    print(f"  {rays}; estimated RMSE {result.rmse_estimate:.3g}; {result.seconds:.1f} s "
           f"({', '.join(f'{k} {v:.1f}' for k, v in times.items())})")
 
 

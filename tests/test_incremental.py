@@ -259,6 +259,8 @@ def test_baker_relight_recomposes_without_rays_and_refuses_other_edits(tmp_path,
                  str(tmp_path / "r.json"), "--quiet"]) == 0
     import json
     assert json.loads((tmp_path / "r.json").read_text())["rebake"]["rays"] == 0
+    assert main(["relight", str(brighter), "-o", str(out)]) == 0
+    assert "\n  0 rays cast (the lightmaps rest on " in capsys.readouterr().out
     assert main(["bake", str(brighter), "-o", str(tmp_path / "full.glb"), "--rays", "4",
                  "--page-size", "128", "--quiet", "--no-state"]) == 0
     assert out.read_bytes() == (tmp_path / "full.glb").read_bytes()
