@@ -105,7 +105,7 @@ def fingerprints(scene: Scene, world: World, settings: Resolved, asked=None) -> 
                      "recompose": digest(*[values[k] for k in RECOMPOSE_SETTINGS]),
                      "values": {k: values[k] for k in sorted(values) if k not in _NO_EFFECT}},
         "unwrap": unwrap_input,
-        "center": world.center.tolist(),
+        "center": world.center.tolist() + [world.scale],
         "triangles": int(len(world.triangles)),
         "instances": [{"key": instance_key(scene, i), "world": digest(inst.world),
                        "node": int(inst.node), "name": _node_name(scene, inst.node),
@@ -183,8 +183,8 @@ def diff(old: dict, new: dict) -> Diff:
     if old["triangles"] != new["triangles"]:
         return full("the number of triangles changed")
     if old["center"] != new["center"]:
-        return full("the scene's bounds changed, which moves the tracer's float32 frame: every "
-                    "ray's rounding changes")
+        return full("the scene's bounds changed beyond the tracer's float32 frame grid (1/16 of "
+                    "the scene's size): every ray's rounding changes")
     om, nm = old["materials"], new["materials"]
     if len(om) != len(nm):
         return full("materials were added or removed")

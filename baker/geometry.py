@@ -2,7 +2,10 @@
 
 Built once per bake from the loaded ``Scene``; the unwrapper, the rasteriser, the tracer and the
 material lookups all index into it. Positions are float64 world coordinates; ``center`` is the
-middle of their bounds, which the tracer subtracts before going to float32.
+middle of their bounds, which the tracer subtracts before going to float32, snapped to a grid of
+1/16 of ``scale`` (the bounds' diagonal rounded up to a power of two): moving a node a little, even
+at the edge of the scene, leaves the float32 frame — and with it every other ray — bit-identical,
+so an incremental rebake can follow (DESIGN.md §5).
 
 Winding: glTF front faces are counter-clockwise, but a node whose world matrix has a negative
 determinant mirrors its mesh, and the spec says its front faces are then clockwise. Triangles of
@@ -53,6 +56,12 @@ class World:
         v = self.triangles[tris]
         return self.positions[v[:, 0]], self.positions[v[:, 1]], self.positions[v[:, 2]]
 
+    @property
+    def scale(self) -> float:
+        """The bounds' diagonal rounded up to a power of two (``bounds_scale``), world units: the
+        length that epsilons scale with, unchanged by small moves of a node."""
+        return bounds_scale(self.positions)
+
     def geometric_normals(self, tris: np.ndarray | None = None) -> np.ndarray:
         """Unit front-face normals (k, 3) of triangles ``tris`` (all when None); 0 for no area."""
         tris = np.arange(len(self.triangles)) if tris is None else tris
@@ -92,6 +101,18 @@ def _flat_normals(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:
 def _unit(v: np.ndarray) -> np.ndarray:
     length = np.linalg.norm(v, axis=1, keepdims=True)
     return np.divide(v, length, out=np.zeros_like(v), where=length > 0)
+
+
+def bounds_scale(positions: np.ndarray) -> float:
+    """The diagonal of the bounds of ``positions`` (n, 3) rounded up to a power of two (1 for
+    none or a single point): a scene-size length that moving a node changes only when the
+    scene's size crosses a power of two."""
+    if not len(positions):
+        return 1.0
+    diagonal = float(np.linalg.norm(positions.max(0) - positions.min(0)))
+    if not (np.isfinite(diagonal) and diagonal > 0):
+        return 1.0
+    return float(2.0 ** np.ceil(np.log2(diagonal)))
 
 
 def build_world(scene: Scene) -> World:
@@ -138,7 +159,10 @@ def build_world(scene: Scene) -> World:
         return np.concatenate(parts[name]) if parts[name] else np.zeros(shape, dtype)
 
     positions = cat("positions", (0, 3), np.float64)
-    center = (positions.min(0) + positions.max(0)) / 2 if len(positions) else np.zeros(3)
+    center = np.zeros(3)
+    if len(positions):
+        grid = bounds_scale(positions) / 16
+        center = np.round((positions.min(0) + positions.max(0)) / 2 / grid) * grid
     world = World(
         positions=positions,
         normals=cat("normals", (0, 3), np.float64),

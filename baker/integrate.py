@@ -298,10 +298,7 @@ def _surfaces(scene: Scene, world: World) -> _Surfaces:
     special = materials.special[world.tri_material] if len(world.triangles) else np.zeros(0, bool)
     kind = np.where(special, _SPECIAL, np.where(varying, _VARYING, _CONSTANT)).astype(np.uint8)
     normals = world.geometric_normals() if special.any() else np.zeros((0, 3))
-    extent = (float(np.linalg.norm(world.positions.max(0) - world.positions.min(0)))
-              if len(world.positions) else 1.0)
-    return _Surfaces(scene, world, table, varying, kind, materials, normals,
-                     max(extent, 1e-30) * 1e-6)
+    return _Surfaces(scene, world, table, varying, kind, materials, normals, world.scale * 1e-6)
 
 
 # Russian roulette starts at this bounce of a chain (tests may raise it to switch it off).

@@ -293,7 +293,5 @@ def alpha_test(scene, world) -> AlphaTest | None:
     mode = np.where(tested[world.tri_material] | vertex_alpha, mode, 0).astype(np.uint8)
     if not mode.any():
         return None
-    extent = float(np.linalg.norm(world.positions.max(0) - world.positions.min(0)))
     return AlphaTest(scene=scene, world=world, mode=mode, normals=world.geometric_normals(),
-                     cutoff=np.array([c.alpha_cutoff for c in classes]),
-                     step=max(extent, 1e-30) * 1e-6)
+                     cutoff=np.array([c.alpha_cutoff for c in classes]), step=world.scale * 1e-6)

@@ -36,7 +36,8 @@ class Settings:
     method: "obscurance" (L = D + I_A·W, the product) or "gi": a full diffuse global
         illumination reference, L = D + path-traced indirect light with ``rays`` paths per
         texel (gi.py; slower, for judging the obscurance approximation).
-    d_max: the obscurance distance; None takes ``d_max_fraction`` of the baked bounds' diagonal.
+    d_max: the obscurance distance; None takes ``d_max_fraction`` of the baked bounds' diagonal
+    (rounded to a quarter octave, ``quarter_octave``).
     rho: the obscurance function ρ(d): "sqrt" (the paper's sqrt(d/d_max)), "step" (classic
         ambient occlusion: a hit closer than d_max counts 0, R(Q) = 1) or "linear" (d/d_max).
     ambient: the ambient intensity I_A; None computes it from the scene's emission (eq. 3).
@@ -231,6 +232,12 @@ def default_texel_density(surface_area: float, page_size: int, fill: float = 0.5
     return math.sqrt(fill * page_size * page_size / surface_area)
 
 
+def quarter_octave(length: float) -> float:
+    """``length`` rounded to the nearest 2^(k/4): derived settings (d_max) that a small move of
+    a node leaves bit-identical, so that an incremental rebake can follow (steps of 19 %)."""
+    return 2.0 ** (round(4.0 * math.log2(length)) / 4.0)
+
+
 def resolve(settings: Settings, surface_area: float, diagonal: float) -> Resolved:
     """Fill in the defaults that depend on the scene.
 
@@ -249,5 +256,5 @@ def resolve(settings: Settings, surface_area: float, diagonal: float) -> Resolve
             f"for {surface_area:.4g} square units of surface; one bake holds at most "
             f"{MAX_TEXELS:,} texels", fix=f"use --texel-density {_round_down(most):g} or less")
     if values["d_max"] is None:
-        values["d_max"] = settings.d_max_fraction * diagonal if diagonal > 0 else 1.0
+        values["d_max"] = settings.d_max_fraction * quarter_octave(diagonal) if diagonal > 0 else 1.0
     return Resolved(**values)

@@ -48,7 +48,8 @@ def add_parser(commands) -> None:
                        help=f"obscurance rays per texel: more is smoother and slower (default {d.rays})")
     model.add_argument("--d-max", type=positive_float, metavar="DISTANCE",
                        help="obscurance distance in scene units: farther surfaces count as open "
-                            f"(default {d.d_max_fraction:g} × the baked surfaces' bounds diagonal)")
+                            f"(default {d.d_max_fraction:g} × the baked surfaces' bounds diagonal, rounded to "
+                            "a quarter octave)")
     model.add_argument("--rho", choices=baker.settings.RHO_FUNCTIONS, default=d.rho,
                        help="obscurance function ρ(d): sqrt (the paper's), linear, or step "
                             "(classic ambient occlusion) (default sqrt)")

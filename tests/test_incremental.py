@@ -352,3 +352,20 @@ def test_moves_seen_through_mirrors_and_leaves_rebake_like_a_full_bake(tmp_path,
     assert result.rebake["incremental"], result.rebake.get("full_bake_reason")
     assert (tmp_path / "incremental.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()
     assert result.rebake["dirty_fraction"] < 1
+
+
+def test_a_small_move_at_the_edge_of_the_scene_still_rebakes(tmp_path):
+    """Moving a crate that sticks out past the floor a centimetre further grows the scene's
+    bounds: the tracer's frame (snapped to 1/16 of the scene's size) and the derived d_max (a
+    quarter octave) stay, so the rebake is incremental and gives the full bake's bytes."""
+    from assets.material_scenes import leaf
+
+    settings = baker.Settings(rays=16, page_size=128, threads=1, texel_density=10.0)
+    _with_crate(leaf(height=0.5, facing="up-opaque"), (2.1, 0.0)).save(tmp_path / "before.glb")
+    _with_crate(leaf(height=0.5, facing="up-opaque"), (2.11, 0.0)).save(tmp_path / "after.glb")
+    baker.bake(tmp_path / "before.glb", tmp_path / "incremental.glb", settings)
+    result = baker.bake(tmp_path / "after.glb", tmp_path / "incremental.glb", settings,
+                        incremental=True)
+    baker.bake(tmp_path / "after.glb", tmp_path / "full.glb", settings)
+    assert result.rebake["incremental"], result.rebake.get("full_bake_reason")
+    assert (tmp_path / "incremental.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()
