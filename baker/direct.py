@@ -69,7 +69,7 @@ POWER_POINTS = 16384
 _POWER_KEY_BASE = np.uint64(1 << 62)
 
 # Shadow rays stop this fraction short of the point they aim at (a light sample on a surface).
-_SHORT = 1e-3
+SHADOW_SHORTEN = 1e-3
 
 # Barycentric points at which each triangle's emission is averaged (as ambient.py does).
 _POINTS = np.array([[1 / 3, 1 / 3, 1 / 3], [2 / 3, 1 / 6, 1 / 6],
@@ -335,11 +335,11 @@ def punctual_irradiance(light: Light, spread: float, n: int, receivers: Receiver
             scale = factor * 2.0 * (1.0 - cos_max) / (spread * spread)
             b = np.einsum("knc,knc->kn", directions, offset)
             to_sphere = b - np.sqrt(np.maximum(b * b - (r * r - spread * spread), 0.0))
-            lengths = (np.maximum(to_sphere, 0.0) * (1.0 - _SHORT)).reshape(-1)
+            lengths = (np.maximum(to_sphere, 0.0) * (1.0 - SHADOW_SHORTEN)).reshape(-1)
         else:
             directions = axis
             scale = factor / (r * r)
-            lengths = (r * (1.0 - _SHORT)).reshape(-1)
+            lengths = (r * (1.0 - SHADOW_SHORTEN)).reshape(-1)
     directions = np.broadcast_to(directions, (k, n, 3))
     cos = _facing(receivers, directions)
     live = (cos > 0) & (scale > 0)
@@ -354,7 +354,7 @@ def punctual_irradiance(light: Light, spread: float, n: int, receivers: Receiver
 
 
 @jit
-def _emitter_samples(u, n, cdf, probability, corners, normals, two_sided, areas, origins, lift,
+def emitter_samples(u, n, cdf, probability, corners, normals, two_sided, areas, origins, lift,
                      shading, geometric, raised):
     """The geometry of the k·n emissive samples (``emissive_irradiance``), one compiled pass.
 
@@ -411,14 +411,14 @@ def emissive_irradiance(scene: Scene, world: World, emitters: Emitters, n: int,
     u = sample_2d(seed, receivers.key[:, None], np.arange(n)[None, :], EMISSIVE_DIMENSION).reshape(-1, 2)
     origins = receivers.origins(n)
     raised = np.zeros(k, bool) if receivers.raised is None else receivers.raised
-    chosen, bary, directions, distance, weight = _emitter_samples(
+    chosen, bary, directions, distance, weight = emitter_samples(
         u, n, emitters.cdf, emitters.probability, emitters.corners, emitters.normals,
         emitters.two_sided, emitters.areas, origins, receivers.lift, receivers.normal,
         receivers.geometric, raised)
     live = weight > 0
     value = np.zeros((k * n, 3))
     if live.any():
-        visible = ~tracer.occluded(origins[live], directions[live], distance[live] * (1.0 - _SHORT))
+        visible = ~tracer.occluded(origins[live], directions[live], distance[live] * (1.0 - SHADOW_SHORTEN))
         picked = chosen[live]
         radiance = emitters.radiance[picked]
         textured = emitters.textured[picked]
@@ -507,7 +507,7 @@ def no_direct(count: int) -> Direct:
                   np.zeros(count), zeros.copy(), np.zeros(count), 0)
 
 
-def _texel_receivers(texels: Texels, rows: slice, center: np.ndarray,
+def texel_receivers(texels: Texels, rows: slice, center: np.ndarray,
                      tracer: Tracer | None = None, supersample: int = 1,
                      seed: int = 0) -> Receivers:
     """The texels ``rows`` as Receivers: their (moved, raised) sample points and, when
@@ -569,7 +569,7 @@ def direct_light(scene: Scene, world: World, tracer: Tracer, texels: Texels, sou
     chunks = [slice(start, min(start + step, count)) for start in range(0, count, step)]
 
     def work(rows: slice) -> None:
-        receivers = _texel_receivers(texels, rows, tracer.center, tracer, settings.supersample,
+        receivers = texel_receivers(texels, rows, tracer.center, tracer, settings.supersample,
                                      settings.seed)
         part = direct_at(scene, world, tracer, sources, receivers, settings.seed)
         punctual[rows], punctual_var[rows] = part.punctual, part.punctual_var

@@ -31,7 +31,8 @@ from typing import Callable
 
 import numpy as np
 
-from .direct import _SHORT, Emitters, Receivers, Sources, _emitter_samples, direct_at
+from .direct import (SHADOW_SHORTEN, Emitters, Receivers, Sources, direct_at,
+                     emitter_samples)
 from .geometry import World
 from .parallel import run_chunks
 from .rasterise import Texels
@@ -188,7 +189,7 @@ def _emitter_light(scene: Scene, world: World, tracer: Tracer, emitters: Emitter
     the shadow rays cast."""
     m = len(position)
     origins = position + lift[:, None] * normal
-    chosen, bary, directions, distance, weight = _emitter_samples(
+    chosen, bary, directions, distance, weight = emitter_samples(
         sample_2d(seed, keys, 0, EMITTER_DIMENSION), 1, emitters.cdf, emitters.probability,
         emitters.corners, emitters.normals, emitters.two_sided, emitters.areas, origins, lift,
         normal, normal, np.zeros(m, bool))
@@ -196,7 +197,7 @@ def _emitter_light(scene: Scene, world: World, tracer: Tracer, emitters: Emitter
     live = np.flatnonzero(weight > 0)
     if not len(live):
         return light, 0
-    visible = ~tracer.occluded(origins[live], directions[live], distance[live] * (1.0 - _SHORT))
+    visible = ~tracer.occluded(origins[live], directions[live], distance[live] * (1.0 - SHADOW_SHORTEN))
     live = live[visible]
     picked = chosen[live]
     radiance = emitters.radiance[picked]

@@ -41,8 +41,7 @@ from . import state as state_file
 from .compose import effective_r_ave
 from .diff import Diff, diff, fingerprints
 from . import validity as validity_module
-from .direct import Direct, _texel_receivers, direct_light, \
-    light_dimension, punctual_irradiance
+from .direct import Direct, direct_light, light_dimension, punctual_irradiance, texel_receivers
 from .geometry import World, build_world
 from .integrate import Terms, cosine_directions, hemisphere_rays, integrate
 from .materials import SPECULAR, TRANSPARENT, material_table
@@ -524,7 +523,7 @@ def _relight(texels: Texels, tracer: Tracer, sources, settings, light: int,
     step = max(1, settings.chunk_texels)
     for start in range(0, len(rows), step):
         part = rows[start:start + step]
-        receivers = _texel_receivers(take(texels, part), slice(0, len(part)), tracer.center)
+        receivers = texel_receivers(take(texels, part), slice(0, len(part)), tracer.center)
         value[start:start + len(part)], variance[start:start + len(part)] = punctual_irradiance(
             sources.lights[light], float(sources.spread[light]), int(sources.samples[light]),
             receivers, tracer, settings.seed, light_dimension(light))
