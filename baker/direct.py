@@ -418,17 +418,25 @@ def emissive_irradiance(scene: Scene, world: World, emitters: Emitters, n: int,
     live = weight > 0
     value = np.zeros((k * n, 3))
     if live.any():
-        visible = ~tracer.occluded(origins[live], directions[live], distance[live] * (1.0 - SHADOW_SHORTEN))
-        picked = chosen[live]
-        radiance = emitters.radiance[picked]
-        textured = emitters.textured[picked]
-        if textured.any():
-            radiance[textured] = emission(scene, world, emitters.triangles[picked[textured]],
-                                          bary[live][textured])
+        visible = ~tracer.occluded(origins[live], directions[live],
+                                   distance[live] * (1.0 - SHADOW_SHORTEN))
+        radiance = emitter_radiance(scene, world, emitters, chosen[live], bary[live])
         value[live] = radiance * (weight[live] * visible)[:, None]
     value = value.reshape(k, n, 3)
     _, variance = _mean_and_variance(value @ LUMINANCE)
     return value.mean(axis=1), variance
+
+
+def emitter_radiance(scene: Scene, world: World, emitters: Emitters, picked: np.ndarray,
+                     bary: np.ndarray) -> np.ndarray:
+    """Emitted radiance (k, 3) at points ``bary`` (k, 3) of the emitter triangles ``picked``
+    (k,): each triangle's constant radiance, or its emissive texture's where it has one."""
+    radiance = emitters.radiance[picked]
+    textured = emitters.textured[picked]
+    if textured.any():
+        radiance[textured] = emission(scene, world, emitters.triangles[picked[textured]],
+                                      bary[textured])
+    return radiance
 
 
 def sky_radiance(sky: np.ndarray, directions: np.ndarray) -> np.ndarray:

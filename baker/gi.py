@@ -32,7 +32,7 @@ from typing import Callable
 import numpy as np
 
 from .direct import (SHADOW_SHORTEN, Emitters, Receivers, Sources, direct_at,
-                     emitter_samples)
+                     emitter_radiance, emitter_samples)
 from .geometry import World
 from .parallel import run_chunks
 from .rasterise import Texels
@@ -197,14 +197,11 @@ def _emitter_light(scene: Scene, world: World, tracer: Tracer, emitters: Emitter
     live = np.flatnonzero(weight > 0)
     if not len(live):
         return light, 0
-    visible = ~tracer.occluded(origins[live], directions[live], distance[live] * (1.0 - SHADOW_SHORTEN))
+    visible = ~tracer.occluded(origins[live], directions[live],
+                               distance[live] * (1.0 - SHADOW_SHORTEN))
     live = live[visible]
     picked = chosen[live]
-    radiance = emitters.radiance[picked]
-    textured = emitters.textured[picked]
-    if textured.any():
-        radiance[textured] = emission(scene, world, emitters.triangles[picked[textured]],
-                                      bary[live][textured])
+    radiance = emitter_radiance(scene, world, emitters, picked, bary[live])
     cos_p = np.einsum("ij,ij->i", directions[live], normal[live])
     cos_q = np.abs(np.einsum("ij,ij->i", directions[live], emitters.normals[picked]))
     mis = _power_heuristic(_light_pdf(emitters, picked, distance[live], cos_q), cos_p / np.pi)
