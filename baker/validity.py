@@ -40,6 +40,7 @@ import numpy as np
 
 from .geometry import World
 from .rasterise import Texels
+from .sampling import jit
 from .scene import Scene
 from .parallel import run_chunks
 from .trace import Tracer, ray_lift
@@ -113,9 +114,21 @@ class _Faces:
 
     def back(self, triangle: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """(n,) bool: the ray met the back of a single-sided triangle (False for misses)."""
-        t = np.maximum(triangle, 0)
-        facing = np.einsum("ij,ij->i", self.normals[t], directions)
-        return (triangle >= 0) & self.single[t] & (facing > 0)
+        return _back_faces(triangle, directions, self.normals, self.single)
+
+
+@jit
+def _back_faces(triangle: np.ndarray, directions: np.ndarray, normals: np.ndarray,
+                single: np.ndarray) -> np.ndarray:
+    """(n,) bool: hit ``triangle`` (n,) (−1: none) is single-sided and faces along the ray's
+    direction (n, 3), i.e. the ray met its back."""
+    out = np.zeros(len(triangle), np.bool_)
+    for i in range(len(triangle)):
+        t = triangle[i]
+        if t >= 0 and single[t]:
+            out[i] = (normals[t, 0] * directions[i, 0] + normals[t, 1] * directions[i, 1]
+                      + normals[t, 2] * directions[i, 2]) > 0
+    return out
 
 
 def _tangent_step(tracer: Tracer, faces: _Faces, position: np.ndarray, normal: np.ndarray,
@@ -129,10 +142,9 @@ def _tangent_step(tracer: Tracer, faces: _Faces, position: np.ndarray, normal: n
     k = len(position)
     t1, t2 = _frames(normal)
     angle = 2 * np.pi * np.arange(TANGENT_RAYS) / TANGENT_RAYS
-    directions = (np.cos(angle)[None, :, None] * t1[:, None] +
-                  np.sin(angle)[None, :, None] * t2[:, None]).reshape(-1, 3)
-    lift = ray_lift(position, size, tracer.center)
-    origins = np.repeat(position + lift[:, None] * normal, TANGENT_RAYS, axis=0)
+    in_plane = np.stack([np.cos(angle), np.sin(angle), np.zeros(TANGENT_RAYS)], axis=1)
+    origins, directions = _fan(position, normal, t1, t2, ray_lift(position, size, tracer.center),
+                               in_plane)
     length = np.repeat(PROBE_RADIUS * size, TANGENT_RAYS)
     hits = tracer.cast(origins, directions, length)
     back = faces.back(hits.triangle, directions)
@@ -155,11 +167,25 @@ def hemisphere_probes(position: np.ndarray, normal: np.ndarray, size: np.ndarray
     """The fixed hemisphere probes of k points: origins and directions, each (k·HEMISPHERE_RAYS,
     3) float64 world, point-major; origins lifted off the surface by ``trace.ray_lift``."""
     t1, t2 = _frames(normal)
-    local = _hemisphere_directions(HEMISPHERE_RAYS)
-    directions = (local[None, :, :1] * t1[:, None] + local[None, :, 1:2] * t2[:, None]
-                  + local[None, :, 2:] * normal[:, None]).reshape(-1, 3)
-    lift = ray_lift(position, size, center)
-    origins = np.repeat(position + lift[:, None] * normal, HEMISPHERE_RAYS, axis=0)
+    return _fan(position, normal, t1, t2, ray_lift(position, size, center),
+                _hemisphere_directions(HEMISPHERE_RAYS))
+
+
+@jit
+def _fan(position: np.ndarray, normal: np.ndarray, t1: np.ndarray, t2: np.ndarray,
+         lift: np.ndarray, local: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Origins and directions (k·m, 3), point-major, of the m ``local`` directions (m, 3) in
+    each point's frame (t1, t2, normal) (k, 3), from the point lifted by ``lift`` (k,)."""
+    k, m = len(position), len(local)
+    origins = np.empty((k * m, 3))
+    directions = np.empty((k * m, 3))
+    for i in range(k):
+        for j in range(m):
+            r = i * m + j
+            for c in range(3):
+                origins[r, c] = position[i, c] + lift[i] * normal[i, c]
+                directions[r, c] = (local[j, 0] * t1[i, c] + local[j, 1] * t2[i, c]
+                                    + local[j, 2] * normal[i, c])
     return origins, directions
 
 
