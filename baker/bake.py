@@ -352,9 +352,17 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
                       rebake=details(report["rebake"], rebaked))
 
 
+def _umask() -> int:
+    """The process's file-creation mask (read by setting it and setting it back)."""
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
 def write_atomically(path: Path, data: bytes | Callable[[BinaryIO], None]) -> None:
     """Write ``data`` to ``path`` through a temporary file and a rename; ``data`` is the bytes,
-    or a function that writes them to the open file (to stream large files)."""
+    or a function that writes them to the open file (to stream large files). The file gets the
+    permissions a newly created file gets (0666 less the umask), not the temporary's 0600."""
     if not path.parent.exists():
         raise OutputError("the folder does not exist", file=str(path),
                           fix=f"create {path.parent} first")
@@ -365,6 +373,7 @@ def write_atomically(path: Path, data: bytes | Callable[[BinaryIO], None]) -> No
                 data(f)
             else:
                 f.write(data)
+        os.chmod(temp, 0o666 & ~_umask())
         os.replace(temp, path)
     except BaseException:
         if os.path.exists(temp):

@@ -171,3 +171,23 @@ def test_real_scene_facts_show_in_the_plan(tmp_path):
     multi = baker.bake(REAL_SCENES["MultiUVTest"], tmp_path / "m.glb",
                        baker.Settings(page_size=128, rays=4))
     assert any("TEXCOORD_2" in note for note in multi.report["notes"])
+
+
+def test_files_written_beside_the_output_get_the_usual_permissions(tmp_path):
+    """The state, its timing record, the report and the page files are written through a
+    temporary file (created 0600) and renamed: they end with 0666 less the umask, like the
+    output itself, so that others in an asset pipeline can read them."""
+    import os
+    import stat
+
+    mask = os.umask(0o022)
+    try:
+        source, out, _ = _bake(cornell_box(), tmp_path)
+        baker.bake(source, tmp_path / "second.glb", baker.Settings(**FAST),
+                   lightmaps_dir=tmp_path / "pages")
+    finally:
+        os.umask(mask)
+    written = [out, tmp_path / "out.glb.bake", tmp_path / "out.glb.bake.json",
+               tmp_path / "report.json", *sorted((tmp_path / "pages").iterdir())]
+    for path in written:
+        assert stat.S_IMODE(path.stat().st_mode) == 0o644, path
