@@ -446,20 +446,26 @@ def _mark_seen(scene: Scene, world: World, changed: _Changed, boxes: list, corne
     obscurance rays — their own (within d_max of ``boxes``, above their plane) and those from
     their other side (leaves' back faces, translucent insides: ``inner.other_side_rays``) —
     meet the ``changed`` geometry (``corners`` (t, 3, 3)); return the rays cast."""
-    from .inner import other_side_rays
+    from .inner import other_side_rays, translucent
 
     test = np.flatnonzero(_near(texels, boxes, settings.d_max) & (reason < 0))
     test = test[_above(texels, test, corners)]
     meets, tested = _rays_meet(changed, texels, test, settings)
     reason[test[meets]] = REASONS.index(why)
+    table = translucent(scene)
+    if not table.any:
+        return tested
     rest = np.flatnonzero(reason < 0)
+    material = world.tri_material[texels.triangle[rest]]
+    rest = rest[table.leaf[material] | table.inner[material]]  # texels with another side
     for part in _slices(len(rest), max(1, _TEST_RAYS // settings.rays)):
-        which, origins, directions, lengths = other_side_rays(scene, world, texels, rest[part],
-                                                              settings, changed.center)
+        rows = rest[part]
+        which, origins, directions, lengths = other_side_rays(
+            scene, world, take(texels, rows), np.arange(len(rows)), settings, changed.center)
         if not len(which):
             continue
         hit = changed.cast_local(origins, directions, lengths.copy())["primID"] >= 0
-        reason[rest[part][which[hit.reshape(len(which), -1).any(axis=1)]]] = REASONS.index(why)
+        reason[rows[which[hit.reshape(len(which), -1).any(axis=1)]]] = REASONS.index(why)
         tested += len(origins)
     return tested
 
