@@ -176,6 +176,54 @@ def _normal_product(weight: np.ndarray, local: np.ndarray, lam: np.ndarray, x: n
     return out
 
 
+@jit
+def _solve(weight: np.ndarray, local: np.ndarray, lam: np.ndarray, x0: np.ndarray,
+           iterations: int) -> np.ndarray:
+    """x (n, C) minimising |M x|² + Σ lam·|x − x0|² (M the seam rows, ``_normal_product``):
+    conjugate gradients on (MᵀM + Λ) x = Λ x0, every channel at once (they share the matrix),
+    until the residual's square falls under 1e-20 of |Λ x0|² or after ``iterations``."""
+    n, channels = x0.shape
+    x = x0.copy()
+    q = np.empty_like(x0)
+    _normal_product(weight, local, lam, x, q)
+    r = np.empty_like(x0)
+    rr = np.zeros(channels)
+    norm = 0.0
+    for i in range(n):
+        for c in range(channels):
+            b = lam[i] * x0[i, c]
+            r[i, c] = b - q[i, c]
+            rr[c] += r[i, c] * r[i, c]
+            norm += b * b
+    p = r.copy()
+    target = 1e-20 * max(norm, 1e-300)
+    alpha, beta, pq, rr_new = (np.empty(channels), np.empty(channels), np.empty(channels),
+                               np.empty(channels))
+    for _ in range(iterations):
+        if rr.sum() <= target:
+            break
+        _normal_product(weight, local, lam, p, q)
+        pq[:] = 0.0
+        for i in range(n):
+            for c in range(channels):
+                pq[c] += p[i, c] * q[i, c]
+        for c in range(channels):
+            alpha[c] = rr[c] / max(pq[c], 1e-300)
+        rr_new[:] = 0.0
+        for i in range(n):
+            for c in range(channels):
+                x[i, c] += alpha[c] * p[i, c]
+                r[i, c] -= alpha[c] * q[i, c]
+                rr_new[c] += r[i, c] * r[i, c]
+        for c in range(channels):
+            beta[c] = rr_new[c] / max(rr[c], 1e-300)
+        for i in range(n):
+            for c in range(channels):
+                p[i, c] = r[i, c] + beta[c] * p[i, c]
+        rr[:] = rr_new
+    return x
+
+
 def stitch(values: np.ndarray, covered: np.ndarray, seams: Seams) -> np.ndarray:
     """``values`` (P, H, W, C) with the texels the seam lookups read re-solved so that both
     sides of every seam agree (least squares, see the module's docstring); others unchanged.
@@ -191,28 +239,8 @@ def stitch(values: np.ndarray, covered: np.ndarray, seams: Seams) -> np.ndarray:
     local = local.reshape(index.shape)
     flat = values.reshape(-1, values.shape[-1])
     x0 = flat[used]
-    lam = np.where(covered.reshape(-1)[used], DATA_WEIGHT, PADDING_WEIGHT)[:, None]
-
-    def normal_matrix(x: np.ndarray) -> np.ndarray:
-        """(MᵀM + Λ) x for x (n, C): M the seam rows (S, n) with 8 entries each."""
-        return _normal_product(weight, local, lam[:, 0], x, np.empty_like(x))
-
-    # Conjugate gradients on every channel at once (the channels share the matrix).
-    x = x0.copy()
-    r = lam * x0 - normal_matrix(x)
-    p = r.copy()
-    rr = (r * r).sum(axis=0)
-    target = 1e-20 * max(float(((lam * x0) ** 2).sum()), 1e-300)
-    for _ in range(_ITERATIONS):
-        if rr.sum() <= target:
-            break
-        q = normal_matrix(p)
-        alpha = rr / np.maximum((p * q).sum(axis=0), 1e-300)
-        x += alpha * p
-        r -= alpha * q
-        rr_new = (r * r).sum(axis=0)
-        p = r + (rr_new / np.maximum(rr, 1e-300)) * p
-        rr = rr_new
+    lam = np.where(covered.reshape(-1)[used], DATA_WEIGHT, PADDING_WEIGHT)
+    x = _solve(weight, local, lam, np.ascontiguousarray(x0), _ITERATIONS)
     values = np.ascontiguousarray(values)
     values.reshape(-1, values.shape[-1])[used] = x
     return values
