@@ -43,6 +43,7 @@ from .diff import Diff, diff, fingerprints
 from . import validity as validity_module
 from .direct import Direct, direct_light, light_dimension, punctual_irradiance, texel_receivers
 from .geometry import World, build_world
+from .inner import other_side_rays, translucent
 from .integrate import Terms, cosine_directions, hemisphere_rays, integrate
 from .materials import SPECULAR, TRANSPARENT, material_table
 from .parallel import run_chunks
@@ -446,8 +447,6 @@ def _mark_seen(scene: Scene, world: World, changed: _Changed, boxes: list, corne
     obscurance rays — their own (within d_max of ``boxes``, above their plane) and those from
     their other side (leaves' back faces, translucent insides: ``inner.other_side_rays``) —
     meet the ``changed`` geometry (``corners`` (t, 3, 3)); return the rays cast."""
-    from .inner import other_side_rays, translucent
-
     test = np.flatnonzero(_near(texels, boxes, settings.d_max) & (reason < 0))
     test = test[_above(texels, test, corners)]
     meets, tested = _rays_meet(changed, texels, test, settings)

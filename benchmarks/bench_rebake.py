@@ -73,9 +73,14 @@ def main() -> None:
     print(f"full bake {full_before:.2f} s (edited scene: {full_after:.2f} s), rebake {rebake:.2f} s "
           f"= {100 * rebake / full_after:.1f} % of the full bake; state file {state_mb:.1f} MB; "
           f"identical bytes: {same}")
-    for name, result in (("full", full), ("rebake", again)):
+    print_stage_seconds({"full": full, "rebake": again})
+
+
+def print_stage_seconds(results: dict) -> None:
+    """One line per named ``baker.BakeResult``: the seconds of each stage of that bake."""
+    for name, result in results.items():
         times = result.report["stage_seconds"]
-        print(f"  {name:7s} " + ", ".join(f"{k} {v:.2f}" for k, v in times.items()))
+        print(f"  {name:8s} " + ", ".join(f"{k} {v:.2f}" for k, v in times.items()))
 
 
 if __name__ == "__main__":

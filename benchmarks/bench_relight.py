@@ -19,6 +19,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import baker  # noqa: E402
 from assets.light_scenes import lit_floor  # noqa: E402
+from benchmarks.bench_rebake import print_stage_seconds  # noqa: E402
 
 
 def main() -> None:
@@ -41,9 +42,7 @@ def main() -> None:
     print(f"  full bake: {full_seconds:6.2f} s, {full.rays:,} obscurance rays")
     print(f"  relight:   {relight_seconds:6.2f} s, {relit.rebake['rays']:,} rays "
           f"({relight_seconds / full_seconds:.0%} of the full bake); identical output: {same}")
-    for name, result in (("full", full), ("relight", relit)):
-        times = result.report["stage_seconds"]
-        print(f"  {name:8s} " + ", ".join(f"{k} {v:.2f}" for k, v in times.items()))
+    print_stage_seconds({"full": full, "relight": relit})
 
 
 if __name__ == "__main__":
