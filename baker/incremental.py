@@ -614,7 +614,10 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
             far = far[_above(texels, far, corners)]  # the probes too stay in the hemisphere
             meets, n = _probes_meet(small, texels, far, resolved.d_max, resolved.threads)
             tested += n
-            redo = np.union1d(np.flatnonzero(close), far[meets])
+            # Texels touching other geometry: which coincident triangle a probe or ray meets
+            # there depends on Embree's BVH, which the move changed (``Validity.touching``).
+            redo = np.union1d(np.union1d(np.flatnonzero(close), far[meets]),
+                              np.flatnonzero(old_validity.touching))
             checked, fresh = check_texels(scene, world, tracer, take(raw, redo), resolved.d_max)
             tested += len(redo) * (validity_module.HEMISPHERE_RAYS + validity_module.TANGENT_RAYS
                                    * getattr(validity_module, "TANGENT_ROUNDS", 2))

@@ -52,6 +52,7 @@ PUSH = 0.1  # texel sides past the back face the point is moved to
 TIE = 0.25  # texel sides: back faces this close to the nearest count as equally near
 RAISE_MARGIN = 0.1  # texel sides: the terminator push is checked this much past its end
 HEMISPHERE_RAYS = 12
+TOUCH = 2.0  # ray lifts: a probe hit this close to its origin touches (see Validity.touching)
 ENCLOSED_FRACTION = 0.9
 BACKFACE_TOLERANCE = 0.6
 
@@ -69,12 +70,16 @@ class Validity:
     (filled from neighbours later), ENCLOSED (inside a solid: value 0). moved_by: (N,) float64
     world distance each sample point moved past back faces (0 for most; the terminator push is
     not counted). back_fraction: (N,) float64 fraction of
-    the hemisphere probes that met a back face.
+    the hemisphere probes that met a back face. touching: (N,) bool, some probe met a surface
+    within ``TOUCH`` ray lifts of its origin: the point touches other geometry (a room's corner),
+    where which of the triangles meeting there Embree reports first depends on its whole BVH —
+    so on every object in the scene, near or not (an incremental rebake redoes these texels).
     """
 
     state: np.ndarray
     moved_by: np.ndarray
     back_fraction: np.ndarray
+    touching: np.ndarray
 
     def counts(self) -> dict[str, int]:
         """How many texels are in each state, by name (for the report)."""
@@ -132,8 +137,10 @@ def _back_faces(triangle: np.ndarray, directions: np.ndarray, normals: np.ndarra
 
 
 def _tangent_step(tracer: Tracer, faces: _Faces, position: np.ndarray, normal: np.ndarray,
-                  size: np.ndarray, home: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """One round of tangent probes for k points: (new position (k, 3), moved (k,) bool).
+                  size: np.ndarray, home: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One round of tangent probes for k points: (new position (k, 3), moved (k,) bool,
+    touching (k,) bool: ``_touching``).
 
     Of the back faces within ``TIE`` texel sides of the nearest, the point crosses the one
     whose direction points most towards ``home`` (k, 3), the centroid of the texel's own
@@ -143,8 +150,8 @@ def _tangent_step(tracer: Tracer, faces: _Faces, position: np.ndarray, normal: n
     t1, t2 = _frames(normal)
     angle = 2 * np.pi * np.arange(TANGENT_RAYS) / TANGENT_RAYS
     in_plane = np.stack([np.cos(angle), np.sin(angle), np.zeros(TANGENT_RAYS)], axis=1)
-    origins, directions = _fan(position, normal, t1, t2, ray_lift(position, size, tracer.center),
-                               in_plane)
+    lift = ray_lift(position, size, tracer.center)
+    origins, directions = _fan(position, normal, t1, t2, lift, in_plane)
     length = np.repeat(PROBE_RADIUS * size, TANGENT_RAYS)
     hits = tracer.cast(origins, directions, length)
     back = faces.back(hits.triangle, directions)
@@ -159,7 +166,13 @@ def _tangent_step(tracer: Tracer, faces: _Faces, position: np.ndarray, normal: n
     direction = directions.reshape(k, TANGENT_RAYS, 3)[np.arange(k), nearest]
     new = np.where(moved[:, None], position + np.where(moved, step, 0.0)[:, None] * direction,
                    position)
-    return new, moved
+    return new, moved, _touching(hits.distance, lift)
+
+
+def _touching(distance: np.ndarray, lift: np.ndarray) -> np.ndarray:
+    """(k,) bool: some of each point's probes (k·m distances, point-major; inf for misses) met
+    a surface within ``TOUCH`` × its ray ``lift`` (k,)."""
+    return (distance.reshape(len(lift), -1) <= TOUCH * lift[:, None]).any(axis=1)
 
 
 def hemisphere_probes(position: np.ndarray, normal: np.ndarray, size: np.ndarray,
@@ -190,12 +203,14 @@ def _fan(position: np.ndarray, normal: np.ndarray, t1: np.ndarray, t2: np.ndarra
 
 
 def _back_fraction(tracer: Tracer, faces: _Faces, position: np.ndarray, normal: np.ndarray,
-                   size: np.ndarray, d_max: float) -> np.ndarray:
-    """(k,) fraction of the fixed hemisphere probes from each point that meet a back face."""
+                   size: np.ndarray, d_max: float) -> tuple[np.ndarray, np.ndarray]:
+    """(k,) fraction of the fixed hemisphere probes from each point that meet a back face, and
+    (k,) bool whether one touches (``_touching``)."""
     k = len(position)
     origins, directions = hemisphere_probes(position, normal, size, tracer.center)
     hits = tracer.cast(origins, directions, d_max)
-    return faces.back(hits.triangle, directions).reshape(k, HEMISPHERE_RAYS).mean(axis=1)
+    fraction = faces.back(hits.triangle, directions).reshape(k, HEMISPHERE_RAYS).mean(axis=1)
+    return fraction, _touching(hits.distance, ray_lift(position, size, tracer.center))
 
 
 def _raise(tracer: Tracer, position: np.ndarray, normal: np.ndarray, size: np.ndarray,
@@ -232,6 +247,7 @@ def check_texels(scene: Scene, world: World, tracer: Tracer, texels: Texels,
     position = texels.position.copy()
     start = position.copy()  # after the terminator push
     moved = np.zeros(count, bool)
+    touching = np.zeros(count, bool)
     fraction = np.zeros(count)
 
     def work(rows: slice) -> None:
@@ -241,17 +257,20 @@ def check_texels(scene: Scene, world: World, tracer: Tracer, texels: Texels,
         p[:] = _raise(tracer, p, normal, texels.size[rows], texels.terminator[rows])
         start[rows] = p
         home = np.mean(world.corners(texels.triangle[rows]), axis=0)  # (k, 3) centroids
-        step_moved = moved[rows]
+        step_moved, touched = moved[rows], touching[rows]  # views: the chunk's own rows
         for _ in range(TANGENT_ROUNDS):
-            new, stepped = _tangent_step(tracer, faces, p[usable], normal[usable], size[usable],
-                                         home[usable])
+            new, stepped, touch = _tangent_step(tracer, faces, p[usable], normal[usable],
+                                                size[usable], home[usable])
             p[usable] = new
             step_moved[usable] |= stepped
+            touched[usable] |= touch
             usable = usable[stepped]
             if not len(usable):
                 break
         ok = np.flatnonzero(np.linalg.norm(normal, axis=1) > 0.5)
-        fraction[rows][ok] = _back_fraction(tracer, faces, p[ok], normal[ok], size[ok], d_max)
+        fraction[rows][ok], touch = _back_fraction(tracer, faces, p[ok], normal[ok], size[ok],
+                                                   d_max)
+        touched[ok] |= touch
 
     run_chunks(work, [slice(start, min(start + _CHUNK, count))
                       for start in range(0, count, _CHUNK)], threads)
@@ -260,4 +279,4 @@ def check_texels(scene: Scene, world: World, tracer: Tracer, texels: Texels,
     state[fraction >= ENCLOSED_FRACTION] = ENCLOSED
     moved_by = np.linalg.norm(position - start, axis=1)
     return (replace(texels, position=position),
-            Validity(state=state, moved_by=moved_by, back_fraction=fraction))
+            Validity(state=state, moved_by=moved_by, back_fraction=fraction, touching=touching))

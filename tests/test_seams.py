@@ -130,7 +130,7 @@ def test_no_lookup_on_any_triangle_reads_an_empty_texel(scene, sphere, tmp_path)
     marked = Lightmaps(light=covered[..., None] * np.ones(3), obscurance=covered[..., None]
                        * np.ones(3), covered=covered)
     no_flags = Validity(np.zeros(len(done.texels), np.int8), np.zeros(len(done.texels)),
-                        np.zeros(len(done.texels)))
+                        np.zeros(len(done.texels)), np.zeros(len(done.texels), bool))
     filled = postprocess(marked, done.settings.padding,
                          *no_flags.page_masks(done.texels, covered.shape)).light[..., 0] > 0
     steps = 10

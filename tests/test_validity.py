@@ -132,7 +132,7 @@ def test_no_floor_texel_leaks_light_into_a_closed_room(room, tmp_path, monkeypat
     monkeypatch.setattr(importlib.import_module("baker.bake"), "check_texels",
                         lambda scene, world, tracer, texels, d_max: (texels, Validity(
                             np.zeros(len(texels), np.int8), np.zeros(len(texels)),
-                            np.zeros(len(texels)))))
+                            np.zeros(len(texels)), np.zeros(len(texels), bool))))
     before = computed(room, tmp_path, **settings)
     leaking_before, _, read_leaking_before = _leaking_texels(before, room)
     assert leaking_before > 50 and read_leaking_before > 50, (leaking_before,
