@@ -10,6 +10,16 @@ deepest at the texel centre, ties going to the lower triangle index: a fixed rul
 does not depend on how the work is split. The texel's sample point is its centre's barycentric
 position in the owner, clamped into the triangle, mapped to world space.
 
+A centre outside its owner, or closer to one of its edges than ``INSET`` texels, is drawn
+inside, each edge by its own distance: ``INSET`` × (1 + 0.7·θ/π), θ ∈ [0, π) the edge's
+direction in UV (``_inset``), so edges meeting at a corner get unequal insets whatever the
+corners' order (a mirrored mesh lists them the other way round). A point clamped onto an edge would lie in every surface that meets
+the triangle there (a room's corner, a crate standing on the floor): a probe or ray from it
+meets those surfaces at distance 0, or exactly where two of them meet, and which of the tied
+triangles Embree reports depends on its BVH of the whole scene, so on every object's place —
+an incremental rebake could not match a full bake there. Unequal insets keep the point off
+the diagonals too, where a probe would reach two edges at once.
+
 Shadow terminator: on a low-poly curved surface with smooth (interpolated) normals, the flat
 facets lie inside the surface the normals describe, so a point on a facet near the light's
 terminator sees the light only below its own facet's plane, or is shadowed by the next facet:
@@ -159,11 +169,15 @@ def _chunks(counts: np.ndarray, limit: int) -> list[slice]:
     return [slice(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:]) if b > a]
 
 
+INSET = 0.01  # texels: sample points keep at least this far inside their triangle's edges
+
+
 @jit
 def _barycentric(corners: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Barycentric coordinates (c, 3) of ``points`` (c, 2) in triangles (c, 3, 2), clamped into
-    the triangle (negative weights cut to 0 and the rest renormalised); degenerate triangles
-    give their centroid."""
+    """Barycentric coordinates (c, 3) of ``points`` (c, 2) in triangles (c, 3, 2) (UV, texel
+    units), clamped into the triangle (negative weights cut to 0 and the rest renormalised),
+    then drawn in from any edge closer than its inset (``INSET``, ``_inset``); degenerate
+    triangles give their centroid."""
     bary = np.empty((len(points), 3))
     for i in range(len(points)):
         ax, ay = corners[i, 0, 0], corners[i, 0, 1]
@@ -184,7 +198,34 @@ def _barycentric(corners: np.ndarray, points: np.ndarray) -> np.ndarray:
             bary[i, 0], bary[i, 1], bary[i, 2] = u / total, v / total, w / total
         else:
             bary[i, 0] = bary[i, 1] = bary[i, 2] = 1.0 / 3.0
+            continue
+        _inset(bary[i], abs(x0 * y1 - x1 * y0), ((x1 - x0, y1 - y0), (x1, y1), (x0, y0)))
     return bary
+
+
+@jit
+def _inset(weights: np.ndarray, area2: float, edges) -> None:
+    """Draw barycentric ``weights`` (3,) in place away from edges closer than their inset.
+
+    area2: twice the triangle's UV area (texels²); edges: the UV vectors (dx, dy) of the edges
+    facing each corner. The distance to edge j is weight_j · area2 / |edge_j|, so weight j
+    must be at least f_j = inset_j · |edge_j| / area2, with inset_j = ``INSET`` ·
+    (1 + 0.7·θ_j/π) and θ_j ∈ [0, π) the edge's direction. Where a weight is below its f, the
+    weights become f + (1 − Σf) · weights (still summing to 1, each at least its f). A triangle
+    too small for the insets (Σf over ½) scales them down to Σf = ½."""
+    floor = np.empty(3)
+    for j in range(3):
+        dx, dy = edges[j]
+        theta = np.arctan2(dy, dx) % np.pi
+        floor[j] = INSET * (1.0 + 0.7 * theta / np.pi) * np.sqrt(dx * dx + dy * dy) / area2
+    total = floor[0] + floor[1] + floor[2]
+    if total > 0.5:
+        floor *= 0.5 / total
+        total = 0.5
+    if weights[0] >= floor[0] and weights[1] >= floor[1] and weights[2] >= floor[2]:
+        return
+    for j in range(3):
+        weights[j] = floor[j] + (1.0 - total) * weights[j]
 
 
 @dataclass(frozen=True)

@@ -4,7 +4,7 @@ import numpy as np
 
 from assets.make_scenes import open_plane, slivers_and_tiny, three_instances
 from baker.geometry import build_world
-from baker.rasterise import rasterise
+from baker.rasterise import INSET, _baked_triangles, rasterise
 from baker.settings import Settings, resolve
 from baker.unwrap import unwrap
 from tests.bakehelp import loaded
@@ -37,6 +37,30 @@ def test_sample_points_lie_on_their_triangles(tmp_path):
     # On a plane through the triangle: distance to the plane is ~0.
     n = world.geometric_normals(texels.triangle)
     assert np.abs(((texels.position - a) * n).sum(axis=1)).max() < 1e-9
+
+
+def test_sample_points_keep_inside_their_triangles_edges(tmp_path):
+    """Every sample point is at least ``INSET`` texels inside each edge of its UV triangle (a
+    centre clamped onto an edge would lie in the surfaces meeting there, where ties in Embree
+    depend on its BVH), and the two edges at a corner get different insets."""
+    scene, world, atlas, texels = _raster(three_instances(), tmp_path, 16.0)
+    corners, _, tris = _baked_triangles(atlas, world)  # UV corners, texel units
+    slot = np.full(len(world.triangles), -1, np.int64)
+    slot[tris] = np.arange(len(tris))
+    uv = corners[slot[texels.triangle]]
+    point = np.einsum("kc,kcj->kj", texels.barycentric, uv)
+    e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
+    area2 = np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+    distance = texels.barycentric * area2[:, None] / np.linalg.norm(
+        uv[:, [2, 0, 1]] - uv[:, [1, 2, 0]], axis=2)  # to the edge facing each corner
+    clamped = distance.min(axis=1) < 0.5  # near an edge
+    assert clamped.sum() > 100
+    assert distance.min() >= INSET * (1 - 1e-9)
+    centre = np.stack([texels.x + 0.5, texels.y + 0.5], axis=1)
+    assert np.abs(point - centre)[~clamped].max() < 1e-9  # the others keep their centres
+    at_corner = np.sort(distance[clamped], axis=1)[:, :2]  # a corner's two nearest edges
+    corner = at_corner[:, 1] < 2 * INSET
+    assert corner.any() and (at_corner[corner, 1] - at_corner[corner, 0] > 1e-4).all()
 
 
 def test_keys_are_unique_sorted_and_match_page_positions(tmp_path):
