@@ -44,7 +44,7 @@ from . import validity as validity_module
 from .direct import Direct, direct_light, light_dimension, punctual_irradiance, texel_receivers
 from .geometry import World, build_world
 from .inner import other_side_rays, translucent
-from .integrate import Terms, cosine_directions, hemisphere_rays, integrate
+from .integrate import Terms, cosine_directions, integrate, world_rays
 from .materials import SPECULAR, TRANSPARENT, material_table
 from .parallel import run_chunks
 from .rasterise import Coverage, Texels, texels_of
@@ -356,19 +356,15 @@ def _rays_meet(tracer: Tracer, texels: Texels, rows: np.ndarray, settings) -> tu
         normal = texels.geometric_normal[chosen]
         maybe = _candidates(tracer, x, y, z, texels.position[chosen], normal,
                             texels.size[chosen], *tangent_frames(normal), n, settings.d_max)
-        some = np.flatnonzero(maybe.any(axis=1))
-        if not len(some):
+        keep = maybe.ravel()
+        if not keep.any():
             return
-        origins, directions = hemisphere_rays(texels, chosen[some], n, settings.seed,
-                                              tracer.center, settings.sampling)
-        cast = maybe[some].ravel()
-        primitive = np.full(len(cast), -1, np.int32)
-        primitive[cast] = tracer.cast_local(origins[cast], directions[cast],
-                                            np.full(int(cast.sum()), settings.d_max,
+        origins, directions = world_rays(texels, chosen, n, x, y, z, tracer.center, keep)
+        primitive = np.full(len(keep), -1, np.int32)
+        primitive[keep] = tracer.cast_local(origins, directions,
+                                            np.full(len(origins), settings.d_max,
                                                     np.float32))["primID"]
-        found = meets[part]
-        found[some] = (primitive.reshape(-1, n) >= 0).any(axis=1)
-        meets[part] = found
+        meets[part] = (primitive.reshape(-1, n) >= 0).any(axis=1)
 
     run_chunks(work, _slices(len(rows), max(1, _TEST_RAYS // n)), settings.threads)
     return meets, len(rows) * n

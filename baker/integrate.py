@@ -121,26 +121,33 @@ class Terms:
 
 
 @jit
-def _to_world_kernel(rays, first, starts, normals, offsets, center, x, y, z, origins, directions):
+def _to_world_kernel(rays, first, starts, normals, offsets, center, x, y, z, keep, origins,
+                     directions):
     """Turn local cosine directions (x, y, z) (k·rays,) into Embree's float32 rays.
 
     Each texel's directions go into the frame of its normal; ray s of texel i (its sample
     ``first`` + s) starts from ``starts[i, (first + s) mod S]`` (starts: (k, S, 3) world points
     on the texel's plane, S = 1 without supersampling), lifted off the surface by the texel's
-    offset along the normal and recentred on ``center``.
+    offset along the normal and recentred on ``center``. keep: (k·rays,) bool, the rays to
+    write, in order, to consecutive rows of ``origins`` and ``directions``; empty: all of them.
     """
     count = starts.shape[1]
+    every = len(keep) == 0
+    q = 0
     for i in range(len(starts)):
         nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
         f = frame(nx, ny, nz)
         for r in range(i * rays, (i + 1) * rays):
+            if not every and not keep[r]:
+                continue
             j = (first + r - i * rays) % count
-            origins[r, 0] = starts[i, j, 0] - center[0] + offsets[i] * nx
-            origins[r, 1] = starts[i, j, 1] - center[1] + offsets[i] * ny
-            origins[r, 2] = starts[i, j, 2] - center[2] + offsets[i] * nz
-            directions[r, 0] = x[r] * f[0] + y[r] * f[3] + z[r] * nx
-            directions[r, 1] = x[r] * f[1] + y[r] * f[4] + z[r] * ny
-            directions[r, 2] = x[r] * f[2] + y[r] * f[5] + z[r] * nz
+            origins[q, 0] = starts[i, j, 0] - center[0] + offsets[i] * nx
+            origins[q, 1] = starts[i, j, 1] - center[1] + offsets[i] * ny
+            origins[q, 2] = starts[i, j, 2] - center[2] + offsets[i] * nz
+            directions[q, 0] = x[r] * f[0] + y[r] * f[3] + z[r] * nx
+            directions[q, 1] = x[r] * f[1] + y[r] * f[4] + z[r] * ny
+            directions[q, 2] = x[r] * f[2] + y[r] * f[5] + z[r] * nz
+            q += 1
 
 
 def cosine_directions(keys: np.ndarray, rays: int, seed: int, technique: str = "sobol",
@@ -170,15 +177,25 @@ def hemisphere_rays(texels: Texels, rows: np.ndarray | slice, rays: int, seed: i
     (texel i's rays are rows i·rays … i·rays + rays − 1). Computed in float64 (points, then
     directions, in flat arrays that the compiler vectorises), rounded once at the end.
     """
-    keys = texels.key[rows]
-    k = len(keys)
-    x, y, z = cosine_directions(keys, rays, seed, technique, first)
-    origins = np.empty((k * rays, 3), np.float32)
-    directions = np.empty((k * rays, 3), np.float32)
+    x, y, z = cosine_directions(texels.key[rows], rays, seed, technique, first)
+    return world_rays(texels, rows, rays, x, y, z, center, first=first, sub=sub)
+
+
+def world_rays(texels: Texels, rows: np.ndarray | slice, rays: int, x: np.ndarray,
+               y: np.ndarray, z: np.ndarray, center: np.ndarray, keep: np.ndarray | None = None,
+               first: int = 0, sub: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """``hemisphere_rays`` from the texels' local directions x, y, z (k·rays,) already drawn
+    (``cosine_directions``); keep: None, or (k·rays,) bool, the rays wanted (the others are
+    left out of the returned (m, 3) arrays, which keep their order). The same bits as
+    ``hemisphere_rays`` for the rays kept."""
+    k = len(x) // rays
+    m = k * rays if keep is None else int(np.count_nonzero(keep))
+    origins = np.empty((m, 3), np.float32)
+    directions = np.empty((m, 3), np.float32)
     starts = texels.position[rows][:, None, :] if sub is None else sub
     _to_world_kernel(rays, first, starts, texels.geometric_normal[rows],
                      ray_lift(texels.position[rows], texels.size[rows], center), center, x, y, z,
-                     origins, directions)
+                     np.zeros(0, np.bool_) if keep is None else keep, origins, directions)
     return origins, directions
 
 
