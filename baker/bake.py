@@ -13,6 +13,7 @@ import os
 import tempfile
 import time
 import urllib.parse
+from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -46,7 +47,7 @@ from .surface import LUMINANCE
 from .trace import Tracer
 from .unwrap import PageTooSmall, baked_instances, frame_area, unwrap
 from .write import WriteOptions, write
-from .incremental import bake_or_rebake, details, save_bake_state, summary
+from .incremental import bake_or_rebake, bake_state_writer, details, record_full_bake, summary
 from .state import default_path as default_state_path
 
 
@@ -307,19 +308,29 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
     times = dict(done.stage_seconds)
     times["load"] += loading["load"]
     resolved = done.settings
-    with _timed(times, "write"):
-        pages = encode(done.lightmaps, resolved.encoding, resolved.occlusion != "none",
-                       resolved.clip_percentile)
-        info = write(scene, done.atlas, pages, output,
-                     WriteOptions(encoding=resolved.encoding, occlusion=resolved.occlusion,
-                                  clip_percentile=resolved.clip_percentile))
-        if lightmaps_dir is not None:
-            write_page_files(Path(lightmaps_dir), output.stem, pages, done.lightmaps.light,
-                             lightmaps_format)
-        if error_map_dir is not None:  # per-texel standard error pages (errormap.py)
-            write_error_maps(Path(error_map_dir), output.stem, done, write_atomically)
-        if state_path is not None:  # the sidecar a rebake starts from (docs/bake_state.md)
-            save_bake_state(state_path, done, rebaked, settings, time.perf_counter() - started)
+    with _timed(times, "write"), ThreadPoolExecutor(1) as beside:
+        # The sidecar a rebake starts from (docs/bake_state.md), written while the pages are
+        # encoded (its CRCs and file writes release the GIL, as PIL's compression does), and
+        # put in place only once the output is.
+        state_file = None if state_path is None else beside.submit(
+            stage_atomically, state_path, bake_state_writer(done, rebaked, settings))
+        try:
+            pages = encode(done.lightmaps, resolved.encoding, resolved.occlusion != "none",
+                           resolved.clip_percentile)
+            info = write(scene, done.atlas, pages, output,
+                         WriteOptions(encoding=resolved.encoding, occlusion=resolved.occlusion,
+                                      clip_percentile=resolved.clip_percentile))
+            if lightmaps_dir is not None:
+                write_page_files(Path(lightmaps_dir), output.stem, pages, done.lightmaps.light,
+                                 lightmaps_format)
+            if error_map_dir is not None:  # per-texel standard error pages (errormap.py)
+                write_error_maps(Path(error_map_dir), output.stem, done, write_atomically)
+        except BaseException:
+            _discard(state_file)
+            raise
+        if state_file is not None:
+            _rename(state_file.result(), state_path)
+            record_full_bake(state_path, rebaked, time.perf_counter() - started)
     seconds = time.perf_counter() - started
     rmse = done.rmse_estimate()
     ambient, atlas = done.ambient, done.atlas
@@ -359,10 +370,10 @@ def _umask() -> int:
     return mask
 
 
-def write_atomically(path: Path, data: bytes | Callable[[BinaryIO], None]) -> None:
-    """Write ``data`` to ``path`` through a temporary file and a rename; ``data`` is the bytes,
-    or a function that writes them to the open file (to stream large files). The file gets the
-    permissions a newly created file gets (0666 less the umask), not the temporary's 0600."""
+def stage_atomically(path: Path, data: bytes | Callable[[BinaryIO], None]) -> str:
+    """The first half of ``write_atomically``: write ``data`` to a temporary file beside
+    ``path`` with the permissions a new file gets, and return the temporary's path, for
+    ``_rename`` to put in place (nothing is left behind if writing fails)."""
     if not path.parent.exists():
         raise OutputError("the folder does not exist", file=str(path),
                           fix=f"create {path.parent} first")
@@ -374,11 +385,41 @@ def write_atomically(path: Path, data: bytes | Callable[[BinaryIO], None]) -> No
             else:
                 f.write(data)
         os.chmod(temp, 0o666 & ~_umask())
+    except BaseException:
+        _remove(temp)
+        raise
+    return temp
+
+
+def _rename(temp: str, path: Path) -> None:
+    """Put the staged file ``temp`` in place at ``path`` (an atomic rename)."""
+    try:
         os.replace(temp, path)
     except BaseException:
-        if os.path.exists(temp):
-            os.unlink(temp)
+        _remove(temp)
         raise
+
+
+def _remove(temp: str) -> None:
+    if os.path.exists(temp):
+        os.unlink(temp)
+
+
+def _discard(staging: Future | None) -> None:
+    """Wait for a file being staged beside a write that failed, and remove it."""
+    if staging is None:
+        return
+    try:
+        _remove(staging.result())
+    except Exception:
+        pass  # it failed too; the write's own error is the one to report
+
+
+def write_atomically(path: Path, data: bytes | Callable[[BinaryIO], None]) -> None:
+    """Write ``data`` to ``path`` through a temporary file and a rename; ``data`` is the bytes,
+    or a function that writes them to the open file (to stream large files). The file gets the
+    permissions a newly created file gets (0666 less the umask), not the temporary's 0600."""
+    _rename(stage_atomically(path, data), path)
 
 
 def clipping_notes(pages) -> list[str]:

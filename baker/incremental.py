@@ -35,6 +35,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields, replace
 
+from typing import BinaryIO, Callable
+
 import numpy as np
 
 from . import state as state_file
@@ -315,18 +317,24 @@ def _placed_corners(scene: Scene, world: World, instance: int, matrix: np.ndarra
 
 
 @jit
-def _within(points: np.ndarray, reach: np.ndarray, low: np.ndarray,
-            high: np.ndarray) -> np.ndarray:
-    """(n,) bool: whether each point (n, 3) lies within ``reach`` (n,) of some box
-    [low[b], high[b]] (b, 3) (Euclidean distance to the box, 0 inside)."""
+def _within(points: np.ndarray, size: np.ndarray, d_max: float, texels_reach: float,
+            middle: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+    """(n,) bool: whether each point (n, 3) lies within its reach of some box [low[b], high[b]]
+    (b, 3) (Euclidean distance to the box, 0 inside). The reach: d_max (+ 1e-9 of it),
+    ``texels_reach`` texel sides ``size`` (n,), and 1e-4 of the point's distance from
+    ``middle`` (3,) (the float32 spacing part of the rays' lift, ``trace.ray_lift``)."""
     out = np.zeros(len(points), np.bool_)
     for i in range(len(points)):
+        spread = 0.0
+        for c in range(3):
+            spread = max(spread, abs(points[i, c] - middle[c]))
+        reach = d_max * (1 + 1e-9) + texels_reach * size[i] + 1e-4 * spread
         for b in range(len(low)):
             squared = 0.0
             for c in range(3):
                 gap = max(low[b, c] - points[i, c], points[i, c] - high[b, c], 0.0)
                 squared += gap * gap
-            if np.sqrt(squared) <= reach[i]:
+            if np.sqrt(squared) <= reach:
                 out[i] = True
                 break
     return out
@@ -337,11 +345,9 @@ def _near(texels: Texels, boxes: list[tuple[np.ndarray, np.ndarray]], d_max: flo
     box — a conservative bound on where their validity probes and obscurance rays can go."""
     if not boxes:
         return np.zeros(len(texels), bool)
-    reach = d_max * (1 + 1e-9) + _REACH_TEXELS * texels.size
-    middle = (boxes[0][0] + boxes[0][1]) / 2  # plus the float32 spacing part of the rays' lift
-    reach = reach + 1e-4 * np.abs(texels.position - middle).max(axis=1)
-    return _within(texels.position, reach, np.array([b[0] for b in boxes]),
-                   np.array([b[1] for b in boxes]))
+    middle = (boxes[0][0] + boxes[0][1]) / 2
+    return _within(texels.position, texels.size, float(d_max), float(_REACH_TEXELS), middle,
+                   np.array([b[0] for b in boxes]), np.array([b[1] for b in boxes]))
 
 
 def _rays_meet(tracer: Tracer, texels: Texels, rows: np.ndarray, settings) -> tuple[np.ndarray, int]:
@@ -692,15 +698,21 @@ def bake_or_rebake(scene: Scene, settings: Settings, state_path, incremental: bo
     return compute(scene, settings, quiet), reason
 
 
-def save_bake_state(path, done, rebaked, settings: Settings | None = None,
-                    seconds: float | None = None) -> None:
-    """Write the state of ``done`` (``bake.Computed``) baked with ``settings`` to ``path``,
-    atomically; after a full bake, also the ``seconds`` it took (``state.timing_path``), which
-    the reports of the rebakes that follow compare their own time with."""
+def bake_state_writer(done, rebaked, settings: Settings | None = None
+                      ) -> Callable[[BinaryIO], None]:
+    """What writes the state of ``done`` (``bake.Computed``) baked with ``settings`` to an open
+    file (``state.write_state``): ``bake.py`` runs it beside the output's encoding and renames
+    the file into place only once the output is written."""
     fingerprint = rebaked.fingerprints if isinstance(rebaked, Rebaked) else fingerprints(
         done.scene, done.world, done.settings, settings)
-    state_file.save(path, make_state(done, fingerprint))
-    if not isinstance(rebaked, Rebaked) and seconds is not None:
+    state = make_state(done, fingerprint)
+    return lambda file: state_file.write_state(file, state)
+
+
+def record_full_bake(path, rebaked, seconds: float) -> None:
+    """After a full bake, record beside its state at ``path`` the ``seconds`` it took
+    (``state.timing_path``), which the reports of the rebakes that follow compare with."""
+    if not isinstance(rebaked, Rebaked):
         state_file.save_full_bake_seconds(path, seconds)
 
 

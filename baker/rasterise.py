@@ -213,6 +213,13 @@ def _inset(weights: np.ndarray, area2: float, edges) -> None:
     (1 + 0.7·θ_j/π) and θ_j ∈ [0, π) the edge's direction. Where a weight is below its f, the
     weights become f + (1 − Σf) · weights (still summing to 1, each at least its f). A triangle
     too small for the insets (Σf over ½) scales them down to Σf = ½."""
+    near = False  # first the cheap test against the largest inset, 1.7 · INSET (no arctan)
+    for j in range(3):
+        dx, dy = edges[j]
+        reach = 1.7 * INSET * (dx * dx + dy * dy) ** 0.5
+        near = near or weights[j] * area2 < reach
+    if not near:
+        return
     floor = np.empty(3)
     for j in range(3):
         dx, dy = edges[j]
@@ -371,8 +378,12 @@ def _surface_points(world: World, tri: np.ndarray, bary: np.ndarray, uv_corners:
     What depends on the owning triangle alone (front-face normal, texel size, texel axes) is
     computed once per distinct owner and gathered: scenes have far fewer triangles than texels.
     """
-    owners, first, inverse = np.unique(tri, return_index=True, return_inverse=True)
-    per_geometric, per_size, per_axes = _triangle_terms(world, owners, uv_corners[first])
+    count = np.bincount(tri, minlength=len(world.triangles))
+    owners = np.flatnonzero(count)  # sorted, as np.unique gives them, but counted in O(N)
+    inverse = (np.cumsum(count > 0) - 1)[tri]
+    some = np.empty(len(owners), np.int64)  # a texel of each owner (all have its UV corners)
+    some[inverse] = np.arange(len(tri))
+    per_geometric, per_size, per_axes = _triangle_terms(world, owners, uv_corners[some])
     geometric, size, axes = per_geometric[inverse], per_size[inverse], per_axes[inverse]
     position, normal, terminator = _texel_points(world.positions, world.normals, world.smooth,
                                                  world.triangles, tri, bary, geometric)
