@@ -168,6 +168,17 @@ def merge(stored, fresh, rows: np.ndarray, **overrides):
     return type(stored)(**values)
 
 
+def _same_rows(stored, fresh, rows: np.ndarray) -> np.ndarray:
+    """(k,) bool: whether rows ``rows`` of ``stored`` equal, in every per-texel array field,
+    the k rows of ``fresh`` (a dataclass of the same type)."""
+    same = np.ones(len(rows), bool)
+    for f in fields(stored):
+        old, new = getattr(stored, f.name), getattr(fresh, f.name)
+        if isinstance(old, np.ndarray) and isinstance(new, np.ndarray):
+            same &= (old[rows] == new).reshape(len(rows), -1).all(axis=1)
+    return same
+
+
 def _small_world(corners: np.ndarray, center: np.ndarray) -> World:
     """A World of just the triangles ``corners`` (k, 3, 3) world, in ``center``'s frame (so its
     float32 vertices are bit-identical to the full scene's)."""
@@ -623,9 +634,14 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
             checked, fresh = check_texels(scene, world, tracer, take(raw, redo), resolved.d_max)
             tested += len(redo) * (validity_module.HEMISPHERE_RAYS + validity_module.TANGENT_RAYS
                                    * getattr(validity_module, "TANGENT_ROUNDS", 2))
+            # Probes that met the moved object mostly find what they found before: such a
+            # texel is dirty only if its rays meet it (below). Touching texels are redone.
+            same = (_same_rows(old_validity, fresh, redo) & ~old_validity.touching[redo]
+                    & (texels.position[redo] == checked.position).all(axis=1))
             texels.position[redo] = checked.position
             validity = merge(old_validity, fresh, redo)
-            reason[redo[reason[redo] < 0]] = REASONS.index("validity")
+            changed = redo[~same]
+            reason[changed[reason[changed] < 0]] = REASONS.index("validity")
             n = _mark_seen(scene, world, small, boxes, corners, texels, reason, "obscurance",
                            resolved)
             tested += n
