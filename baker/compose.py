@@ -7,7 +7,8 @@ per light at unit intensity, so a light's new colour or intensity is a recomposi
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, replace
+from typing import Callable
 
 import numpy as np
 
@@ -50,23 +51,37 @@ def compose(atlas: Atlas, texels: Texels, terms: Terms, ambient: Ambient, rho: s
     shape = (atlas.page_count, atlas.height, atlas.width)
     obscurance = np.zeros(shape + (3,))
     covered = np.zeros(shape, bool)
-    _scatter(obscurance, texels, terms.obscurance(effective_r_ave(ambient, rho)))
+    r_ave = effective_r_ave(ambient, rho)
+    _scatter(obscurance, texels, lambda block: _rows(terms, block, len(texels)).obscurance(r_ave))
     covered[texels.page, texels.y, texels.x] = True
     light = obscurance * ambient.intensity
     if indirect is not None:
-        _scatter(light, texels, indirect)
+        _scatter(light, texels, lambda block: indirect[block])
     if direct is not None:
-        _scatter(light, texels, direct.irradiance(light_colours), add=True)
+        _scatter(light, texels, lambda block: _rows(direct, block, len(texels)).irradiance(
+            light_colours), add=True)
     return Lightmaps(light=light, obscurance=obscurance, covered=covered)
 
 
 _TEXELS_AT_ONCE = 1 << 16
 
 
-def _scatter(pages: np.ndarray, texels: Texels, values: np.ndarray, add: bool = False) -> None:
-    """Write (or ``add``) the texels' ``values`` (N, 3) into ``pages`` (P, H, W, 3), a block of
-    texels at a time: at once, ``+=`` would gather and sum (N, 3) copies (200 MB each at 4096²)."""
-    for start in range(0, len(values), _TEXELS_AT_ONCE):
+def _rows(per_texel, block: slice, count: int):
+    """``per_texel`` (Terms, Direct: a dataclass of (N, …) arrays) for the texels ``block``
+    only: every array field with ``count`` = N rows sliced (views), the others kept (empty
+    optional terms; ``Direct.light_colours``, (L, 3) per light, whatever L is)."""
+    return replace(per_texel, **{
+        f.name: value[block] for f in fields(per_texel)
+        if isinstance(value := getattr(per_texel, f.name), np.ndarray) and value.ndim
+        and len(value) == count and f.name != "light_colours"})
+
+
+def _scatter(pages: np.ndarray, texels: Texels, values: Callable[[slice], np.ndarray],
+             add: bool = False) -> None:
+    """Write (or ``add``) the texels' values into ``pages`` (P, H, W, 3), a block of texels at
+    a time: ``values(block)`` gives the (k, 3) values of the texels ``block``. At once, the
+    (N, 3) values and ``+=``'s gathered copies would be 200 MB each at 4096²."""
+    for start in range(0, len(texels), _TEXELS_AT_ONCE):
         block = slice(start, start + _TEXELS_AT_ONCE)
         where = texels.page[block], texels.y[block], texels.x[block]
-        pages[where] = pages[where] + values[block] if add else values[block]
+        pages[where] = pages[where] + values(block) if add else values(block)

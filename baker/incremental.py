@@ -135,9 +135,10 @@ class Rebaked:
 
 
 def take(texels: Texels, rows: np.ndarray) -> Texels:
-    """The texels ``rows`` (k,) as a Texels of k rows (``triangle_texels`` kept whole)."""
+    """The texels ``rows`` (k,) as a Texels of k rows (the per-triangle ``triangle_*`` fields
+    kept whole)."""
     return replace(texels, **{f.name: getattr(texels, f.name)[rows] for f in fields(Texels)
-                              if f.name != "triangle_texels"})
+                              if not f.name.startswith("triangle_")})
 
 
 def _absent(value) -> bool:

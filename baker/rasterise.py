@@ -53,11 +53,11 @@ class Texels:
     position: (N, 3) float64 world sample point. normal: (N, 3) unit interpolated shading normal.
     geometric_normal: (N, 3) unit front-face normal of the owning triangle.
     triangle: (N,) int64 owning world triangle (index into World.triangles); instance: (N,) int64.
-    barycentric: (N, 3) float64 of the sample point in the owning triangle.
     size: (N,) float64 world length of one texel side on the owning triangle.
-    axes: (N, 2, 3) float64 world displacement of one texel step in x and in y on the owning
-    triangle's plane (the UV→world Jacobian; zeros for a triangle without UV area), for
-    sub-texel sample positions (``supersample.py``).
+    triangle_axes: (T, 2, 3) float64, per world triangle, the world displacement of one texel
+    step in x and in y on its plane (the UV→world Jacobian; zeros for a triangle without UV
+    area or without texels), for sub-texel sample positions (``supersample.py``): kept per
+    triangle, as 48 bytes per texel would be 400 MB on a 4096² page.
     terminator: (N, 3) float64 world push of the sample point towards the smooth surface its
     shading normals describe (``_texel_points``; zeros on flat and concave surfaces). Not
     yet applied to ``position``: ``validity.check_texels`` does that where the way is clear.
@@ -74,14 +74,17 @@ class Texels:
     geometric_normal: np.ndarray
     triangle: np.ndarray
     instance: np.ndarray
-    barycentric: np.ndarray
     size: np.ndarray
     triangle_texels: np.ndarray
-    axes: np.ndarray
+    triangle_axes: np.ndarray
     terminator: np.ndarray
 
     def __len__(self) -> int:
         return len(self.key)
+
+    def axes(self, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
+        """(k, 2, 3) texel axes of the texels ``rows`` (their owning triangles' ``triangle_axes``)."""
+        return self.triangle_axes[self.triangle[rows]]
 
 
 def degenerate(world: World, tris: np.ndarray) -> np.ndarray:
@@ -373,7 +376,8 @@ def _texel_axes(world: World, tri: np.ndarray, uv_corners: np.ndarray) -> np.nda
 def _surface_points(world: World, tri: np.ndarray, bary: np.ndarray, uv_corners: np.ndarray,
                     page: np.ndarray, x: np.ndarray, y: np.ndarray, key: np.ndarray,
                     triangle_texels: np.ndarray) -> Texels:
-    """World position, normals, size, axes and terminator push of each texel's sample point.
+    """World position, normals, size and terminator push of each texel's sample point (from its
+    barycentrics ``bary`` (N, 3) in the owner ``tri``), and every triangle's texel axes.
 
     What depends on the owning triangle alone (front-face normal, texel size, texel axes) is
     computed once per distinct owner and gathered: scenes have far fewer triangles than texels.
@@ -384,13 +388,15 @@ def _surface_points(world: World, tri: np.ndarray, bary: np.ndarray, uv_corners:
     some = np.empty(len(owners), np.int64)  # a texel of each owner (all have its UV corners)
     some[inverse] = np.arange(len(tri))
     per_geometric, per_size, per_axes = _triangle_terms(world, owners, uv_corners[some])
-    geometric, size, axes = per_geometric[inverse], per_size[inverse], per_axes[inverse]
+    geometric, size = per_geometric[inverse], per_size[inverse]
+    axes = np.zeros((len(world.triangles), 2, 3))
+    axes[owners] = per_axes
     position, normal, terminator = _texel_points(world.positions, world.normals, world.smooth,
                                                  world.triangles, tri, bary, geometric)
     return Texels(page=page, x=x, y=y, key=key.astype(np.uint64), position=position,
                   normal=normal, geometric_normal=geometric, triangle=tri,
-                  instance=world.tri_instance[tri], barycentric=bary, size=size,
-                  triangle_texels=triangle_texels, axes=axes, terminator=terminator)
+                  instance=world.tri_instance[tri], size=size,
+                  triangle_texels=triangle_texels, triangle_axes=axes, terminator=terminator)
 
 
 def _triangle_terms(world: World, tri: np.ndarray, uv_corners: np.ndarray

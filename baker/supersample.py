@@ -12,7 +12,7 @@ rays per texel then, one from each sub-position. Sub-positions lie on the owning
 plane, so rays from them use the texel's normal and frame.
 
 Where they are: the texel's square in the atlas, mapped onto the owning triangle's plane by the
-UV→world Jacobian (``Texels.axes``), around the texel's sample point after the validity probes
+UV→world Jacobian (``Texels.triangle_axes``), around the texel's sample point after the validity probes
 moved it (``validity.py``). The offsets inside the square are Owen-scrambled Sobol points of the
 texel's key (``SUB_DIMENSION``), so they are a pure function of (seed, key, sub-sample index):
 the bake stays the same bytes for any chunking or thread count.
@@ -41,11 +41,11 @@ def sub_offsets(texels: Texels, rows: slice | np.ndarray, count: int, seed: int)
     """(k, count, 3) world offsets of each texel's sub-positions from its sample point.
 
     The offsets are points of the texel's square, (−½, ½)² in texel units around its centre,
-    times the texel's axes (``Texels.axes``, (k, 2, 3)): on the owning triangle's plane.
+    times the owning triangle's texel axes (``Texels.triangle_axes``, (2, 3) each): on its plane.
     """
     keys = texels.key[rows]
     square = sample_2d(seed, keys[:, None], np.arange(count)[None, :], SUB_DIMENSION) - 0.5
-    return np.einsum("ksj,kjc->ksc", square, texels.axes[rows])
+    return np.einsum("ksj,kjc->ksc", square, texels.axes(rows))
 
 
 def sub_positions(tracer: Tracer, texels: Texels, rows: slice | np.ndarray, count: int,

@@ -100,7 +100,7 @@ def _coverage(done, lit, n=32):
     t = done.texels
     d = (np.arange(n) + 0.5) / n - 0.5
     square = np.stack(np.meshgrid(d, d), axis=-1).reshape(-1, 2)
-    points = t.position[:, None] + np.einsum("sj,kjc->ksc", square, t.axes)
+    points = t.position[:, None] + np.einsum("sj,kjc->ksc", square, t.axes())
     return lit(points.reshape(-1, 3)).reshape(len(t), -1).mean(axis=1)
 
 

@@ -31,9 +31,8 @@ def _texels(page: np.ndarray, y: np.ndarray, x: np.ndarray, instance: np.ndarray
     normal = np.tile([0.0, 0.0, 1.0], (n, 1))
     return Texels(page=page, x=x, y=y, key=np.arange(n, dtype=np.uint64), position=zeros3,
                   normal=normal, geometric_normal=normal, triangle=np.zeros(n, np.int64),
-                  instance=instance, barycentric=zeros3, size=np.ones(n),
-                  triangle_texels=np.zeros(0, np.int64), axes=np.zeros((n, 2, 3)),
-                  terminator=zeros3)
+                  instance=instance, size=np.ones(n), triangle_texels=np.zeros(0, np.int64),
+                  triangle_axes=np.zeros((1, 2, 3)), terminator=zeros3)
 
 
 def _two_charts(gap: int, same_instance: bool, seed: int = 0):

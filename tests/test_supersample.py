@@ -30,8 +30,8 @@ def _box_filtered_reference(done) -> np.ndarray:
     offsets = (np.arange(_GRID) + 0.5) / _GRID - 0.5
     total = np.zeros(len(texels))
     for i, (a, b) in enumerate((a, b) for a in offsets for b in offsets):
-        moved = replace(texels, position=texels.position + a * texels.axes[:, 0]
-                        + b * texels.axes[:, 1])
+        moved = replace(texels, position=texels.position + a * texels.axes()[:, 0]
+                        + b * texels.axes()[:, 1])
         total += _obscurance(done, integrate(done.scene, done.world, tracer, moved,
                                              replace(done.settings, seed=1000 + i)))
     return total / _GRID ** 2
@@ -55,7 +55,7 @@ def test_supersampling_antialiases_a_sharp_obscurance_step(edge_scene, tmp_path)
     t = one.texels
     reference = _box_filtered_reference(one)
     corners = t.position[:, None] + np.einsum(
-        "sj,kjc->ksc", np.array([[-0.5, -0.5], [0.5, -0.5], [-0.5, 0.5], [0.5, 0.5]]), t.axes)
+        "sj,kjc->ksc", np.array([[-0.5, -0.5], [0.5, -0.5], [-0.5, 0.5], [0.5, 0.5]]), t.axes())
     under = scene.info["under"](corners.reshape(-1, 3)).reshape(-1, 4)
     inner = (np.abs(t.position[:, [0, 2]]) < 0.85).all(axis=1)  # whole squares on the floor
     crossed = inner & under.any(axis=1) & ~under.all(axis=1)
