@@ -305,6 +305,32 @@ def test_rebake_reports_its_time_against_the_last_full_bake(base, tmp_path, caps
     assert f"of the last full bake ({full:.2f} s)" in capsys.readouterr().out
 
 
+def test_a_failed_write_leaves_the_old_state_and_no_temporary(base, tmp_path, monkeypatch):
+    """The state is written while the pages are encoded, but put in place only once the output
+    is: when writing the output fails, the previous state stays as it was, byte for byte, and
+    no temporary file is left beside it."""
+    import importlib
+
+    bake_module = importlib.import_module("baker.bake")
+    folder = tmp_path / "out"
+    folder.mkdir()
+    output = folder / "room_baked.glb"
+    shutil.copy(base, output)
+    shutil.copy(default_path(base), default_path(output))
+    before = default_path(output).read_bytes()
+
+    def failing_write(*args, **kwargs):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(bake_module, "write", failing_write)
+    edited = _room(moved(BOXES, "box0", at=(-1.0, 1.3))).save(tmp_path / "edited.glb")
+    with pytest.raises(OSError, match="disk full"):
+        baker.bake(edited, output, SETTINGS, incremental=True)
+    assert default_path(output).read_bytes() == before
+    assert sorted(p.name for p in folder.iterdir()) == sorted(
+        [output.name, default_path(output).name])
+
+
 def test_state_leaves_out_arrays_of_zeros_and_reads_them_back(base):
     """A room without sky or mirrors: its sky terms and chain counts are zeros, listed in the
     header instead of stored, and read back equal (same dtype, shape and bytes)."""
