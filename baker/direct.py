@@ -527,8 +527,8 @@ def texel_receivers(texels: Texels, rows: slice, center: np.ndarray,
             raise ValueError("supersampling needs the tracer (sub-positions are checked by rays)")
         sub = sub_positions(tracer, texels, rows, supersample, seed)
     return Receivers(position=texels.position[rows], normal=texels.normal[rows],
-                     geometric=texels.geometric_normal[rows],
-                     lift=ray_lift(texels.position[rows], texels.size[rows], center),
+                     geometric=texels.geometric_normal(rows),
+                     lift=ray_lift(texels.position[rows], texels.size(rows), center),
                      key=texels.key[rows], sub=sub,
                      raised=np.any(texels.terminator[rows] != 0.0, axis=1))
 

@@ -88,8 +88,8 @@ def _chunk(scene: Scene, world: World, tracer: Tracer, sources: Sources, texels:
     k = len(keys)
     path_keys = _path_keys(keys, paths)
     position = np.repeat(texels.position[rows], paths, axis=0)
-    normal = np.repeat(texels.geometric_normal[rows], paths, axis=0)
-    size = np.repeat(texels.size[rows], paths)
+    normal = np.repeat(texels.geometric_normal(rows), paths, axis=0)
+    size = np.repeat(texels.size(rows), paths)
     points = sample_2d(settings.seed, keys[:, None], np.arange(paths)[None, :],
                        FIRST_DIMENSION).reshape(-1, 2)
     throughput = np.ones((k * paths, 3))

@@ -358,7 +358,7 @@ def _near(texels: Texels, boxes: list[tuple[np.ndarray, np.ndarray]], d_max: flo
     if not boxes:
         return np.zeros(len(texels), bool)
     middle = (boxes[0][0] + boxes[0][1]) / 2
-    return _within(texels.position, texels.size, float(d_max), float(_REACH_TEXELS), middle,
+    return _within(texels.position, texels.size(), float(d_max), float(_REACH_TEXELS), middle,
                    np.array([b[0] for b in boxes]), np.array([b[1] for b in boxes]))
 
 
@@ -371,9 +371,9 @@ def _rays_meet(tracer: Tracer, texels: Texels, rows: np.ndarray, settings) -> tu
     def work(part: slice) -> None:
         chosen = rows[part]
         x, y, z = cosine_directions(texels.key[chosen], n, settings.seed, settings.sampling)
-        normal = texels.geometric_normal[chosen]
+        normal = texels.geometric_normal(chosen)
         maybe = _candidates(tracer, x, y, z, texels.position[chosen], normal,
-                            texels.size[chosen], *tangent_frames(normal), n, settings.d_max)
+                            texels.size(chosen), *tangent_frames(normal), n, settings.d_max)
         keep = maybe.ravel()
         if not keep.any():
             return
@@ -398,16 +398,16 @@ def _probes_meet(tracer: Tracer, texels: Texels, rows: np.ndarray, d_max: float,
 
     def work(part: slice) -> None:
         chosen = rows[part]
-        normal = texels.geometric_normal[chosen]
+        normal = texels.geometric_normal(chosen)
         k = len(chosen)
         maybe = _candidates(tracer, np.tile(x, k), np.tile(y, k), np.tile(z, k),
-                            texels.position[chosen], normal, texels.size[chosen],
+                            texels.position[chosen], normal, texels.size(chosen),
                             *validity_module._frames(normal), m, d_max)
         some = np.flatnonzero(maybe.any(axis=1))
         if not len(some):
             return
         origins, directions = validity_module.hemisphere_probes(
-            texels.position[chosen[some]], normal[some], texels.size[chosen[some]],
+            texels.position[chosen[some]], normal[some], texels.size(chosen[some]),
             tracer.center)
         hits = tracer.cast(origins, directions, d_max)
         found = meets[part]
@@ -433,9 +433,9 @@ def _above(texels: Texels, rows: np.ndarray, corners: np.ndarray) -> np.ndarray:
         return np.zeros(len(rows), bool)
     middle = points.mean(0)
     p = texels.position[rows]
-    slack = texels.size[rows] + 1e-5 * (float(np.abs(points - middle).max())
+    slack = texels.size(rows) + 1e-5 * (float(np.abs(points - middle).max())
                                         + np.abs(p - middle).max(axis=1))
-    return _any_above(p, texels.geometric_normal[rows], slack, points)
+    return _any_above(p, texels.geometric_normal(rows), slack, points)
 
 
 @jit
@@ -529,8 +529,8 @@ def _shadow_dirty(scene, world, recorder_tracer: Tracer, texels: Texels, rows: n
     direct_light(scene, world, recorder, part, sources, settings)
     if not recorder.origins:
         return np.zeros(len(rows), bool), recorder.rays
-    lift = ray_lift(part.position, part.size, recorder.center)
-    starts = part.position + lift[:, None] * part.geometric_normal
+    lift = ray_lift(part.position, part.size(), recorder.center)
+    starts = part.position + lift[:, None] * part.geometric_normal()
     return np.isin(_row_keys(starts), _row_keys(np.concatenate(recorder.origins))), recorder.rays
 
 

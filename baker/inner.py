@@ -91,7 +91,7 @@ def translucent(scene: Scene) -> Translucent:
 
 def other_side(texels: Texels) -> Texels:
     """The texels seen from their other side: geometric normals flipped, ``OTHER_SIDE`` keys."""
-    return replace(texels, geometric_normal=-texels.geometric_normal,
+    return replace(texels, triangle_normal=-texels.triangle_normal,
                    key=texels.key | OTHER_SIDE)
 
 

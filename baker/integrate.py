@@ -193,8 +193,8 @@ def world_rays(texels: Texels, rows: np.ndarray | slice, rays: int, x: np.ndarra
     origins = np.empty((m, 3), np.float32)
     directions = np.empty((m, 3), np.float32)
     starts = texels.position[rows][:, None, :] if sub is None else sub
-    _to_world_kernel(rays, first, starts, texels.geometric_normal[rows],
-                     ray_lift(texels.position[rows], texels.size[rows], center), center, x, y, z,
+    _to_world_kernel(rays, first, starts, texels.geometric_normal(rows),
+                     ray_lift(texels.position[rows], texels.size(rows), center), center, x, y, z,
                      np.zeros(0, np.bool_) if keep is None else keep, origins, directions)
     return origins, directions
 

@@ -51,13 +51,16 @@ class Texels:
     page, x, y: (N,) int64, the texel's page and column/row (row 0 at the top of the page image).
     key: (N,) uint64 stable texel key for the sampler, ``(page·height + y)·width + x``.
     position: (N, 3) float64 world sample point. normal: (N, 3) unit interpolated shading normal.
-    geometric_normal: (N, 3) unit front-face normal of the owning triangle.
     triangle: (N,) int64 owning world triangle (index into World.triangles); instance: (N,) int64.
-    size: (N,) float64 world length of one texel side on the owning triangle.
+    triangle_normal: (T, 3) unit front-face normal of every world triangle that owns texels
+    (zeros for the others); ``geometric_normal(rows)`` gives the texels'.
+    triangle_size: (T,) float64 world length of one texel side on each triangle (0 without UV
+    area or texels); ``size(rows)`` gives the texels'.
     triangle_axes: (T, 2, 3) float64, per world triangle, the world displacement of one texel
     step in x and in y on its plane (the UV→world Jacobian; zeros for a triangle without UV
-    area or without texels), for sub-texel sample positions (``supersample.py``): kept per
-    triangle, as 48 bytes per texel would be 400 MB on a 4096² page.
+    area or without texels), for sub-texel sample positions (``supersample.py``). What depends
+    on the owning triangle alone is kept per triangle: per texel, normal, size and axes would
+    take 80 bytes, 670 MB on a 4096² page.
     terminator: (N, 3) float64 world push of the sample point towards the smooth surface its
     shading normals describe (``_texel_points``; zeros on flat and concave surfaces). Not
     yet applied to ``position``: ``validity.check_texels`` does that where the way is clear.
@@ -71,16 +74,24 @@ class Texels:
     key: np.ndarray
     position: np.ndarray
     normal: np.ndarray
-    geometric_normal: np.ndarray
     triangle: np.ndarray
     instance: np.ndarray
-    size: np.ndarray
+    triangle_normal: np.ndarray
+    triangle_size: np.ndarray
     triangle_texels: np.ndarray
     triangle_axes: np.ndarray
     terminator: np.ndarray
 
     def __len__(self) -> int:
         return len(self.key)
+
+    def geometric_normal(self, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
+        """(k, 3) unit front-face normals of the texels ``rows`` (their triangles')."""
+        return self.triangle_normal[self.triangle[rows]]
+
+    def size(self, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
+        """(k,) world length of one texel side of the texels ``rows`` (their triangles')."""
+        return self.triangle_size[self.triangle[rows]]
 
     def axes(self, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
         """(k, 2, 3) texel axes of the texels ``rows`` (their owning triangles' ``triangle_axes``)."""
@@ -328,7 +339,8 @@ def _texel_points(positions: np.ndarray, normals: np.ndarray, smooth: np.ndarray
     normal = np.empty((k, 3))
     terminator = np.zeros((k, 3))
     for i in range(k):
-        v0, v1, v2 = triangles[tri[i], 0], triangles[tri[i], 1], triangles[tri[i], 2]
+        t = tri[i]
+        v0, v1, v2 = triangles[t, 0], triangles[t, 1], triangles[t, 2]
         b0, b1, b2 = bary[i, 0], bary[i, 1], bary[i, 2]
         for c in range(3):
             position[i, c] = b0 * positions[v0, c] + b1 * positions[v1, c] + b2 * positions[v2, c]
@@ -339,10 +351,10 @@ def _texel_points(positions: np.ndarray, normals: np.ndarray, smooth: np.ndarray
         if smooth[v0] and smooth[v1] and smooth[v2] and length > 1e-12:
             normal[i, 0], normal[i, 1], normal[i, 2] = sx / length, sy / length, sz / length
         else:
-            normal[i, 0], normal[i, 1], normal[i, 2] = geometric[i, 0], geometric[i, 1], geometric[i, 2]
+            normal[i, 0], normal[i, 1], normal[i, 2] = geometric[t, 0], geometric[t, 1], geometric[t, 2]
         for corner, weight in ((v0, b0), (v1, b1), (v2, b2)):
             n0, n1, n2 = normals[corner, 0], normals[corner, 1], normals[corner, 2]
-            facing = n0 * geometric[i, 0] + n1 * geometric[i, 1] + n2 * geometric[i, 2]
+            facing = n0 * geometric[t, 0] + n1 * geometric[t, 1] + n2 * geometric[t, 2]
             if not smooth[corner] or facing <= 0:
                 continue
             height = ((positions[corner, 0] - position[i, 0]) * n0
@@ -388,14 +400,14 @@ def _surface_points(world: World, tri: np.ndarray, bary: np.ndarray, uv_corners:
     some = np.empty(len(owners), np.int64)  # a texel of each owner (all have its UV corners)
     some[inverse] = np.arange(len(tri))
     per_geometric, per_size, per_axes = _triangle_terms(world, owners, uv_corners[some])
-    geometric, size = per_geometric[inverse], per_size[inverse]
-    axes = np.zeros((len(world.triangles), 2, 3))
-    axes[owners] = per_axes
+    triangles = len(world.triangles)
+    geometric, size, axes = np.zeros((triangles, 3)), np.zeros(triangles), np.zeros((triangles, 2, 3))
+    geometric[owners], size[owners], axes[owners] = per_geometric, per_size, per_axes
     position, normal, terminator = _texel_points(world.positions, world.normals, world.smooth,
                                                  world.triangles, tri, bary, geometric)
     return Texels(page=page, x=x, y=y, key=key.astype(np.uint64), position=position,
-                  normal=normal, geometric_normal=geometric, triangle=tri,
-                  instance=world.tri_instance[tri], size=size,
+                  normal=normal, triangle=tri, instance=world.tri_instance[tri],
+                  triangle_normal=geometric, triangle_size=size,
                   triangle_texels=triangle_texels, triangle_axes=axes, terminator=terminator)
 
 

@@ -57,10 +57,10 @@ def sub_positions(tracer: Tracer, texels: Texels, rows: slice | np.ndarray, coun
     position = texels.position[rows]
     k = len(position)
     offsets = sub_offsets(texels, rows, count, seed).reshape(-1, 3)
-    size = np.repeat(texels.size[rows], count)
-    lift = np.repeat(ray_lift(position, texels.size[rows], tracer.center), count)
+    size = np.repeat(texels.size(rows), count)
+    lift = np.repeat(ray_lift(position, texels.size(rows), tracer.center), count)
     start = np.repeat(position + 0.0, count, axis=0)
-    origins = start + lift[:, None] * np.repeat(texels.geometric_normal[rows], count, axis=0)
+    origins = start + lift[:, None] * np.repeat(texels.geometric_normal(rows), count, axis=0)
     length = np.linalg.norm(offsets, axis=1)
     moving = length > 0
     blocked = np.zeros(k * count, bool)

@@ -40,7 +40,7 @@ def _light_leaks(done, builder):
     h = info["half"]
     floor = _node_of(done) == info["nodes"]["floor"]
     centre = rasterise(done.atlas, done.world).position[floor]  # before any was moved
-    r = done.texels.size[floor][:, None] / 2
+    r = done.texels.size(floor)[:, None] / 2
     overlap = (np.clip(h - (np.abs(centre[:, [0, 2]]) - r), 0.0, 2 * r) / (2 * r)).prod(axis=1)
     t = done.texels
     light = done.lightmaps.light[t.page[floor], t.y[floor], t.x[floor]].max(axis=1)

@@ -103,7 +103,7 @@ def _differing(done, reference, scale: float = 1.0, offset: float = 0.0) -> int:
     # inside by the corner's two edges (rasterise.INSET), so another triangulation of the
     # same surface (a mirrored mesh's diagonal) places it up to 2 × 1.7 insets away
     apart = np.linalg.norm(where - reference.texels.position[match], axis=1)
-    assert (apart < 1e-6 + 4 * INSET * reference.texels.size[match]).all()
+    assert (apart < 1e-6 + 4 * INSET * reference.texels.size(match)).all()
     w, w_ref = _w(done), _w(reference)[match]  # grey scenes: the mean of RGB is the luminance
     se, se_ref = (d.terms.standard_error(effective_r_ave(d.ambient, d.settings.rho))
                   for d in (done, reference))
@@ -147,7 +147,7 @@ def test_node_scale_and_deep_nesting_leave_the_lightmap_unchanged(tmp_path, plai
     errors; the panel's own texels face down, so a winding error would show on both)."""
     done = computed(panel_over_floor(**variant), tmp_path, texel_density=16.0, rays=16, d_max=1.0)
     np.testing.assert_allclose(done.world.positions, plain_panel.world.positions, atol=1e-9)
-    np.testing.assert_allclose(done.texels.geometric_normal, plain_panel.texels.geometric_normal,
+    np.testing.assert_allclose(done.texels.geometric_normal(), plain_panel.texels.geometric_normal(),
                                atol=1e-9)
     assert _differing(done, plain_panel) == 0
 

@@ -92,7 +92,7 @@ def test_obscurances_sit_near_full_gi_in_a_lit_room(tmp_path):
     assert 0 < comparison["relative"] < 1
     # Colour bleeding in both: the red wall's neighbourhood is redder than the green one's.
     x = done.texels.position[:, 0]
-    floor = done.texels.geometric_normal[:, 1] > 0.9
+    floor = done.texels.geometric_normal()[:, 1] > 0.9
     for term in (ambient, indirect):
         near_red, near_green = term[floor & (x < -1.0)].mean(0), term[floor & (x > 1.0)].mean(0)
         assert near_red[0] / near_red[1] > near_green[0] / near_green[1]

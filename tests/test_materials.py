@@ -283,7 +283,7 @@ def test_a_diffuse_scene_runs_no_material_stage(tmp_path):
 
 def _top_cap(done, node):
     tx = done.texels
-    top = (done.world.tri_instance[tx.triangle] == node) & (tx.geometric_normal[:, 1] > 0.99)
+    top = (done.world.tri_instance[tx.triangle] == node) & (tx.geometric_normal()[:, 1] > 0.99)
     return top, np.hypot(tx.position[:, 0], tx.position[:, 2])
 
 

@@ -53,7 +53,7 @@ def test_parallel_plane_matches_closed_form(tmp_path, rho):
 def test_colour_bleeding_red_shift_falls_off_with_distance(tmp_path):
     done = computed(red_wall_floor(), tmp_path, texel_density=8.0, rays=256, d_max=2.0)
     distance = done.texels.position[:, 2] + 2.0  # from the wall at z = -2
-    floor = (done.texels.geometric_normal[:, 1] > 0.9) & (distance > 0.05)
+    floor = (done.texels.geometric_normal()[:, 1] > 0.9) & (distance > 0.05)
     w = _w(done)[floor]
     redness = w[:, 0] / w[:, 1]  # red over green; a white floor alone gives 1
     distance = distance[floor]

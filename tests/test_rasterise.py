@@ -86,6 +86,6 @@ def test_keys_are_unique_sorted_and_match_page_positions(tmp_path):
 def test_texel_size_follows_texel_density(tmp_path):
     scene, world, atlas, texels = _raster(open_plane(size=2.0), tmp_path, 10.0)
     # One texel side is 1/density world units (xatlas may shrink charts a little to pack).
-    assert np.allclose(np.median(texels.size), 0.1, rtol=0.1)
+    assert np.allclose(np.median(texels.size()), 0.1, rtol=0.1)
     # And the plane's 4 m² holds about 400 texels, plus its conservative border.
     assert 350 < len(texels) < 600

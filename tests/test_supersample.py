@@ -87,7 +87,7 @@ def test_supersampled_obscurance_does_not_depend_on_threads_or_chunks(edge_scene
                                   later.reshape(len(rows), 12, 3))
     # Ray j starts at sub-position j mod 8 (lifted off the floor by the texel's offset).
     starts = whole.reshape(len(rows), 24, 3).astype(np.float64) + tracer.center
-    lift = ray_lift(t.position[rows], t.size[rows], tracer.center)[:, None]
-    expected = sub[:, np.arange(24) % n] + (lift * t.geometric_normal[rows])[:, None]
+    lift = ray_lift(t.position[rows], t.size(rows), tracer.center)[:, None]
+    expected = sub[:, np.arange(24) % n] + (lift * t.geometric_normal(rows))[:, None]
     np.testing.assert_allclose(starts, expected, atol=1e-5)
     assert len(np.unique(starts[0].round(6), axis=0)) == n

@@ -83,7 +83,7 @@ def _leaking_texels(done, builder):
     # Texel centres before any was moved, to the mm: those near the floor's diagonal are drawn
     # 0.01–0.017 texels off it (rasterise.INSET)
     centre = rasterise(done.atlas, done.world).position[floor].round(2)
-    size = done.texels.size[floor]
+    size = done.texels.size(floor)
     step = np.diff(np.unique(centre[:, 0]))
     assert np.allclose(step, size[0], atol=1e-6) and np.allclose(size, size[0])  # on a world-aligned grid
     bx, _, bz = info["box_centre"]
