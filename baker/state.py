@@ -6,7 +6,7 @@ incremental rebake (``incremental.py``), which diffs the new scene against its f
 
 - a ZIP archive (stored, no compression) whose members have a fixed timestamp, so the same bake
   gives the same bytes (DESIGN.md §4: an incremental rebake's state equals a full bake's);
-- ``header.json``: ``{"format": "baker-bake-state", "version": 2, "fingerprints": {...},
+- ``header.json``: ``{"format": "baker-bake-state", "version": 3, "fingerprints": {...},
   "groups": {name: {"class": ..., "fields": {...}, "scalars": {...}}}, "zeros": {...}}``;
 - one ``<group>/<field>.npy`` member per array (numpy's .npy format), so ``numpy.load`` of the
   file as an .npz reads the arrays; arrays that are all zero are listed under ``zeros`` (shape,
@@ -33,7 +33,7 @@ import numpy as np
 from .atlas import Atlas, InstanceUV
 
 FORMAT = "baker-bake-state"
-VERSION = 2
+VERSION = 3
 SUFFIX = ".bake"
 _DATE = (1980, 1, 1, 0, 0, 0)  # fixed member timestamp: same content, same bytes
 
