@@ -105,7 +105,7 @@ def chart_labels(texels: Texels, shape: tuple[int, int, int]) -> np.ndarray:
         other = index[texels.page[rows], y[rows], x[rows]]
         keep = other >= 0
         rows, other = rows[keep], other[keep]
-        keep = ((texels.instance[rows] == texels.instance[other]) &
+        keep = ((texels.instance(rows) == texels.instance(other)) &
                 (np.einsum("ij,ij->i", texels.normal[rows], texels.normal[other]) > CREASE_COS))
         a_parts.append(rows[keep])
         b_parts.append(other[keep])

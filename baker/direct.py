@@ -545,7 +545,7 @@ def texel_receivers(texels: Texels, rows: slice, center: np.ndarray,
                      geometric=texels.geometric_normal(rows),
                      lift=ray_lift(texels.position[rows], texels.size(rows), center),
                      key=texels.key[rows], sub=sub,
-                     raised=np.any(texels.terminator[rows] != 0.0, axis=1))
+                     raised=np.any(texels.terminator(rows) != 0.0, axis=1))
 
 
 def direct_at(scene: Scene, world: World, tracer: Tracer, sources: Sources,

@@ -136,9 +136,10 @@ class Rebaked:
 
 def take(texels: Texels, rows: np.ndarray) -> Texels:
     """The texels ``rows`` (k,) as a Texels of k rows (the per-triangle ``triangle_*`` fields
-    kept whole)."""
+    and empty ones kept whole)."""
     return replace(texels, **{f.name: getattr(texels, f.name)[rows] for f in fields(Texels)
-                              if not f.name.startswith("triangle_")})
+                              if not f.name.startswith("triangle_")
+                              and len(getattr(texels, f.name))})  # an absent terminator_push
 
 
 def _absent(value) -> bool:
@@ -613,7 +614,7 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
     validity = old_validity
     with _timed(times, "dirty"):
         if len(moved):
-            own = np.isin(raw.instance, moved)
+            own = np.isin(raw.instance(), moved)
             reason[own] = REASONS.index("own")
             old_corners = [_placed_corners(scene, world, i, stored.instance_world[i]) for i in moved]
             new_corners = [_placed_corners(scene, world, i, scene.instances[i].world) for i in moved]

@@ -127,7 +127,7 @@ def add_translucency(scene: Scene, world: World, tracer: Tracer, texels: Texels,
     if len(inside):
         texel_rows = rows[inside]
         w_in = inner_obscurance(tracer, texels, texel_rows,
-                                _reach(scene, table, material[inside], texels.instance[texel_rows]),
+                                _reach(scene, table, material[inside], texels.instance(texel_rows)),
                                 table.sigma[material[inside]], settings)
         ave[inside] += table.factor[material[inside]] * w_in
         extra[inside] += settings.rays
@@ -169,7 +169,7 @@ def other_side_rays(scene: Scene, world: World, texels: Texels, rows: np.ndarray
                                           settings.seed, center, settings.sampling)
     lengths = np.full(len(origins), settings.d_max, np.float32)
     inner = _inner_rays(texels, rows[inside], _reach(scene, table, material[inside],
-                                                     texels.instance[rows[inside]]),
+                                                     texels.instance(rows[inside])),
                         settings, center)
     return (np.concatenate([leaves, inside]), np.concatenate([origins, inner[0]]),
             np.concatenate([directions, inner[1]]), np.concatenate([lengths, inner[2]]))

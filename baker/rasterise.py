@@ -51,7 +51,9 @@ class Texels:
     page, x, y: (N,) int64, the texel's page and column/row (row 0 at the top of the page image).
     key: (N,) uint64 stable texel key for the sampler, ``(page·height + y)·width + x``.
     position: (N, 3) float64 world sample point. normal: (N, 3) unit interpolated shading normal.
-    triangle: (N,) int64 owning world triangle (index into World.triangles); instance: (N,) int64.
+    triangle: (N,) int64 owning world triangle (index into World.triangles).
+    triangle_instance: (T,) int64 instance of every world triangle; ``instance(rows)`` gives the
+    texels'.
     triangle_normal: (T, 3) unit front-face normal of every world triangle that owns texels
     (zeros for the others); ``geometric_normal(rows)`` gives the texels'.
     triangle_size: (T,) float64 world length of one texel side on each triangle (0 without UV
@@ -61,9 +63,10 @@ class Texels:
     area or without texels), for sub-texel sample positions (``supersample.py``). What depends
     on the owning triangle alone is kept per triangle: per texel, normal, size and axes would
     take 80 bytes, 670 MB on a 4096² page.
-    terminator: (N, 3) float64 world push of the sample point towards the smooth surface its
-    shading normals describe (``_texel_points``; zeros on flat and concave surfaces). Not
-    yet applied to ``position``: ``validity.check_texels`` does that where the way is clear.
+    terminator_push: (N, 3) float64 world push of the sample point towards the smooth surface
+    its shading normals describe (``_texel_points``; zeros on flat and concave surfaces), or
+    (0, 3) when every texel's is zero; ``terminator(rows)`` gives the texels'. Not yet applied
+    to ``position``: ``validity.check_texels`` does that where the way is clear.
     triangle_texels: (T,) int64, for every world triangle, how many texels its UV footprint
     touches (0 for triangles that are not baked).
     """
@@ -75,15 +78,25 @@ class Texels:
     position: np.ndarray
     normal: np.ndarray
     triangle: np.ndarray
-    instance: np.ndarray
+    triangle_instance: np.ndarray
     triangle_normal: np.ndarray
     triangle_size: np.ndarray
     triangle_texels: np.ndarray
     triangle_axes: np.ndarray
-    terminator: np.ndarray
+    terminator_push: np.ndarray
 
     def __len__(self) -> int:
         return len(self.key)
+
+    def instance(self, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
+        """(k,) int64 instance of the texels ``rows`` (their triangles')."""
+        return self.triangle_instance[self.triangle[rows]]
+
+    def terminator(self, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
+        """(k, 3) terminator push of the texels ``rows`` (zeros where none is stored)."""
+        if len(self.terminator_push):
+            return self.terminator_push[rows]
+        return np.zeros((len(self.triangle[rows]), 3))
 
     def geometric_normal(self, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
         """(k, 3) unit front-face normals of the texels ``rows`` (their triangles')."""
@@ -406,9 +419,10 @@ def _surface_points(world: World, tri: np.ndarray, bary: np.ndarray, uv_corners:
     position, normal, terminator = _texel_points(world.positions, world.normals, world.smooth,
                                                  world.triangles, tri, bary, geometric)
     return Texels(page=page, x=x, y=y, key=key.astype(np.uint64), position=position,
-                  normal=normal, triangle=tri, instance=world.tri_instance[tri],
+                  normal=normal, triangle=tri, triangle_instance=world.tri_instance,
                   triangle_normal=geometric, triangle_size=size,
-                  triangle_texels=triangle_texels, triangle_axes=axes, terminator=terminator)
+                  triangle_texels=triangle_texels, triangle_axes=axes,
+                  terminator_push=terminator if terminator.any() else np.zeros((0, 3)))
 
 
 def _triangle_terms(world: World, tri: np.ndarray, uv_corners: np.ndarray

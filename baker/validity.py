@@ -256,7 +256,7 @@ def check_texels(scene: Scene, world: World, tracer: Tracer, texels: Texels,
         normal, size = texels.geometric_normal(rows), texels.size(rows)
         usable = np.flatnonzero((size > 0) & (np.linalg.norm(normal, axis=1) > 0.5))
         p = position[rows]  # a view: the chunk's own rows
-        p[:] = _raise(tracer, p, normal, texels.size(rows), texels.terminator[rows])
+        p[:] = _raise(tracer, p, normal, texels.size(rows), texels.terminator(rows))
         start[rows] = p
         home = np.mean(world.corners(texels.triangle[rows]), axis=0)  # (k, 3) centroids
         step_moved, touched = moved[rows], touching[rows]  # views: the chunk's own rows

@@ -131,7 +131,7 @@ def test_instances_differ_where_their_surroundings_differ(tmp_path):
     scene = load(saved(builder, tmp_path))
     done = compute(scene, baker.Settings(texel_density=24.0, rays=64, d_max=0.5))
     w = done.terms.obscurance(effective_r_ave(done.ambient, "sqrt")).mean(axis=1)
-    node_of = np.array([scene.instances[i].node for i in done.texels.instance])
+    node_of = np.array([scene.instances[i].node for i in done.texels.instance()])
     up = done.texels.geometric_normal()[:, 1] > 0.9  # the boxes' top faces
     mean = {name: w[(node_of == node) & up].mean() for name, node in builder.info["boxes"].items()}
     assert mean["open"] > mean["corner"] + 0.02

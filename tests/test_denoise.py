@@ -30,10 +30,10 @@ def _texels(page: np.ndarray, y: np.ndarray, x: np.ndarray, instance: np.ndarray
     zeros3 = np.zeros((n, 3))
     normal = np.tile([0.0, 0.0, 1.0], (n, 1))
     return Texels(page=page, x=x, y=y, key=np.arange(n, dtype=np.uint64), position=zeros3,
-                  normal=normal, triangle=np.zeros(n, np.int64), instance=instance,
-                  triangle_normal=np.array([[0.0, 0.0, 1.0]]), triangle_size=np.ones(1),
-                  triangle_texels=np.zeros(0, np.int64), triangle_axes=np.zeros((1, 2, 3)),
-                  terminator=zeros3)
+                  normal=normal, triangle=instance, triangle_instance=np.arange(2),
+                  triangle_normal=np.array([[0.0, 0.0, 1.0]] * 2), triangle_size=np.ones(2),
+                  triangle_texels=np.zeros(0, np.int64), triangle_axes=np.zeros((2, 2, 3)),
+                  terminator_push=zeros3)
 
 
 def _two_charts(gap: int, same_instance: bool, seed: int = 0):

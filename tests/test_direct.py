@@ -16,7 +16,7 @@ FAST = dict(texel_density=8.0, rays=4, page_size=256)
 
 def _floor(done):
     """Rows of the floor's texels (node 0) and their world positions."""
-    nodes = np.array([done.scene.instances[i].node for i in done.texels.instance])
+    nodes = np.array([done.scene.instances[i].node for i in done.texels.instance()])
     rows = np.flatnonzero(nodes == 0)
     return rows, done.texels.position[rows]
 
@@ -144,7 +144,7 @@ def test_emissive_square_matches_the_analytic_irradiance(tmp_path):
     assert abs(got.mean() - expected.mean()) < 3 * stderr
     assert abs(got.mean() / expected.mean() - 1) < 0.01
     # The emitter's own texels receive nothing from itself: no double count of its emission.
-    nodes = np.array([done.scene.instances[i].node for i in done.texels.instance])
+    nodes = np.array([done.scene.instances[i].node for i in done.texels.instance()])
     own = nodes == builder.info["emitter"]
     assert own.sum() > 100 and np.all(done.direct.emission[own] == 0)
     assert "emissive surfaces" in done.plan.stages and "1 light" not in done.plan.stages["punctual lights"]

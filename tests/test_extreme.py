@@ -163,7 +163,7 @@ def test_mesh_defects_bake_to_open_sky_and_are_counted(tmp_path):
     and the degenerate triangles own none. The report counts what was dropped or changed."""
     done = computed(defect_panels(), tmp_path, texel_density=16.0, rays=16)
     nodes = defect_panels().info["nodes"]
-    per_node = np.bincount([done.scene.instances[i].node for i in done.texels.instance],
+    per_node = np.bincount([done.scene.instances[i].node for i in done.texels.instance()],
                            minlength=len(nodes))
     assert (per_node[list(nodes.values())] >= 81).all()  # a 0.5 m panel at 16/m: 9 × 9 texels
     assert per_node[nodes["coincident"]] == 2 * per_node[nodes["clean"]]
@@ -222,11 +222,11 @@ def test_a_mesh_instanced_many_times(tmp_path, count):
     within d_max: every instance gets its own texels, the same number, and the same W up to
     noise (the instances' means all within 5 standard errors of the mean over all)."""
     done = computed(instanced_boxes(count), tmp_path, texel_density=5.0, rays=4, d_max=0.5)
-    per_instance = np.bincount(done.texels.instance, minlength=count)
+    per_instance = np.bincount(done.texels.instance(), minlength=count)
     assert per_instance.min() == per_instance.max() > 0
     w = _w(done)
-    means = np.bincount(done.texels.instance, w) / per_instance
-    se = np.sqrt(np.bincount(done.texels.instance, done.terms.standard_error(
+    means = np.bincount(done.texels.instance(), w) / per_instance
+    se = np.sqrt(np.bincount(done.texels.instance(), done.terms.standard_error(
         effective_r_ave(done.ambient, done.settings.rho)) ** 2)) / per_instance
     assert (np.abs(means - means.mean()) <= 5 * se + 1e-12).all()
 

@@ -67,7 +67,7 @@ def test_seams_agree_after_stitching(shape, request):
     assert seams.edges >= 3 and len(seams) > 200
     before = seam_steps(_unstitched(done).obscurance, seams)
     after = seam_steps(done.lightmaps.obscurance, seams)
-    on_shape = node[done.texels.instance] == builder.info["nodes"][shape]
+    on_shape = node[done.texels.instance()] == builder.info["nodes"][shape]
     noise = float(np.median(done.terms.standard_error(done.ambient.r_ave)[on_shape]))
     assert before.max() > 5 * noise  # the seams were visible
     assert after.max() < noise  # now within the noise level, everywhere

@@ -108,7 +108,7 @@ def _leaking_texels(done, builder):
 
 def _node_of(done):
     """(N,) node index of every texel."""
-    return np.array([inst.node for inst in done.scene.instances])[done.texels.instance]
+    return np.array([inst.node for inst in done.scene.instances])[done.texels.instance()]
 
 
 @pytest.fixture(scope="module")
@@ -174,7 +174,7 @@ def test_probe_states_on_known_points(room, tmp_path):
     done = computed(room, tmp_path, texel_density=DENSITY, rays=4, d_max=6.0)
     texels, validity, info = done.texels, done.validity, room.info
     original = rasterise(done.atlas, done.world).position  # before the probes moved any
-    node = np.array([inst.node for inst in done.scene.instances])[texels.instance]
+    node = np.array([inst.node for inst in done.scene.instances])[texels.instance()]
     floor = node == info["nodes"]["floor"]
     bx, _, bz = info["box_centre"]
     sx, _, sz = info["box_size"]
