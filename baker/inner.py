@@ -114,7 +114,7 @@ def add_translucency(scene: Scene, world: World, tracer: Tracer, texels: Texels,
         return terms
     material = world.tri_material[texels.triangle[rows]]
     hit, ave = np.zeros((len(rows), 3)), np.zeros((len(rows), 3))
-    extra = terms.chain_rays.copy()
+    extra = terms.chain_ray_counts()
     leaves = np.flatnonzero(table.leaf[material])
     if len(leaves):
         back = integrate(scene, world, tracer, other_side(texels), settings, rows=rows[leaves],
@@ -122,7 +122,7 @@ def add_translucency(scene: Scene, world: World, tracer: Tracer, texels: Texels,
         t = table.factor[material[leaves]]
         hit[leaves] = t * back.w_hit
         ave[leaves] = t * back.escaped[:, None]
-        extra[leaves] += back.counts + back.chain_rays
+        extra[leaves] += back.counts + back.chain_ray_counts()
     inside = np.flatnonzero(table.inner[material])
     if len(inside):
         texel_rows = rows[inside]

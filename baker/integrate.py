@@ -75,6 +75,10 @@ class Terms:
         """How many obscurance rays were cast in all."""
         return int(self.counts.sum())
 
+    def chain_ray_counts(self) -> np.ndarray:
+        """(N,) int64 ``chain_rays``, zeros when they were not counted (a new array)."""
+        return self.chain_rays.copy() if len(self.chain_rays) else np.zeros(len(self.counts), np.int64)
+
     def obscurance(self, r_ave: np.ndarray) -> np.ndarray:
         """W (N, 3) for average reflectivity ``r_ave`` (3,), with the light through
         translucent surfaces (``through_hit``, ``through_ave``) when there is some."""
@@ -541,7 +545,8 @@ def integrate(scene: Scene, world: World, tracer: Tracer, texels: Texels, settin
     rows = np.arange(len(texels)) if rows is None else np.asarray(rows, np.int64)
     surfaces = _surfaces(scene, world)
     sums = np.zeros((len(rows), _COLUMNS))
-    chain_counts = np.zeros((len(rows), 2), np.int64)  # chain rays, capped chains
+    chaining = surfaces.special  # else no chain is counted: the counts stay empty
+    chain_counts = np.zeros((len(rows) if chaining else 0, 2), np.int64)  # rays, capped chains
     counts = np.zeros(len(rows), np.int64)
     active = np.arange(len(rows))
     first, batch = 0, settings.rays
@@ -553,8 +558,9 @@ def integrate(scene: Scene, world: World, tracer: Tracer, texels: Texels, settin
         def work(chunk: np.ndarray, first=first, batch=batch) -> None:
             round_sums, chains = _chunk_sums(surfaces, tracer, texels, rows[chunk], first, batch,
                                              settings)
-            chain_counts[chunk, 0] += chains.rays
-            chain_counts[chunk, 1] += chains.capped
+            if chaining:
+                chain_counts[chunk, 0] += chains.rays
+                chain_counts[chunk, 1] += chains.capped
             if first:
                 round_sums[:, _HALF.start:] = 0.0
             sums[chunk] += round_sums
@@ -572,7 +578,9 @@ def integrate(scene: Scene, world: World, tracer: Tracer, texels: Texels, settin
         r_ave, scale = error_scale if error_scale is not None else (np.ones(3), 1.0)
         active = active[terms.standard_error(r_ave) * scale > settings.target_error]
         batch = first
-    terms = replace(_means(sums, counts), chain_rays=chain_counts[:, 0], capped=chain_counts[:, 1])
+    terms = _means(sums, counts)
+    if chaining:
+        terms = replace(terms, chain_rays=chain_counts[:, 0], capped=chain_counts[:, 1])
     if not translucency:
         return terms
     from .inner import add_translucency  # leaves and inner obscurances (§4); inner.py casts
