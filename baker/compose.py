@@ -53,7 +53,7 @@ def compose(atlas: Atlas, texels: Texels, terms: Terms, ambient: Ambient, rho: s
     covered = np.zeros(shape, bool)
     r_ave = effective_r_ave(ambient, rho)
     _scatter(obscurance, texels, lambda block: _rows(terms, block, len(texels)).obscurance(r_ave))
-    covered[texels.page, texels.y, texels.x] = True
+    _scatter(covered, texels, lambda block: True)
     light = obscurance * ambient.intensity
     if indirect is not None:
         _scatter(light, texels, lambda block: indirect[block])
@@ -78,10 +78,10 @@ def _rows(per_texel, block: slice, count: int):
 
 def _scatter(pages: np.ndarray, texels: Texels, values: Callable[[slice], np.ndarray],
              add: bool = False) -> None:
-    """Write (or ``add``) the texels' values into ``pages`` (P, H, W, 3), a block of texels at
-    a time: ``values(block)`` gives the (k, 3) values of the texels ``block``. At once, the
+    """Write (or ``add``) the texels' values into ``pages`` (P, H, W, …), a block of texels at
+    a time: ``values(block)`` gives the (k, …) values of the texels ``block``. At once, the
     (N, 3) values and ``+=``'s gathered copies would be 200 MB each at 4096²."""
     for start in range(0, len(texels), _TEXELS_AT_ONCE):
         block = slice(start, start + _TEXELS_AT_ONCE)
-        where = texels.page[block], texels.y[block], texels.x[block]
+        where = texels.pixels(block)
         pages[where] = pages[where] + values(block) if add else values(block)

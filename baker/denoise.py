@@ -95,14 +95,15 @@ def chart_labels(texels: Texels, shape: tuple[int, int, int]) -> np.ndarray:
     """
     n = len(texels)
     index = np.full(shape, -1, np.int64)
-    index[texels.page, texels.y, texels.x] = np.arange(n)
+    page, texel_y, texel_x = texels.pixels()
+    index[page, texel_y, texel_x] = np.arange(n)
     pages, height, width = shape
     a_parts, b_parts = [], []
     for dy, dx in ((0, 1), (1, -1), (1, 0), (1, 1)):  # each unordered 8-neighbour pair once
-        y, x = texels.y + dy, texels.x + dx
+        y, x = texel_y + dy, texel_x + dx
         inside = (y < height) & (x >= 0) & (x < width)
         rows = np.flatnonzero(inside)
-        other = index[texels.page[rows], y[rows], x[rows]]
+        other = index[page[rows], y[rows], x[rows]]
         keep = other >= 0
         rows, other = rows[keep], other[keep]
         keep = ((texels.instance(rows) == texels.instance(other)) &
@@ -201,7 +202,7 @@ def denoise(lightmaps: Lightmaps, texels: Texels, invalid: np.ndarray | None = N
     valid = np.ones(n, bool)
     for mask in (invalid, enclosed):
         if mask is not None:
-            valid &= ~mask[texels.page, texels.y, texels.x]
+            valid &= ~mask[texels.pixels()]
     labels = chart_labels(texels, shape)
     order = np.argsort(labels, kind="stable")
     starts = np.flatnonzero(np.r_[True, np.diff(labels[order]) != 0]) if n else np.zeros(0, int)
@@ -215,7 +216,8 @@ def denoise(lightmaps: Lightmaps, texels: Texels, invalid: np.ndarray | None = N
             keep = valid[rows]
             if keep.sum() < MIN_TEXELS:  # too small to tell noise from detail: keep it
                 continue
-            page, ys, xs = int(texels.page[rows[0]]), texels.y[rows], texels.x[rows]
+            pages_of, ys, xs = texels.pixels(rows)
+            page = int(pages_of[0])
             origin = (int(ys.min()) - MARGIN, int(xs.min()) - MARGIN)
             size = (int(ys.max()) - origin[0] + 1 + MARGIN, int(xs.max()) - origin[1] + 1 + MARGIN)
             for name in names:

@@ -40,7 +40,7 @@ def error_pages(done) -> np.ndarray:
     """(P, H, W) float64 pages of ``texel_errors`` (0 where no texel is baked)."""
     atlas, texels = done.atlas, done.texels
     pages = np.zeros((atlas.page_count, atlas.height, atlas.width))
-    pages[texels.page, texels.y, texels.x] = texel_errors(done)
+    pages[texels.pixels()] = texel_errors(done)
     return pages
 
 

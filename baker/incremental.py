@@ -137,9 +137,10 @@ class Rebaked:
 def take(texels: Texels, rows: np.ndarray) -> Texels:
     """The texels ``rows`` (k,) as a Texels of k rows (the per-triangle ``triangle_*`` fields
     and empty ones kept whole)."""
-    return replace(texels, **{f.name: getattr(texels, f.name)[rows] for f in fields(Texels)
-                              if not f.name.startswith("triangle_")
-                              and len(getattr(texels, f.name))})  # an absent terminator_push
+    return replace(texels, **{f.name: value[rows] for f in fields(Texels)
+                              if isinstance(value := getattr(texels, f.name), np.ndarray)
+                              and not f.name.startswith("triangle_")
+                              and len(value)})  # an absent terminator_push
 
 
 def _absent(value) -> bool:

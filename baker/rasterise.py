@@ -44,12 +44,16 @@ from .sampling import jit
 _CANDIDATES_PER_CHUNK = 2_000_000
 
 
+_KEY_BITS = np.uint64((1 << 63) - 1)  # a texel key's bits below inner.OTHER_SIDE
+
+
 @dataclass(frozen=True)
 class Texels:
     """The baked texels, N of them, sorted by ``key``.
 
-    page, x, y: (N,) int64, the texel's page and column/row (row 0 at the top of the page image).
-    key: (N,) uint64 stable texel key for the sampler, ``(page·height + y)·width + x``.
+    key: (N,) uint64 stable texel key for the sampler, ``(page·height + y)·width + x``, of pages
+    ``page_width`` × ``page_height`` texels: ``pixels(rows)`` gives the texels' page, row (0 at
+    the top of the page image) and column.
     position: (N, 3) float64 world sample point. normal: (N, 3) unit interpolated shading normal.
     triangle: (N,) int64 owning world triangle (index into World.triangles).
     triangle_instance: (T,) int64 instance of every world triangle; ``instance(rows)`` gives the
@@ -71,9 +75,6 @@ class Texels:
     touches (0 for triangles that are not baked).
     """
 
-    page: np.ndarray
-    x: np.ndarray
-    y: np.ndarray
     key: np.ndarray
     position: np.ndarray
     normal: np.ndarray
@@ -84,9 +85,20 @@ class Texels:
     triangle_texels: np.ndarray
     triangle_axes: np.ndarray
     terminator_push: np.ndarray
+    page_width: int
+    page_height: int
 
     def __len__(self) -> int:
         return len(self.key)
+
+    def pixels(self, rows: np.ndarray | slice = slice(None)
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(page, y, x), each (k,) int64, of the texels ``rows``, from their keys (the other-side
+        bit ``inner.OTHER_SIDE`` ignored): ``pages[texels.pixels(rows)]`` reads them."""
+        key = (self.key[rows] & _KEY_BITS).astype(np.int64)
+        page, rest = np.divmod(key, self.page_width * self.page_height)
+        y, x = np.divmod(rest, self.page_width)
+        return page, y, x
 
     def instance(self, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
         """(k,) int64 instance of the texels ``rows`` (their triangles')."""
@@ -322,11 +334,10 @@ def texels_of(atlas: Atlas, world: World, coverage: Coverage) -> Texels:
     slot[tris] = np.arange(len(tris))
     uv = corners[slot[coverage.triangle]]
     key = coverage.key.astype(np.int64)
-    page, rest = np.divmod(key, atlas.width * atlas.height)
-    y, x = np.divmod(rest, atlas.width)
+    y, x = np.divmod(key % (atlas.width * atlas.height), atlas.width)
     centre = np.stack([x + 0.5, y + 0.5], axis=1)
     bary = _barycentric(uv, centre)
-    return _surface_points(world, coverage.triangle, bary, uv, page, x, y, key,
+    return _surface_points(world, coverage.triangle, bary, uv, (atlas.width, atlas.height), key,
                            coverage.triangle_texels)
 
 
@@ -399,7 +410,7 @@ def _texel_axes(world: World, tri: np.ndarray, uv_corners: np.ndarray) -> np.nda
 
 
 def _surface_points(world: World, tri: np.ndarray, bary: np.ndarray, uv_corners: np.ndarray,
-                    page: np.ndarray, x: np.ndarray, y: np.ndarray, key: np.ndarray,
+                    page_size: tuple[int, int], key: np.ndarray,
                     triangle_texels: np.ndarray) -> Texels:
     """World position, normals, size and terminator push of each texel's sample point (from its
     barycentrics ``bary`` (N, 3) in the owner ``tri``), and every triangle's texel axes.
@@ -418,11 +429,12 @@ def _surface_points(world: World, tri: np.ndarray, bary: np.ndarray, uv_corners:
     geometric[owners], size[owners], axes[owners] = per_geometric, per_size, per_axes
     position, normal, terminator = _texel_points(world.positions, world.normals, world.smooth,
                                                  world.triangles, tri, bary, geometric)
-    return Texels(page=page, x=x, y=y, key=key.astype(np.uint64), position=position,
+    return Texels(key=key.astype(np.uint64), position=position,
                   normal=normal, triangle=tri, triangle_instance=world.tri_instance,
                   triangle_normal=geometric, triangle_size=size,
                   triangle_texels=triangle_texels, triangle_axes=axes,
-                  terminator_push=terminator if terminator.any() else np.zeros((0, 3)))
+                  terminator_push=terminator if terminator.any() else np.zeros((0, 3)),
+                  page_width=page_size[0], page_height=page_size[1])
 
 
 def _triangle_terms(world: World, tri: np.ndarray, uv_corners: np.ndarray

@@ -91,8 +91,11 @@ class Validity:
         """(invalid, enclosed): (P, H, W) bool page masks of the INVALID and ENCLOSED texels."""
         invalid = np.zeros(shape, bool)
         enclosed = np.zeros(shape, bool)
-        invalid[texels.page, texels.y, texels.x] = self.state == INVALID
-        enclosed[texels.page, texels.y, texels.x] = self.state == ENCLOSED
+        for start in range(0, len(texels), _CHUNK):  # the pixels of a chunk at a time
+            rows = slice(start, start + _CHUNK)
+            where = texels.pixels(rows)
+            invalid[where] = self.state[rows] == INVALID
+            enclosed[where] = self.state[rows] == ENCLOSED
         return invalid, enclosed
 
 

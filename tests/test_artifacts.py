@@ -43,7 +43,7 @@ def _light_leaks(done, builder):
     r = done.texels.size(floor)[:, None] / 2
     overlap = (np.clip(h - (np.abs(centre[:, [0, 2]]) - r), 0.0, 2 * r) / (2 * r)).prod(axis=1)
     t = done.texels
-    light = done.lightmaps.light[t.page[floor], t.y[floor], t.x[floor]].max(axis=1)
+    light = done.lightmaps.light[t.pixels(floor)].max(axis=1)
     lit = light > 1e-6
     texels, weights = _floor_lookup_texels(done, info["nodes"]["floor"],
                                            _interior_points(info, 0.25 / DENSITY))

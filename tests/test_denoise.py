@@ -24,16 +24,18 @@ from baker.rasterise import Texels
 from baker.settings import Settings
 
 
-def _texels(page: np.ndarray, y: np.ndarray, x: np.ndarray, instance: np.ndarray) -> Texels:
+def _texels(page: np.ndarray, y: np.ndarray, x: np.ndarray, instance: np.ndarray,
+            shape: tuple[int, int, int]) -> Texels:
     """Texels at the given page positions, all facing +z (only what denoise.py reads is set)."""
     n = len(page)
     zeros3 = np.zeros((n, 3))
     normal = np.tile([0.0, 0.0, 1.0], (n, 1))
-    return Texels(page=page, x=x, y=y, key=np.arange(n, dtype=np.uint64), position=zeros3,
+    key = ((page * shape[1] + y) * shape[2] + x).astype(np.uint64)
+    return Texels(key=key, position=zeros3,
                   normal=normal, triangle=instance, triangle_instance=np.arange(2),
                   triangle_normal=np.array([[0.0, 0.0, 1.0]] * 2), triangle_size=np.ones(2),
                   triangle_texels=np.zeros(0, np.int64), triangle_axes=np.zeros((2, 2, 3)),
-                  terminator_push=zeros3)
+                  terminator_push=zeros3, page_width=shape[2], page_height=shape[1])
 
 
 def _two_charts(gap: int, same_instance: bool, seed: int = 0):
@@ -54,7 +56,7 @@ def _two_charts(gap: int, same_instance: bool, seed: int = 0):
         covered[0][region] = True
     _, y, x = np.nonzero(covered)
     instance = np.zeros(len(y), np.int64) if same_instance else np.where(dark[y, x], 0, 1)
-    texels = _texels(np.zeros(len(y), np.int64), y, x, instance.astype(np.int64))
+    texels = _texels(np.zeros(len(y), np.int64), y, x, instance.astype(np.int64), shape)
     return Lightmaps(light=light, obscurance=light.copy(), covered=covered), texels, dark, 0.005
 
 
@@ -94,7 +96,7 @@ def test_small_patches_and_creases():
     """A patch under MIN_TEXELS keeps its values; a crease splits a chart into two patches."""
     y, x = np.mgrid[0:20, 0:20]
     y, x = y.ravel(), x.ravel()
-    texels = _texels(np.zeros(len(y), np.int64), y, x, np.zeros(len(y), np.int64))
+    texels = _texels(np.zeros(len(y), np.int64), y, x, np.zeros(len(y), np.int64), (1, 20, 20))
     normal = texels.normal.copy()
     normal[x >= 10] = [1.0, 0.0, 0.0]  # a box's edge down the middle
     from dataclasses import replace
@@ -102,7 +104,7 @@ def test_small_patches_and_creases():
     assert chart_labels(texels, (1, 20, 20)).max() == 0
     assert chart_labels(creased, (1, 20, 20)).max() == 1
     small = _texels(np.zeros(MIN_TEXELS - 1, np.int64), np.zeros(MIN_TEXELS - 1, np.int64),
-                    np.arange(MIN_TEXELS - 1), np.zeros(MIN_TEXELS - 1, np.int64))
+                    np.arange(MIN_TEXELS - 1), np.zeros(MIN_TEXELS - 1, np.int64), (1, 4, 80))
     rng = np.random.default_rng(2)
     light = np.zeros((1, 4, 80, 3))
     light[0, 0, :MIN_TEXELS - 1] = rng.uniform(0.5, 1.5, (MIN_TEXELS - 1, 3))

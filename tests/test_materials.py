@@ -295,7 +295,7 @@ def test_a_wax_cylinders_thin_rim_is_brighter_than_its_thick_core(tmp_path):
     assert rim.sum() > 50 and core.sum() > 20
     inner = done.terms.through_ave @ LUMINANCE
     assert 0 < inner[core].mean() and 1.5 * inner[core].mean() < inner[rim].mean()
-    light = done.lightmaps.light[done.texels.page, done.texels.y, done.texels.x] @ LUMINANCE
+    light = done.lightmaps.light[done.texels.pixels()] @ LUMINANCE
     assert light[core].mean() < light[rim].mean()  # the front's W is the same: open sky
     assert "wax" in done.plan.stages["inner obscurances"]
     assert done.plan.stages["leaves"].startswith("off")

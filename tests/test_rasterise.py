@@ -69,7 +69,8 @@ def test_sample_points_keep_inside_their_triangles_edges(tmp_path):
     clamped = distance.min(axis=1) < 0.5  # near an edge
     assert clamped.sum() > 100
     assert distance.min() >= INSET * (1 - 1e-6)
-    centre = np.stack([texels.x + 0.5, texels.y + 0.5], axis=1)
+    _, y, x = texels.pixels()
+    centre = np.stack([x + 0.5, y + 0.5], axis=1)
     assert np.abs(point - centre)[~clamped].max() < 1e-6  # the others keep their centres
     at_corner = np.sort(distance[clamped], axis=1)[:, :2]  # a corner's two nearest edges
     corner = at_corner[:, 1] < 2 * INSET
@@ -79,7 +80,9 @@ def test_sample_points_keep_inside_their_triangles_edges(tmp_path):
 def test_keys_are_unique_sorted_and_match_page_positions(tmp_path):
     scene, world, atlas, texels = _raster(three_instances(), tmp_path, 16.0)
     assert np.all(np.diff(texels.key.astype(np.int64)) > 0)
-    expected = (texels.page * atlas.height + texels.y) * atlas.width + texels.x
+    page, y, x = texels.pixels()
+    assert (page < atlas.page_count).all() and (y < atlas.height).all() and (x < atlas.width).all()
+    expected = (page * atlas.height + y) * atlas.width + x
     assert np.array_equal(texels.key.astype(np.int64), expected)
 
 

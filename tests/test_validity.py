@@ -95,7 +95,7 @@ def _leaking_texels(done, builder):
                   & (np.abs(centre[:, 2] - bz) + r[:, 0] <= sz / 2))
     near = (overlap > 0) & ~inside_box
     t = done.texels
-    w = done.lightmaps.obscurance[t.page[floor], t.y[floor], t.x[floor]].max(axis=1)
+    w = done.lightmaps.obscurance[t.pixels(floor)].max(axis=1)
     points = _interior_points(info, 0.25 / DENSITY)
     texels, weights = _floor_lookup_texels(done, info["nodes"]["floor"], points)
     read = np.unique(texels[weights > 0], axis=0)
