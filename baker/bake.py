@@ -401,6 +401,7 @@ def _rename(temp: str, path: Path) -> None:
 
 
 def _remove(temp: str) -> None:
+    """Delete the temporary file ``temp`` if it is there."""
     if os.path.exists(temp):
         os.unlink(temp)
 

@@ -34,7 +34,6 @@ bit, the terms the last bake stored, and only the others need rays. The rebake:
 from __future__ import annotations
 
 from dataclasses import dataclass, fields, replace
-
 from typing import BinaryIO, Callable
 
 import numpy as np
@@ -59,7 +58,7 @@ from .validity import Validity, check_texels
 
 # Extra reach (in texel sides of each texel) beyond d_max: the validity probes move a sample
 # point by up to rounds × (probe radius + push) sides, then probe a radius further; plus one.
-_REACH_TEXELS = (getattr(validity_module, "TANGENT_ROUNDS", 2)
+_REACH_TEXELS = (validity_module.TANGENT_ROUNDS
                  * (validity_module.PROBE_RADIUS + validity_module.PUSH)
                  + validity_module.PROBE_RADIUS + 1.0)
 # Rays per batch when testing candidates against the changed geometry (bounds memory).
@@ -636,7 +635,7 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
                               np.flatnonzero(old_validity.touching))
             checked, fresh = check_texels(scene, world, tracer, take(raw, redo), resolved.d_max)
             tested += len(redo) * (validity_module.HEMISPHERE_RAYS + validity_module.TANGENT_RAYS
-                                   * getattr(validity_module, "TANGENT_ROUNDS", 2))
+                                   * validity_module.TANGENT_ROUNDS)
             # Probes that met the moved object mostly find what they found before: such a
             # texel is dirty only if its rays meet it (below). Touching texels are redone.
             same = (_same_rows(old_validity, fresh, redo) & ~old_validity.touching[redo]

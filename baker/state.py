@@ -169,15 +169,8 @@ def write_state(file: BinaryIO, state: BakeState) -> None:
             _member(archive, f"{name}.npy", arrays[name])
 
 
-def save(path: str | Path, state: BakeState) -> None:
-    """Write the state to ``path`` atomically (temporary file + rename), streamed."""
-    from .bake import write_atomically  # bake imports this module
-
-    write_atomically(Path(path), lambda file: write_state(file, state))
-
-
 def load(path: str | Path, classes: dict[str, type]) -> BakeState:
-    """Read a state written by ``save``; ``classes`` maps group name → the dataclass to rebuild.
+    """Read a state written by ``write_state``; ``classes`` maps group name → the dataclass to rebuild.
 
     Raises StateUnusable (one-line reason) for a missing, truncated, foreign or other-version
     file, or one whose groups or fields differ from the dataclasses' (written by older code).
