@@ -8,7 +8,8 @@ The pipeline, one module per stage (DESIGN.md §3):
     load.load            glTF file → Scene (instances with float64 world matrices)
     geometry.build_world Scene → World (every triangle in world space)
     unwrap.unwrap        World → Atlas (xatlas lightmap pages)
-    rasterise.rasterise  Atlas → Texels (world sample point of every texel)
+    rasterise.cover      Atlas → Coverage (which triangle owns each texel)
+    rasterise.texels_of  Coverage → Texels (world sample point of every texel of a part)
     integrate.integrate  Texels → Terms (obscurance terms, rays cast with trace.Tracer)
     direct.direct_light  Texels → Direct (lights, emitters, sky per texel, with shadow rays)
     compose.compose      Terms + Direct → Lightmaps (L = D + I_A · W per page)
@@ -18,7 +19,9 @@ The pipeline, one module per stage (DESIGN.md §3):
     hdr.page_file        float pages as .hdr / .exr files (``--lightmaps DIR --format``)
     write.write          Scene + Atlas + pages → glTF file with MOZ_lightmap
 
-``bake.bake`` runs them in order.
+``bake.bake`` runs them in order; from ``texels_of`` to ``compose`` a part of the texels at a
+time, each part's results kept on disk for the bake state (``parts.py``, ``spill.py``), so a
+large page needs little more memory than its pages.
 """
 
 from .bake import BakeResult, bake

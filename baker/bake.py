@@ -23,7 +23,7 @@ import numpy as np
 
 from .ambient import Ambient, ambient_terms
 from .atlas import Atlas
-from .compose import Lightmaps, compose, effective_r_ave
+from .compose import Lightmaps, blank, compose, compose_into, effective_r_ave
 from .direct import Direct, Power, Sources, delivered_power, direct_light, light_sources
 from .encode import encode
 from .errormap import write_error_maps
@@ -38,7 +38,9 @@ from .load import load
 from .plan import Plan, make_plan
 from .postprocess import postprocess
 from .progress import bar, wanted
-from .rasterise import Texels, rasterise
+from .parts import PerTexel, Tally, TexelPoints, part_slices
+from .rasterise import Texels, cover, owners, texels_of
+from .spill import Spill
 from .validity import Validity, check_texels
 from .seams import find_seams
 from .scene import Scene
@@ -161,7 +163,12 @@ def check_input_kept(scene: Scene, output: Path, overwrite: bool = False) -> Non
 
 @dataclass(frozen=True)
 class Computed:
-    """Everything a bake computed before encoding, for the report, tests and benchmarks."""
+    """Everything a bake computed before encoding, for the report, tests and benchmarks.
+
+    ``per_texel`` holds the texels and their results, in memory or on disk (``parts.py``);
+    ``texels``, ``validity``, ``terms`` and ``direct`` load them whole on first use. ``tally``
+    has what the report needs of them without loading them.
+    """
 
     scene: Scene
     world: World
@@ -169,25 +176,43 @@ class Computed:
     ambient: Ambient
     plan: Plan
     atlas: Atlas
-    texels: Texels
-    terms: Terms
+    per_texel: PerTexel
+    tally: Tally
     lightmaps: Lightmaps
     stage_seconds: dict[str, float]
     sources: Sources | None = None  # what lights the scene directly (direct.py)
     power: Power | None = None  # what each source lays on the surfaces, for I_A
-    direct: Direct | None = None  # the texels' direct light, per source
-    validity: Validity | None = None  # which sample points were moved, flagged (validity.py)
     denoised: DenoiseInfo | None = None  # what --denoise did (denoise.py); None: not denoised
 
-    def rmse_estimate(self) -> float:
-        """RMSE of the lightmap's luminance estimated from the rays (``Terms.rmse``)."""
-        if not len(self.texels):
-            return 0.0
-        r_ave = effective_r_ave(self.ambient, self.settings.rho)
-        obscurance = self.terms.rmse(r_ave, self.settings.sampling) * (
+    @property
+    def texels(self) -> Texels:
+        return self.per_texel.texels
+
+    @property
+    def validity(self) -> Validity:
+        """Which sample points were moved or flagged (validity.py)."""
+        return self.per_texel.validity
+
+    @property
+    def terms(self) -> Terms:
+        return self.per_texel.terms
+
+    @property
+    def direct(self) -> Direct | None:
+        """The texels' direct light, per source."""
+        return self.per_texel.direct
+
+    def obscurance_rmse(self) -> float:
+        """RMSE of the luminance of I_A·W estimated from the rays (``Terms.rmse``)."""
+        return self.tally.obscurance_rmse(self.settings.sampling) * float(
             self.ambient.intensity @ LUMINANCE)
-        direct = float(np.mean(self.direct.variance())) if self.direct is not None else 0.0
-        return float(np.sqrt(obscurance ** 2 + direct))
+
+    def rmse_estimate(self) -> float:
+        """RMSE of the lightmap's luminance estimated from the rays: I_A·W's and D's."""
+        if not self.tally.texels:
+            return 0.0
+        direct = self.tally.direct_variance / self.tally.texels
+        return float(np.sqrt(self.obscurance_rmse() ** 2 + direct))
 
 
 def lighting(scene: Scene, world: World, resolved: Resolved, times: dict[str, float]):
@@ -204,8 +229,27 @@ def lighting(scene: Scene, world: World, resolved: Resolved, times: dict[str, fl
     return tracer, sources, power, ambient, plan
 
 
-def compute(scene: Scene, settings: Settings, quiet: bool = True) -> Computed:
-    """Run every stage from the loaded scene up to the post-processed float lightmaps."""
+@dataclass(frozen=True)
+class _Baking:
+    """What every part of a bake needs (``compute``)."""
+
+    scene: Scene
+    world: World
+    settings: Resolved
+    tracer: Tracer
+    sources: Sources
+    ambient: Ambient
+    atlas: Atlas
+
+
+def compute(scene: Scene, settings: Settings, quiet: bool = True,
+            spill_folder: str | os.PathLike | None = None) -> Computed:
+    """Run every stage from the loaded scene up to the post-processed float lightmaps.
+
+    The texels are made, traced and composed a part at a time (``parts.py``); when there are
+    several parts, each part's results go to a temporary folder in ``spill_folder`` (None: the
+    system's) until the bake state is written (``Computed.per_texel``).
+    """
     times: dict[str, float] = {}
     with _timed(times, "load"):
         world = build_world(scene)
@@ -221,46 +265,92 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True) -> Computed:
             resolved = replace(resolved, texel_density=error.texel_density)  # derived: shrink it
             atlas = unwrap(scene, world, resolved)
     with _timed(times, "rasterise"):
-        texels = rasterise(atlas, world)
+        coverage = cover(atlas, world)
+        owned = owners(atlas, world, coverage)
+    count = len(coverage.key)
+    parts = part_slices(count)
+    spill = Spill(spill_folder) if len(parts) > 1 else None
+    baking = _Baking(scene, world, resolved, tracer, sources, ambient, atlas)
+    lightmaps = blank(atlas)
+    masks = np.zeros_like(lightmaps.covered), np.zeros_like(lightmaps.covered)
+    tally = Tally()
+    with bar(count * (1 + sources.any()), "baking", wanted(quiet)) as advance:
+        for rows in parts:
+            texels, validity, terms, direct = _bake_part(
+                baking, texels_of(atlas, world, coverage, rows, owned), times, advance)
+            indirect = None
+            if resolved.method == "gi":  # the full-GI reference instead of I_A·W (gi.py)
+                with _timed(times, "gi"):
+                    indirect = indirect_light(scene, world, tracer, sources, texels, resolved,
+                                              resolved.rays).irradiance
+            with _timed(times, "compose"):
+                compose_into(lightmaps, texels, terms, ambient, resolved.rho, direct,
+                             indirect=indirect)
+                validity.mark(texels, *masks)
+                tally.add(terms, direct, validity, effective_r_ave(ambient, resolved.rho))
+            if spill is not None:
+                with _timed(times, "spill"):
+                    for name, group in (("texels", TexelPoints.of(texels)), ("validity", validity),
+                                        ("terms", terms), ("direct", direct)):
+                        spill.append(name, group)
+    per_texel = (PerTexel.spilled(spill, atlas, world) if spill is not None
+                 else PerTexel.held(texels, validity, terms, direct))
+    return _finish_pages(baking, power, plan, per_texel, tally, lightmaps, masks, times)
+
+
+def _bake_part(baking: _Baking, texels: Texels, times: dict[str, float],
+               advance: Callable[[int], None]) -> tuple[Texels, Validity, Terms, Direct]:
+    """Probe, trace and light one part of the texels: (texels with their sample points moved
+    by the probes, validity, obscurance terms, direct light)."""
+    s, ambient = baking.settings, baking.ambient
     with _timed(times, "validity"):  # sample points inside/behind geometry: moved or flagged
-        texels, validity = check_texels(scene, world, tracer, texels, resolved.d_max)
+        texels, validity = check_texels(baking.scene, baking.world, baking.tracer, texels,
+                                        s.d_max)
     with _timed(times, "trace"):
-        with bar(len(texels), "baking", wanted(quiet)) as advance:
-            error_scale = (effective_r_ave(ambient, resolved.rho),
-                           float(ambient.intensity @ LUMINANCE))
-            terms = integrate(scene, world, tracer, texels, resolved, advance,
-                              error_scale=error_scale)
+        error_scale = (effective_r_ave(ambient, s.rho), float(ambient.intensity @ LUMINANCE))
+        terms = integrate(baking.scene, baking.world, baking.tracer, texels, s, advance,
+                          error_scale=error_scale)
     with _timed(times, "direct"):
-        with bar(len(texels), "direct light", wanted(quiet) and sources.any()) as advance:
-            direct = direct_light(scene, world, tracer, texels, sources, resolved, advance)
-    return finish(scene, world, resolved, tracer, sources, power, ambient, plan, atlas, texels,
-                  validity, terms, direct, times)
+        direct = direct_light(baking.scene, baking.world, baking.tracer, texels, baking.sources,
+                              s, advance)
+    return texels, validity, terms, direct
 
 
 def finish(scene: Scene, world: World, resolved: Resolved, tracer: Tracer, sources: Sources,
            power: Power, ambient: Ambient, plan: Plan, atlas: Atlas, texels: Texels,
            validity: Validity, terms: Terms, direct: Direct, times: dict[str, float]) -> Computed:
-    """From the texels' terms to the post-processed float lightmaps: what a full bake and an
-    incremental rebake (incremental.py) share after the rays, so both give the same bytes."""
-    indirect = None
-    if resolved.method == "gi":  # the full-GI reference instead of I_A·W (gi.py)
-        with _timed(times, "gi"):
-            indirect = indirect_light(scene, world, tracer, sources, texels, resolved,
-                                      resolved.rays).irradiance
+    """From the texels' terms, all held in memory, to the post-processed float lightmaps: an
+    incremental rebake (incremental.py) ends as a full bake does, so both give the same bytes.
+    """
     with _timed(times, "compose"):
-        lightmaps = compose(atlas, texels, terms, ambient, resolved.rho, direct, indirect=indirect)
-        masks = validity.page_masks(texels, (atlas.page_count, atlas.height, atlas.width))
+        lightmaps = compose(atlas, texels, terms, ambient, resolved.rho, direct)
+        masks = validity.page_masks(texels, lightmaps.covered.shape)
+        tally = Tally()
+        tally.add(terms, direct, validity, effective_r_ave(ambient, resolved.rho))
+    baking = _Baking(scene, world, resolved, tracer, sources, ambient, atlas)
+    return _finish_pages(baking, power, plan, PerTexel.held(texels, validity, terms, direct),
+                         tally, lightmaps, masks, times)
+
+
+def _finish_pages(baking: _Baking, power: Power, plan: Plan, per_texel: PerTexel, tally: Tally,
+                  lightmaps: Lightmaps, masks: tuple[np.ndarray, np.ndarray],
+                  times: dict[str, float]) -> Computed:
+    """Denoise (if asked) and post-process the composed pages (``masks``: the validity's
+    invalid and enclosed page masks)."""
+    resolved = baking.settings
     denoised = None
     if resolved.denoise:  # per chart, before the fill of invalid texels and dilation (denoise.py)
         with _timed(times, "denoise"):
-            lightmaps, denoised = denoise(lightmaps, texels, *masks, threads=resolved.threads,
+            lightmaps, denoised = denoise(lightmaps, per_texel.texels, *masks,
+                                          threads=resolved.threads,
                                           obscurance=resolved.occlusion != "none")
     with _timed(times, "compose"):
-        lightmaps = postprocess(lightmaps, resolved.padding, *masks, seams=find_seams(atlas, world))
-    return Computed(scene=scene, world=world, settings=resolved, ambient=ambient, plan=plan,
-                    atlas=atlas, texels=texels, terms=terms, lightmaps=lightmaps,
-                    stage_seconds=times, sources=sources, power=power, direct=direct,
-                    validity=validity, denoised=denoised)
+        lightmaps = postprocess(lightmaps, resolved.padding, *masks,
+                                seams=find_seams(baking.atlas, baking.world))
+    return Computed(scene=baking.scene, world=baking.world, settings=resolved,
+                    ambient=baking.ambient, plan=plan, atlas=baking.atlas, per_texel=per_texel,
+                    tally=tally, lightmaps=lightmaps, stage_seconds=times,
+                    sources=baking.sources, power=power, denoised=denoised)
 
 
 def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings = Settings(), *,
@@ -301,36 +391,39 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
         default_state_path(output) if state is None or state is True else Path(state))
     try:
         done, rebaked = bake_or_rebake(scene, settings, state_path, incremental, quiet,
-                                       relight)
+                                       relight, (state_path or output).parent)
     except BakerError as error:  # a setting this scene cannot meet: name the scene
         error.file = error.file or str(input_path)
         raise
     times = dict(done.stage_seconds)
     times["load"] += loading["load"]
     resolved = done.settings
-    with _timed(times, "write"), ThreadPoolExecutor(1) as beside:
-        # The sidecar a rebake starts from (docs/bake_state.md), written while the pages are
-        # encoded (its CRCs and file writes release the GIL, as PIL's compression does), and
-        # put in place only once the output is.
-        state_file = None if state_path is None else beside.submit(
-            stage_atomically, state_path, bake_state_writer(done, rebaked, settings))
-        try:
-            pages = encode(done.lightmaps, resolved.encoding, resolved.occlusion != "none",
-                           resolved.clip_percentile)
-            info = write(scene, done.atlas, pages, output,
-                         WriteOptions(encoding=resolved.encoding, occlusion=resolved.occlusion,
-                                      clip_percentile=resolved.clip_percentile))
-            if lightmaps_dir is not None:
-                write_page_files(Path(lightmaps_dir), output.stem, pages, done.lightmaps.light,
-                                 lightmaps_format)
-            if error_map_dir is not None:  # per-texel standard error pages (errormap.py)
-                write_error_maps(Path(error_map_dir), output.stem, done, write_atomically)
-        except BaseException:
-            _discard(state_file)
-            raise
-        if state_file is not None:
-            _rename(state_file.result(), state_path)
-            record_full_bake(state_path, rebaked, time.perf_counter() - started)
+    try:
+        with _timed(times, "write"), ThreadPoolExecutor(1) as beside:
+            # The sidecar a rebake starts from (docs/bake_state.md), written while the pages are
+            # encoded (its CRCs and file writes release the GIL, as PIL's compression does), and
+            # put in place only once the output is.
+            state_file = None if state_path is None else beside.submit(
+                stage_atomically, state_path, bake_state_writer(done, rebaked, settings))
+            try:
+                pages = encode(done.lightmaps, resolved.encoding, resolved.occlusion != "none",
+                               resolved.clip_percentile)
+                info = write(scene, done.atlas, pages, output,
+                             WriteOptions(encoding=resolved.encoding, occlusion=resolved.occlusion,
+                                          clip_percentile=resolved.clip_percentile))
+                if lightmaps_dir is not None:
+                    write_page_files(Path(lightmaps_dir), output.stem, pages, done.lightmaps.light,
+                                     lightmaps_format)
+                if error_map_dir is not None:  # per-texel standard error pages (errormap.py)
+                    write_error_maps(Path(error_map_dir), output.stem, done, write_atomically)
+            except BaseException:
+                _discard(state_file)
+                raise
+            if state_file is not None:
+                _rename(state_file.result(), state_path)
+                record_full_bake(state_path, rebaked, time.perf_counter() - started)
+    finally:  # the rows the state was written from (parts.py), if on disk
+        done.per_texel.close()
     seconds = time.perf_counter() - started
     rmse = done.rmse_estimate()
     ambient, atlas = done.ambient, done.atlas
@@ -342,12 +435,12 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
                     "source": ambient.source, "series_truncated": ambient.truncated},
         "atlas": {"pages": atlas.page_count, "width": atlas.width, "height": atlas.height,
                   "texel_density": atlas.texel_density},
-        "texels": len(done.texels), "rays": done.terms.rays,
-        "shadow_rays": done.direct.rays if done.direct is not None else 0,
-        "rays_per_second": done.terms.rays / times["trace"] if times["trace"] > 0 else 0.0,
+        "texels": done.tally.texels, "rays": done.tally.rays,
+        "shadow_rays": done.tally.shadow_rays,
+        "rays_per_second": done.tally.rays / times["trace"] if times["trace"] > 0 else 0.0,
         "stage_seconds": times, "seconds": seconds,
         "rmse_estimate": rmse,
-        "validity": done.validity.counts() if done.validity is not None else None,
+        "validity": done.tally.states,
         "denoise": done.denoised.as_dict() if done.denoised is not None else {"denoised": False},
         "notes": list(info.notes) + clipping_notes(pages),
         "warnings": input_warnings(done.scene, done.world),  # dropped or changed, counted
@@ -357,8 +450,8 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
     }
     if report_path is not None:
         write_atomically(Path(report_path), json.dumps(report, indent=2).encode())
-    return BakeResult(output=output, settings=resolved, plan=done.plan, texels=len(done.texels),
-                      rays=done.terms.rays, pages=atlas.page_count, seconds=seconds,
+    return BakeResult(output=output, settings=resolved, plan=done.plan, texels=done.tally.texels,
+                      rays=done.tally.rays, pages=atlas.page_count, seconds=seconds,
                       rmse_estimate=rmse, report=report,
                       rebake=details(report["rebake"], rebaked))
 

@@ -8,8 +8,6 @@ per light at unit intensity, so a light's new colour or intensity is a recomposi
 from __future__ import annotations
 
 from dataclasses import dataclass, fields, replace
-from typing import Callable
-
 import numpy as np
 
 from .ambient import Ambient
@@ -18,6 +16,7 @@ from .direct import Direct
 from .integrate import Terms
 from .obscurance import UNIT_REFLECTIVITY
 from .rasterise import Texels
+from .spill import PER_SCENE
 
 
 @dataclass(frozen=True)
@@ -48,19 +47,39 @@ def compose(atlas: Atlas, texels: Texels, terms: Terms, ambient: Ambient, rho: s
     baked colour × intensity of its punctual lights (relighting without rays). ``indirect``
     (N, 3): path-traced indirect irradiance (``--method gi``) to use instead of I_A·W.
     """
+    lightmaps = blank(atlas)
+    compose_into(lightmaps, texels, terms, ambient, rho, direct, light_colours, indirect)
+    return lightmaps
+
+
+def blank(atlas: Atlas) -> Lightmaps:
+    """Lightmaps of zeros, no texel covered, the atlas's pages in size."""
     shape = (atlas.page_count, atlas.height, atlas.width)
-    obscurance = np.zeros(shape + (3,))
-    covered = np.zeros(shape, bool)
+    return Lightmaps(light=np.zeros(shape + (3,)), obscurance=np.zeros(shape + (3,)),
+                     covered=np.zeros(shape, bool))
+
+
+def compose_into(lightmaps: Lightmaps, texels: Texels, terms: Terms, ambient: Ambient, rho: str,
+                 direct: Direct | None = None, light_colours: np.ndarray | None = None,
+                 indirect: np.ndarray | None = None) -> None:
+    """``compose`` the texels into ``lightmaps``' pages, in place: a bake made part by part
+    composes each part as it is done. The pixels of other texels are left as they are.
+
+    A block of ``_TEXELS_AT_ONCE`` texels at a time: at once, the (N, 3) values and their
+    temporaries would be 200 MB each at 4096².
+    """
     r_ave = effective_r_ave(ambient, rho)
-    _scatter(obscurance, texels, lambda block: _rows(terms, block, len(texels)).obscurance(r_ave))
-    _scatter(covered, texels, lambda block: True)
-    light = obscurance * ambient.intensity
-    if indirect is not None:
-        _scatter(light, texels, lambda block: indirect[block])
-    if direct is not None:
-        _scatter(light, texels, lambda block: _rows(direct, block, len(texels)).irradiance(
-            light_colours), add=True)
-    return Lightmaps(light=light, obscurance=obscurance, covered=covered)
+    count = len(texels)
+    for start in range(0, count, _TEXELS_AT_ONCE):
+        block = slice(start, start + _TEXELS_AT_ONCE)
+        where = texels.pixels(block)
+        w = _rows(terms, block, count).obscurance(r_ave)
+        lightmaps.obscurance[where] = w
+        lightmaps.covered[where] = True
+        light = w * ambient.intensity if indirect is None else indirect[block]
+        if direct is not None:
+            light = light + _rows(direct, block, count).irradiance(light_colours)
+        lightmaps.light[where] = light
 
 
 _TEXELS_AT_ONCE = 1 << 16
@@ -73,15 +92,4 @@ def _rows(per_texel, block: slice, count: int):
     return replace(per_texel, **{
         f.name: value[block] for f in fields(per_texel)
         if isinstance(value := getattr(per_texel, f.name), np.ndarray) and value.ndim
-        and len(value) == count and f.name != "light_colours"})
-
-
-def _scatter(pages: np.ndarray, texels: Texels, values: Callable[[slice], np.ndarray],
-             add: bool = False) -> None:
-    """Write (or ``add``) the texels' values into ``pages`` (P, H, W, …), a block of texels at
-    a time: ``values(block)`` gives the (k, …) values of the texels ``block``. At once, the
-    (N, 3) values and ``+=``'s gathered copies would be 200 MB each at 4096²."""
-    for start in range(0, len(texels), _TEXELS_AT_ONCE):
-        block = slice(start, start + _TEXELS_AT_ONCE)
-        where = texels.pixels(block)
-        pages[where] = pages[where] + values(block) if add else values(block)
+        and len(value) == count and f.name not in PER_SCENE})

@@ -491,7 +491,8 @@ class Direct:
     light_colours: (L, 3) colour × intensity of each light as baked. emission: (N, 3) irradiance
     from emissive surfaces; sky: (N, 3) from the sky; emission_var, sky_var: (N,) variances of
     their luminance estimates — each empty (0 rows) when the scene has no such source (32 bytes
-    a texel not held: 270 MB on a 4096² page). rays: shadow and sky rays cast.
+    a texel not held: 270 MB on a 4096² page). rays_per_texel: shadow and sky rays cast from
+    each texel (``rays`` in all).
     """
 
     punctual: np.ndarray
@@ -501,7 +502,12 @@ class Direct:
     emission_var: np.ndarray
     sky: np.ndarray
     sky_var: np.ndarray
-    rays: int
+    rays_per_texel: int
+
+    @property
+    def rays(self) -> int:
+        """Shadow and sky rays cast in all."""
+        return len(self.punctual) * self.rays_per_texel
 
     def irradiance(self, light_colours: np.ndarray | None = None) -> np.ndarray:
         """D (N, 3) for the given light colour × intensity (L, 3), by default the baked ones."""
@@ -572,9 +578,9 @@ def direct_at(scene: Scene, world: World, tracer: Tracer, sources: Sources,
     return Direct(punctual=punctual, punctual_var=punctual_var,
                   light_colours=sources.light_colours(), emission=emitted,
                   emission_var=emitted_var, sky=sky, sky_var=sky_var,
-                  rays=k * (sources.rays_per_texel() if samples is None else
-                            samples * (len(sources.lights) + (sources.emitters is not None)
-                                       + (sources.sky is not None))))
+                  rays_per_texel=(sources.rays_per_texel() if samples is None else
+                                  samples * (len(sources.lights) + (sources.emitters is not None)
+                                             + (sources.sky is not None))))
 
 
 def direct_light(scene: Scene, world: World, tracer: Tracer, texels: Texels, sources: Sources,
@@ -607,7 +613,7 @@ def direct_light(scene: Scene, world: World, tracer: Tracer, texels: Texels, sou
     return Direct(punctual=punctual, punctual_var=punctual_var,
                   light_colours=sources.light_colours(), emission=emitted,
                   emission_var=emitted_var, sky=sky, sky_var=sky_var,
-                  rays=count * sources.rays_per_texel())
+                  rays_per_texel=sources.rays_per_texel())
 
 
 # ------------------------------------------------------------------------------------------------

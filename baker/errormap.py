@@ -30,7 +30,7 @@ def texel_errors(done) -> np.ndarray:
     scale = float(done.ambient.intensity @ LUMINANCE)
     sample = done.terms.standard_error(r_ave) * scale
     rms = float(np.sqrt(np.mean(sample ** 2))) if len(sample) else 0.0
-    target = done.terms.rmse(r_ave, done.settings.sampling) * scale
+    target = done.obscurance_rmse()
     obscurance = sample * (target / rms if rms > 0 else 0.0)
     direct = done.direct.variance() if done.direct is not None else 0.0
     return np.sqrt(obscurance ** 2 + direct)

@@ -48,6 +48,7 @@ from .inner import other_side_rays, translucent
 from .integrate import Terms, cosine_directions, integrate, world_rays
 from .materials import SPECULAR, TRANSPARENT, material_table
 from .parallel import run_chunks
+from .parts import TexelPoints
 from .rasterise import Coverage, Texels, texels_of
 from .scene import Scene
 from .settings import Settings, resolve
@@ -71,20 +72,6 @@ class FullBake(Exception):
     """An incremental rebake cannot follow; ``str(error)`` says why in one line."""
 
 
-@dataclass(frozen=True)
-class TexelPoints:
-    """What the state keeps of the texels: their coverage (``rasterise.Coverage``: key (N,)
-    uint64, owning world triangle (N,) int64, triangle_texels (T,) int64) and position (N, 3)
-    float64, the world sample point after the validity probes moved it. The rest of ``Texels``
-    follows from the stored atlas and the scene (``rasterise.texels_of``), bit for bit, without
-    rasterising again."""
-
-    key: np.ndarray
-    triangle: np.ndarray
-    triangle_texels: np.ndarray
-    position: np.ndarray
-
-
 def state_classes() -> dict[str, type]:
     """The dataclasses a bake state stores, by group name."""
     return {"texels": TexelPoints, "validity": Validity, "terms": Terms, "direct": Direct}
@@ -94,9 +81,7 @@ def make_state(done, fingerprint: dict) -> state_file.BakeState:
     """The bake state of a finished computation (``bake.Computed``)."""
     return state_file.BakeState(
         fingerprints=fingerprint, atlas=done.atlas,
-        groups={"texels": TexelPoints(done.texels.key, done.texels.triangle,
-                                      done.texels.triangle_texels, done.texels.position),
-                "validity": done.validity, "terms": done.terms, "direct": done.direct},
+        groups=done.per_texel.state_groups(),
         instance_world=np.array([inst.world for inst in done.scene.instances], np.float64
                                 ).reshape(-1, 4, 4))
 
@@ -674,7 +659,7 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
     with _timed(times, "direct"):
         fresh_direct = direct_light(scene, world, tracer, take(texels, rows), sources, resolved)
         direct = merge(old_direct, fresh_direct, rows, light_colours=sources.light_colours(),
-                       rays=count * sources.rays_per_texel())
+                       rays_per_texel=sources.rays_per_texel())
         clean = np.flatnonzero(reason < 0)
         relit_rays = 0
         if change.lights_placed and len(clean):
@@ -692,16 +677,18 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
 
 
 def bake_or_rebake(scene: Scene, settings: Settings, state_path, incremental: bool,
-                   quiet: bool = True, relight: bool = False):
+                   quiet: bool = True, relight: bool = False, spill_folder=None):
     """(``bake.Computed``, Rebaked | str | None): a rebake from the state at ``state_path`` when
     ``incremental`` and it can follow, else a full bake and the one-line reason (a str), or None
     when no rebake was asked for. ``relight``: only a recomposition (light colours and
-    intensities) may follow; anything else raises InputError before any ray is cast."""
+    intensities) may follow; anything else raises InputError before any ray is cast.
+    ``spill_folder``: where a full bake keeps its texels' results until the state is written
+    (``bake.compute``)."""
     from .bake import compute
     from .errors import InputError
 
     if not incremental and not relight:
-        return compute(scene, settings, quiet), None
+        return compute(scene, settings, quiet, spill_folder), None
     if state_path is None:
         reason = "no bake state (state=False)"
     else:
@@ -713,7 +700,7 @@ def bake_or_rebake(scene: Scene, settings: Settings, state_path, incremental: bo
     if relight:
         raise InputError(f"cannot relight without tracing: {reason}", file=str(scene.path),
                          fix="use `baker bake` (it rebakes only what changed)")
-    return compute(scene, settings, quiet), reason
+    return compute(scene, settings, quiet, spill_folder), reason
 
 
 def bake_state_writer(done, rebaked, settings: Settings | None = None

@@ -113,15 +113,26 @@ class Terms:
         1.5× of the true RMSE for Sobol at 64 rays and more. r is averaged over all texels
         (one texel's is far too noisy) and kept within [0.05, 0.5].
         """
-        if not len(self.counts):
-            return 0.0
+        return rmse_of(self.split_squares(r_ave), len(self.counts), technique)
+
+    def split_squares(self, r_ave: np.ndarray) -> np.ndarray:
+        """(2,) the sums over the texels of e² for the halves and for the quarters (see
+        ``rmse``), in luminance of W: what ``rmse_of`` needs, added up part by part when a
+        bake makes its texels a part at a time."""
         lum = np.array([1.0, float(r_ave @ LUMINANCE)])
-        half = np.mean(np.clip(0.5 * self.half_split @ lum, -_SPLIT_MAX, _SPLIT_MAX) ** 2)
-        if technique == "stratified":
-            return float(np.sqrt(half))
-        quarter = np.mean(np.clip(0.5 * self.quarter_split @ lum, -_SPLIT_MAX, _SPLIT_MAX) ** 2)
-        ratio = float(np.clip(half / quarter, 0.05, 0.5)) if quarter > 0 else 0.5
-        return float(np.sqrt(half * ratio / (1.0 - ratio)))
+        return np.array([np.sum(np.clip(0.5 * split @ lum, -_SPLIT_MAX, _SPLIT_MAX) ** 2)
+                         for split in (self.half_split, self.quarter_split)])
+
+
+def rmse_of(squares: np.ndarray, count: int, technique: str) -> float:
+    """``Terms.rmse`` of ``count`` texels from their ``Terms.split_squares`` ``squares`` (2,)."""
+    if not count:
+        return 0.0
+    half, quarter = squares / count
+    if technique == "stratified":
+        return float(np.sqrt(half))
+    ratio = float(np.clip(half / quarter, 0.05, 0.5)) if quarter > 0 else 0.5
+    return float(np.sqrt(half * ratio / (1.0 - ratio)))
 
 
 @jit

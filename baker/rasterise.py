@@ -326,19 +326,55 @@ def cover(atlas: Atlas, world: World) -> Coverage:
                     triangle_texels=triangle_texels)
 
 
-def texels_of(atlas: Atlas, world: World, coverage: Coverage) -> Texels:
-    """The texels of ``coverage`` with their sample points on ``world`` as it stands now: each
-    texel centre's barycentrics in its owner's UV triangle (clamped into it), mapped to world."""
+@dataclass(frozen=True)
+class Owners:
+    """What the texels of one ``Coverage`` take from their owning triangles, computed once for a
+    bake that makes its texels part by part (``texels_of(..., rows)``).
+
+    uv: (T, 3, 2) texel-space UV corners of every world triangle (zeros for those not baked).
+    normal: (T, 3) unit front-face normal, size: (T,) world length of one texel side, axes:
+    (T, 2, 3) texel axes — of every world triangle that owns texels (zeros for the others; see
+    ``Texels``).
+    """
+
+    uv: np.ndarray
+    normal: np.ndarray
+    size: np.ndarray
+    axes: np.ndarray
+
+
+def owners(atlas: Atlas, world: World, coverage: Coverage) -> Owners:
+    """The per-triangle terms of the triangles that own texels in ``coverage``."""
     corners, _, tris = _baked_triangles(atlas, world)
-    slot = np.full(len(world.triangles), -1, np.int64)
-    slot[tris] = np.arange(len(tris))
-    uv = corners[slot[coverage.triangle]]
-    key = coverage.key.astype(np.int64)
+    triangles = len(world.triangles)
+    uv = np.zeros((triangles, 3, 2))
+    uv[tris] = corners
+    owning = np.flatnonzero(np.bincount(coverage.triangle, minlength=triangles))
+    normal, size, axes = np.zeros((triangles, 3)), np.zeros(triangles), np.zeros((triangles, 2, 3))
+    normal[owning], size[owning], axes[owning] = _triangle_terms(world, owning, uv[owning])
+    return Owners(uv=uv, normal=normal, size=size, axes=axes)
+
+
+def texels_of(atlas: Atlas, world: World, coverage: Coverage, rows: slice = slice(None),
+              owned: Owners | None = None) -> Texels:
+    """The texels ``rows`` of ``coverage`` with their sample points on ``world`` as it stands
+    now: each texel centre's barycentrics in its owner's UV triangle (clamped into it), mapped
+    to world. ``owned``: ``owners(atlas, world, coverage)``, computed here when not given. A
+    texel's values do not depend on which other texels are made with it."""
+    owned = owners(atlas, world, coverage) if owned is None else owned
+    tri = coverage.triangle[rows]
+    uv = owned.uv[tri]
+    key = coverage.key[rows].astype(np.int64)
     y, x = np.divmod(key % (atlas.width * atlas.height), atlas.width)
-    centre = np.stack([x + 0.5, y + 0.5], axis=1)
-    bary = _barycentric(uv, centre)
-    return _surface_points(world, coverage.triangle, bary, uv, (atlas.width, atlas.height), key,
-                           coverage.triangle_texels)
+    bary = _barycentric(uv, np.stack([x + 0.5, y + 0.5], axis=1))
+    position, normal, terminator = _texel_points(world.positions, world.normals, world.smooth,
+                                                 world.triangles, tri, bary, owned.normal)
+    return Texels(key=key.astype(np.uint64), position=position, normal=normal, triangle=tri,
+                  triangle_instance=world.tri_instance, triangle_normal=owned.normal,
+                  triangle_size=owned.size, triangle_texels=coverage.triangle_texels,
+                  triangle_axes=owned.axes,
+                  terminator_push=terminator if terminator.any() else np.zeros((0, 3)),
+                  page_width=atlas.width, page_height=atlas.height)
 
 
 @jit
@@ -407,34 +443,6 @@ def _texel_axes(world: World, tri: np.ndarray, uv_corners: np.ndarray) -> np.nda
                         np.stack([-uv[:, 1, 0], uv[:, 0, 0]], axis=1)], axis=1) / safe[:, None, None]
     jacobian = np.einsum("kce,kej->kcj", edges, inverse)  # (k, 3, 2)
     return np.where(ok[:, None, None], np.swapaxes(jacobian, 1, 2), 0.0)
-
-
-def _surface_points(world: World, tri: np.ndarray, bary: np.ndarray, uv_corners: np.ndarray,
-                    page_size: tuple[int, int], key: np.ndarray,
-                    triangle_texels: np.ndarray) -> Texels:
-    """World position, normals, size and terminator push of each texel's sample point (from its
-    barycentrics ``bary`` (N, 3) in the owner ``tri``), and every triangle's texel axes.
-
-    What depends on the owning triangle alone (front-face normal, texel size, texel axes) is
-    computed once per distinct owner and gathered: scenes have far fewer triangles than texels.
-    """
-    count = np.bincount(tri, minlength=len(world.triangles))
-    owners = np.flatnonzero(count)  # sorted, as np.unique gives them, but counted in O(N)
-    inverse = (np.cumsum(count > 0) - 1)[tri]
-    some = np.empty(len(owners), np.int64)  # a texel of each owner (all have its UV corners)
-    some[inverse] = np.arange(len(tri))
-    per_geometric, per_size, per_axes = _triangle_terms(world, owners, uv_corners[some])
-    triangles = len(world.triangles)
-    geometric, size, axes = np.zeros((triangles, 3)), np.zeros(triangles), np.zeros((triangles, 2, 3))
-    geometric[owners], size[owners], axes[owners] = per_geometric, per_size, per_axes
-    position, normal, terminator = _texel_points(world.positions, world.normals, world.smooth,
-                                                 world.triangles, tri, bary, geometric)
-    return Texels(key=key.astype(np.uint64), position=position,
-                  normal=normal, triangle=tri, triangle_instance=world.tri_instance,
-                  triangle_normal=geometric, triangle_size=size,
-                  triangle_texels=triangle_texels, triangle_axes=axes,
-                  terminator_push=terminator if terminator.any() else np.zeros((0, 3)),
-                  page_width=page_size[0], page_height=page_size[1])
 
 
 def _triangle_terms(world: World, tri: np.ndarray, uv_corners: np.ndarray

@@ -31,9 +31,10 @@ from typing import Any, BinaryIO
 import numpy as np
 
 from .atlas import Atlas, InstanceUV
+from .spill import Column, Group
 
 FORMAT = "baker-bake-state"
-VERSION = 3
+VERSION = 4
 SUFFIX = ".bake"
 _DATE = (1980, 1, 1, 0, 0, 0)  # fixed member timestamp: same content, same bytes
 
@@ -92,7 +93,7 @@ class BakeState:
 
     fingerprints: JSON-able dict from ``diff.fingerprints`` (settings, unwrap input, every
     instance, material, light; the tracer's centre). atlas: the lightmap layout (UVs).
-    groups: name → dataclass instance, at least "texels" (Texels after the validity probes moved
+    groups: name → dataclass instance (or its rows spilled to disk, ``spill.Group``), at least "texels" (Texels after the validity probes moved
     their sample points), "validity", "terms", and "direct" when the scene has direct light;
     rows of every per-texel array in texel order. instance_world: (I, 4, 4) float64 world matrix
     of every instance as baked (to rebuild a moved node's old placement).
@@ -104,22 +105,19 @@ class BakeState:
     instance_world: np.ndarray
 
 
-def _member(archive: zipfile.ZipFile, name: str, data: bytes | np.ndarray) -> None:
-    """Add one stored member dated ``_DATE``: bytes as they are, an array as ``.npy``,
-    streamed into the archive (no in-memory copy of the array's bytes)."""
+def _member(archive: zipfile.ZipFile, name: str, data: bytes | Column) -> None:
+    """Add one stored member dated ``_DATE``: bytes as they are, an array (``spill.Column``,
+    in memory or spilled to disk) as ``.npy``, streamed into the archive (no copy of its
+    bytes in memory)."""
     info = zipfile.ZipInfo(name, date_time=_DATE)
     info.compress_type = zipfile.ZIP_STORED
     info.external_attr = 0o644 << 16
     if isinstance(data, bytes):
         archive.writestr(info, data)
         return
-    with archive.open(info, "w", force_zip64=data.nbytes > 2**31) as member:
-        np.lib.format.write_array(member, np.ascontiguousarray(data), allow_pickle=False)
-
-
-def _all_zero(array: np.ndarray) -> bool:
-    """Whether every byte of ``array`` is 0 (so +0.0, not −0.0: the rebuilt array is the same)."""
-    return array.size > 0 and not np.ascontiguousarray(array).view(np.uint8).any()
+    nbytes = int(np.prod(data.shape)) * data.dtype.itemsize
+    with archive.open(info, "w", force_zip64=nbytes > 2**31) as member:
+        data.write_npy(member)
 
 
 def _atlas_group(atlas: Atlas) -> tuple[dict, dict[str, np.ndarray]]:
@@ -140,27 +138,22 @@ def write_state(file: BinaryIO, state: BakeState) -> None:
     Arrays whose bytes are all zero (a sky term in a scene without sky, chain counts without
     mirrors) are not stored: ``header.json`` lists them under ``zeros`` with shape and dtype.
     """
-    arrays: dict[str, np.ndarray] = {}
     groups: dict[str, dict] = {}
     atlas_scalars, atlas_arrays = _atlas_group(state.atlas)
     groups["atlas"] = {"class": "Atlas", "scalars": atlas_scalars, "fields": sorted(atlas_arrays)}
-    arrays.update({f"atlas/{k}": v for k, v in atlas_arrays.items()})
-    arrays["instance_world"] = np.asarray(state.instance_world, np.float64)
+    arrays = {f"atlas/{k}": Column.of(v) for k, v in atlas_arrays.items()}
+    arrays["instance_world"] = Column.of(np.asarray(state.instance_world, np.float64))
     for group, obj in sorted(state.groups.items()):
         if obj is None:
             continue
-        assert is_dataclass(obj), group
-        scalars, names = {}, []
-        for f in fields(obj):
-            value = getattr(obj, f.name)
-            if isinstance(value, np.ndarray):
-                arrays[f"{group}/{f.name}"] = value
-                names.append(f.name)
-            else:
-                scalars[f.name] = value
-        groups[group] = {"class": type(obj).__name__, "fields": names, "scalars": scalars}
+        if not isinstance(obj, Group):  # a dataclass in memory
+            assert is_dataclass(obj), group
+            obj = Group.of(obj)
+        arrays.update({f"{group}/{name}": column for name, column in obj.columns.items()})
+        groups[group] = {"class": obj.cls.__name__, "fields": list(obj.columns),
+                         "scalars": obj.scalars}
     zeros = {name: {"shape": list(a.shape), "dtype": a.dtype.str}
-             for name, a in arrays.items() if _all_zero(a)}
+             for name, a in arrays.items() if a.all_zero}
     header = {"format": FORMAT, "version": VERSION, "fingerprints": state.fingerprints,
               "groups": groups, "zeros": zeros}
     with zipfile.ZipFile(file, "w", zipfile.ZIP_STORED) as archive:

@@ -89,14 +89,18 @@ class Validity:
 
     def page_masks(self, texels: Texels, shape: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray]:
         """(invalid, enclosed): (P, H, W) bool page masks of the INVALID and ENCLOSED texels."""
-        invalid = np.zeros(shape, bool)
-        enclosed = np.zeros(shape, bool)
+        masks = np.zeros(shape, bool), np.zeros(shape, bool)
+        self.mark(texels, *masks)
+        return masks
+
+    def mark(self, texels: Texels, invalid: np.ndarray, enclosed: np.ndarray) -> None:
+        """Set the texels' pixels of the ``page_masks`` ``invalid`` and ``enclosed`` in place
+        (a bake made part by part marks each part)."""
         for start in range(0, len(texels), _CHUNK):  # the pixels of a chunk at a time
             rows = slice(start, start + _CHUNK)
             where = texels.pixels(rows)
             invalid[where] = self.state[rows] == INVALID
             enclosed[where] = self.state[rows] == ENCLOSED
-        return invalid, enclosed
 
 
 def _frames(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -75,3 +75,26 @@ def test_blocks_give_the_same_values_as_one_block(done, monkeypatch):
                                     np.arange(1000) % 40)
     for name in ("w_hit", "escaped", "hit_sq", "half_split", "quarter_split"):
         assert np.array_equal(getattr(again, name), getattr(means, name)), name
+
+
+def test_a_bake_in_parts_grows_with_its_pages_not_its_texels(tmp_path, monkeypatch):
+    """Made a part at a time, with the parts' rows on disk (parts.py), a bake's peak grows by
+    its pages (two float pages, the coverage's page-sized arrays, masks), not by what it holds
+    per texel: all at once, the same growth was 9 light pages."""
+    from baker import parts, rasterise
+    from baker.bake import compute
+    from baker.settings import Settings
+    from tests.bakehelp import loaded
+
+    scene = loaded(cornell_box(), tmp_path)
+    monkeypatch.setattr(parts, "PART_TEXELS", 4096)
+    monkeypatch.setattr(rasterise, "_CANDIDATES_PER_CHUNK", 50_000)
+    peaks, pages = [], []
+    for size in (256, 640):
+        held = []
+        peaks.append(_extra_bytes(lambda: held.append(
+            compute(scene, Settings(page_size=size, rays=4), spill_folder=tmp_path))))
+        pages.append(held[0].lightmaps.light.nbytes)
+        assert held[0].per_texel.spill is not None and len(held[0].texels) > 4 * 4096
+        held[0].per_texel.close()
+    assert peaks[1] - peaks[0] < 3.5 * (pages[1] - pages[0])

@@ -1,0 +1,143 @@
+"""A bake's per-texel results, which a full bake makes a part of the texels at a time.
+
+``bake.compute`` rasterises, probes, traces and composes ``PART_TEXELS`` texels at a time, so
+that no stage holds every texel's arrays at once: each part is composed into the pages as it is
+done, and its rows go to disk (``spill.py``) for the bake state. ``PerTexel`` gives back the
+texels and their results whole, in memory, to whoever asks (tests, ``--error-map``, the
+denoiser); ``Tally`` adds up, part by part, what the report needs of them. Each texel's values
+do not depend on the parts (its rays are a function of its key), so neither do the bytes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from functools import cached_property
+
+import numpy as np
+
+from .atlas import Atlas
+from .direct import Direct
+from .geometry import World
+from .integrate import Terms, rmse_of
+from .rasterise import Coverage, Texels, texels_of
+from .spill import Spill
+from .validity import STATE_NAMES, Validity
+
+# Texels made at once. The part's arrays (texels, probes, the integrator's sums, terms, direct
+# light) take about 400 bytes a texel: 400 MB. A bake of fewer texels holds them in memory.
+PART_TEXELS = 1 << 18
+
+
+def part_slices(count: int) -> list[slice]:
+    """The rows of each part of ``count`` texels, in order (one empty part for none)."""
+    return [slice(start, min(start + PART_TEXELS, count))
+            for start in range(0, count, PART_TEXELS)] or [slice(0, 0)]
+
+
+@dataclass(frozen=True)
+class TexelPoints:
+    """What the state keeps of the texels: their coverage (``rasterise.Coverage``: key (N,)
+    uint64, owning world triangle (N,) int64, triangle_texels (T,) int64) and position (N, 3)
+    float64, the world sample point after the validity probes moved it. The rest of ``Texels``
+    follows from the stored atlas and the scene (``rasterise.texels_of``), bit for bit, without
+    rasterising again."""
+
+    key: np.ndarray
+    triangle: np.ndarray
+    triangle_texels: np.ndarray
+    position: np.ndarray
+
+    @classmethod
+    def of(cls, texels: Texels) -> "TexelPoints":
+        return cls(texels.key, texels.triangle, texels.triangle_texels, texels.position)
+
+
+@dataclass
+class Tally:
+    """What the report needs of every texel, added up part by part (``add``).
+
+    texels: how many; rays: obscurance rays cast; shadow_rays: shadow and sky rays cast;
+    states: texels in each validity state, by name; split_squares: (2,) ``Terms.split_squares``
+    summed; direct_variance: the sum over texels of the variance of D's luminance.
+    """
+
+    texels: int = 0
+    rays: int = 0
+    shadow_rays: int = 0
+    states: dict[str, int] = field(default_factory=lambda: dict.fromkeys(STATE_NAMES, 0))
+    split_squares: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    direct_variance: float = 0.0
+
+    def add(self, terms: Terms, direct: Direct | None, validity: Validity,
+            r_ave: np.ndarray) -> None:
+        """Count the texels of one part (``r_ave``: the R_ave the estimator used)."""
+        self.texels += len(terms.counts)
+        self.rays += terms.rays
+        self.split_squares = self.split_squares + terms.split_squares(r_ave)
+        if direct is not None:
+            self.shadow_rays += direct.rays
+            self.direct_variance += float(np.sum(direct.variance()))
+        for name, count in validity.counts().items():
+            self.states[name] += count
+
+    def obscurance_rmse(self, technique: str) -> float:
+        """``Terms.rmse`` over every texel (of W's luminance, R_ave as in ``add``)."""
+        return rmse_of(self.split_squares, self.texels, technique)
+
+
+class PerTexel:
+    """The texels of a bake and their results — ``Validity``, ``Terms`` and ``Direct`` — held
+    in memory (``held``) or on disk (``spilled``), loaded whole on first use."""
+
+    def __init__(self, groups: dict, texels: Texels | None = None,
+                 rebuild: tuple[Atlas, World] | None = None, spill: Spill | None = None):
+        self._groups, self._texels, self._rebuild, self.spill = groups, texels, rebuild, spill
+
+    @classmethod
+    def held(cls, texels: Texels, validity: Validity, terms: Terms,
+             direct: Direct | None) -> "PerTexel":
+        """Results held in memory."""
+        return cls({"validity": validity, "terms": terms, "direct": direct}, texels)
+
+    @classmethod
+    def spilled(cls, spill: Spill, atlas: Atlas, world: World) -> "PerTexel":
+        """Results in ``spill``'s groups "texels" (``TexelPoints``), "validity", "terms" and
+        "direct"; the texels are made again from their coverage on ``atlas`` and ``world``."""
+        return cls(spill.groups, rebuild=(atlas, world), spill=spill)
+
+    def state_groups(self) -> dict:
+        """The per-texel groups of the bake state (``incremental.make_state``), by name: the
+        dataclasses, or their spilled rows (``spill.Group``), which are written from disk."""
+        if self.spill is not None:
+            return dict(self._groups)
+        return {"texels": TexelPoints.of(self._texels), **self._groups}
+
+    def close(self) -> None:
+        """Remove the rows on disk, if any (what was loaded stays usable)."""
+        if self.spill is not None:
+            self.spill.close()
+
+    def _group(self, name: str):
+        value = self._groups.get(name)
+        return value.load() if self.spill is not None and value is not None else value
+
+    @cached_property
+    def texels(self) -> Texels:
+        if self._texels is not None:
+            return self._texels
+        points = self._group("texels")
+        made = texels_of(*self._rebuild, Coverage(points.key, points.triangle,
+                                                  points.triangle_texels))
+        return replace(made, position=points.position)
+
+    @cached_property
+    def validity(self) -> Validity:
+        return self._group("validity")
+
+    @cached_property
+    def terms(self) -> Terms:
+        return self._group("terms")
+
+    @cached_property
+    def direct(self) -> Direct | None:
+        return self._group("direct")

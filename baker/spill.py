@@ -1,0 +1,158 @@
+"""Per-texel results kept on disk, part by part, so a bake holds one part of its texels at a time.
+
+A 4096² page has 8 million texels, and what the bake state keeps of each (``incremental.py``:
+sample point, validity, obscurance terms, direct light) is about 200 bytes: 1.7 GB, seven times
+the float page itself. A full bake (``bake.compute``) therefore makes its texels a part at a
+time, composes each part into the pages, and appends the part's rows here, one file per field;
+the state is then written from these files (``state.write_state``), and nothing holds every
+texel's terms at once.
+
+A group is a dataclass of per-texel arrays (``Terms``, ``Direct``, ``Validity``,
+``TexelPoints``). Each part appends one instance: its per-texel arrays (as many rows as the
+part has texels) are appended to their files; the fields named in ``PER_SCENE`` (a light's
+colour, a triangle's texel count) and empty optional terms (0 rows) are the same in every part
+and kept once; so are the scalar fields.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+import weakref
+from dataclasses import dataclass, fields
+from typing import BinaryIO
+
+import numpy as np
+
+# Array fields of the per-texel dataclasses that are not per texel: the same in every part.
+PER_SCENE = ("light_colours", "triangle_texels")
+
+_COPY_BYTES = 1 << 24  # bytes copied or read at once from a column's file (bounds memory)
+
+
+@dataclass
+class Column:
+    """One per-texel array field, its rows in ``path`` (raw C-order bytes), or held whole in
+    ``array`` (a per-scene field, or an empty optional term)."""
+
+    path: str | None
+    dtype: np.dtype
+    tail: tuple[int, ...]  # the shape after the row count
+    rows: int = 0
+    nonzero: bool = False  # whether any byte written so far is not 0
+    array: np.ndarray | None = None
+
+    @classmethod
+    def of(cls, array: np.ndarray) -> "Column":
+        """A column held in memory."""
+        return cls(None, array.dtype, array.shape[1:], array=array)
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return self.array.shape if self.array is not None else (self.rows,) + self.tail
+
+    @property
+    def all_zero(self) -> bool:
+        """Whether every byte is 0 (and there is at least one): ``state.write_state`` then
+        lists the array instead of storing it."""
+        if self.array is not None:
+            return self.array.size > 0 and not np.ascontiguousarray(self.array).view(np.uint8).any()
+        return self.rows * int(np.prod(self.tail)) > 0 and not self.nonzero
+
+    def write_npy(self, file: BinaryIO) -> None:
+        """Write the column as a ``.npy`` file: the same bytes as ``numpy.lib.format.write_array``
+        of the whole array, copied from disk a block at a time."""
+        if self.array is not None:
+            np.lib.format.write_array(file, np.ascontiguousarray(self.array), allow_pickle=False)
+            return
+        np.lib.format.write_array_header_1_0(file, {
+            "descr": np.lib.format.dtype_to_descr(self.dtype), "fortran_order": False,
+            "shape": self.shape})
+        with open(self.path, "rb") as source:
+            shutil.copyfileobj(source, file, _COPY_BYTES)
+
+    def load(self) -> np.ndarray:
+        """The whole array, in memory."""
+        if self.array is not None:
+            return self.array
+        return np.fromfile(self.path, self.dtype).reshape(self.shape)
+
+    def _append(self, values: np.ndarray) -> None:
+        values = np.ascontiguousarray(values, self.dtype)
+        with open(self.path, "ab") as file:
+            values.tofile(file)
+        self.rows += len(values)
+        self.nonzero = self.nonzero or bool(values.view(np.uint8).any())
+
+
+@dataclass
+class Group:
+    """A spilled dataclass: ``cls`` (its type), its columns by field name in field order, and
+    its scalar fields."""
+
+    cls: type
+    columns: dict[str, Column]
+    scalars: dict
+
+    @classmethod
+    def of(cls, obj) -> "Group":
+        """A dataclass instance held in memory, as a group."""
+        values = {f.name: getattr(obj, f.name) for f in fields(obj)}
+        return cls(type(obj), {k: Column.of(v) for k, v in values.items() if isinstance(v, np.ndarray)},
+                   {k: v for k, v in values.items() if not isinstance(v, np.ndarray)})
+
+    def load(self):
+        """The whole dataclass instance, in memory."""
+        return self.cls(**self.scalars, **{name: c.load() for name, c in self.columns.items()})
+
+
+class Spill:
+    """A temporary folder of groups appended part by part; removed by ``close``, or when the
+    object is garbage collected or the interpreter exits.
+
+    ``folder``: where to make it (None: the system's temporary folder). A bake puts it beside
+    its output, on the disk that will hold the bake state anyway.
+    """
+
+    def __init__(self, folder: str | os.PathLike | None = None):
+        self.folder = tempfile.mkdtemp(prefix=".baker-spill-", dir=folder)
+        self.groups: dict[str, Group] = {}
+        self._cleanup = weakref.finalize(self, shutil.rmtree, self.folder, ignore_errors=True)
+
+    def append(self, name: str, part) -> None:
+        """Append the rows of ``part`` (a dataclass of per-texel arrays) to the group ``name``."""
+        rows = _rows_of(part)
+        group = self.groups.get(name)
+        if group is None:
+            group = self.groups[name] = Group(type(part), {}, {})
+            for f in fields(part):
+                value = getattr(part, f.name)
+                if not isinstance(value, np.ndarray):
+                    group.scalars[f.name] = value
+                elif f.name in PER_SCENE or not len(value):
+                    group.columns[f.name] = Column.of(value)
+                else:
+                    group.columns[f.name] = Column(os.path.join(self.folder, f"{name}.{f.name}"),
+                                                   value.dtype, value.shape[1:])
+        for field_name, column in group.columns.items():
+            value = getattr(part, field_name)
+            if column.array is None:
+                assert value.shape == (rows,) + column.tail, (name, field_name)
+                column._append(value)
+            else:
+                assert np.array_equal(value, column.array), (name, field_name)
+        assert all(getattr(part, k) == v for k, v in group.scalars.items()), name
+
+    def close(self) -> None:
+        """Remove the folder and everything in it."""
+        self._cleanup()
+
+
+def _rows_of(part) -> int:
+    """The texel count of a per-texel dataclass: the rows of its first per-texel array."""
+    for f in fields(part):
+        value = getattr(part, f.name)
+        if isinstance(value, np.ndarray) and f.name not in PER_SCENE and len(value):
+            return len(value)
+    return 0

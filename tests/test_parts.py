@@ -1,0 +1,88 @@
+"""A bake made a part of the texels at a time (parts.py), with the parts' rows on disk
+(spill.py), gives the same bytes as one made all at once, and leaves no file behind."""
+
+from dataclasses import fields
+
+import numpy as np
+import pytest
+
+import baker
+from baker import parts
+from baker.spill import Column, Spill
+from tests.bakehelp import REAL_SCENES
+
+SCENES = {"lamp": (REAL_SCENES["LightsPunctualLamp"], 192),  # punctual lights
+          "vase": (REAL_SCENES["GlassVaseFlowers"], 128)}  # glass, leaves: chain counts, §4 terms
+
+
+def _bake(path, out, **settings):
+    return baker.bake(path, out, baker.Settings(rays=8, **settings))
+
+
+@pytest.mark.parametrize("name", sorted(SCENES))
+def test_parts_on_disk_give_the_bytes_of_one_part(name, tmp_path, monkeypatch):
+    path, page = SCENES[name]
+    whole = _bake(path, tmp_path / "whole.glb", page_size=page)
+    monkeypatch.setattr(parts, "PART_TEXELS", 997)  # several parts, cut anywhere
+    (tmp_path / "parts").mkdir()
+    split = _bake(path, tmp_path / "parts" / "split.glb", page_size=page)
+    assert split.texels == whole.texels > 3 * 997
+    assert (tmp_path / "parts" / "split.glb").read_bytes() == (tmp_path / "whole.glb").read_bytes()
+    assert (tmp_path / "parts" / "split.glb.bake").read_bytes() == \
+        (tmp_path / "whole.glb.bake").read_bytes()
+    for key in ("rays", "shadow_rays", "validity", "rmse_estimate"):
+        assert split.report[key] == pytest.approx(whole.report[key], rel=1e-12), key
+    assert not [p for p in (tmp_path / "parts").iterdir()
+                if p.name.startswith(".")]  # the spilled rows are gone
+
+
+def test_a_computation_in_parts_gives_back_its_texels_and_terms(tmp_path, monkeypatch):
+    """What tests, the error maps and the denoiser read (``Computed.texels``, ``terms``, …) is
+    the same whether it was held or spilled."""
+    from baker.bake import compute
+    from baker.load import load
+
+    scene = load(REAL_SCENES["LightsPunctualLamp"])
+    settings = baker.Settings(rays=8, page_size=128)
+    held = compute(scene, settings)
+    monkeypatch.setattr(parts, "PART_TEXELS", 1000)
+    spilled = compute(scene, settings, spill_folder=tmp_path)
+    assert spilled.per_texel.spill is not None and held.per_texel.spill is None
+    for group in ("texels", "validity", "terms", "direct"):
+        a, b = getattr(held, group), getattr(spilled, group)
+        for f in fields(a):
+            x, y = getattr(a, f.name), getattr(b, f.name)
+            assert np.array_equal(x, y) if isinstance(x, np.ndarray) else x == y, (group, f.name)
+    spilled.per_texel.close()
+    assert not list(tmp_path.iterdir())
+
+
+def test_a_spilled_column_is_written_as_numpy_writes_the_array(tmp_path):
+    rng = np.random.default_rng(1)
+    spill = Spill(tmp_path)
+    from dataclasses import dataclass
+
+    @dataclass
+    class Rows:
+        value: np.ndarray
+        zero: np.ndarray
+        light_colours: np.ndarray  # per scene: kept once
+
+    colours = rng.random((2, 3))
+    chunks = [Rows(rng.random((n, 3)), np.zeros(n, np.int64), colours) for n in (5, 1, 7)]
+    for chunk in chunks:
+        spill.append("rows", chunk)
+    group = spill.groups["rows"]
+    import io
+    for name in ("value", "zero"):
+        whole = np.concatenate([getattr(c, name) for c in chunks])
+        ours, numpy = io.BytesIO(), io.BytesIO()
+        group.columns[name].write_npy(ours)
+        np.save(numpy, whole)
+        assert ours.getvalue() == numpy.getvalue()
+        assert group.columns[name].all_zero == (name == "zero")
+    assert group.columns["light_colours"].array is colours
+    assert np.array_equal(group.load().value, np.concatenate([c.value for c in chunks]))
+    assert not Column.of(np.zeros((0, 3))).all_zero  # an empty term is stored as such
+    spill.close()
+    assert not list(tmp_path.iterdir())
