@@ -33,15 +33,15 @@ from .errors import BakerError, OutputError
 from .geometry import World, build_world
 from .gi import indirect_light
 from .input_warnings import input_warnings
-from .integrate import Terms, integrate
+from .integrate import Surfaces, Terms, integrate, surfaces_of
 from .load import load
 from .plan import Plan, make_plan
 from .postprocess import postprocess
 from .progress import bar, wanted
 from .parts import PerTexel, Tally, TexelPoints, part_slices
-from .rasterise import Texels, cover, owners, texels_of
+from .rasterise import Coverage, Owners, Texels, cover, owners, texels_of
 from .spill import Spill
-from .validity import Validity, check_texels
+from .validity import Faces, Validity, check_texels
 from .seams import find_seams
 from .scene import Scene
 from .settings import Resolved, Settings, resolve
@@ -240,6 +240,10 @@ class _Baking:
     sources: Sources
     ambient: Ambient
     atlas: Atlas
+    coverage: Coverage | None = None  # which triangle owns each texel (rasterise.cover)
+    owned: Owners | None = None  # what the texels take from their triangles (rasterise.owners)
+    faces: Faces | None = None  # back faces, for the validity probes
+    surfaces: Surfaces | None = None  # shading of obscurance hits (integrate.surfaces_of)
 
 
 def compute(scene: Scene, settings: Settings, quiet: bool = True,
@@ -270,19 +274,14 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True,
     count = len(coverage.key)
     parts = part_slices(count)
     spill = Spill(spill_folder) if len(parts) > 1 else None
-    baking = _Baking(scene, world, resolved, tracer, sources, ambient, atlas)
+    baking = _Baking(scene, world, resolved, tracer, sources, ambient, atlas, coverage, owned,
+                     Faces(scene, world), surfaces_of(scene, world))
     lightmaps = blank(atlas)
     masks = np.zeros_like(lightmaps.covered), np.zeros_like(lightmaps.covered)
     tally = Tally()
     with bar(count * (1 + sources.any()), "baking", wanted(quiet)) as advance:
         for rows in parts:
-            texels, validity, terms, direct = _bake_part(
-                baking, texels_of(atlas, world, coverage, rows, owned), times, advance)
-            indirect = None
-            if resolved.method == "gi":  # the full-GI reference instead of I_A·W (gi.py)
-                with _timed(times, "gi"):
-                    indirect = indirect_light(scene, world, tracer, sources, texels, resolved,
-                                              resolved.rays).irradiance
+            texels, validity, terms, direct, indirect = _bake_part(baking, rows, times, advance)
             with _timed(times, "compose"):
                 compose_into(lightmaps, texels, terms, ambient, resolved.rho, direct,
                              indirect=indirect)
@@ -298,22 +297,30 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True,
     return _finish_pages(baking, power, plan, per_texel, tally, lightmaps, masks, times)
 
 
-def _bake_part(baking: _Baking, texels: Texels, times: dict[str, float],
-               advance: Callable[[int], None]) -> tuple[Texels, Validity, Terms, Direct]:
-    """Probe, trace and light one part of the texels: (texels with their sample points moved
-    by the probes, validity, obscurance terms, direct light)."""
-    s, ambient = baking.settings, baking.ambient
+def _bake_part(baking: _Baking, rows: slice, times: dict[str, float],
+               advance: Callable[[int], None]):
+    """Make, probe, trace and light the texels ``rows``: (texels with their sample points moved
+    by the probes, validity, obscurance terms, direct light, and the full-GI indirect
+    irradiance (k, 3) with ``--method gi``, else None)."""
+    s, ambient, scene, world, tracer = (baking.settings, baking.ambient, baking.scene,
+                                        baking.world, baking.tracer)
+    with _timed(times, "rasterise"):
+        texels = texels_of(baking.atlas, world, baking.coverage, rows, baking.owned)
     with _timed(times, "validity"):  # sample points inside/behind geometry: moved or flagged
-        texels, validity = check_texels(baking.scene, baking.world, baking.tracer, texels,
-                                        s.d_max)
+        texels, validity = check_texels(scene, world, tracer, texels, s.d_max,
+                                        faces=baking.faces)
     with _timed(times, "trace"):
         error_scale = (effective_r_ave(ambient, s.rho), float(ambient.intensity @ LUMINANCE))
-        terms = integrate(baking.scene, baking.world, baking.tracer, texels, s, advance,
-                          error_scale=error_scale)
+        terms = integrate(scene, world, tracer, texels, s, advance, error_scale=error_scale,
+                          surfaces=baking.surfaces)
     with _timed(times, "direct"):
-        direct = direct_light(baking.scene, baking.world, baking.tracer, texels, baking.sources,
-                              s, advance)
-    return texels, validity, terms, direct
+        direct = direct_light(scene, world, tracer, texels, baking.sources, s, advance)
+    indirect = None
+    if s.method == "gi":  # the full-GI reference instead of I_A·W (gi.py)
+        with _timed(times, "gi"):
+            indirect = indirect_light(scene, world, tracer, baking.sources, texels, s,
+                                      s.rays).irradiance
+    return texels, validity, terms, direct, indirect
 
 
 def finish(scene: Scene, world: World, resolved: Resolved, tracer: Tracer, sources: Sources,

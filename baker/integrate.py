@@ -287,8 +287,9 @@ def _accumulate_kernel(rays, primitive, distance, d_max, rho_kind, table, kind, 
 
 
 @dataclass(frozen=True)
-class _Surfaces:
-    """What the shading of obscurance hits needs, built once per bake.
+class Surfaces:
+    """What the shading of obscurance hits needs, built once per bake (``surfaces_of``) and
+    passed to ``integrate`` for each part of the texels.
 
     kind: (T,) uint8 per world triangle for ``_accumulate_kernel`` (``_CONSTANT``, ``_VARYING``,
     ``_SPECIAL``); materials: the scene's ``materials.MaterialTable``; normals: (T, 3) unit
@@ -322,7 +323,7 @@ class _Surfaces:
         return out
 
 
-def _surfaces(scene: Scene, world: World) -> _Surfaces:
+def surfaces_of(scene: Scene, world: World) -> Surfaces:
     """The shading tables of ``scene``: special triangles only where a material has a mirror,
     glass or translucent branch (a scene of diffuse surfaces gets the diffuse kernel alone)."""
     table, varying = triangle_albedo(scene, world)
@@ -330,7 +331,7 @@ def _surfaces(scene: Scene, world: World) -> _Surfaces:
     special = materials.special[world.tri_material] if len(world.triangles) else np.zeros(0, bool)
     kind = np.where(special, _SPECIAL, np.where(varying, _VARYING, _CONSTANT)).astype(np.uint8)
     normals = world.geometric_normals() if special.any() else np.zeros((0, 3))
-    return _Surfaces(scene, world, table, varying, kind, materials, normals, world.scale * 1e-6)
+    return Surfaces(scene, world, table, varying, kind, materials, normals, world.scale * 1e-6)
 
 
 # Russian roulette starts at this bounce of a chain (tests may raise it to switch it off).
@@ -382,7 +383,7 @@ class _Chains:
     capped: np.ndarray
 
 
-def _special_hits(surfaces: _Surfaces, tracer: Tracer, origins: np.ndarray,
+def _special_hits(surfaces: Surfaces, tracer: Tracer, origins: np.ndarray,
                   directions: np.ndarray, hits: dict[str, np.ndarray], keys: np.ndarray,
                   first: int, rays: int, settings: Resolved, out: np.ndarray,
                   chains: _Chains) -> None:
@@ -507,7 +508,7 @@ def _rho(kind: int, x: np.ndarray) -> np.ndarray:
     return np.zeros_like(x)
 
 
-def _chunk_sums(surfaces: _Surfaces, tracer: Tracer, texels: Texels, rows: np.ndarray,
+def _chunk_sums(surfaces: Surfaces, tracer: Tracer, texels: Texels, rows: np.ndarray,
                 first: int, rays: int, settings: Resolved) -> tuple[np.ndarray, _Chains]:
     """(k, 9) sums over samples ``first`` … ``first + rays − 1`` of the texels ``rows``, as
     ``_accumulate_kernel`` lays them out, and the chunk's chain counts."""
@@ -541,7 +542,7 @@ def _chunk_sums(surfaces: _Surfaces, tracer: Tracer, texels: Texels, rows: np.nd
 def integrate(scene: Scene, world: World, tracer: Tracer, texels: Texels, settings: Resolved,
               progress: Callable[[int], None] | None = None, rows: np.ndarray | None = None,
               error_scale: tuple[np.ndarray, float] | None = None,
-              translucency: bool = True) -> Terms:
+              translucency: bool = True, surfaces: Surfaces | None = None) -> Terms:
     """Estimate the obscurance terms of the texels ``rows`` (default: all), in that order.
 
     Without ``settings.target_error`` every texel gets ``settings.rays`` rays. With it, rays come
@@ -552,9 +553,10 @@ def integrate(scene: Scene, world: World, tracer: Tracer, texels: Texels, settin
     are the same whatever the chunking, so the result is too. ``progress`` is told how many
     texels each chunk of the first round finished. ``translucency``: add the leaves' back faces
     and the inner obscurances of closed translucent objects (``inner.add_translucency``, §4).
+    ``surfaces``: ``surfaces_of(scene, world)``, made here when not given.
     """
     rows = np.arange(len(texels)) if rows is None else np.asarray(rows, np.int64)
-    surfaces = _surfaces(scene, world)
+    surfaces = surfaces_of(scene, world) if surfaces is None else surfaces
     sums = np.zeros((len(rows), _COLUMNS))
     chaining = surfaces.special  # else no chain is counted: the counts stay empty
     chain_counts = np.zeros((len(rows) if chaining else 0, 2), np.int64)  # rays, capped chains

@@ -119,8 +119,9 @@ def _hemisphere_directions(count: int) -> np.ndarray:
     return np.stack([r * np.cos(phi), r * np.sin(phi), np.sqrt(1.0 - r * r)], axis=1)
 
 
-class _Faces:
-    """Which hits are back faces: geometric normals and single-sidedness of every triangle."""
+class Faces:
+    """Which hits are back faces: geometric normals and single-sidedness of every triangle (made
+    once per bake and passed to ``check_texels`` for each part of the texels)."""
 
     def __init__(self, scene: Scene, world: World):
         self.normals = world.geometric_normals()
@@ -145,7 +146,7 @@ def _back_faces(triangle: np.ndarray, directions: np.ndarray, normals: np.ndarra
     return out
 
 
-def _tangent_step(tracer: Tracer, faces: _Faces, position: np.ndarray, normal: np.ndarray,
+def _tangent_step(tracer: Tracer, faces: Faces, position: np.ndarray, normal: np.ndarray,
                   size: np.ndarray, home: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One round of tangent probes for k points: (new position (k, 3), moved (k,) bool,
@@ -211,7 +212,7 @@ def _fan(position: np.ndarray, normal: np.ndarray, t1: np.ndarray, t2: np.ndarra
     return origins, directions
 
 
-def _back_fraction(tracer: Tracer, faces: _Faces, position: np.ndarray, normal: np.ndarray,
+def _back_fraction(tracer: Tracer, faces: Faces, position: np.ndarray, normal: np.ndarray,
                    size: np.ndarray, d_max: float) -> tuple[np.ndarray, np.ndarray]:
     """(k,) fraction of the fixed hemisphere probes from each point that meet a back face, and
     (k,) bool whether one touches (``_touching``)."""
@@ -242,17 +243,19 @@ def _raise(tracer: Tracer, position: np.ndarray, normal: np.ndarray, size: np.nd
 
 
 def check_texels(scene: Scene, world: World, tracer: Tracer, texels: Texels,
-                 d_max: float, threads: int = 0) -> tuple[Texels, Validity]:
+                 d_max: float, threads: int = 0, faces: Faces | None = None
+                 ) -> tuple[Texels, Validity]:
     """Probe every texel's sample point; return the texels with moved positions and their states.
 
     ``d_max``: the hemisphere probes' length (the obscurance distance), world units.
-    ``threads``: 0 for one per core. Only ``Texels.position`` changes; normals, triangle and key
+    ``threads``: 0 for one per core. ``faces``: ``Faces(scene, world)``, made here when not
+    given. Only ``Texels.position`` changes; normals, triangle and key
     stay (the point is pushed off its facet by the terminator push, then moves parallel to the
     facet). Chunks write only their own rows, so the
     result does not depend on the chunking or the threads.
     """
     count = len(texels)
-    faces = _Faces(scene, world)
+    faces = Faces(scene, world) if faces is None else faces
     position = texels.position.copy()
     start = position.copy()  # after the terminator push
     moved = np.zeros(count, bool)

@@ -43,6 +43,8 @@ from baker.bake import compute  # noqa: E402
 from baker.load import load  # noqa: E402
 from baker.surface import LUMINANCE  # noqa: E402
 
+bake_module = sys.modules["baker.bake"]  # the module (``baker.bake`` is also the function)
+
 
 def strategies(folder: Path, rays: int, repeat: int) -> None:
     """Part 1: strategies (a), (b), (c) on the mirror wall."""
@@ -76,22 +78,23 @@ def _trace_seconds(done) -> float:
 def diffuse_only():
     """The baker with every material stage cut out: no special-hit shading, no alpha table, no
     leaves or inner obscurances (what the bake was before issue 4, for a diffuse scene)."""
-    surfaces, alpha = integrate_module._surfaces, materials_module.alpha_test
+    surfaces, alpha = integrate_module.surfaces_of, materials_module.alpha_test
 
     def plain_surfaces(scene, world):
         s = surfaces(scene, world)
         kind = np.where(s.kind == integrate_module._SPECIAL, integrate_module._CONSTANT, s.kind)
-        return integrate_module._Surfaces(s.scene, s.world, s.table, s.varying,
+        return integrate_module.Surfaces(s.scene, s.world, s.table, s.varying,
                                           kind.astype(np.uint8), s.materials, np.zeros((0, 3)),
                                           s.step)
 
-    integrate_module._surfaces = plain_surfaces
+    integrate_module.surfaces_of = bake_module.surfaces_of = plain_surfaces
     materials_module.alpha_test = lambda scene, world: None
     try:
         with without_translucency():
             yield
     finally:
-        integrate_module._surfaces, materials_module.alpha_test = surfaces, alpha
+        integrate_module.surfaces_of, materials_module.alpha_test = surfaces, alpha
+        bake_module.surfaces_of = surfaces
 
 
 @contextmanager

@@ -13,7 +13,7 @@ from assets.material_scenes import (DIFFUSE_TRANSMISSION, TRANSMISSION, VOLUME, 
                                     alpha_cut_quad, facing_mirrors, glass_slab, leaf, material_zoo,
                                     mirror_wall, wax_cylinder)
 from baker.geometry import build_world
-from baker.integrate import (_Chains, _refract, _special_hits, _surfaces, hemisphere_rays,
+from baker.integrate import (_Chains, _refract, _special_hits, surfaces_of, hemisphere_rays,
                              integrate)
 from baker.materials import (DIFFUSE, SPECULAR, TRANSLUCENT, classify,
                              no_lightmap_reason)
@@ -219,7 +219,7 @@ def test_a_ray_through_a_glass_slab_finds_the_colour_along_the_refracted_path(tm
     hits = tracer.cast_local(origins, directions, np.full(n, 10.0, np.float32))
     out = np.zeros((n, 4))
     chains = _Chains(np.zeros(n, np.int64), np.zeros(n, np.int64))
-    _special_hits(_surfaces(scene, world), tracer, origins, directions, hits,
+    _special_hits(surfaces_of(scene, world), tracer, origins, directions, hits,
                   np.arange(n, dtype=np.uint64), 0, 1, settings, out, chains)
     landed = out[:, :3].sum(axis=1) > 0  # the rest escaped (Fresnel, ≈ 4 % per face) or
     assert landed.mean() > 0.75  # ended by Russian roulette (5 % from the second bounce)
@@ -273,7 +273,7 @@ def test_surfaces_that_would_not_show_a_lightmap_get_none(tmp_path):
 
 def test_a_diffuse_scene_runs_no_material_stage(tmp_path):
     done = computed(mirror_wall(mirror=False), tmp_path, rays=16, texel_density=4)
-    assert done.world.alpha is None and not _surfaces(done.scene, done.world).special
+    assert done.world.alpha is None and not surfaces_of(done.scene, done.world).special
     assert all(done.plan.stages[s].startswith("off") for s in
                ("specular chains", "refraction", "translucency", "alpha testing"))
     assert done.terms.chain_rays.sum() == 0 and done.terms.capped.sum() == 0

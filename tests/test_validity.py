@@ -132,7 +132,7 @@ def test_no_floor_texel_leaks_light_into_a_closed_room(room, tmp_path, monkeypat
     assert counts["moved"] > 50 and counts["enclosed"] > 50  # walls, wall box, box
     # The same bake with every sample point left where it was leaks along the thin walls.
     monkeypatch.setattr(importlib.import_module("baker.bake"), "check_texels",
-                        lambda scene, world, tracer, texels, d_max: (texels, Validity(
+                        lambda scene, world, tracer, texels, d_max, **_: (texels, Validity(
                             np.zeros(len(texels), np.int8), np.zeros(len(texels)),
                             np.zeros(len(texels)), np.zeros(len(texels), bool))))
     before = computed(room, tmp_path, **settings)
