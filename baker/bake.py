@@ -276,7 +276,7 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True,
     spill = Spill(spill_folder) if len(parts) > 1 else None
     baking = _Baking(scene, world, resolved, tracer, sources, ambient, atlas, coverage, owned,
                      Faces(scene, world), surfaces_of(scene, world))
-    lightmaps = blank(atlas)
+    lightmaps = blank(atlas, obscurance=resolved.occlusion != "none")
     masks = np.zeros_like(lightmaps.covered), np.zeros_like(lightmaps.covered)
     tally = Tally()
     with bar(count * (1 + sources.any()), "baking", wanted(quiet)) as advance:
@@ -330,7 +330,8 @@ def finish(scene: Scene, world: World, resolved: Resolved, tracer: Tracer, sourc
     incremental rebake (incremental.py) ends as a full bake does, so both give the same bytes.
     """
     with _timed(times, "compose"):
-        lightmaps = compose(atlas, texels, terms, ambient, resolved.rho, direct)
+        lightmaps = compose(atlas, texels, terms, ambient, resolved.rho, direct,
+                            obscurance=resolved.occlusion != "none")
         masks = validity.page_masks(texels, lightmaps.covered.shape)
         tally = Tally()
         tally.add(terms, direct, validity, effective_r_ave(ambient, resolved.rho))

@@ -24,7 +24,8 @@ class Lightmaps:
     """Float lightmap pages, linear RGB.
 
     light: (P, H, W, 3) float64, what arrives at the surface (the shader multiplies by albedo).
-    obscurance: (P, H, W, 3) float64, W itself. covered: (P, H, W) bool, texels that were baked
+    obscurance: (P, H, W, 3) float64, W itself, for the occlusion texture; (0, H, W, 3) when
+    not kept (a bake without ``occlusion`` does not need it: 400 MB at 4096²). covered: (P, H, W) bool, texels that were baked
     (the rest are padding, filled by dilation).
     """
 
@@ -40,22 +41,25 @@ def effective_r_ave(ambient: Ambient, rho: str) -> np.ndarray:
 
 def compose(atlas: Atlas, texels: Texels, terms: Terms, ambient: Ambient, rho: str,
             direct: Direct | None = None, light_colours: np.ndarray | None = None,
-            indirect: np.ndarray | None = None) -> Lightmaps:
+            indirect: np.ndarray | None = None, obscurance: bool = True) -> Lightmaps:
     """Scatter the texels' light L = D + I_A·W and obscurance W into page images.
 
     ``direct``: the texels' direct light (None: L = I_A·W); ``light_colours`` (L, 3) replaces the
     baked colour × intensity of its punctual lights (relighting without rays). ``indirect``
     (N, 3): path-traced indirect irradiance (``--method gi``) to use instead of I_A·W.
+    ``obscurance``: keep the pages of W too.
     """
-    lightmaps = blank(atlas)
+    lightmaps = blank(atlas, obscurance)
     compose_into(lightmaps, texels, terms, ambient, rho, direct, light_colours, indirect)
     return lightmaps
 
 
-def blank(atlas: Atlas) -> Lightmaps:
-    """Lightmaps of zeros, no texel covered, the atlas's pages in size."""
+def blank(atlas: Atlas, obscurance: bool = True) -> Lightmaps:
+    """Lightmaps of zeros, no texel covered, the atlas's pages in size (``obscurance``: with
+    pages of W, else 0 of them)."""
     shape = (atlas.page_count, atlas.height, atlas.width)
-    return Lightmaps(light=np.zeros(shape + (3,)), obscurance=np.zeros(shape + (3,)),
+    return Lightmaps(light=np.zeros(shape + (3,)),
+                     obscurance=np.zeros((shape[0] if obscurance else 0,) + shape[1:] + (3,)),
                      covered=np.zeros(shape, bool))
 
 
@@ -74,7 +78,8 @@ def compose_into(lightmaps: Lightmaps, texels: Texels, terms: Terms, ambient: Am
         block = slice(start, start + _TEXELS_AT_ONCE)
         where = texels.pixels(block)
         w = _rows(terms, block, count).obscurance(r_ave)
-        lightmaps.obscurance[where] = w
+        if len(lightmaps.obscurance):
+            lightmaps.obscurance[where] = w
         lightmaps.covered[where] = True
         light = w * ambient.intensity if indirect is None else indirect[block]
         if direct is not None:

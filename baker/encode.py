@@ -141,12 +141,11 @@ def encode(lightmaps: Lightmaps, encoding: str, occlusion: bool,
     Each page's intensity is ``page_scale`` of its covered texels at ``clip_percentile``.
     """
     pages = []
-    for light, obscurance, covered in zip(lightmaps.light, lightmaps.obscurance,
-                                          lightmaps.covered):
+    for p, (light, covered) in enumerate(zip(lightmaps.light, lightmaps.covered)):
         intensity, peak, clipped = page_scale(light, covered, clip_percentile)
         occlusion_png = None
         if occlusion:
-            occlusion_png = png_bytes(_page_texels(obscurance, lambda rows: quantise(
+            occlusion_png = png_bytes(_page_texels(lightmaps.obscurance[p], lambda rows: quantise(
                 np.repeat((rows @ LUMINANCE)[..., None], 3, axis=-1), "linear")))
         texels = _page_texels(light, lambda rows: quantise(rows / intensity, encoding))
         pages.append(EncodedPage(png=png_bytes(texels),

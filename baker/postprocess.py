@@ -150,6 +150,9 @@ def postprocess(lightmaps: Lightmaps, padding: int, invalid: np.ndarray | None =
     pages = []
     for values in (lightmaps.light, lightmaps.obscurance):
         values = np.ascontiguousarray(values, np.float64)
+        if not len(values):  # W's pages not kept (compose.Lightmaps)
+            pages.append(values)
+            continue
         if enclosed is not None and enclosed.any():
             values[enclosed] = 0.0  # shut inside a solid: no light reaches it
         if invalid is not None and invalid.any():

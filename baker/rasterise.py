@@ -40,8 +40,8 @@ from .atlas import Atlas
 from .geometry import World
 from .sampling import jit
 
-# Candidate (triangle, texel) pairs examined at once; bounds memory at ~100 bytes a pair.
-_CANDIDATES_PER_CHUNK = 2_000_000
+# Candidate (triangle, texel) pairs examined at once; bounds memory at ~150 bytes a pair.
+_CANDIDATES_PER_CHUNK = 500_000
 
 
 _KEY_BITS = np.uint64((1 << 63) - 1)  # a texel key's bits below inner.OTHER_SIDE
@@ -180,16 +180,30 @@ def _edge_terms(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return normals, np.einsum("kej,kej->ke", normals, starts)
 
 
-def _cover(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Conservative coverage of a chunk of UV triangles (k, 3, 2) in texel units.
+def _bands(corners: np.ndarray, limit: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every UV triangle's (k, 3, 2) texel box cut into bands of rows of at most about
+    ``limit`` texels (a wall's one triangle can span millions): (b,) triangle of each band,
+    and its box's lowest and highest texel lo, hi (b, 2) int64, inclusive."""
+    lo = np.floor(corners.min(axis=1)).astype(np.int64)
+    hi = np.maximum(np.floor(corners.max(axis=1)).astype(np.int64), lo)
+    rows = np.maximum(1, limit // (hi[:, 0] - lo[:, 0] + 1))  # rows per band
+    bands = (hi[:, 1] - lo[:, 1]) // rows + 1
+    tri = np.repeat(np.arange(len(corners)), bands)
+    first = lo[tri, 1] + (np.arange(len(tri)) - (np.cumsum(bands) - bands)[tri]) * rows[tri]
+    band_lo = np.stack([lo[tri, 0], first], axis=1)
+    band_hi = np.stack([hi[tri, 0], np.minimum(first + rows[tri] - 1, hi[tri, 1])], axis=1)
+    return tri, band_lo, band_hi
+
+
+def _cover(corners: np.ndarray, lo: np.ndarray, hi: np.ndarray
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Conservative coverage of a chunk of UV triangles (k, 3, 2) in texel units, within the
+    texel boxes [lo, hi] (k, 2) (inclusive; a band of each triangle's box).
 
     Returns, for every (triangle, texel) pair whose square overlaps the triangle: triangle (c,)
     index into the chunk, texel x and y (c,), and the depth (c,) of the texel centre inside the
     triangle (negative when the centre is outside).
     """
-    lo = np.floor(corners.min(axis=1)).astype(np.int64)
-    hi = np.floor(corners.max(axis=1)).astype(np.int64)
-    hi = np.maximum(hi, lo)
     owner, x, y = _candidates(lo, hi)
     normals, offsets = _edge_terms(corners)
     centre = np.stack([x + 0.5, y + 0.5], axis=1)
@@ -301,12 +315,12 @@ def cover(atlas: Atlas, world: World) -> Coverage:
     width, height = atlas.width, atlas.height
     page_texels = max(atlas.page_count, 1) * width * height
     best_depth = np.full(page_texels, -np.inf)
-    best_owner = np.full(page_texels, -1, np.int64)  # index into corners/tris
+    best_owner = np.full(page_texels, -1, np.int32)  # index into corners/tris (4 bytes a page texel)
     triangle_texels = np.zeros(len(world.triangles), np.int64)
-    extent = np.floor(corners.max(axis=1)) - np.floor(corners.min(axis=1)) + 1
-    for part in _chunks(np.prod(extent, axis=1).astype(np.int64), _CANDIDATES_PER_CHUNK):
-        owner, x, y, depth = _cover(corners[part])
-        owner = owner + part.start
+    band, lo, hi = _bands(corners, _CANDIDATES_PER_CHUNK)
+    for part in _chunks(np.prod(hi - lo + 1, axis=1), _CANDIDATES_PER_CHUNK):
+        owner, x, y, depth = _cover(corners[band[part]], lo[part], hi[part])
+        owner = band[part][owner]
         inside_page = (x >= 0) & (x < width) & (y >= 0) & (y < height)
         owner, x, y, depth = owner[inside_page], x[inside_page], y[inside_page], depth[inside_page]
         np.add.at(triangle_texels, tris[owner], 1)

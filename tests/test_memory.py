@@ -19,7 +19,8 @@ from tests.bakehelp import computed
 
 @pytest.fixture(scope="module")
 def done(tmp_path_factory):
-    return computed(cornell_box(), tmp_path_factory.mktemp("memory"), page_size=384, rays=4)
+    return computed(cornell_box(), tmp_path_factory.mktemp("memory"), page_size=384, rays=4,
+                    occlusion="also")  # with the pages of W
 
 
 def _composed(done):
@@ -98,3 +99,16 @@ def test_a_bake_in_parts_grows_with_its_pages_not_its_texels(tmp_path, monkeypat
         assert held[0].per_texel.spill is not None and len(held[0].texels) > 4 * 4096
         held[0].per_texel.close()
     assert peaks[1] - peaks[0] < 3.5 * (pages[1] - pages[0])
+
+
+def test_pages_of_w_are_kept_only_for_the_occlusion_texture(done, tmp_path):
+    """Without ``occlusion`` the bake holds no pages of W (a float page pair less), and its
+    light is the same."""
+    from baker.bake import compute
+    from baker.settings import Settings
+
+    plain = compute(done.scene, Settings(page_size=384, rays=4))
+    assert plain.lightmaps.obscurance.shape[0] == 0 and done.lightmaps.obscurance.shape[0] == 1
+    assert np.array_equal(plain.lightmaps.light, done.lightmaps.light)
+    assert [p.png for p in encode(plain.lightmaps, "srgb", False)] == \
+        [p.png for p in encode(done.lightmaps, "srgb", True)]

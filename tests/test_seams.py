@@ -18,14 +18,16 @@ MIP_LEVELS = 1  # clean lookups on mip levels 0 and 1 (at padding 2, level 2 rea
 @pytest.fixture(scope="module")
 def sphere(tmp_path_factory):
     builder = sphere_on_floor()
-    done = computed(builder, tmp_path_factory.mktemp("sphere"), texel_density=24.0, rays=64)
+    done = computed(builder, tmp_path_factory.mktemp("sphere"), texel_density=24.0, rays=64,
+                    occlusion="also")
     return builder, done
 
 
 @pytest.fixture(scope="module")
 def cylinder(tmp_path_factory):
     builder = cylinder_on_floor()
-    done = computed(builder, tmp_path_factory.mktemp("cylinder"), texel_density=24.0, rays=64)
+    done = computed(builder, tmp_path_factory.mktemp("cylinder"), texel_density=24.0, rays=64,
+                    occlusion="also")
     return builder, done
 
 
@@ -85,7 +87,8 @@ def test_seams_between_touching_objects_agree(tmp_path):
     builder = tiled_floor()
     nodes = builder.info["nodes"]
     tiles = {nodes["tile_left"], nodes["tile_right"]}
-    done = computed(builder, tmp_path, only_nodes=tiles, texel_density=16.0, rays=64)
+    done = computed(builder, tmp_path, only_nodes=tiles, texel_density=16.0, rays=64,
+                    occlusion="also")
     seams = find_seams(done.atlas, done.world)
     assert seams.edges == 1 and len(seams) > 30  # the joint (the sphere is not baked)
     # Side A and side B sample the same 3D points on different tiles' charts.

@@ -120,7 +120,7 @@ def room():
 
 
 def test_no_floor_texel_leaks_light_into_a_closed_room(room, tmp_path, monkeypatch):
-    settings = dict(texel_density=DENSITY, rays=64, rho="step", d_max=6.0)
+    settings = dict(texel_density=DENSITY, rays=64, rho="step", d_max=6.0, occlusion="also")
     done = computed(room, tmp_path, **settings)
     leaking, corner, read_leaking = _leaking_texels(done, room)
     counts = done.validity.counts()
@@ -142,7 +142,8 @@ def test_no_floor_texel_leaks_light_into_a_closed_room(room, tmp_path, monkeypat
 
 
 def test_floor_under_the_box_and_the_thick_wall_is_dark(room, tmp_path):
-    done = computed(room, tmp_path, texel_density=DENSITY, rays=64, d_max=6.0)
+    done = computed(room, tmp_path, texel_density=DENSITY, rays=64, d_max=6.0,
+                    occlusion="also")
     info = room.info
     margin = 2.5 / DENSITY  # lookups there read only texels whose centres are ≥ 1 texel inside
     bx, _, bz = info["box_centre"]
