@@ -92,3 +92,18 @@ def test_texel_size_follows_texel_density(tmp_path):
     assert np.allclose(np.median(texels.size()), 0.1, rtol=0.1)
     # And the plane's 4 m² holds about 400 texels, plus its conservative border.
     assert 350 < len(texels) < 600
+
+
+def test_coverage_does_not_depend_on_how_many_candidates_are_taken_at_once(tmp_path, monkeypatch):
+    """Triangles' texel boxes are cut into bands of rows and taken in chunks (memory): tiny
+    bands and chunks, cutting every triangle, give the same owners and counts."""
+    from baker import rasterise as rasterise_module
+
+    scene, world, atlas, texels = _raster(three_instances(), tmp_path, 48.0)
+    whole = rasterise_module.cover(atlas, world)
+    monkeypatch.setattr(rasterise_module, "_CANDIDATES_PER_CHUNK", 7)
+    bands = rasterise_module._bands(_baked_triangles(atlas, world)[0], 7)[0]
+    assert len(bands) > 10 * len(np.unique(bands))  # every triangle in many bands
+    cut = rasterise_module.cover(atlas, world)
+    for name in ("key", "triangle", "triangle_texels"):
+        assert np.array_equal(getattr(cut, name), getattr(whole, name)), name
