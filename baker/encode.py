@@ -68,7 +68,7 @@ def srgb_to_linear(e: np.ndarray) -> np.ndarray:
 def png_bytes(rgb: np.ndarray) -> bytes:
     """A (H, W, 3) uint8 image as PNG bytes (deterministic: no timestamps, fixed settings)."""
     buffer = io.BytesIO()
-    Image.fromarray(rgb, "RGB").save(buffer, format="PNG", optimize=False, compress_level=6)
+    Image.fromarray(rgb, "RGB").save(buffer, format="PNG", optimize=False, compress_level=4)
     return buffer.getvalue()
 
 
@@ -114,6 +114,12 @@ def error_bound(values: np.ndarray, intensity: float, encoding: str) -> np.ndarr
     return np.where(x > 1.0, x - 1.0, step) * intensity
 
 
+def _brightest(rgb: np.ndarray) -> np.ndarray:
+    """(…) the largest of each texel's 3 channels (…, 3): the same as ``max(axis=-1)``, 7×
+    faster (numpy reduces a 3-long last axis slowly)."""
+    return np.maximum(np.maximum(rgb[..., 0], rgb[..., 1]), rgb[..., 2])
+
+
 def page_scale(light: np.ndarray, covered: np.ndarray,
                percentile: float = CLIP_PERCENTILE) -> tuple[float, float, float]:
     """(intensity, peak, clipped fraction) of one page.
@@ -124,7 +130,7 @@ def page_scale(light: np.ndarray, covered: np.ndarray,
     peak (nothing clips). A page with nothing above 0 gets intensity 1.
     """
     brightest = np.concatenate([np.zeros(0)] + [  # by rows: no (N, 3) copy of the texels
-        light[start:start + _ROWS][covered[start:start + _ROWS]].max(axis=-1)
+        _brightest(light[start:start + _ROWS])[covered[start:start + _ROWS]]
         for start in range(0, len(light), _ROWS)])
     lit = brightest[brightest > 0]
     if not len(lit):
