@@ -272,29 +272,43 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True,
         coverage = cover(atlas, world)
         owned = owners(atlas, world, coverage)
     count = len(coverage.key)
-    parts = part_slices(count)
-    spill = Spill(spill_folder) if len(parts) > 1 else None
+    spill = Spill(spill_folder) if len(part_slices(count)) > 1 else None
     baking = _Baking(scene, world, resolved, tracer, sources, ambient, atlas, coverage, owned,
                      Faces(scene, world), surfaces_of(scene, world))
-    lightmaps = blank(atlas, obscurance=resolved.occlusion != "none")
+    try:
+        lightmaps, masks, tally, held = _bake_parts(baking, spill, times, quiet)
+        per_texel = (PerTexel.spilled(spill, atlas, world) if spill is not None
+                     else PerTexel.held(*held))
+        return _finish_pages(baking, power, plan, per_texel, tally, lightmaps, masks, times)
+    except BaseException:  # an error or Ctrl-C: no spilled rows left behind
+        if spill is not None:
+            spill.close()
+        raise
+
+
+def _bake_parts(baking: _Baking, spill: Spill | None, times: dict[str, float], quiet: bool):
+    """Bake the texels a part at a time, each composed into the pages as it is done and, with
+    a ``spill``, its rows appended to it. Returns the composed lightmaps, the validity's page
+    masks (invalid, enclosed), the ``Tally``, and the last part's (texels, validity, terms,
+    direct) — all the texels' when there is one part."""
+    s, ambient = baking.settings, baking.ambient
+    count = len(baking.coverage.key)
+    lightmaps = blank(baking.atlas, obscurance=s.occlusion != "none")
     masks = np.zeros_like(lightmaps.covered), np.zeros_like(lightmaps.covered)
     tally = Tally()
-    with bar(count * (1 + sources.any()), "baking", wanted(quiet)) as advance:
-        for rows in parts:
+    with bar(count * (1 + baking.sources.any()), "baking", wanted(quiet)) as advance:
+        for rows in part_slices(count):
             texels, validity, terms, direct, indirect = _bake_part(baking, rows, times, advance)
             with _timed(times, "compose"):
-                compose_into(lightmaps, texels, terms, ambient, resolved.rho, direct,
-                             indirect=indirect)
+                compose_into(lightmaps, texels, terms, ambient, s.rho, direct, indirect=indirect)
                 validity.mark(texels, *masks)
-                tally.add(terms, direct, validity, effective_r_ave(ambient, resolved.rho))
+                tally.add(terms, direct, validity, effective_r_ave(ambient, s.rho))
             if spill is not None:
                 with _timed(times, "spill"):
                     for name, group in (("texels", TexelPoints.of(texels)), ("validity", validity),
                                         ("terms", terms), ("direct", direct)):
                         spill.append(name, group)
-    per_texel = (PerTexel.spilled(spill, atlas, world) if spill is not None
-                 else PerTexel.held(texels, validity, terms, direct))
-    return _finish_pages(baking, power, plan, per_texel, tally, lightmaps, masks, times)
+    return lightmaps, masks, tally, (texels, validity, terms, direct)
 
 
 def _bake_part(baking: _Baking, rows: slice, times: dict[str, float],

@@ -38,6 +38,7 @@ import numpy as np
 
 from .atlas import Atlas
 from .geometry import World
+from .parallel import run_chunks
 from .sampling import jit
 
 # Candidate (triangle, texel) pairs examined at once; bounds memory at ~150 bytes a pair.
@@ -374,21 +375,31 @@ def texels_of(atlas: Atlas, world: World, coverage: Coverage, rows: slice = slic
     """The texels ``rows`` of ``coverage`` with their sample points on ``world`` as it stands
     now: each texel centre's barycentrics in its owner's UV triangle (clamped into it), mapped
     to world. ``owned``: ``owners(atlas, world, coverage)``, computed here when not given. A
-    texel's values do not depend on which other texels are made with it."""
+    texel's values do not depend on which other texels are made with it, so blocks of
+    ``_POINTS_AT_ONCE`` are made on every core."""
     owned = owners(atlas, world, coverage) if owned is None else owned
     tri = coverage.triangle[rows]
-    uv = owned.uv[tri]
-    key = coverage.key[rows].astype(np.int64)
-    y, x = np.divmod(key % (atlas.width * atlas.height), atlas.width)
-    bary = _barycentric(uv, np.stack([x + 0.5, y + 0.5], axis=1))
-    position, normal, terminator = _texel_points(world.positions, world.normals, world.smooth,
-                                                 world.triangles, tri, bary, owned.normal)
-    return Texels(key=key.astype(np.uint64), position=position, normal=normal, triangle=tri,
+    key = coverage.key[rows]
+    position, normal, terminator = (np.empty((len(tri), 3)) for _ in range(3))
+
+    def work(block: slice) -> None:
+        y, x = np.divmod(key[block].astype(np.int64) % (atlas.width * atlas.height), atlas.width)
+        bary = _barycentric(owned.uv[tri[block]], np.stack([x + 0.5, y + 0.5], axis=1))
+        position[block], normal[block], terminator[block] = _texel_points(
+            world.positions, world.normals, world.smooth, world.triangles, tri[block], bary,
+            owned.normal)
+
+    run_chunks(work, [slice(start, start + _POINTS_AT_ONCE)
+                      for start in range(0, len(tri), _POINTS_AT_ONCE)])
+    return Texels(key=key, position=position, normal=normal, triangle=tri,
                   triangle_instance=world.tri_instance, triangle_normal=owned.normal,
                   triangle_size=owned.size, triangle_texels=coverage.triangle_texels,
                   triangle_axes=owned.axes,
                   terminator_push=terminator if terminator.any() else np.zeros((0, 3)),
                   page_width=atlas.width, page_height=atlas.height)
+
+
+_POINTS_AT_ONCE = 1 << 16  # texels per block of ``texels_of``
 
 
 @jit

@@ -86,3 +86,22 @@ def test_a_spilled_column_is_written_as_numpy_writes_the_array(tmp_path):
     assert not Column.of(np.zeros((0, 3))).all_zero  # an empty term is stored as such
     spill.close()
     assert not list(tmp_path.iterdir())
+
+
+def test_an_interrupted_bake_in_parts_leaves_no_rows_on_disk(tmp_path, monkeypatch):
+    import importlib
+
+    bake_module = importlib.import_module("baker.bake")
+    monkeypatch.setattr(parts, "PART_TEXELS", 1000)
+    lit, original = [], bake_module.direct_light
+
+    def interrupted(*args, **kwargs):  # Ctrl-C in the second part
+        lit.append(1)
+        if len(lit) == 2:
+            raise KeyboardInterrupt
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(bake_module, "direct_light", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        _bake(REAL_SCENES["LightsPunctualLamp"], tmp_path / "out.glb", page_size=128)
+    assert len(lit) == 2 and not list(tmp_path.iterdir())
