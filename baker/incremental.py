@@ -48,7 +48,7 @@ from .inner import other_side_rays, translucent
 from .integrate import Terms, cosine_directions, integrate, world_rays
 from .materials import SPECULAR, TRANSPARENT, material_table
 from .parallel import run_chunks
-from .parts import TexelPoints
+from .parts import TexelPoints, part_slices
 from .rasterise import Coverage, Texels, texels_of
 from .scene import Scene
 from .settings import Settings, resolve
@@ -134,7 +134,9 @@ def _absent(value) -> bool:
 
 def merge(stored, fresh, rows: np.ndarray, **overrides):
     """``stored`` (a dataclass of per-texel arrays) with rows ``rows`` replaced by ``fresh``'s
-    rows (same fields, k rows); fields in ``overrides`` are taken as given (global values)."""
+    rows (same fields, k rows); fields in ``overrides`` are taken as given (global values).
+    ``stored``'s arrays are changed in place: they were read from the bake state for this
+    rebake alone, and copies of a 4096² bake's terms would add 1 GB to its peak."""
     values = {}
     for f in fields(stored):
         if f.name in overrides:
@@ -147,9 +149,8 @@ def merge(stored, fresh, rows: np.ndarray, **overrides):
                 raise FullBake(f"the bake state's term {f.name} does not fit the scene now")
             values[f.name] = old
         elif isinstance(old, np.ndarray):
-            out = old.copy()
-            out[rows] = new
-            values[f.name] = out
+            old[rows] = new
+            values[f.name] = old
         else:
             values[f.name] = old
     return type(stored)(**values)
@@ -507,17 +508,24 @@ def _row_keys(points: np.ndarray) -> np.ndarray:
 def _shadow_dirty(scene, world, recorder_tracer: Tracer, texels: Texels, rows: np.ndarray,
                   sources, settings) -> tuple[np.ndarray, int]:
     """(k,) bool: whether any shadow, emissive or sky ray of the texels ``rows`` meets the
-    changed geometry; and the rays cast. Runs ``direct.direct_light`` itself against it."""
+    changed geometry; and the rays cast. Runs ``direct.direct_light`` itself against it, a
+    part of the texels at a time (``parts.PART_TEXELS``: the rows are most of the texels, and
+    their copies and direct light at once would take 1 GB at 4096²)."""
+    meets = np.zeros(len(rows), bool)
     if not len(rows) or not sources.any():
-        return np.zeros(len(rows), bool), 0
-    recorder = _Recorder(recorder_tracer)
-    part = take(texels, rows)
-    direct_light(scene, world, recorder, part, sources, settings)
-    if not recorder.origins:
-        return np.zeros(len(rows), bool), recorder.rays
-    lift = ray_lift(part.position, part.size(), recorder.center)
-    starts = part.position + lift[:, None] * part.geometric_normal()
-    return np.isin(_row_keys(starts), _row_keys(np.concatenate(recorder.origins))), recorder.rays
+        return meets, 0
+    rays = 0
+    for part in part_slices(len(rows)):
+        recorder = _Recorder(recorder_tracer)
+        texels_part = take(texels, rows[part])
+        direct_light(scene, world, recorder, texels_part, sources, settings)
+        rays += recorder.rays
+        if not recorder.origins:
+            continue
+        lift = ray_lift(texels_part.position, texels_part.size(), recorder.center)
+        starts = texels_part.position + lift[:, None] * texels_part.geometric_normal()
+        meets[part] = np.isin(_row_keys(starts), _row_keys(np.concatenate(recorder.origins)))
+    return meets, rays
 
 
 def _relight(texels: Texels, tracer: Tracer, sources, settings, light: int,
@@ -595,7 +603,7 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
 
     reason = np.full(count, -1, np.int8)
     tested = 0
-    texels = replace(raw, position=old_texels.position.copy())
+    texels = replace(raw, position=old_texels.position)  # read for this rebake: changed in place
     validity = old_validity
     with _timed(times, "dirty"):
         if len(moved):
