@@ -505,6 +505,38 @@ def _row_keys(points: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(points, np.float64).view(np.int64).view(kind).ravel()
 
 
+def _may_shadow(texels: Texels, rows: np.ndarray, changed: "_Changed", sources) -> np.ndarray:
+    """(k,) bool, conservative: whether a shadow ray of the texels ``rows`` may pass through
+    one of the ``changed`` geometry's bounding spheres. Exact on the geometry of the rays
+    (``direct.punctual_irradiance``): a point or spot light's rays run from the lifted sample
+    point O towards its sphere (radius ρ, 0 when hard) and stop before it, so they stay
+    within ρ of the segment from O to its centre; a directional light's stay within its cone
+    (half-angle ρ) around the direction to it. Emitters and the sky send rays anywhere: with
+    either, every texel may."""
+    if sources.emitters is not None or sources.sky is not None:
+        return np.ones(len(rows), bool)
+    origin = (texels.position[rows] - changed.center
+              + ray_lift(texels.position[rows], texels.size(rows), changed.center)[:, None]
+              * texels.geometric_normal(rows))
+    may = np.zeros(len(rows), bool)
+    for light, spread in zip(sources.lights, sources.spread):
+        for centre, radius in zip(changed.sphere_centres, changed.sphere_radii):
+            to_centre = centre - origin
+            distance = np.linalg.norm(to_centre, axis=1)
+            reach = radius + 1e-4 * (distance + np.abs(origin).max(axis=1) + 1.0)  # float32
+            if light.kind == "directional":
+                cos = np.clip(to_centre @ -light.direction / np.maximum(distance, 1e-300), -1, 1)
+                seen = np.arcsin(np.clip(reach / np.maximum(distance, 1e-300), 0.0, 1.0))
+                may |= (distance <= reach) | (np.arccos(cos) <= spread + seen + 1e-6)
+            else:
+                to_light = light.position - changed.center - origin
+                t = np.clip(np.einsum("ij,ij->i", to_centre, to_light)
+                            / np.maximum(np.einsum("ij,ij->i", to_light, to_light), 1e-300), 0, 1)
+                gap = np.linalg.norm(to_centre - t[:, None] * to_light, axis=1)
+                may |= gap <= reach + spread
+    return may
+
+
 def _shadow_dirty(scene, world, recorder_tracer: Tracer, texels: Texels, rows: np.ndarray,
                   sources, settings) -> tuple[np.ndarray, int]:
     """(k,) bool: whether any shadow, emissive or sky ray of the texels ``rows`` meets the
@@ -515,7 +547,9 @@ def _shadow_dirty(scene, world, recorder_tracer: Tracer, texels: Texels, rows: n
     if not len(rows) or not sources.any():
         return meets, 0
     rays = 0
-    for part in part_slices(len(rows)):
+    maybe = np.flatnonzero(_may_shadow(texels, rows, recorder_tracer, sources))
+    for part in part_slices(len(maybe)):
+        part = maybe[part]
         recorder = _Recorder(recorder_tracer)
         texels_part = take(texels, rows[part])
         direct_light(scene, world, recorder, texels_part, sources, settings)

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import baker
-from assets.gltf_builder import rotation_matrix
+from assets.gltf_builder import quat_axis_angle, rotation_matrix
 from assets.rebake_scenes import box_room, grid_boxes, moved
 from baker.bake import compute
 from baker.geometry import build_world
@@ -425,3 +425,39 @@ def test_texels_touching_a_corner_follow_the_full_bake_after_any_move(tmp_path):
     assert (default_path(tmp_path / "incremental.glb").read_bytes()
             == default_path(tmp_path / "full.glb").read_bytes())
     assert (tmp_path / "incremental.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()
+
+
+def test_the_shadow_ray_prefilter_keeps_every_texel_whose_rays_meet_the_move(tmp_path,
+                                                                              monkeypatch):
+    """``_may_shadow`` skips the texels whose shadow rays cannot pass the moved box (by the rays'
+    geometry); with a soft point light, a spot and a soft sun, the rebake finds the same
+    shadow-dirty texels as when every texel's shadow rays are cast, and the same bytes."""
+    from baker import incremental
+
+    def lit(boxes):
+        builder = _room(boxes, lamp=dict(LAMP, radius=0.3))
+        sun = builder.light("directional", name="sun", intensity=3.0,
+                            extras={"angular_diameter": 8.0})
+        spot = builder.light("spot", name="spot", intensity=8.0, outer_cone=0.6)
+        builder.node("sun", extensions={"KHR_lights_punctual": {"light": sun}},
+                     rotation=quat_axis_angle((1, 0, 0.3), -50.0))
+        builder.node("spot", translation=(1.5, 2.0, -1.0), rotation=quat_axis_angle((1, 0, 0), -80.0),
+                     extensions={"KHR_lights_punctual": {"light": spot}})
+        return builder
+
+    settings = baker.Settings(rays=8, page_size=128, shadow_rays=4, d_max=0.3)
+    before = lit(BOXES).save(tmp_path / "before.glb")
+    after = lit(moved(BOXES, "box1", at=(0.4, 0.6))).save(tmp_path / "after.glb")
+    found = {}
+    for name, prefilter in (("all", False), ("filtered", True)):
+        if not prefilter:
+            monkeypatch.setattr(incremental, "_may_shadow",
+                                lambda texels, rows, *_: np.ones(len(rows), bool))
+        baker.bake(before, tmp_path / f"{name}.glb", settings)
+        result = baker.bake(after, tmp_path / f"{name}.glb", settings, incremental=True)
+        found[name] = (result.rebake["dirty_by_reason"], result.report["rebake"]["test_rays"],
+                       (tmp_path / f"{name}.glb").read_bytes())
+        monkeypatch.undo()
+    assert found["filtered"][0] == found["all"][0] and found["all"][0]["shadow"] > 10
+    assert found["filtered"][2] == found["all"][2]
+    assert found["filtered"][1] < 0.7 * found["all"][1]  # most texels' shadow rays not cast
