@@ -345,8 +345,15 @@ def _near(texels: Texels, boxes: list[tuple[np.ndarray, np.ndarray]], d_max: flo
     if not boxes:
         return np.zeros(len(texels), bool)
     middle = (boxes[0][0] + boxes[0][1]) / 2
-    return _within(texels.position, texels.size(), float(d_max), float(_REACH_TEXELS), middle,
-                   np.array([b[0] for b in boxes]), np.array([b[1] for b in boxes]))
+    low, high = np.array([b[0] for b in boxes]), np.array([b[1] for b in boxes])
+    near = np.zeros(len(texels), bool)
+
+    def work(rows: slice) -> None:  # on every core: a bake has millions of texels
+        near[rows] = _within(texels.position[rows], texels.size(rows), float(d_max),
+                             float(_REACH_TEXELS), middle, low, high)
+
+    run_chunks(work, _slices(len(texels), 1 << 16))
+    return near
 
 
 def _rays_meet(tracer: Tracer, texels: Texels, rows: np.ndarray, settings) -> tuple[np.ndarray, int]:
