@@ -107,16 +107,22 @@ class Group:
         return self.cls(**self.scalars, **{name: c.load() for name, c in self.columns.items()})
 
 
+_PREFIX = ".baker-spill-"
+
+
 class Spill:
     """A temporary folder of groups appended part by part; removed by ``close``, or when the
     object is garbage collected or the interpreter exits.
 
     ``folder``: where to make it (None: the system's temporary folder). A bake puts it beside
-    its output, on the disk that will hold the bake state anyway.
+    its output, on the disk that will hold the bake state anyway. Its name holds this process's
+    id: the folders a killed bake left there (SIGKILL, power loss) are removed when the next
+    one starts (``remove_stale``).
     """
 
     def __init__(self, folder: str | os.PathLike | None = None):
-        self.folder = tempfile.mkdtemp(prefix=".baker-spill-", dir=folder)
+        remove_stale(folder)
+        self.folder = tempfile.mkdtemp(prefix=f"{_PREFIX}{os.getpid()}-", dir=folder)
         self.groups: dict[str, Group] = {}
         self._cleanup = weakref.finalize(self, shutil.rmtree, self.folder, ignore_errors=True)
 
@@ -147,6 +153,32 @@ class Spill:
     def close(self) -> None:
         """Remove the folder and everything in it."""
         self._cleanup()
+
+
+def remove_stale(folder: str | os.PathLike | None = None) -> list[str]:
+    """Remove the spill folders in ``folder`` (None: the system's temporary folder) whose
+    process is no longer running; return their paths. A folder whose process id is in use
+    (perhaps by another program since) is kept."""
+    folder = tempfile.gettempdir() if folder is None else os.fspath(folder)
+    removed = []
+    for name in os.listdir(folder):
+        pid = name[len(_PREFIX):].split("-", 1)[0]
+        if not name.startswith(_PREFIX) or not pid.isdigit() or _running(int(pid)):
+            continue
+        shutil.rmtree(os.path.join(folder, name), ignore_errors=True)
+        removed.append(os.path.join(folder, name))
+    return removed
+
+
+def _running(pid: int) -> bool:
+    """Whether a process with id ``pid`` exists (signal 0 tests without sending anything)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process
+        return True
+    return True
 
 
 def _rows_of(part) -> int:

@@ -1,6 +1,7 @@
 """A bake made a part of the texels at a time (parts.py), with the parts' rows on disk
 (spill.py), gives the same bytes as one made all at once, and leaves no file behind."""
 
+import os
 from dataclasses import fields
 
 import numpy as np
@@ -105,3 +106,23 @@ def test_an_interrupted_bake_in_parts_leaves_no_rows_on_disk(tmp_path, monkeypat
     with pytest.raises(KeyboardInterrupt):
         _bake(REAL_SCENES["LightsPunctualLamp"], tmp_path / "out.glb", page_size=128)
     assert len(lit) == 2 and not list(tmp_path.iterdir())
+
+
+def test_rows_a_killed_bake_left_behind_are_removed_by_the_next(tmp_path):
+    """A SIGKILL leaves the spilled rows (nothing can run then); the next spill in the folder
+    removes the folders of processes that are gone, and keeps those of running ones."""
+    import subprocess
+    import sys
+
+    from baker.spill import remove_stale
+
+    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                          capture_output=True, text=True, check=True).stdout.strip()
+    (tmp_path / f".baker-spill-{gone}-x1").mkdir()
+    (tmp_path / f".baker-spill-{gone}-x1" / "terms.w_hit").write_bytes(b"\0" * 64)
+    (tmp_path / f".baker-spill-{os.getpid()}-x2").mkdir()  # a bake running now: this one
+    (tmp_path / ".baker-spill-notapid").mkdir()
+    Spill(tmp_path).close()
+    assert sorted(p.name for p in tmp_path.iterdir()) == \
+        [f".baker-spill-{os.getpid()}-x2", ".baker-spill-notapid"]
+    assert remove_stale(tmp_path) == []
