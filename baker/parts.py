@@ -29,9 +29,12 @@ PART_TEXELS = 1 << 18
 
 
 def part_slices(count: int) -> list[slice]:
-    """The rows of each part of ``count`` texels, in order (one empty part for none)."""
-    return [slice(start, min(start + PART_TEXELS, count))
-            for start in range(0, count, PART_TEXELS)] or [slice(0, 0)]
+    """The rows of each part of ``count`` texels, in order: as few parts of at most
+    ``PART_TEXELS`` as will do, of equal size (no small last part, whose threads would idle;
+    one empty part for none)."""
+    parts = max(1, -(-count // PART_TEXELS))
+    bounds = [count * k // parts for k in range(parts + 1)]
+    return [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:])]
 
 
 @dataclass(frozen=True)
