@@ -12,7 +12,7 @@ The pipeline, one module per stage (DESIGN.md §3):
     rasterise.texels_of  Coverage → Texels (world sample point of every texel of a part)
     integrate.integrate  Texels → Terms (obscurance terms, rays cast with trace.Tracer)
     direct.direct_light  Texels → Direct (lights, emitters, sky per texel, with shadow rays)
-    compose.compose      Terms + Direct → Lightmaps (L = D + I_A · W per page)
+    compose.compose_into Terms + Direct → Lightmaps (L = D + I_A · W per page)
     denoise.denoise      optional (--denoise): Open Image Denoise per chart, before dilation
     postprocess          dilation into the padding
     encode.encode        Lightmaps → 8-bit PNG pages, each scaled by a percentile of its texels

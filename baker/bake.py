@@ -14,7 +14,7 @@ import tempfile
 import time
 import urllib.parse
 from concurrent.futures import Future, ThreadPoolExecutor
-from contextlib import contextmanager
+from contextlib import closing, contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import BinaryIO, Callable, Iterator
@@ -23,7 +23,7 @@ import numpy as np
 
 from .ambient import Ambient, ambient_terms
 from .atlas import Atlas
-from .compose import Lightmaps, blank, compose, compose_into, effective_r_ave
+from .compose import Lightmaps, blank, compose_into, effective_r_ave
 from .direct import Direct, Power, Sources, delivered_power, direct_light, light_sources
 from .encode import encode
 from .errormap import write_error_maps
@@ -276,10 +276,10 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True,
     baking = _Baking(scene, world, resolved, tracer, sources, ambient, atlas, coverage, owned,
                      Faces(scene, world), surfaces_of(scene, world))
     try:
-        lightmaps, masks, tally, held = _bake_parts(baking, spill, times, quiet)
+        pages, held = _bake_parts(baking, spill, times, quiet)
         per_texel = (PerTexel.spilled(spill, atlas, world) if spill is not None
                      else PerTexel.held(*held))
-        return _finish_pages(baking, power, plan, per_texel, tally, lightmaps, masks, times)
+        return _finish_pages(baking, power, plan, per_texel, pages, times)
     except BaseException:  # an error or Ctrl-C: no spilled rows left behind
         if spill is not None:
             spill.close()
@@ -288,27 +288,21 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True,
 
 def _bake_parts(baking: _Baking, spill: Spill | None, times: dict[str, float], quiet: bool):
     """Bake the texels a part at a time, each composed into the pages as it is done and, with
-    a ``spill``, its rows appended to it. Returns the composed lightmaps, the validity's page
-    masks (invalid, enclosed), the ``Tally``, and the last part's (texels, validity, terms,
-    direct) — all the texels' when there is one part."""
-    s, ambient = baking.settings, baking.ambient
+    a ``spill``, its rows appended to it. Returns the composed ``_Pages``, and the last part's
+    (texels, validity, terms, direct) — all the texels' when there is one part."""
     count = len(baking.coverage.key)
-    lightmaps = blank(baking.atlas, obscurance=s.occlusion != "none")
-    masks = np.zeros_like(lightmaps.covered), np.zeros_like(lightmaps.covered)
-    tally = Tally()
+    pages = _Pages.blank(baking)
     with bar(count * (1 + baking.sources.any()), "baking", wanted(quiet)) as advance:
         for rows in part_slices(count):
             texels, validity, terms, direct, indirect = _bake_part(baking, rows, times, advance)
             with _timed(times, "compose"):
-                compose_into(lightmaps, texels, terms, ambient, s.rho, direct, indirect=indirect)
-                validity.mark(texels, *masks)
-                tally.add(terms, direct, validity, effective_r_ave(ambient, s.rho))
+                pages.add(baking, texels, validity, terms, direct, indirect)
             if spill is not None:
                 with _timed(times, "spill"):
                     for name, group in (("texels", TexelPoints.of(texels)), ("validity", validity),
                                         ("terms", terms), ("direct", direct)):
                         spill.append(name, group)
-    return lightmaps, masks, tally, (texels, validity, terms, direct)
+    return pages, (texels, validity, terms, direct)
 
 
 def _bake_part(baking: _Baking, rows: slice, times: dict[str, float],
@@ -343,23 +337,43 @@ def finish(scene: Scene, world: World, resolved: Resolved, tracer: Tracer, sourc
     """From the texels' terms, all held in memory, to the post-processed float lightmaps: an
     incremental rebake (incremental.py) ends as a full bake does, so both give the same bytes.
     """
-    with _timed(times, "compose"):
-        lightmaps = compose(atlas, texels, terms, ambient, resolved.rho, direct,
-                            obscurance=resolved.occlusion != "none")
-        masks = validity.page_masks(texels, lightmaps.covered.shape)
-        tally = Tally()
-        tally.add(terms, direct, validity, effective_r_ave(ambient, resolved.rho))
     baking = _Baking(scene, world, resolved, tracer, sources, ambient, atlas)
+    with _timed(times, "compose"):
+        pages = _Pages.blank(baking)
+        pages.add(baking, texels, validity, terms, direct)
     return _finish_pages(baking, power, plan, PerTexel.held(texels, validity, terms, direct),
-                         tally, lightmaps, masks, times)
+                         pages, times)
 
 
-def _finish_pages(baking: _Baking, power: Power, plan: Plan, per_texel: PerTexel, tally: Tally,
-                  lightmaps: Lightmaps, masks: tuple[np.ndarray, np.ndarray],
+@dataclass
+class _Pages:
+    """What the texels are composed into, part by part: the lightmaps, the validity's page
+    masks (invalid, enclosed) and the report's ``Tally``."""
+
+    lightmaps: Lightmaps
+    masks: tuple[np.ndarray, np.ndarray]
+    tally: Tally
+
+    @classmethod
+    def blank(cls, baking: _Baking) -> "_Pages":
+        """Nothing composed yet (pages of W only for the occlusion texture)."""
+        lightmaps = blank(baking.atlas, obscurance=baking.settings.occlusion != "none")
+        return cls(lightmaps, (np.zeros_like(lightmaps.covered),
+                               np.zeros_like(lightmaps.covered)), Tally())
+
+    def add(self, baking: _Baking, texels: Texels, validity: Validity, terms: Terms,
+            direct: Direct, indirect: np.ndarray | None = None) -> None:
+        """Compose the texels' light, mark their validity and count them."""
+        rho, ambient = baking.settings.rho, baking.ambient
+        compose_into(self.lightmaps, texels, terms, ambient, rho, direct, indirect=indirect)
+        validity.mark(texels, *self.masks)
+        self.tally.add(terms, direct, validity, effective_r_ave(ambient, rho))
+
+
+def _finish_pages(baking: _Baking, power: Power, plan: Plan, per_texel: PerTexel, pages: _Pages,
                   times: dict[str, float]) -> Computed:
-    """Denoise (if asked) and post-process the composed pages (``masks``: the validity's
-    invalid and enclosed page masks)."""
-    resolved = baking.settings
+    """Denoise (if asked) and post-process the composed pages."""
+    resolved, lightmaps, masks = baking.settings, pages.lightmaps, pages.masks
     denoised = None
     if resolved.denoise:  # per chart, before the fill of invalid texels and dilation (denoise.py)
         with _timed(times, "denoise"):
@@ -371,7 +385,7 @@ def _finish_pages(baking: _Baking, power: Power, plan: Plan, per_texel: PerTexel
                                 seams=find_seams(baking.atlas, baking.world))
     return Computed(scene=baking.scene, world=baking.world, settings=resolved,
                     ambient=baking.ambient, plan=plan, atlas=baking.atlas, per_texel=per_texel,
-                    tally=tally, lightmaps=lightmaps, stage_seconds=times,
+                    tally=pages.tally, lightmaps=lightmaps, stage_seconds=times,
                     sources=baking.sources, power=power, denoised=denoised)
 
 
@@ -420,32 +434,31 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
     times = dict(done.stage_seconds)
     times["load"] += loading["load"]
     resolved = done.settings
-    try:
-        with _timed(times, "write"), ThreadPoolExecutor(1) as beside:
-            # The sidecar a rebake starts from (docs/bake_state.md), written while the pages are
-            # encoded (its CRCs and file writes release the GIL, as PIL's compression does), and
-            # put in place only once the output is.
-            state_file = None if state_path is None else beside.submit(
-                stage_atomically, state_path, bake_state_writer(done, rebaked, settings))
-            try:
-                pages = encode(done.lightmaps, resolved.encoding, resolved.occlusion != "none",
-                               resolved.clip_percentile)
-                info = write(scene, done.atlas, pages, output,
-                             WriteOptions(encoding=resolved.encoding, occlusion=resolved.occlusion,
-                                          clip_percentile=resolved.clip_percentile))
-                if lightmaps_dir is not None:
-                    write_page_files(Path(lightmaps_dir), output.stem, pages, done.lightmaps.light,
-                                     lightmaps_format)
-                if error_map_dir is not None:  # per-texel standard error pages (errormap.py)
-                    write_error_maps(Path(error_map_dir), output.stem, done, write_atomically)
-            except BaseException:
-                _discard(state_file)
-                raise
-            if state_file is not None:
-                _rename(state_file.result(), state_path)
-                record_full_bake(state_path, rebaked, time.perf_counter() - started)
-    finally:  # the rows the state was written from (parts.py), if on disk
-        done.per_texel.close()
+    # closing(): the rows the state is written from (parts.py), if on disk, are removed once
+    # the executor (exited first) has written the state.
+    with closing(done.per_texel), _timed(times, "write"), ThreadPoolExecutor(1) as beside:
+        # The sidecar a rebake starts from (docs/bake_state.md), written while the pages are
+        # encoded (its CRCs and file writes release the GIL, as PIL's compression does), and
+        # put in place only once the output is.
+        state_file = None if state_path is None else beside.submit(
+            stage_atomically, state_path, bake_state_writer(done, rebaked, settings))
+        try:
+            pages = encode(done.lightmaps, resolved.encoding, resolved.occlusion != "none",
+                           resolved.clip_percentile)
+            info = write(scene, done.atlas, pages, output,
+                         WriteOptions(encoding=resolved.encoding, occlusion=resolved.occlusion,
+                                      clip_percentile=resolved.clip_percentile))
+            if lightmaps_dir is not None:
+                write_page_files(Path(lightmaps_dir), output.stem, pages, done.lightmaps.light,
+                                 lightmaps_format)
+            if error_map_dir is not None:  # per-texel standard error pages (errormap.py)
+                write_error_maps(Path(error_map_dir), output.stem, done, write_atomically)
+        except BaseException:
+            _discard(state_file)
+            raise
+        if state_file is not None:
+            _rename(state_file.result(), state_path)
+            record_full_bake(state_path, rebaked, time.perf_counter() - started)
     seconds = time.perf_counter() - started
     rmse = done.rmse_estimate()
     ambient, atlas = done.ambient, done.atlas

@@ -522,8 +522,9 @@ def _may_shadow(texels: Texels, rows: np.ndarray, changed: "_Changed", sources) 
     either, every texel may."""
     if sources.emitters is not None or sources.sky is not None:
         return np.ones(len(rows), bool)
-    origin = (texels.position[rows] - changed.center
-              + ray_lift(texels.position[rows], texels.size(rows), changed.center)[:, None]
+    position = texels.position[rows]
+    origin = (position - changed.center
+              + ray_lift(position, texels.size(rows), changed.center)[:, None]
               * texels.geometric_normal(rows))
     may = np.zeros(len(rows), bool)
     for light, spread in zip(sources.lights, sources.spread):
@@ -556,16 +557,16 @@ def _shadow_dirty(scene, world, recorder_tracer: Tracer, texels: Texels, rows: n
     rays = 0
     maybe = np.flatnonzero(_may_shadow(texels, rows, recorder_tracer, sources))
     for part in part_slices(len(maybe)):
-        part = maybe[part]
+        chosen = maybe[part]
         recorder = _Recorder(recorder_tracer)
-        texels_part = take(texels, rows[part])
+        texels_part = take(texels, rows[chosen])
         direct_light(scene, world, recorder, texels_part, sources, settings)
         rays += recorder.rays
         if not recorder.origins:
             continue
         lift = ray_lift(texels_part.position, texels_part.size(), recorder.center)
         starts = texels_part.position + lift[:, None] * texels_part.geometric_normal()
-        meets[part] = np.isin(_row_keys(starts), _row_keys(np.concatenate(recorder.origins)))
+        meets[chosen] = np.isin(_row_keys(starts), _row_keys(np.concatenate(recorder.origins)))
     return meets, rays
 
 
