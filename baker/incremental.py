@@ -53,7 +53,7 @@ from .rasterise import Coverage, Texels, texels_of
 from .scene import Scene
 from .settings import Settings, resolve
 from .surface import LUMINANCE
-from .sampling import jit, tangent_frames
+from .sampling import TECHNIQUES, fill_cosine, fill_points, jit, tangent_frames
 from .trace import Hits, Tracer, ray_lift
 from .validity import Validity, check_texels
 
@@ -204,6 +204,37 @@ def _crossing(origins: np.ndarray, directions: np.ndarray, lengths: np.ndarray,
 
 
 @jit
+def _sphere_locals(start, t1, t2, normal, centres, local, distance_sq):
+    """Each sphere centre (b, 3) seen from ``start`` (3,) in the frame (t1, t2, normal), into
+    ``local`` (b, 3), and its squared distance into ``distance_sq`` (b,): once per texel, so a
+    ray's test costs a dot product, not a transform."""
+    for b in range(len(centres)):
+        c = centres[b] - start
+        local[b, 0] = c[0] * t1[0] + c[1] * t1[1] + c[2] * t1[2]
+        local[b, 1] = c[0] * t2[0] + c[1] * t2[1] + c[2] * t2[2]
+        local[b, 2] = c[0] * normal[0] + c[1] * normal[1] + c[2] * normal[2]
+        distance_sq[b] = c[0] * c[0] + c[1] * c[1] + c[2] * c[2]
+
+
+@jit
+def _any_near(x, y, z, start, stop, local, distance_sq, radii, length):
+    """Whether any of the rays ``start`` … ``stop − 1`` from the origin along the local
+    directions x, y, z passes within ``radii[b]`` of some sphere ``local[b]``
+    (``_sphere_locals``) before ``length``. Spheres outside, rays inside, without branches:
+    the loop over the rays vectorises."""
+    for b in range(len(radii)):
+        cx, cy, cz, radius = local[b, 0], local[b, 1], local[b, 2], radii[b]
+        low, high, room = -radius, length + radius, radius * radius - distance_sq[b]
+        near = False
+        for r in range(start, stop):
+            along = x[r] * cx + y[r] * cy + z[r] * cz
+            near |= (along >= low) & (along <= high) & (-along * along <= room)
+        if near:
+            return True
+    return False
+
+
+@jit
 def _may_meet(rays: int, x: np.ndarray, y: np.ndarray, z: np.ndarray, starts: np.ndarray,
               t1: np.ndarray, t2: np.ndarray, normals: np.ndarray, centres: np.ndarray,
               radii: np.ndarray, length: float) -> np.ndarray:
@@ -211,41 +242,75 @@ def _may_meet(rays: int, x: np.ndarray, y: np.ndarray, z: np.ndarray, starts: np
     the frame (t1, t2, normals)[i] (k, 3) each, from ``starts[i]`` (k, 3), in the tracer's
     frame — passes within ``radii[b]`` of some ``centres[b]`` (b, 3) before ``length``.
     Conservative for the float32 rays Embree gets when the radii are padded beyond their
-    rounding. A sphere's centre goes into each texel's frame once, so a ray costs a dot
-    product, not a transform."""
-    k, spheres = len(starts), len(centres)
+    rounding (``_starts``)."""
+    k = len(starts)
     out = np.zeros(k * rays, np.bool_)
-    local = np.empty((spheres, 3))
-    distance_sq = np.empty(spheres)
+    local = np.empty((len(centres), 3))
+    distance_sq = np.empty(len(centres))
     for i in range(k):
-        for b in range(spheres):
-            c = centres[b] - starts[i]
-            local[b, 0] = c[0] * t1[i, 0] + c[1] * t1[i, 1] + c[2] * t1[i, 2]
-            local[b, 1] = c[0] * t2[i, 0] + c[1] * t2[i, 1] + c[2] * t2[i, 2]
-            local[b, 2] = c[0] * normals[i, 0] + c[1] * normals[i, 1] + c[2] * normals[i, 2]
-            distance_sq[b] = c[0] * c[0] + c[1] * c[1] + c[2] * c[2]
+        _sphere_locals(starts[i], t1[i], t2[i], normals[i], centres, local, distance_sq)
         for r in range(i * rays, (i + 1) * rays):
-            for b in range(spheres):
-                along = x[r] * local[b, 0] + y[r] * local[b, 1] + z[r] * local[b, 2]
-                radius = radii[b]
-                if along < -radius or along > length + radius:
-                    continue
-                if distance_sq[b] - along * along <= radius * radius:
-                    out[r] = True
-                    break
+            out[r] = _any_near(x, y, z, r, r + 1, local, distance_sq, radii, length)
     return out
 
 
-def _candidates(tracer: "_Changed", x, y, z, position, normal, size, t1, t2, rays: int,
-                length: float) -> np.ndarray:
-    """(k, rays) bool: which of k texels' rays (local directions x, y, z (k·rays,) in the frames
-    t1, t2, normal (k, 3), from ``position`` (k, 3) lifted by ``trace.ray_lift``) may meet the
-    changed geometry within ``length`` (``_may_meet`` against its padded bounding spheres)."""
+@jit
+def _fixed_may_meet(x: np.ndarray, y: np.ndarray, z: np.ndarray, starts: np.ndarray,
+                    t1: np.ndarray, t2: np.ndarray, normals: np.ndarray, centres: np.ndarray,
+                    radii: np.ndarray, length: float) -> np.ndarray:
+    """(k,) bool: whether some ray of texel i may pass near the spheres, as ``_may_meet``
+    decides, when every texel casts the same local directions x, y, z (m,) (the validity
+    probes)."""
+    k = len(starts)
+    out = np.zeros(k, np.bool_)
+    local = np.empty((len(centres), 3))
+    distance_sq = np.empty(len(centres))
+    for i in range(k):
+        _sphere_locals(starts[i], t1[i], t2[i], normals[i], centres, local, distance_sq)
+        out[i] = _any_near(x, y, z, 0, len(x), local, distance_sq, radii, length)
+    return out
+
+
+# Rays whose directions ``_drawn_may_meet`` draws at once: they stay in the cache (a whole
+# chunk's fresh arrays would cost more in page faults than the drawing).
+_DRAWN_RAYS = 1 << 12
+
+
+@jit
+def _drawn_may_meet(technique: int, seed, keys: np.ndarray, rays: int, starts: np.ndarray,
+                    t1: np.ndarray, t2: np.ndarray, normals: np.ndarray, centres: np.ndarray,
+                    radii: np.ndarray, length: float) -> np.ndarray:
+    """(k,) bool: whether some obscurance ray of texel i (keys (k,)) may pass near the
+    spheres, as ``_may_meet`` decides; the rays' local directions are drawn here
+    (``sampling.fill_points``, ``fill_cosine``: the bits ``cosine_directions`` gives) a few
+    texels at a time into small buffers, so that no (k·rays,) arrays are made."""
+    k = len(starts)
+    out = np.zeros(k, np.bool_)
+    local = np.empty((len(centres), 3))
+    distance_sq = np.empty(len(centres))
+    block = max(1, _DRAWN_RAYS // rays)
+    u, v = np.empty(block * rays), np.empty(block * rays)
+    x, y, z = np.empty(block * rays), np.empty(block * rays), np.empty(block * rays)
+    for first in range(0, k, block):
+        last = min(first + block, k)
+        m = (last - first) * rays
+        fill_points(technique, seed, keys[first:last], 0, rays, np.uint64(0), u[:m], v[:m])
+        fill_cosine(u[:m], v[:m], x[:m], y[:m], z[:m])
+        for i in range(first, last):
+            _sphere_locals(starts[i], t1[i], t2[i], normals[i], centres, local, distance_sq)
+            base = (i - first) * rays
+            out[i] = _any_near(x, y, z, base, base + rays, local, distance_sq, radii, length)
+    return out
+
+
+def _starts(tracer: "_Changed", position, normal, size, length: float):
+    """The rays' origins (k, 3) in the tracer's frame — the sample points ``position`` (k, 3)
+    lifted along ``normal`` by ``trace.ray_lift`` — and the changed geometry's bounding-sphere
+    radii padded for the float32 rays Embree gets, for ``_may_meet``/``_drawn_may_meet``."""
     lift = ray_lift(position, size, tracer.center)
     starts = position - tracer.center + lift[:, None] * normal
     slack = 1e-5 * (length + np.abs(starts).max(initial=0.0))  # float32 directions, origins
-    return _may_meet(rays, x, y, z, starts, t1, t2, normal, tracer.sphere_centres,
-                     tracer.sphere_radii + slack, length).reshape(-1, rays)
+    return starts, tracer.sphere_radii + slack
 
 
 class _Changed:
@@ -364,19 +429,29 @@ def _rays_meet(tracer: Tracer, texels: Texels, rows: np.ndarray, settings) -> tu
 
     def work(part: slice) -> None:
         chosen = rows[part]
-        x, y, z = cosine_directions(texels.key[chosen], n, settings.seed, settings.sampling)
         normal = texels.geometric_normal(chosen)
-        maybe = _candidates(tracer, x, y, z, texels.position[chosen], normal,
-                            texels.size(chosen), *tangent_frames(normal), n, settings.d_max)
-        keep = maybe.ravel()
-        if not keep.any():
+        t1, t2 = tangent_frames(normal)
+        starts, radii = _starts(tracer, texels.position[chosen], normal, texels.size(chosen),
+                                settings.d_max)
+        # Drawing the rays and testing them in one pass first: few texels have any near.
+        some = np.flatnonzero(_drawn_may_meet(
+            TECHNIQUES.index(settings.sampling), np.uint64(settings.seed), texels.key[chosen],
+            n, starts, t1, t2, normal, tracer.sphere_centres, radii, settings.d_max))
+        import sys; print('DBG', len(chosen), len(some), file=sys.stderr)
+        if not len(some):
             return
+        chosen = chosen[some]
+        x, y, z = cosine_directions(texels.key[chosen], n, settings.seed, settings.sampling)
+        keep = _may_meet(n, x, y, z, starts[some], t1[some], t2[some], normal[some],
+                         tracer.sphere_centres, radii, settings.d_max)
         origins, directions = world_rays(texels, chosen, n, x, y, z, tracer.center, keep)
         primitive = np.full(len(keep), -1, np.int32)
         primitive[keep] = tracer.cast_local(origins, directions,
                                             np.full(len(origins), settings.d_max,
                                                     np.float32))["primID"]
-        meets[part] = (primitive.reshape(-1, n) >= 0).any(axis=1)
+        found = meets[part]
+        found[some] = (primitive.reshape(-1, n) >= 0).any(axis=1)
+        meets[part] = found
 
     run_chunks(work, _slices(len(rows), max(1, _TEST_RAYS // n)), settings.threads)
     return meets, len(rows) * n
@@ -388,16 +463,15 @@ def _probes_meet(tracer: Tracer, texels: Texels, rows: np.ndarray, d_max: float,
     (probed) sample point meets ``tracer``'s triangles within d_max; and the rays cast."""
     meets = np.zeros(len(rows), bool)
     m = validity_module.HEMISPHERE_RAYS
-    x, y, z = validity_module._hemisphere_directions(m).T
+    x, y, z = np.ascontiguousarray(validity_module._hemisphere_directions(m).T)
 
     def work(part: slice) -> None:
         chosen = rows[part]
         normal = texels.geometric_normal(chosen)
-        k = len(chosen)
-        maybe = _candidates(tracer, np.tile(x, k), np.tile(y, k), np.tile(z, k),
-                            texels.position[chosen], normal, texels.size(chosen),
-                            *validity_module._frames(normal), m, d_max)
-        some = np.flatnonzero(maybe.any(axis=1))
+        starts, radii = _starts(tracer, texels.position[chosen], normal, texels.size(chosen),
+                                d_max)
+        some = np.flatnonzero(_fixed_may_meet(x, y, z, starts, *validity_module._frames(normal),
+                                              normal, tracer.sphere_centres, radii, d_max))
         if not len(some):
             return
         origins, directions = validity_module.hemisphere_probes(
