@@ -437,7 +437,6 @@ def _rays_meet(tracer: Tracer, texels: Texels, rows: np.ndarray, settings) -> tu
         some = np.flatnonzero(_drawn_may_meet(
             TECHNIQUES.index(settings.sampling), np.uint64(settings.seed), texels.key[chosen],
             n, starts, t1, t2, normal, tracer.sphere_centres, radii, settings.d_max))
-        import sys; print('DBG', len(chosen), len(some), file=sys.stderr)
         if not len(some):
             return
         chosen = chosen[some]
