@@ -19,13 +19,14 @@ the sRGB curve (``srgb``: what the proposed MOZ_lightmap text says; more precisi
 
 from __future__ import annotations
 
-import io
+import struct
+import zlib
 from dataclasses import dataclass
 
 import numpy as np
-from PIL import Image
 
 from .compose import Lightmaps
+from .parallel import run_chunks
 from .surface import LUMINANCE
 
 CLIP_PERCENTILE = 99.9
@@ -65,11 +66,47 @@ def srgb_to_linear(e: np.ndarray) -> np.ndarray:
     return np.where(e <= 0.04045, e / 12.92, np.power((e + 0.055) / 1.055, 2.4))
 
 
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+_ZLIB_HEADER = b"\x78\x5e"  # deflate, 32 KiB window, "fast" level: what zlib writes at level 4
+_LEVEL = 4  # zlib level: at a 4096 page, 2.5× faster than 6 for a file 3 % larger
+_BAND_ROWS = 64  # image rows compressed as one piece (pieces go to every core)
+
+
 def png_bytes(rgb: np.ndarray) -> bytes:
-    """A (H, W, 3) uint8 image as PNG bytes (deterministic: no timestamps, fixed settings)."""
-    buffer = io.BytesIO()
-    Image.fromarray(rgb, "RGB").save(buffer, format="PNG", optimize=False, compress_level=4)
-    return buffer.getvalue()
+    """A (H, W, 3) uint8 image as PNG bytes (deterministic: no timestamps, fixed settings).
+
+    Every row has the "Up" filter (its difference from the row above): on lightmaps it
+    compresses within 0.5 % of the per-row adaptive choice (PIL's), at a fraction of the cost.
+    The filtered rows are deflated in bands of ``_BAND_ROWS`` rows side by side, each band a
+    raw deflate stream ending on a byte boundary (a sync flush; the last one finishes), so that
+    their concatenation is one valid zlib stream (as pigz makes it). On a 825² page: 0.03 s,
+    where PIL took 0.10 s.
+    """
+    height, width = rgb.shape[:2]
+    rows = np.ascontiguousarray(rgb, np.uint8).reshape(height, 3 * width)
+    filtered = np.empty((height, 3 * width + 1), np.uint8)
+    filtered[:, 0] = 2  # the "Up" filter type
+    filtered[:1, 1:] = rows[:1]  # the row above the first counts as zeros
+    np.subtract(rows[1:], rows[:-1], out=filtered[1:, 1:])  # uint8: modulo 256, as PNG wants
+    starts = range(0, height, _BAND_ROWS)
+    pieces: list[bytes] = [b""] * len(starts)
+
+    def deflate(band: int) -> None:  # zlib releases the GIL: bands compress side by side
+        stream = zlib.compressobj(_LEVEL, zlib.DEFLATED, -15)
+        last = band == len(pieces) - 1
+        pieces[band] = (stream.compress(filtered[starts[band]:starts[band] + _BAND_ROWS])
+                        + stream.flush(zlib.Z_FINISH if last else zlib.Z_SYNC_FLUSH))
+
+    run_chunks(deflate, range(len(pieces)))
+    data = b"".join([_ZLIB_HEADER, *pieces, struct.pack(">I", zlib.adler32(filtered))])
+    header = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)  # 8-bit RGB, no interlace
+    return b"".join([PNG_SIGNATURE, _chunk(b"IHDR", header), _chunk(b"IDAT", data),
+                     _chunk(b"IEND", b"")])
+
+
+def _chunk(kind: bytes, data: bytes) -> bytes:
+    """One PNG chunk: length, type, data, CRC-32 of type and data."""
+    return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
 
 
 def quantise(values: np.ndarray, encoding: str) -> np.ndarray:

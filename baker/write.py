@@ -35,7 +35,7 @@ import numpy as np
 import pygltflib
 
 from .atlas import Atlas, InstanceUV
-from .encode import EncodedPage
+from .encode import PNG_SIGNATURE, EncodedPage
 from .errors import InputError, OutputError, SettingsError
 from .load import read_accessor, resolve_buffers
 from .scene import Scene
@@ -61,7 +61,6 @@ _COMPONENT_DTYPES = {
     5125: np.dtype("<u4"),
     5126: np.dtype("<f4"),
 }
-_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 _GLB_MAGIC, _GLB_JSON, _GLB_BIN = 0x46546C67, 0x4E4F534A, 0x004E4942
 
 
@@ -363,7 +362,7 @@ class _Builder:
                     self._add_texture(page.occlusion_png, sampler, f"occlusion page {p}"))
 
     def _add_texture(self, png: bytes, sampler: int, name: str) -> int:
-        if not bytes(png[:8]) == _PNG_SIGNATURE:
+        if not bytes(png[:8]) == PNG_SIGNATURE:
             raise ValueError(f"{name} is not a PNG image")
         images = self.data.setdefault("images", [])
         images.append({"bufferView": self._add_view(bytes(png)), "mimeType": "image/png",
