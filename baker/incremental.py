@@ -45,7 +45,7 @@ from . import validity as validity_module
 from .direct import Direct, direct_light, light_dimension, punctual_irradiance, texel_receivers
 from .geometry import World, build_world
 from .inner import other_side_rays, translucent
-from .integrate import Terms, cosine_directions, integrate, world_rays
+from .integrate import Terms, integrate, world_rays
 from .materials import SPECULAR, TRANSPARENT, material_table
 from .parallel import run_chunks
 from .parts import TexelPoints, part_slices
@@ -235,32 +235,12 @@ def _any_near(x, y, z, start, stop, local, distance_sq, radii, length):
 
 
 @jit
-def _may_meet(rays: int, x: np.ndarray, y: np.ndarray, z: np.ndarray, starts: np.ndarray,
-              t1: np.ndarray, t2: np.ndarray, normals: np.ndarray, centres: np.ndarray,
-              radii: np.ndarray, length: float) -> np.ndarray:
-    """(k·rays,) bool: whether ray r of texel i = r // rays — local direction (x, y, z)[r] in
-    the frame (t1, t2, normals)[i] (k, 3) each, from ``starts[i]`` (k, 3), in the tracer's
-    frame — passes within ``radii[b]`` of some ``centres[b]`` (b, 3) before ``length``.
-    Conservative for the float32 rays Embree gets when the radii are padded beyond their
-    rounding (``_starts``)."""
-    k = len(starts)
-    out = np.zeros(k * rays, np.bool_)
-    local = np.empty((len(centres), 3))
-    distance_sq = np.empty(len(centres))
-    for i in range(k):
-        _sphere_locals(starts[i], t1[i], t2[i], normals[i], centres, local, distance_sq)
-        for r in range(i * rays, (i + 1) * rays):
-            out[r] = _any_near(x, y, z, r, r + 1, local, distance_sq, radii, length)
-    return out
-
-
-@jit
 def _fixed_may_meet(x: np.ndarray, y: np.ndarray, z: np.ndarray, starts: np.ndarray,
                     t1: np.ndarray, t2: np.ndarray, normals: np.ndarray, centres: np.ndarray,
                     radii: np.ndarray, length: float) -> np.ndarray:
-    """(k,) bool: whether some ray of texel i may pass near the spheres, as ``_may_meet``
-    decides, when every texel casts the same local directions x, y, z (m,) (the validity
-    probes)."""
+    """(k,) bool: whether some ray of texel i may pass near the spheres (``_any_near``), when
+    every texel casts the same local directions x, y, z (m,) (the validity probes) in its
+    frame t1, t2, normals (k, 3) each, from ``starts`` (k, 3) (``_starts``)."""
     k = len(starts)
     out = np.zeros(k, np.bool_)
     local = np.empty((len(centres), 3))
@@ -271,42 +251,57 @@ def _fixed_may_meet(x: np.ndarray, y: np.ndarray, z: np.ndarray, starts: np.ndar
     return out
 
 
-# Rays whose directions ``_drawn_may_meet`` draws at once: they stay in the cache (a whole
+# Rays whose directions ``_drawn_near_rays`` draws at once: they stay in the cache (a whole
 # chunk's fresh arrays would cost more in page faults than the drawing).
 _DRAWN_RAYS = 1 << 12
 
 
 @jit
-def _drawn_may_meet(technique: int, seed, keys: np.ndarray, rays: int, starts: np.ndarray,
-                    t1: np.ndarray, t2: np.ndarray, normals: np.ndarray, centres: np.ndarray,
-                    radii: np.ndarray, length: float) -> np.ndarray:
-    """(k,) bool: whether some obscurance ray of texel i (keys (k,)) may pass near the
-    spheres, as ``_may_meet`` decides; the rays' local directions are drawn here
-    (``sampling.fill_points``, ``fill_cosine``: the bits ``cosine_directions`` gives) a few
-    texels at a time into small buffers, so that no (k·rays,) arrays are made."""
+def _drawn_near_rays(technique: int, seed, keys: np.ndarray, rays: int, starts: np.ndarray,
+                     t1: np.ndarray, t2: np.ndarray, normals: np.ndarray, centres: np.ndarray,
+                     radii: np.ndarray, length: float):
+    """The obscurance rays of texels keys (k,) — each texel's rays from ``starts[i]`` (k, 3) in
+    its frame t1, t2, normals (k, 3) each — that may pass near the spheres (``_any_near``):
+    (texel (m,) int64 index into keys, x, y, z (m,) their local directions, the bits
+    ``cosine_directions`` gives). The directions are drawn here (``sampling.fill_points``,
+    ``fill_cosine``) a few texels at a time into small buffers, so that no (k·rays,) arrays
+    are made; a texel's rays are tested one by one only when some of them passes near."""
     k = len(starts)
-    out = np.zeros(k, np.bool_)
     local = np.empty((len(centres), 3))
     distance_sq = np.empty(len(centres))
     block = max(1, _DRAWN_RAYS // rays)
     u, v = np.empty(block * rays), np.empty(block * rays)
     x, y, z = np.empty(block * rays), np.empty(block * rays), np.empty(block * rays)
+    texel = np.empty(1024, np.int64)
+    near = np.empty((1024, 3))
+    m = 0
     for first in range(0, k, block):
         last = min(first + block, k)
-        m = (last - first) * rays
-        fill_points(technique, seed, keys[first:last], 0, rays, np.uint64(0), u[:m], v[:m])
-        fill_cosine(u[:m], v[:m], x[:m], y[:m], z[:m])
+        drawn = (last - first) * rays
+        fill_points(technique, seed, keys[first:last], 0, rays, np.uint64(0), u[:drawn],
+                    v[:drawn])
+        fill_cosine(u[:drawn], v[:drawn], x[:drawn], y[:drawn], z[:drawn])
         for i in range(first, last):
             _sphere_locals(starts[i], t1[i], t2[i], normals[i], centres, local, distance_sq)
             base = (i - first) * rays
-            out[i] = _any_near(x, y, z, base, base + rays, local, distance_sq, radii, length)
-    return out
+            if not _any_near(x, y, z, base, base + rays, local, distance_sq, radii, length):
+                continue
+            for r in range(base, base + rays):
+                if not _any_near(x, y, z, r, r + 1, local, distance_sq, radii, length):
+                    continue
+                if m == len(texel):  # grow the outputs
+                    texel = np.concatenate((texel, np.empty(m, np.int64)))
+                    near = np.concatenate((near, np.empty((m, 3))))
+                texel[m] = i
+                near[m, 0], near[m, 1], near[m, 2] = x[r], y[r], z[r]
+                m += 1
+    return texel[:m], near[:m, 0].copy(), near[:m, 1].copy(), near[:m, 2].copy()
 
 
 def _starts(tracer: "_Changed", position, normal, size, length: float):
     """The rays' origins (k, 3) in the tracer's frame — the sample points ``position`` (k, 3)
     lifted along ``normal`` by ``trace.ray_lift`` — and the changed geometry's bounding-sphere
-    radii padded for the float32 rays Embree gets, for ``_may_meet``/``_drawn_may_meet``."""
+    radii padded for the float32 rays Embree gets (``_any_near``)."""
     lift = ray_lift(position, size, tracer.center)
     starts = position - tracer.center + lift[:, None] * normal
     slack = 1e-5 * (length + np.abs(starts).max(initial=0.0))  # float32 directions, origins
@@ -430,26 +425,20 @@ def _rays_meet(tracer: Tracer, texels: Texels, rows: np.ndarray, settings) -> tu
     def work(part: slice) -> None:
         chosen = rows[part]
         normal = texels.geometric_normal(chosen)
-        t1, t2 = tangent_frames(normal)
         starts, radii = _starts(tracer, texels.position[chosen], normal, texels.size(chosen),
                                 settings.d_max)
-        # Drawing the rays and testing them in one pass first: few texels have any near.
-        some = np.flatnonzero(_drawn_may_meet(
+        texel, x, y, z = _drawn_near_rays(
             TECHNIQUES.index(settings.sampling), np.uint64(settings.seed), texels.key[chosen],
-            n, starts, t1, t2, normal, tracer.sphere_centres, radii, settings.d_max))
-        if not len(some):
+            n, starts, *tangent_frames(normal), normal, tracer.sphere_centres, radii,
+            settings.d_max)
+        if not len(texel):
             return
-        chosen = chosen[some]
-        x, y, z = cosine_directions(texels.key[chosen], n, settings.seed, settings.sampling)
-        keep = _may_meet(n, x, y, z, starts[some], t1[some], t2[some], normal[some],
-                         tracer.sphere_centres, radii, settings.d_max)
-        origins, directions = world_rays(texels, chosen, n, x, y, z, tracer.center, keep)
-        primitive = np.full(len(keep), -1, np.int32)
-        primitive[keep] = tracer.cast_local(origins, directions,
-                                            np.full(len(origins), settings.d_max,
-                                                    np.float32))["primID"]
+        # One ray per "texel" (rays=1): the same bits as the texel's own ray in a bake.
+        origins, directions = world_rays(texels, chosen[texel], 1, x, y, z, tracer.center)
+        primitive = tracer.cast_local(origins, directions,
+                                      np.full(len(origins), settings.d_max, np.float32))["primID"]
         found = meets[part]
-        found[some] = (primitive.reshape(-1, n) >= 0).any(axis=1)
+        found[texel[primitive >= 0]] = True
         meets[part] = found
 
     run_chunks(work, _slices(len(rows), max(1, _TEST_RAYS // n)), settings.threads)

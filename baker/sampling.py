@@ -150,7 +150,7 @@ def _sobol_point(sample, shuffle, sx, sy):
 
 
 @jit
-def stratified_grid(count):
+def _grid(count):
     """(cells, columns) of the stratified grid for ``count`` samples: ⌊count/2⌋ cells in the
     most nearly square rows × columns (rows the largest divisor of cells up to its root)."""
     cells = count // 2
@@ -164,7 +164,7 @@ def stratified_grid(count):
 def _hashed_point(technique, sample, local, cells, columns, shuffle, sx, sy):
     """Point ``sample`` for the ``stratified`` (1) or ``random`` (2) technique: the jitter is
     hashed from the sample index, the stratum is the ``local``-th of a grid of ``cells`` cells in
-    ``columns`` columns laid twice (``stratified_grid``); samples past both layers are independent."""
+    ``columns`` columns laid twice (``_grid``); samples past both layers are independent."""
     jitter_x = _unit(hash4(sx, sample, shuffle, 3))
     jitter_y = _unit(hash4(sy, sample, shuffle, 4))
     if technique == 1 and local < 2 * cells:
@@ -182,31 +182,23 @@ def point(technique, sample, count, scrambles):
     texel's ``texel_scrambles``. ``count`` matters to the stratified grid only (samples
     0 … count − 1 form one grid).
     """
-    cells, columns = stratified_grid(count)
-    return texel_point(technique, sample, 0, cells, columns, scrambles)
-
-
-@jit
-def texel_point(technique, sample, first, cells, columns, scrambles):
-    """Point ``sample`` of a texel whose samples ``first`` … form one ``stratified_grid`` of ``cells``
-    cells in ``columns`` columns (``stratified`` only), as ``fill_points`` gives it; for kernels
-    that draw points one at a time (``incremental._drawn_may_meet``)."""
     shuffle, sx, sy = scrambles
     if technique == 0:
         return _sobol_point(sample, shuffle, sx, sy)
-    return _hashed_point(technique, sample, sample - first, cells, columns, shuffle, sx, sy)
+    cells, columns = _grid(count)
+    return _hashed_point(technique, sample, sample, cells, columns, shuffle, sx, sy)
 
 
 @jit
 def fill_points(technique, seed, keys, first, count, dimension, u, v):
     """Samples ``first`` … ``first + count − 1`` of every texel in ``keys`` (k,) into ``u``, ``v``
     (k·count,), texel-major, as ``point`` gives them; for ``stratified`` these samples form one
-    grid of their own (``stratified_grid(count)``).
+    grid of their own (``_grid(count)``).
 
     The technique is chosen once per texel, outside the inner loop, so that the compiler
     vectorises the Sobol case.
     """
-    cells, columns = stratified_grid(count)
+    cells, columns = _grid(count)
     for i in range(len(keys)):
         shuffle, sx, sy = texel_scrambles(seed, keys[i], dimension)
         base = i * count - first
