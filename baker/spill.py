@@ -34,31 +34,62 @@ _COPY_BYTES = 1 << 24  # bytes copied or read at once from a column's file (boun
 @dataclass
 class Column:
     """One per-texel array field, its rows in ``path`` (raw C-order bytes), or held whole in
-    ``array`` (a per-scene field, or an empty optional term)."""
+    ``array`` (a per-scene field, an empty optional term, or any array in memory).
+
+    While rows are appended it counts those with a byte other than 0 and whether they all
+    equal the first, so that ``state.write_state`` can store a mostly-zero or constant column
+    in a few bytes (``encoding``) without reading the file first.
+    """
 
     path: str | None
     dtype: np.dtype
     tail: tuple[int, ...]  # the shape after the row count
     rows: int = 0
-    nonzero: bool = False  # whether any byte written so far is not 0
+    nonzero_rows: int = 0  # rows appended so far with some byte not 0
+    first: np.ndarray | None = None  # the first row appended, (1, *tail)
+    repeated: bool = True  # whether every row appended so far equals ``first``
     array: np.ndarray | None = None
 
     @classmethod
     def of(cls, array: np.ndarray) -> "Column":
         """A column held in memory."""
-        return cls(None, array.dtype, array.shape[1:], array=array)
+        column = cls(None, array.dtype, array.shape[1:], array=array)
+        if array.ndim and len(array):
+            column._count(array)
+        return column
 
     @property
     def shape(self) -> tuple[int, ...]:
         return self.array.shape if self.array is not None else (self.rows,) + self.tail
 
     @property
-    def all_zero(self) -> bool:
-        """Whether every byte is 0 (and there is at least one): ``state.write_state`` then
-        lists the array instead of storing it."""
-        if self.array is not None:
-            return self.array.size > 0 and not np.ascontiguousarray(self.array).view(np.uint8).any()
-        return self.rows * int(np.prod(self.tail)) > 0 and not self.nonzero
+    def encoding(self) -> str:
+        """How ``state.write_state`` stores the column: "zeros" (every byte 0, and there is at
+        least one: not stored at all), "repeated" (two rows or more, all the same: one row
+        stored), "sparse" (the rows with a byte not 0 and their indices, when that takes at most
+        half the bytes) or "dense" (as it is)."""
+        count = self.shape[0] if self.shape else 0
+        row_bytes = self._row_bytes()
+        if count * row_bytes == 0:
+            return "dense"
+        if self.nonzero_rows == 0:
+            return "zeros"
+        if count > 1 and self.repeated:
+            return "repeated"
+        if 2 * self.nonzero_rows * (8 + row_bytes) <= count * row_bytes:
+            return "sparse"
+        return "dense"
+
+    def sparse_rows(self) -> tuple[np.ndarray, np.ndarray]:
+        """(indices (m,) int64, rows (m, *tail)) of the rows with a byte not 0, in order; read
+        from disk a block at a time."""
+        indices, rows = [], []
+        for start, block in self._blocks():
+            keep = np.flatnonzero(_nonzero_rows(block))
+            indices.append(keep + start)
+            rows.append(block[keep])
+        return (np.concatenate(indices) if indices else np.zeros(0, np.int64),
+                np.concatenate(rows) if rows else np.zeros((0,) + self.tail, self.dtype))
 
     def write_npy(self, file: BinaryIO) -> None:
         """Write the column as a ``.npy`` file: the same bytes as ``numpy.lib.format.write_array``
@@ -78,12 +109,55 @@ class Column:
             return self.array
         return np.fromfile(self.path, self.dtype).reshape(self.shape)
 
+    def _row_bytes(self) -> int:
+        return self.dtype.itemsize * int(np.prod(self.shape[1:], dtype=np.int64))
+
+    def _blocks(self):
+        """(first row, rows (n, *tail)) of the column, a block of about ``_COPY_BYTES`` at a time."""
+        if self.array is not None:
+            yield 0, self.array
+            return
+        step = max(1, _COPY_BYTES // max(self._row_bytes(), 1))
+        for start in range(0, self.rows, step):
+            yield start, np.fromfile(self.path, self.dtype, count=min(step, self.rows - start)
+                                     * int(np.prod(self.tail, dtype=np.int64)),
+                                     offset=start * self._row_bytes()).reshape((-1,) + self.tail)
+
+    def _count(self, values: np.ndarray) -> None:
+        """Update ``nonzero_rows``, ``first`` and ``repeated`` with the rows ``values``."""
+        words = _words(values)
+        self.nonzero_rows += int(np.count_nonzero(_nonzero_rows(values)))
+        if self.first is None:
+            self.first = values[:1].copy()
+        if self.repeated:
+            first = _words(self.first)[0]
+            self.repeated = all(bool((words[:, c] == first[c]).all())
+                                for c in range(words.shape[1]))
+
     def _append(self, values: np.ndarray) -> None:
         values = np.ascontiguousarray(values, self.dtype)
         with open(self.path, "ab") as file:
             values.tofile(file)
         self.rows += len(values)
-        self.nonzero = self.nonzero or bool(values.view(np.uint8).any())
+        self._count(values)
+
+
+def _words(values: np.ndarray) -> np.ndarray:
+    """``values`` (n, ...) as (n, w) unsigned integers of their own size: equal bits, equal
+    words (so −0.0 is not 0, and NaNs compare)."""
+    flat = np.ascontiguousarray(values).reshape(len(values), -1)
+    size = flat.dtype.itemsize
+    return flat.view(np.dtype(f"u{size}") if size in (1, 2, 4, 8) else np.uint8)
+
+
+def _nonzero_rows(values: np.ndarray) -> np.ndarray:
+    """(n,) bool: the rows of ``values`` (n, ...) with some bit set. Column by column: numpy
+    reduces a short last axis slowly."""
+    words = _words(values)
+    out = np.zeros(len(words), bool)
+    for c in range(words.shape[1]):
+        out |= words[:, c] != 0
+    return out
 
 
 @dataclass

@@ -6,11 +6,13 @@ incremental rebake (``incremental.py``), which diffs the new scene against its f
 
 - a ZIP archive (stored, no compression) whose members have a fixed timestamp, so the same bake
   gives the same bytes (DESIGN.md §4: an incremental rebake's state equals a full bake's);
-- ``header.json``: ``{"format": "baker-bake-state", "version": 3, "fingerprints": {...},
-  "groups": {name: {"class": ..., "fields": {...}, "scalars": {...}}}, "zeros": {...}}``;
+- ``header.json``: ``{"format": "baker-bake-state", "version": 5, "fingerprints": {...},
+  "groups": {name: {"class": ..., "fields": {...}, "scalars": {...}}}, "zeros": {...},
+  "repeated": {...}, "sparse": {...}}``;
 - one ``<group>/<field>.npy`` member per array (numpy's .npy format), so ``numpy.load`` of the
-  file as an .npz reads the arrays; arrays that are all zero are listed under ``zeros`` (shape,
-  dtype) instead of stored.
+  file as an .npz reads the arrays; arrays that are all zero, all one row repeated, or mostly
+  zero rows are listed under ``zeros``, ``repeated`` or ``sparse`` (shape, dtype) and stored
+  as nothing, their first row, or their rows that are not zero with ``<name>.rows.npy``.
 
 Dataclasses (Texels, Validity, Terms, Direct) are stored field by field, generically: a new term
 field needs no format change — a state that lacks a field the code now has is "old" and leads to
@@ -21,7 +23,6 @@ version, fields that do not match) raises ``StateUnusable`` with a one-line reas
 from __future__ import annotations
 
 import hashlib
-import io
 import json
 import zipfile
 from dataclasses import dataclass, fields, is_dataclass
@@ -34,7 +35,7 @@ from .atlas import Atlas, InstanceUV
 from .spill import Column, Group
 
 FORMAT = "baker-bake-state"
-VERSION = 4
+VERSION = 5
 SUFFIX = ".bake"
 _DATE = (1980, 1, 1, 0, 0, 0)  # fixed member timestamp: same content, same bytes
 
@@ -135,8 +136,12 @@ def _atlas_group(atlas: Atlas) -> tuple[dict, dict[str, np.ndarray]]:
 def write_state(file: BinaryIO, state: BakeState) -> None:
     """Write the state's file to ``file`` (deterministic: the same state, the same bytes).
 
-    Arrays whose bytes are all zero (a sky term in a scene without sky, chain counts without
-    mirrors) are not stored: ``header.json`` lists them under ``zeros`` with shape and dtype.
+    Each array is stored by its ``spill.Column.encoding``: one whose bytes are all zero (a sky
+    term in a scene without sky, chain counts without mirrors) not at all, ``header.json``
+    listing it under ``zeros``; one whose rows are all the same (the ray counts without
+    adaptive sampling) as its first row, listed under ``repeated``; one whose rows are mostly
+    zero (how far the validity probes moved a point) as those rows and their indices
+    (``<name>.rows.npy``), listed under ``sparse``. Each list gives shape and dtype.
     """
     groups: dict[str, dict] = {}
     atlas_scalars, atlas_arrays = _atlas_group(state.atlas)
@@ -152,14 +157,44 @@ def write_state(file: BinaryIO, state: BakeState) -> None:
         arrays.update({f"{group}/{name}": column for name, column in obj.columns.items()})
         groups[group] = {"class": obj.cls.__name__, "fields": list(obj.columns),
                          "scalars": obj.scalars}
-    zeros = {name: {"shape": list(a.shape), "dtype": a.dtype.str}
-             for name, a in arrays.items() if a.all_zero}
+    listed: dict[str, dict] = {"zeros": {}, "repeated": {}, "sparse": {}}
+    members: dict[str, Column] = {}
+    for name, column in arrays.items():
+        encoding = column.encoding
+        if encoding != "dense":
+            listed[encoding][name] = {"shape": list(column.shape), "dtype": column.dtype.str}
+        if encoding == "repeated":
+            members[name] = Column.of(column.first)
+        elif encoding == "sparse":
+            members[f"{name}.rows"], members[name] = map(Column.of, column.sparse_rows())
+        elif encoding == "dense":
+            members[name] = column
     header = {"format": FORMAT, "version": VERSION, "fingerprints": state.fingerprints,
-              "groups": groups, "zeros": zeros}
+              "groups": groups, **listed}
     with zipfile.ZipFile(file, "w", zipfile.ZIP_STORED) as archive:
         _member(archive, "header.json", json.dumps(header, sort_keys=True, indent=1).encode())
-        for name in sorted(set(arrays) - set(zeros)):
-            _member(archive, f"{name}.npy", arrays[name])
+        for name in sorted(members):
+            _member(archive, f"{name}.npy", members[name])
+
+
+def _read_member(archive: zipfile.ZipFile, name: str) -> np.ndarray:
+    """The array of the member ``<name>.npy``, read once into its own memory (the ZIP's CRC
+    checked as it is read)."""
+    with archive.open(f"{name}.npy") as member:
+        version = np.lib.format.read_magic(member)
+        if version not in ((1, 0), (2, 0)):
+            raise ValueError(f"{name}.npy: .npy version {version}")
+        read_header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                       else np.lib.format.read_array_header_2_0)
+        shape, fortran, dtype = read_header(member)
+        if fortran or dtype.hasobject:
+            raise ValueError(f"{name}.npy: not a plain C-order array")
+        out = np.empty(shape, dtype)
+        if out.nbytes and member.readinto(out.reshape(-1).view(np.uint8)) != out.nbytes:
+            raise EOFError(f"{name}.npy is cut short")
+        if member.read(1):
+            raise ValueError(f"{name}.npy is longer than its array")
+        return out
 
 
 def load(path: str | Path, classes: dict[str, type]) -> BakeState:
@@ -183,13 +218,17 @@ def load(path: str | Path, classes: dict[str, type]) -> BakeState:
                 raise StateUnusable(f"{path} is a bake state of version {header.get('version')!r}, "
                                     f"this baker reads version {VERSION}")
 
-            zeros = header.get("zeros", {})
-
             def array(name: str) -> np.ndarray:
-                if name in zeros:
-                    return np.zeros(zeros[name]["shape"], np.dtype(zeros[name]["dtype"]))
-                with archive.open(f"{name}.npy") as member:
-                    return np.lib.format.read_array(io.BytesIO(member.read()), allow_pickle=False)
+                listed = next((header[k][name] for k in ("zeros", "repeated", "sparse")
+                               if name in header[k]), None)
+                if listed is None:
+                    return _read_member(archive, name)
+                out = np.zeros(listed["shape"], np.dtype(listed["dtype"]))
+                if name in header["repeated"]:
+                    out[:] = _read_member(archive, name)
+                elif name in header["sparse"]:
+                    out[_read_member(archive, f"{name}.rows")] = _read_member(archive, name)
+                return out
 
             groups = header["groups"]
             a = groups["atlas"]["scalars"]

@@ -353,6 +353,34 @@ def test_state_leaves_out_arrays_of_zeros_and_reads_them_back(base):
     assert stored.groups["terms"].chain_rays.shape == (0,)
 
 
+def test_state_stores_repeated_and_sparse_arrays_compactly_and_reads_them_back(base, tmp_path):
+    """The ray counts (64 for every texel) are stored as one row, how far the validity probes
+    moved each point (0 for almost all) as its rows that are not 0: and every array reads back
+    with the bits, shape and dtype it was written with."""
+    import json
+
+    from baker.incremental import state_classes
+
+    path = default_path(base)
+    with zipfile.ZipFile(path) as archive:
+        header = json.loads(archive.read("header.json"))
+        sizes = {info.filename: info.file_size for info in archive.infolist()}
+    assert "terms/counts" in header["repeated"] and sizes["terms/counts.npy"] < 200
+    assert "validity/moved_by" in header["sparse"] and "validity/moved_by.rows.npy" in sizes
+    assert "terms/w_hit" not in header["sparse"] and "terms/w_hit" not in header["repeated"]
+    stored = baker.state.load(path, state_classes())
+    again = tmp_path / "again.bake"
+    with open(again, "wb") as file:
+        baker.state.write_state(file, stored)
+    assert again.read_bytes() == path.read_bytes()
+    counts = stored.groups["terms"].counts
+    assert counts.dtype == np.int64 and counts.shape == (header["repeated"]["terms/counts"][
+        "shape"][0],) and (counts == SETTINGS.rays).all()
+    moved_by = stored.groups["validity"].moved_by
+    assert moved_by.shape == tuple(header["sparse"]["validity/moved_by"]["shape"])
+    assert 0 < np.count_nonzero(moved_by) < len(moved_by) / 4
+
+
 def _with_crate(builder, at):
     """``builder`` with a 0.3 m grey crate standing at ``at`` (x, z) on its floor."""
     from assets.gltf_builder import box

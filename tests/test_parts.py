@@ -81,10 +81,10 @@ def test_a_spilled_column_is_written_as_numpy_writes_the_array(tmp_path):
         group.columns[name].write_npy(ours)
         np.save(numpy, whole)
         assert ours.getvalue() == numpy.getvalue()
-        assert group.columns[name].all_zero == (name == "zero")
+        assert (group.columns[name].encoding == "zeros") == (name == "zero")
     assert group.columns["light_colours"].array is colours
     assert np.array_equal(group.load().value, np.concatenate([c.value for c in chunks]))
-    assert not Column.of(np.zeros((0, 3))).all_zero  # an empty term is stored as such
+    assert Column.of(np.zeros((0, 3))).encoding == "dense"  # an empty term is stored as such
     spill.close()
     assert not list(tmp_path.iterdir())
 
@@ -126,3 +126,34 @@ def test_rows_a_killed_bake_left_behind_are_removed_by_the_next(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == \
         [f".baker-spill-{os.getpid()}-x2", ".baker-spill-notapid"]
     assert remove_stale(tmp_path) == []
+
+
+@pytest.mark.parametrize("where", ["spilled", "in memory"])
+def test_column_encodings_follow_the_rows(tmp_path, where):
+    """A column's ``encoding`` (how the state stores it) follows its rows, whether appended
+    part by part to disk or held in memory: one row repeated -> "repeated"; few rows with a bit
+    set (−0.0 counts, as the state keeps bits) -> "sparse", whose rows and indices give the
+    array back; otherwise "dense"."""
+    rng = np.random.default_rng(3)
+    n = 1000
+    mostly_zero = np.zeros((n, 3))
+    mostly_zero[[4, 500, 999]] = rng.random((3, 3))
+    mostly_zero[7, 1] = -0.0
+    arrays = {"repeated": np.full(n, 64, np.int64), "sparse": mostly_zero,
+              "dense": rng.random((n, 2)), "zeros": np.zeros(n, np.int8),
+              "almost repeated": np.r_[np.full(n - 1, 64, np.int64), 65]}
+    expected_encoding = {"almost repeated": "dense"}
+    for expected, array in arrays.items():
+        if where == "in memory":
+            column = Column.of(array)
+        else:
+            column = Column(str(tmp_path / expected), array.dtype, array.shape[1:])
+            for part in np.array_split(array, 4):
+                column._append(part)
+        assert column.encoding == expected_encoding.get(expected, expected)
+        if expected == "sparse":
+            indices, rows = column.sparse_rows()
+            assert indices.tolist() == [4, 7, 500, 999]
+            rebuilt = np.zeros_like(array)
+            rebuilt[indices] = rows
+            assert rebuilt.tobytes() == array.tobytes()
