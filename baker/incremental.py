@@ -163,7 +163,7 @@ def _same_rows(stored, fresh, rows: np.ndarray) -> np.ndarray:
     for f in fields(stored):
         old, new = getattr(stored, f.name), getattr(fresh, f.name)
         if isinstance(old, np.ndarray) and isinstance(new, np.ndarray):
-            same &= (old[rows] == new).reshape(len(rows), -1).all(axis=1)
+            same &= (old[rows] == new).reshape(len(rows), int(np.prod(new.shape[1:]))).all(axis=1)
     return same
 
 

@@ -489,3 +489,25 @@ def test_the_shadow_ray_prefilter_keeps_every_texel_whose_rays_meet_the_move(tmp
     assert found["filtered"][0] == found["all"][0] and found["all"][0]["shadow"] > 10
     assert found["filtered"][2] == found["all"][2]
     assert found["filtered"][1] < 0.7 * found["all"][1]  # most texels' shadow rays not cast
+
+
+def test_moving_a_node_of_a_scene_with_nothing_baked(tmp_path):
+    """SimpleInstancing's only node is GPU-instanced, so nothing is baked (0 texels): moving it
+    rebakes incrementally (no texel to redo) and gives the full bake's bytes. The validity
+    check of 0 texels once raised a numpy reshape error."""
+    import pygltflib
+    from bakehelp import REAL_SCENES
+
+    document = pygltflib.GLTF2().load(str(REAL_SCENES["SimpleInstancing"]))
+    shutil.copy(REAL_SCENES["SimpleInstancing"], tmp_path / "before.glb")
+    document.nodes[0].translation = [0.05, 0.0, 0.0]
+    document.save(str(tmp_path / "after.glb"))
+    settings = baker.Settings(page_size=64, rays=4)
+    baker.bake(tmp_path / "before.glb", tmp_path / "inc.glb", settings)
+    result = baker.bake(tmp_path / "after.glb", tmp_path / "inc.glb", settings, incremental=True)
+    assert result.rebake["incremental"] and result.rebake["changes"] == ["node nodes[0] moved"]
+    assert result.texels == 0 and result.rebake["dirty_texels"] == 0
+    baker.bake(tmp_path / "after.glb", tmp_path / "full.glb", settings)
+    assert (tmp_path / "inc.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()
+    assert default_path(tmp_path / "inc.glb").read_bytes() == default_path(
+        tmp_path / "full.glb").read_bytes()
