@@ -235,6 +235,17 @@ def _any_near(x, y, z, start, stop, local, distance_sq, radii, length):
 
 
 @jit
+def _reachable(local, distance_sq, radii, length):
+    """Whether a ray of the hemisphere (local z ≥ 0) no longer than ``length`` can pass near
+    some sphere (``_sphere_locals``): one not wholly below the plane nor out of reach. Spares
+    drawing and testing the rays of texels that face away from the change."""
+    for b in range(len(radii)):
+        if local[b, 2] >= -radii[b] and distance_sq[b] <= (length + radii[b]) ** 2:
+            return True
+    return False
+
+
+@jit
 def _fixed_may_meet(x: np.ndarray, y: np.ndarray, z: np.ndarray, starts: np.ndarray,
                     t1: np.ndarray, t2: np.ndarray, normals: np.ndarray, centres: np.ndarray,
                     radii: np.ndarray, length: float) -> np.ndarray:
@@ -247,7 +258,8 @@ def _fixed_may_meet(x: np.ndarray, y: np.ndarray, z: np.ndarray, starts: np.ndar
     distance_sq = np.empty(len(centres))
     for i in range(k):
         _sphere_locals(starts[i], t1[i], t2[i], normals[i], centres, local, distance_sq)
-        out[i] = _any_near(x, y, z, 0, len(x), local, distance_sq, radii, length)
+        out[i] = (_reachable(local, distance_sq, radii, length)
+                  and _any_near(x, y, z, 0, len(x), local, distance_sq, radii, length))
     return out
 
 
@@ -263,27 +275,35 @@ def _drawn_near_rays(technique: int, seed, keys: np.ndarray, rays: int, starts: 
     """The obscurance rays of texels keys (k,) — each texel's rays from ``starts[i]`` (k, 3) in
     its frame t1, t2, normals (k, 3) each — that may pass near the spheres (``_any_near``):
     (texel (m,) int64 index into keys, x, y, z (m,) their local directions, the bits
-    ``cosine_directions`` gives). The directions are drawn here (``sampling.fill_points``,
-    ``fill_cosine``) a few texels at a time into small buffers, so that no (k·rays,) arrays
-    are made; a texel's rays are tested one by one only when some of them passes near."""
+    ``cosine_directions`` gives). The directions of the texels that can reach a sphere
+    (``_reachable``) are drawn here (``sampling.fill_points``, ``fill_cosine``) a few at a time
+    into small buffers, so that no (k·rays,) arrays are made; a texel's rays are tested one
+    by one only when some of them passes near."""
     k = len(starts)
     local = np.empty((len(centres), 3))
     distance_sq = np.empty(len(centres))
     block = max(1, _DRAWN_RAYS // rays)
+    todo, todo_keys = np.empty(block, np.int64), np.empty(block, keys.dtype)
     u, v = np.empty(block * rays), np.empty(block * rays)
     x, y, z = np.empty(block * rays), np.empty(block * rays), np.empty(block * rays)
     texel = np.empty(1024, np.int64)
     near = np.empty((1024, 3))
     m = 0
     for first in range(0, k, block):
-        last = min(first + block, k)
-        drawn = (last - first) * rays
-        fill_points(technique, seed, keys[first:last], 0, rays, np.uint64(0), u[:drawn],
+        count = 0
+        for i in range(first, min(first + block, k)):
+            _sphere_locals(starts[i], t1[i], t2[i], normals[i], centres, local, distance_sq)
+            if _reachable(local, distance_sq, radii, length):
+                todo[count], todo_keys[count] = i, keys[i]
+                count += 1
+        drawn = count * rays
+        fill_points(technique, seed, todo_keys[:count], 0, rays, np.uint64(0), u[:drawn],
                     v[:drawn])
         fill_cosine(u[:drawn], v[:drawn], x[:drawn], y[:drawn], z[:drawn])
-        for i in range(first, last):
+        for c in range(count):
+            i = todo[c]
             _sphere_locals(starts[i], t1[i], t2[i], normals[i], centres, local, distance_sq)
-            base = (i - first) * rays
+            base = c * rays
             if not _any_near(x, y, z, base, base + rays, local, distance_sq, radii, length):
                 continue
             for r in range(base, base + rays):
@@ -480,45 +500,13 @@ def _slices(count: int, step: int) -> list[slice]:
     return [slice(start, min(start + step, count)) for start in range(0, count, step)]
 
 
-def _above(texels: Texels, rows: np.ndarray, corners: np.ndarray) -> np.ndarray:
-    """(k,) bool: texels ``rows`` for which some corner of the triangles ``corners`` (t, 3, 3)
-    lies above (or within a texel side, plus float32 rounding, below) the texel's tangent
-    plane: only those can have a hemisphere ray meet them."""
-    points = corners.reshape(-1, 3)
-    if not len(points) or not len(rows):
-        return np.zeros(len(rows), bool)
-    middle = points.mean(0)
-    p = texels.position[rows]
-    slack = texels.size(rows) + 1e-5 * (float(np.abs(points - middle).max())
-                                        + np.abs(p - middle).max(axis=1))
-    return _any_above(p, texels.geometric_normal(rows), slack, points)
-
-
-@jit
-def _any_above(position: np.ndarray, normal: np.ndarray, slack: np.ndarray,
-               points: np.ndarray) -> np.ndarray:
-    """(k,) bool: whether any of ``points`` (m, 3) lies higher than −slack (k,) above the plane
-    through position (k, 3) with normal (k, 3)."""
-    out = np.zeros(len(position), np.bool_)
-    for i in range(len(position)):
-        for j in range(len(points)):
-            height = ((points[j, 0] - position[i, 0]) * normal[i, 0]
-                      + (points[j, 1] - position[i, 1]) * normal[i, 1]
-                      + (points[j, 2] - position[i, 2]) * normal[i, 2])
-            if height > -slack[i]:
-                out[i] = True
-                break
-    return out
-
-
-def _mark_seen(scene: Scene, world: World, changed: _Changed, boxes: list, corners: np.ndarray,
-               texels: Texels, reason: np.ndarray, why: str, settings) -> int:
+def _mark_seen(scene: Scene, world: World, changed: _Changed, boxes: list, texels: Texels,
+               reason: np.ndarray, why: str, settings) -> int:
     """Mark with ``why`` (in ``reason`` (N,), in place) the texels not yet dirty whose
     obscurance rays — their own (within d_max of ``boxes``, above their plane) and those from
     their other side (leaves' back faces, translucent insides: ``inner.other_side_rays``) —
-    meet the ``changed`` geometry (``corners`` (t, 3, 3)); return the rays cast."""
+    meet the ``changed`` geometry (held in ``boxes``, (low, high) pairs); return the rays cast."""
     test = np.flatnonzero(_near(texels, boxes, settings.d_max) & (reason < 0))
-    test = test[_above(texels, test, corners)]
     meets, tested = _rays_meet(changed, texels, test, settings)
     reason[test[meets]] = REASONS.index(why)
     table = translucent(scene)
@@ -715,7 +703,6 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
             reason[own] = REASONS.index("own")
             old_corners = [_placed_corners(scene, world, i, stored.instance_world[i]) for i in moved]
             new_corners = [_placed_corners(scene, world, i, scene.instances[i].world) for i in moved]
-            corners = np.concatenate(old_corners + new_corners)
             boxes = [(c.reshape(-1, 3).min(0), c.reshape(-1, 3).max(0))
                      for c in old_corners + new_corners if len(c)]
             small = _Changed(old_corners + new_corners, world.center)
@@ -723,7 +710,6 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
             # Validity: tangent probes reach a few texel sides; hemisphere probes d_max.
             close = own | _near(raw, boxes, 0.0)
             far = np.flatnonzero(near & ~close)
-            far = far[_above(texels, far, corners)]  # the probes too stay in the hemisphere
             meets, n = _probes_meet(small, texels, far, resolved.d_max, resolved.threads)
             tested += n
             # Texels touching other geometry: which coincident triangle a probe or ray meets
@@ -741,7 +727,7 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
             validity = merge(old_validity, fresh, redo)
             changed = redo[~same]
             reason[changed[reason[changed] < 0]] = REASONS.index("validity")
-            n = _mark_seen(scene, world, small, boxes, corners, texels, reason, "obscurance",
+            n = _mark_seen(scene, world, small, boxes, texels, reason, "obscurance",
                            resolved)
             tested += n
             rest = np.flatnonzero(reason < 0)
@@ -753,14 +739,14 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
             a, b, c = world.corners(tris)
             corners = np.stack([a, b, c], axis=1)
             box = [(corners.reshape(-1, 3).min(0), corners.reshape(-1, 3).max(0))] if len(tris) else []
-            tested += _mark_seen(scene, world, _Changed([corners], world.center), box, corners,
+            tested += _mark_seen(scene, world, _Changed([corners], world.center), box,
                                  texels, reason, "colour", resolved)
         chains = _chain_corners(scene, world)
         if (len(moved) or change.recoloured) and len(chains):
             # A ray that meets a mirror or glass goes on where the searches above do not follow:
             # every texel whose rays meet one is recomputed.
             box = [(chains.reshape(-1, 3).min(0), chains.reshape(-1, 3).max(0))]
-            tested += _mark_seen(scene, world, _Changed([chains], world.center), box, chains,
+            tested += _mark_seen(scene, world, _Changed([chains], world.center), box,
                                  texels, reason, "chain", resolved)
     rows = np.flatnonzero(reason >= 0)
     with _timed(times, "trace"):
