@@ -576,23 +576,51 @@ def _may_shadow(texels: Texels, rows: np.ndarray, changed: "_Changed", sources) 
     origin = (position - changed.center
               + ray_lift(position, texels.size(rows), changed.center)[:, None]
               * texels.geometric_normal(rows))
-    may = np.zeros(len(rows), bool)
-    for light, spread in zip(sources.lights, sources.spread):
-        for centre, radius in zip(changed.sphere_centres, changed.sphere_radii):
-            to_centre = centre - origin
-            distance = np.linalg.norm(to_centre, axis=1)
-            reach = radius + 1e-4 * (distance + np.abs(origin).max(axis=1) + 1.0)  # float32
-            if light.kind == "directional":
-                cos = np.clip(to_centre @ -light.direction / np.maximum(distance, 1e-300), -1, 1)
-                seen = np.arcsin(np.clip(reach / np.maximum(distance, 1e-300), 0.0, 1.0))
-                may |= (distance <= reach) | (np.arccos(cos) <= spread + seen + 1e-6)
-            else:
-                to_light = light.position - changed.center - origin
-                t = np.clip(np.einsum("ij,ij->i", to_centre, to_light)
-                            / np.maximum(np.einsum("ij,ij->i", to_light, to_light), 1e-300), 0, 1)
-                gap = np.linalg.norm(to_centre - t[:, None] * to_light, axis=1)
-                may |= gap <= reach + spread
-    return may
+    lights = sources.lights
+    return _shadow_may_pass(
+        origin, np.array([light.kind == "directional" for light in lights], np.bool_),
+        np.array([light.position - changed.center for light in lights]).reshape(-1, 3),
+        np.array([-np.asarray(light.direction, np.float64) for light in lights]).reshape(-1, 3),
+        np.asarray(sources.spread, np.float64), changed.sphere_centres, changed.sphere_radii)
+
+
+@jit
+def _shadow_may_pass(origin: np.ndarray, directional: np.ndarray, light_position: np.ndarray,
+                     to_light: np.ndarray, spread: np.ndarray, centres: np.ndarray,
+                     radii: np.ndarray) -> np.ndarray:
+    """``_may_shadow``'s test, per texel: origins (k, 3), lights (L,) (``directional``; their
+    positions (L, 3) and the unit directions towards them (L, 3), in the tracer's frame; their
+    spread ρ), the changed geometry's spheres (b, 3), (b,). The reach of a sphere is its radius
+    plus 1e-4 of the distances involved (float32 rays)."""
+    out = np.zeros(len(origin), np.bool_)
+    for i in range(len(origin)):
+        ox, oy, oz = origin[i, 0], origin[i, 1], origin[i, 2]
+        size = max(abs(ox), abs(oy), abs(oz))
+        for light in range(len(directional)):
+            for b in range(len(radii)):
+                cx, cy, cz = centres[b, 0] - ox, centres[b, 1] - oy, centres[b, 2] - oz
+                distance = np.sqrt(cx * cx + cy * cy + cz * cz)
+                reach = radii[b] + 1e-4 * (distance + size + 1.0)
+                if directional[light]:
+                    cos = (cx * to_light[light, 0] + cy * to_light[light, 1]
+                           + cz * to_light[light, 2]) / max(distance, 1e-300)
+                    seen = np.arcsin(min(max(reach / max(distance, 1e-300), 0.0), 1.0))
+                    near = (distance <= reach or np.arccos(min(max(cos, -1.0), 1.0))
+                            <= spread[light] + seen + 1e-6)
+                else:
+                    sx = light_position[light, 0] - ox
+                    sy = light_position[light, 1] - oy
+                    sz = light_position[light, 2] - oz
+                    t = (cx * sx + cy * sy + cz * sz) / max(sx * sx + sy * sy + sz * sz, 1e-300)
+                    t = min(max(t, 0.0), 1.0)
+                    gx, gy, gz = cx - t * sx, cy - t * sy, cz - t * sz
+                    near = np.sqrt(gx * gx + gy * gy + gz * gz) <= reach + spread[light]
+                if near:
+                    out[i] = True
+                    break
+            if out[i]:
+                break
+    return out
 
 
 def _shadow_dirty(scene, world, recorder_tracer: Tracer, texels: Texels, rows: np.ndarray,

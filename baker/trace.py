@@ -96,7 +96,8 @@ def ray_lift(position: np.ndarray, size: np.ndarray, center: np.ndarray) -> np.n
     position's distance from the tracer's ``center``: neither big texels nor scenes far from the
     origin self-intersect inside Embree's float32.
     """
-    magnitude = np.abs(position - center).max(axis=1)
+    offset = np.abs(position - center)
+    magnitude = np.maximum(np.maximum(offset[:, 0], offset[:, 1]), offset[:, 2])  # 7× max(axis=1)
     return np.maximum(_OFFSET_TEXELS * size, _OFFSET_ULPS * np.maximum(magnitude, 1e-30))
 
 
