@@ -294,29 +294,31 @@ def _bake_parts(baking: _Baking, spill: Spill | None, times: dict[str, float], q
     pages = _Pages.blank(baking)
     with bar(count * (1 + baking.sources.any()), "baking", wanted(quiet)) as advance:
         for rows in part_slices(count):
-            texels, validity, terms, direct, indirect = _bake_part(baking, rows, times, advance)
+            texels, points, validity, terms, direct, indirect = _bake_part(baking, rows, times,
+                                                                           advance)
             with _timed(times, "compose"):
                 pages.add(baking, texels, validity, terms, direct, indirect)
             if spill is not None:
                 with _timed(times, "spill"):
-                    for name, group in (("texels", TexelPoints.of(texels)), ("validity", validity),
+                    for name, group in (("texels", points), ("validity", validity),
                                         ("terms", terms), ("direct", direct)):
                         spill.append(name, group)
-    return pages, (texels, validity, terms, direct)
+    return pages, (texels, points, validity, terms, direct)
 
 
 def _bake_part(baking: _Baking, rows: slice, times: dict[str, float],
                advance: Callable[[int], None]):
     """Make, probe, trace and light the texels ``rows``: (texels with their sample points moved
-    by the probes, validity, obscurance terms, direct light, and the full-GI indirect
-    irradiance (k, 3) with ``--method gi``, else None)."""
+    by the probes, what the state keeps of them (``TexelPoints``), validity, obscurance terms,
+    direct light, and the full-GI indirect irradiance (k, 3) with ``--method gi``, else
+    None)."""
     s, ambient, scene, world, tracer = (baking.settings, baking.ambient, baking.scene,
                                         baking.world, baking.tracer)
     with _timed(times, "rasterise"):
-        texels = texels_of(baking.atlas, world, baking.coverage, rows, baking.owned)
+        made = texels_of(baking.atlas, world, baking.coverage, rows, baking.owned)
     with _timed(times, "validity"):  # sample points inside/behind geometry: moved or flagged
-        texels, validity = check_texels(scene, world, tracer, texels, s.d_max,
-                                        faces=baking.faces)
+        texels, validity = check_texels(scene, world, tracer, made, s.d_max, faces=baking.faces)
+        points = TexelPoints.of(texels, made.position)
     with _timed(times, "trace"):
         error_scale = (effective_r_ave(ambient, s.rho), float(ambient.intensity @ LUMINANCE))
         terms = integrate(scene, world, tracer, texels, s, advance, error_scale=error_scale,
@@ -328,12 +330,13 @@ def _bake_part(baking: _Baking, rows: slice, times: dict[str, float],
         with _timed(times, "gi"):
             indirect = indirect_light(scene, world, tracer, baking.sources, texels, s,
                                       s.rays).irradiance
-    return texels, validity, terms, direct, indirect
+    return texels, points, validity, terms, direct, indirect
 
 
 def finish(scene: Scene, world: World, resolved: Resolved, tracer: Tracer, sources: Sources,
            power: Power, ambient: Ambient, plan: Plan, atlas: Atlas, texels: Texels,
-           validity: Validity, terms: Terms, direct: Direct, times: dict[str, float]) -> Computed:
+           points: TexelPoints, validity: Validity, terms: Terms, direct: Direct,
+           times: dict[str, float]) -> Computed:
     """From the texels' terms, all held in memory, to the post-processed float lightmaps: an
     incremental rebake (incremental.py) ends as a full bake does, so both give the same bytes.
     """
@@ -341,8 +344,8 @@ def finish(scene: Scene, world: World, resolved: Resolved, tracer: Tracer, sourc
     with _timed(times, "compose"):
         pages = _Pages.blank(baking)
         pages.add(baking, texels, validity, terms, direct)
-    return _finish_pages(baking, power, plan, PerTexel.held(texels, validity, terms, direct),
-                         pages, times)
+    return _finish_pages(baking, power, plan,
+                         PerTexel.held(texels, points, validity, terms, direct), pages, times)
 
 
 @dataclass

@@ -723,7 +723,7 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
 
     reason = np.full(count, -1, np.int8)
     tested = 0
-    texels = replace(raw, position=old_texels.position)  # read for this rebake: changed in place
+    texels = replace(raw, position=old_texels.positions(raw.position))  # changed in place below
     validity = old_validity
     with _timed(times, "dirty"):
         if len(moved):
@@ -796,7 +796,8 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
                 relit_rays += len(clean) * int(sources.samples[light])
             direct = replace(direct, punctual=punctual, punctual_var=punctual_var)
     done = finish(scene, world, resolved, tracer, sources, power, ambient, plan, atlas, texels,
-                  validity, terms, direct, times)  # exactly as a full bake goes on
+                  TexelPoints.of(texels, raw.position), validity, terms, direct,
+                  times)  # exactly as a full bake goes on
     dirty = Dirty(rows=rows, reason=reason, tested_rays=tested, relit=tuple(change.lights_placed))
     return Rebaked(computed=done, diff=change, dirty=dirty, fingerprints=fingerprint,
                    rays=fresh_terms.rays + fresh_direct.rays + relit_rays)

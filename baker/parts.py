@@ -43,19 +43,32 @@ def part_slices(count: int) -> list[slice]:
 @dataclass(frozen=True)
 class TexelPoints:
     """What the state keeps of the texels: their coverage (``rasterise.Coverage``: key (N,)
-    uint64, owning world triangle (N,) int64, triangle_texels (T,) int64) and position (N, 3)
-    float64, the world sample point after the validity probes moved it. The rest of ``Texels``
-    follows from the stored atlas and the scene (``rasterise.texels_of``), bit for bit, without
-    rasterising again."""
+    uint64, owning world triangle (N,) int64, triangle_texels (T,) int64) and where the
+    validity probes (and the terminator push) moved their sample points: moved (N,) bool,
+    moved_position (N, 3) float64 world, the moved texels' points (0 for the others). The rest
+    of ``Texels``, the other sample points included, follows from the stored atlas and the
+    scene (``rasterise.texels_of``), bit for bit, without rasterising again; on flat surfaces
+    few points move, and the state stores only their rows (``spill.Column.encoding``)."""
 
     key: np.ndarray
     triangle: np.ndarray
     triangle_texels: np.ndarray
-    position: np.ndarray
+    moved: np.ndarray
+    moved_position: np.ndarray
 
     @classmethod
-    def of(cls, texels: Texels) -> "TexelPoints":
-        return cls(texels.key, texels.triangle, texels.triangle_texels, texels.position)
+    def of(cls, texels: Texels, made: np.ndarray) -> "TexelPoints":
+        """The points of ``texels``, whose sample points ``texels_of`` made at ``made`` (N, 3)
+        before the probes moved some (a point counts as moved if any bit differs)."""
+        moved = np.zeros(len(made), bool)
+        for c in range(3):  # column by column: numpy reduces a 3-long axis slowly
+            moved |= texels.position[:, c].view(np.int64) != made[:, c].view(np.int64)
+        return cls(texels.key, texels.triangle, texels.triangle_texels, moved,
+                   np.where(moved[:, None], texels.position, 0.0))
+
+    def positions(self, made: np.ndarray) -> np.ndarray:
+        """(N, 3) the texels' sample points, from those ``texels_of`` made (N, 3)."""
+        return np.where(self.moved[:, None], self.moved_position, made)
 
 
 @dataclass
@@ -100,10 +113,11 @@ class PerTexel:
         self._groups, self._texels, self._rebuild, self.spill = groups, texels, rebuild, spill
 
     @classmethod
-    def held(cls, texels: Texels, validity: Validity, terms: Terms,
+    def held(cls, texels: Texels, points: TexelPoints, validity: Validity, terms: Terms,
              direct: Direct | None) -> "PerTexel":
-        """Results held in memory."""
-        return cls({"validity": validity, "terms": terms, "direct": direct}, texels)
+        """Results held in memory (``points``: what the state keeps of ``texels``)."""
+        return cls({"texels": points, "validity": validity, "terms": terms, "direct": direct},
+                   texels)
 
     @classmethod
     def spilled(cls, spill: Spill, atlas: Atlas, world: World) -> "PerTexel":
@@ -114,9 +128,7 @@ class PerTexel:
     def state_groups(self) -> dict:
         """The per-texel groups of the bake state (``incremental.make_state``), by name: the
         dataclasses, or their spilled rows (``spill.Group``), which are written from disk."""
-        if self.spill is not None:
-            return dict(self._groups)
-        return {"texels": TexelPoints.of(self._texels), **self._groups}
+        return dict(self._groups)
 
     def close(self) -> None:
         """Remove the rows on disk, if any (what was loaded stays usable)."""
@@ -134,7 +146,7 @@ class PerTexel:
         points = self._group("texels")
         made = texels_of(*self._rebuild, Coverage(points.key, points.triangle,
                                                   points.triangle_texels))
-        return replace(made, position=points.position)
+        return replace(made, position=points.positions(made.position))
 
     @cached_property
     def validity(self) -> Validity:

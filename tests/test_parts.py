@@ -157,3 +157,26 @@ def test_column_encodings_follow_the_rows(tmp_path, where):
             rebuilt = np.zeros_like(array)
             rebuilt[indices] = rows
             assert rebuilt.tobytes() == array.tobytes()
+
+
+def test_texel_points_keep_only_the_moved_sample_points():
+    """``TexelPoints`` keeps the sample points the probes moved (any bit differing from the one
+    ``texels_of`` made, so 0.0 → −0.0 counts) and gives every point back bit for bit from the
+    made ones; the others are stored as zero rows, which the state leaves out."""
+    from types import SimpleNamespace
+
+    from baker.parts import TexelPoints
+
+    rng = np.random.default_rng(5)
+    made = rng.random((6, 3))
+    made[5] = 0.0
+    position = made.copy()
+    position[1] += [0.0, 1e-12, 0.0]
+    position[5, 2] = -0.0
+    texels = SimpleNamespace(key=np.arange(6, dtype=np.uint64), triangle=np.zeros(6, np.int64),
+                             triangle_texels=np.array([6]), position=position)
+    points = TexelPoints.of(texels, made)
+    assert points.moved.tolist() == [False, True, False, False, False, True]
+    assert not points.moved_position[~points.moved].any()
+    assert points.positions(made).tobytes() == position.tobytes()
+    assert Column.of(points.moved_position).encoding == "sparse"
