@@ -121,16 +121,38 @@ def _member(archive: zipfile.ZipFile, name: str, data: bytes | Column) -> None:
         data.write_npy(member)
 
 
+_UNWRAP = ("vertices", "triangles", "uv", "pages")  # the per-instance arrays of the atlas
+
+
 def _atlas_group(atlas: Atlas) -> tuple[dict, dict[str, np.ndarray]]:
-    """The atlas as scalars plus per-instance arrays."""
+    """The atlas as scalars plus arrays: each ``InstanceUV`` array of every instance joined
+    into one (a level of a thousand objects would otherwise make four thousand members), and
+    each instance's vertex and triangle counts to split them again (``_atlas_of``)."""
     scalars = {"width": atlas.width, "height": atlas.height, "page_count": atlas.page_count,
                "texel_density": atlas.texel_density, "padding": atlas.padding,
                "instances": [u.instance for u in atlas.instances]}
-    arrays = {}
-    for k, u in enumerate(atlas.instances):
-        for name in ("vertices", "triangles", "uv", "pages"):
-            arrays[f"{k}.{name}"] = getattr(u, name)
+    units = atlas.instances
+    arrays = {name: np.concatenate([getattr(u, name) for u in units]) if units
+              else np.zeros((0, 3) if name == "triangles" else (0, 2) if name == "uv" else 0,
+                            np.float64 if name == "uv" else np.int64)
+              for name in _UNWRAP}
+    arrays["vertex_counts"] = np.array([len(u.vertices) for u in units], np.int64)
+    arrays["triangle_counts"] = np.array([len(u.triangles) for u in units], np.int64)
     return scalars, arrays
+
+
+def _atlas_of(scalars: dict, array) -> Atlas:
+    """The atlas ``_atlas_group`` stored: ``array(name)`` reads ``atlas/<name>``."""
+    vertex_ends = np.cumsum(array("atlas/vertex_counts"))[:-1]
+    triangle_ends = np.cumsum(array("atlas/triangle_counts"))[:-1]
+    split = {name: np.split(array(f"atlas/{name}"),
+                            vertex_ends if name in ("vertices", "uv") else triangle_ends)
+             for name in _UNWRAP}
+    return Atlas(width=scalars["width"], height=scalars["height"],
+                 page_count=scalars["page_count"], texel_density=scalars["texel_density"],
+                 padding=scalars["padding"],
+                 instances=tuple(InstanceUV(instance=i, **{n: split[n][k] for n in _UNWRAP})
+                                 for k, i in enumerate(scalars["instances"])))
 
 
 def write_state(file: BinaryIO, state: BakeState) -> None:
@@ -231,12 +253,7 @@ def load(path: str | Path, classes: dict[str, type]) -> BakeState:
                 return out
 
             groups = header["groups"]
-            a = groups["atlas"]["scalars"]
-            atlas = Atlas(width=a["width"], height=a["height"], page_count=a["page_count"],
-                          texel_density=a["texel_density"], padding=a["padding"],
-                          instances=tuple(InstanceUV(instance=i, **{
-                              n: array(f"atlas/{k}.{n}") for n in ("vertices", "triangles", "uv", "pages")})
-                              for k, i in enumerate(a["instances"])))
+            atlas = _atlas_of(groups["atlas"]["scalars"], array)
             objects: dict[str, Any] = {}
             for group, cls in classes.items():
                 if group not in groups:

@@ -343,11 +343,12 @@ def test_state_leaves_out_arrays_of_zeros_and_reads_them_back(base):
     with zipfile.ZipFile(path) as archive:
         names = set(archive.namelist())
         zeros = json.loads(archive.read("header.json"))["zeros"]
-    assert "atlas/0.pages" in zeros and "atlas/0.pages.npy" not in names
+    assert "atlas/pages" in zeros and "atlas/pages.npy" not in names
     assert "terms/w_hit" not in zeros and "terms/w_hit.npy" in names
     stored = baker.state.load(path, state_classes())
     pages = stored.atlas.instances[0].pages
-    assert pages.shape == tuple(zeros["atlas/0.pages"]["shape"]) and pages.dtype == np.int64
+    assert len(pages) == stored.atlas.instances[0].triangles.shape[0] and pages.dtype == np.int64
+    assert sum(len(u.pages) for u in stored.atlas.instances) == zeros["atlas/pages"]["shape"][0]
     assert not pages.any() and len(pages) > 0
     assert stored.groups["direct"].sky.shape == (0, 3)
     assert stored.groups["terms"].chain_rays.shape == (0,)
@@ -511,3 +512,32 @@ def test_moving_a_node_of_a_scene_with_nothing_baked(tmp_path):
     assert (tmp_path / "inc.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()
     assert default_path(tmp_path / "inc.glb").read_bytes() == default_path(
         tmp_path / "full.glb").read_bytes()
+
+
+def test_state_atlas_joins_the_instances_and_splits_them_back(tmp_path):
+    """The atlas is stored as one array per ``InstanceUV`` field over all instances (not four
+    members per instance) and read back instance by instance with the same bits — including
+    an instance with no triangles."""
+    from baker.atlas import Atlas, InstanceUV
+
+    rng = np.random.default_rng(2)
+    units = tuple(InstanceUV(instance=i, vertices=rng.integers(0, 99, k),
+                             triangles=rng.integers(0, max(k, 1), (m, 3)), uv=rng.random((k, 2)),
+                             pages=rng.integers(-1, 3, m))
+                  for i, (k, m) in zip((4, 0, 7), ((5, 3), (0, 0), (9, 11))))
+    atlas = Atlas(width=64, height=32, page_count=3, texel_density=12.5, padding=2,
+                  instances=units)
+    path = tmp_path / "atlas.bake"
+    with open(path, "wb") as file:
+        baker.state.write_state(file, baker.state.BakeState(
+            fingerprints={}, atlas=atlas, groups={}, instance_world=np.zeros((0, 4, 4))))
+    with zipfile.ZipFile(path) as archive:
+        assert sum(name.startswith("atlas/") for name in archive.namelist()) == 6
+    back = baker.state.load(path, {}).atlas
+    assert (back.width, back.height, back.page_count, back.texel_density, back.padding) == (
+        64, 32, 3, 12.5, 2)
+    assert [u.instance for u in back.instances] == [4, 0, 7]
+    for mine, theirs in zip(units, back.instances):
+        for name in ("vertices", "triangles", "uv", "pages"):
+            a, b = getattr(mine, name), getattr(theirs, name)
+            assert a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
