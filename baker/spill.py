@@ -21,6 +21,7 @@ import shutil
 import tempfile
 import weakref
 from dataclasses import dataclass, fields
+from functools import cached_property
 from typing import BinaryIO
 
 import numpy as np
@@ -29,6 +30,7 @@ import numpy as np
 PER_SCENE = ("light_colours", "triangle_texels")
 
 _COPY_BYTES = 1 << 24  # bytes copied or read at once from a column's file (bounds memory)
+_SCAN_ROWS = 1 << 16  # rows of a column in memory counted at once (``Column.encoding``)
 
 
 @dataclass
@@ -52,33 +54,36 @@ class Column:
 
     @classmethod
     def of(cls, array: np.ndarray) -> "Column":
-        """A column held in memory."""
-        column = cls(None, array.dtype, array.shape[1:], array=array)
-        if array.ndim and len(array):
-            column._count(array)
-        return column
+        """A column held in memory (its rows are counted when ``encoding`` is first asked)."""
+        return cls(None, array.dtype, array.shape[1:], array=array)
 
     @property
     def shape(self) -> tuple[int, ...]:
         return self.array.shape if self.array is not None else (self.rows,) + self.tail
 
-    @property
+    @cached_property
     def encoding(self) -> str:
         """How ``state.write_state`` stores the column: "zeros" (every byte 0, and there is at
         least one: not stored at all), "repeated" (two rows or more, all the same: one row
         stored), "sparse" (the rows with a byte not 0 and their indices, when that takes at most
-        half the bytes) or "dense" (as it is)."""
+        half the bytes) or "dense" (as it is). A column in memory is counted here, a block of
+        rows at a time, and no further once it can only be dense (most are, at once). Asked
+        once every row is in: the answer is kept."""
         count = self.shape[0] if self.shape else 0
         row_bytes = self._row_bytes()
         if count * row_bytes == 0:
             return "dense"
+        sparse_most = count * row_bytes // (2 * (8 + row_bytes))  # nonzero rows, at most
+        if self.array is not None:
+            for start in range(0, count, _SCAN_ROWS):
+                self._count(self.array[start:start + _SCAN_ROWS])
+                if self.nonzero_rows > sparse_most and not self.repeated:
+                    break
         if self.nonzero_rows == 0:
             return "zeros"
         if count > 1 and self.repeated:
             return "repeated"
-        if 2 * self.nonzero_rows * (8 + row_bytes) <= count * row_bytes:
-            return "sparse"
-        return "dense"
+        return "sparse" if self.nonzero_rows <= sparse_most else "dense"
 
     def sparse_rows(self) -> tuple[np.ndarray, np.ndarray]:
         """(indices (m,) int64, rows (m, *tail)) of the rows with a byte not 0, in order; read
