@@ -63,7 +63,7 @@ _REACH_TEXELS = (validity_module.TANGENT_ROUNDS
                  * (validity_module.PROBE_RADIUS + validity_module.PUSH)
                  + validity_module.PROBE_RADIUS + 1.0)
 # Rays per batch when testing candidates against the changed geometry (bounds memory).
-_TEST_RAYS = 1 << 21
+_TEST_RAYS = 1 << 19
 
 REASONS = ("own", "validity", "obscurance", "shadow", "colour", "chain")
 
@@ -217,21 +217,23 @@ def _sphere_locals(start, t1, t2, normal, centres, local, distance_sq):
 
 
 @jit
-def _any_near(x, y, z, start, stop, local, distance_sq, radii, length):
-    """Whether any of the rays ``start`` … ``stop − 1`` from the origin along the local
-    directions x, y, z passes within ``radii[b]`` of some sphere ``local[b]``
-    (``_sphere_locals``) before ``length``. Spheres outside, rays inside, without branches:
-    the loop over the rays vectorises."""
+def _near_flags(x, y, z, start, stop, local, distance_sq, radii, length, flags):
+    """Set ``flags[r]`` for the rays r = ``start`` … ``stop − 1`` from the origin along the
+    local directions x, y, z: whether it passes within ``radii[b]`` of some sphere
+    ``local[b]`` (``_sphere_locals``) before ``length``; return whether any does. Spheres
+    outside, rays inside, without branches: the loop over the rays vectorises."""
+    for r in range(start, stop):
+        flags[r] = False
     for b in range(len(radii)):
         cx, cy, cz, radius = local[b, 0], local[b, 1], local[b, 2], radii[b]
         low, high, room = -radius, length + radius, radius * radius - distance_sq[b]
-        near = False
         for r in range(start, stop):
             along = x[r] * cx + y[r] * cy + z[r] * cz
-            near |= (along >= low) & (along <= high) & (-along * along <= room)
-        if near:
-            return True
-    return False
+            flags[r] |= (along >= low) & (along <= high) & (-along * along <= room)
+    near = False
+    for r in range(start, stop):
+        near |= flags[r]
+    return near
 
 
 @jit
@@ -249,17 +251,18 @@ def _reachable(local, distance_sq, radii, length):
 def _fixed_may_meet(x: np.ndarray, y: np.ndarray, z: np.ndarray, starts: np.ndarray,
                     t1: np.ndarray, t2: np.ndarray, normals: np.ndarray, centres: np.ndarray,
                     radii: np.ndarray, length: float) -> np.ndarray:
-    """(k,) bool: whether some ray of texel i may pass near the spheres (``_any_near``), when
+    """(k,) bool: whether some ray of texel i may pass near the spheres (``_near_flags``), when
     every texel casts the same local directions x, y, z (m,) (the validity probes) in its
     frame t1, t2, normals (k, 3) each, from ``starts`` (k, 3) (``_starts``)."""
     k = len(starts)
     out = np.zeros(k, np.bool_)
     local = np.empty((len(centres), 3))
     distance_sq = np.empty(len(centres))
+    flags = np.empty(len(x), np.bool_)
     for i in range(k):
         _sphere_locals(starts[i], t1[i], t2[i], normals[i], centres, local, distance_sq)
         out[i] = (_reachable(local, distance_sq, radii, length)
-                  and _any_near(x, y, z, 0, len(x), local, distance_sq, radii, length))
+                  and _near_flags(x, y, z, 0, len(x), local, distance_sq, radii, length, flags))
     return out
 
 
@@ -273,7 +276,7 @@ def _drawn_near_rays(technique: int, seed, keys: np.ndarray, rays: int, starts: 
                      t1: np.ndarray, t2: np.ndarray, normals: np.ndarray, centres: np.ndarray,
                      radii: np.ndarray, length: float):
     """The obscurance rays of texels keys (k,) — each texel's rays from ``starts[i]`` (k, 3) in
-    its frame t1, t2, normals (k, 3) each — that may pass near the spheres (``_any_near``):
+    its frame t1, t2, normals (k, 3) each — that may pass near the spheres (``_near_flags``):
     (texel (m,) int64 index into keys, x, y, z (m,) their local directions, the bits
     ``cosine_directions`` gives). The directions of the texels that can reach a sphere
     (``_reachable``) are drawn here (``sampling.fill_points``, ``fill_cosine``) a few at a time
@@ -286,6 +289,7 @@ def _drawn_near_rays(technique: int, seed, keys: np.ndarray, rays: int, starts: 
     todo, todo_keys = np.empty(block, np.int64), np.empty(block, keys.dtype)
     u, v = np.empty(block * rays), np.empty(block * rays)
     x, y, z = np.empty(block * rays), np.empty(block * rays), np.empty(block * rays)
+    flags = np.empty(block * rays, np.bool_)
     texel = np.empty(1024, np.int64)
     near = np.empty((1024, 3))
     m = 0
@@ -304,10 +308,11 @@ def _drawn_near_rays(technique: int, seed, keys: np.ndarray, rays: int, starts: 
             i = todo[c]
             _sphere_locals(starts[i], t1[i], t2[i], normals[i], centres, local, distance_sq)
             base = c * rays
-            if not _any_near(x, y, z, base, base + rays, local, distance_sq, radii, length):
+            if not _near_flags(x, y, z, base, base + rays, local, distance_sq, radii, length,
+                               flags):
                 continue
             for r in range(base, base + rays):
-                if not _any_near(x, y, z, r, r + 1, local, distance_sq, radii, length):
+                if not flags[r]:
                     continue
                 if m == len(texel):  # grow the outputs
                     texel = np.concatenate((texel, np.empty(m, np.int64)))
@@ -321,7 +326,7 @@ def _drawn_near_rays(technique: int, seed, keys: np.ndarray, rays: int, starts: 
 def _starts(tracer: "_Changed", position, normal, size, length: float):
     """The rays' origins (k, 3) in the tracer's frame — the sample points ``position`` (k, 3)
     lifted along ``normal`` by ``trace.ray_lift`` — and the changed geometry's bounding-sphere
-    radii padded for the float32 rays Embree gets (``_any_near``)."""
+    radii padded for the float32 rays Embree gets (``_near_flags``)."""
     lift = ray_lift(position, size, tracer.center)
     starts = position - tracer.center + lift[:, None] * normal
     slack = 1e-5 * (length + np.abs(starts).max(initial=0.0))  # float32 directions, origins
