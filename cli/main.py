@@ -10,6 +10,7 @@ message (the traceback only with ``--debug``). Exit codes: 0 done, 1 bad input o
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 
 import baker
@@ -55,5 +56,16 @@ def main(argv: list[str] | None = None) -> int:
         return 3
 
 
+def entry() -> int:
+    """The ``baker`` command: ``main`` on the process's arguments. Once it has returned, a
+    second Ctrl-C (an impatient user presses it twice) has nothing left to stop: it is ignored
+    while Python waits for the worker threads to end their chunk, rather than printing a
+    traceback from the interpreter's shutdown."""
+    try:
+        return main()
+    finally:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(entry())

@@ -3,6 +3,7 @@
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -72,3 +73,18 @@ def test_material_and_sampling_options_reach_the_settings():
     s = settings_from(args)
     assert (s.specular, s.mirror_roughness, s.translucent, s.max_depth) == ("c", 0.3, 0.2, 5)
     assert (s.sampling, s.target_error, s.max_rays, s.method) == ("random", 0.01, 256, "gi")
+
+
+def test_the_command_ignores_a_second_ctrl_c_once_done(tmp_path):
+    """``baker`` (``cli.main.entry``) ignores Ctrl-C once its command has returned, so a second
+    Ctrl-C while Python ends the worker threads prints no traceback from the interpreter's
+    shutdown; the exit code stays the command's. Run in a child process: the test's own
+    Ctrl-C stays as it is."""
+    script = ("import signal, sys; sys.argv = ['baker', 'bake', sys.argv[1], '-o', sys.argv[2]]; "
+              "from cli.main import entry; code = entry(); "
+              "print(signal.getsignal(signal.SIGINT) is signal.SIG_IGN); sys.exit(code)")
+    run = subprocess.run([sys.executable, "-c", script, str(tmp_path / "nope.glb"),
+                          str(tmp_path / "o.glb")],
+                         capture_output=True, text=True, cwd=Path(__file__).resolve().parent.parent)
+    assert run.returncode == 1 and "baker: error:" in run.stderr
+    assert run.stdout.strip() == "True"
