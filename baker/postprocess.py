@@ -47,9 +47,12 @@ def _grow_ring(values: np.ndarray, filled: np.ndarray, into: np.ndarray,
             if 0 <= v < height and 0 <= u < width:
                 n = (page * height + v) * width + u
                 if not flat_filled[n] and flat_into[n]:
+                    flat_into[n] = False  # taken once (given back below): no duplicates to sort
                     candidate[seen] = n
                     seen += 1
-    candidate = np.unique(candidate[:seen])
+    candidate = candidate[:seen]
+    for n in candidate:
+        flat_into[n] = True
     channels = flat_values.shape[1]
     total = np.zeros(channels)
     for n in candidate:
