@@ -323,12 +323,16 @@ def _drawn_near_rays(technique: int, seed, keys: np.ndarray, rays: int, starts: 
     return texel[:m], near[:m, 0].copy(), near[:m, 1].copy(), near[:m, 2].copy()
 
 
+def _lifted(center: np.ndarray, position, normal, size) -> np.ndarray:
+    """The rays' origins (k, 3) in the tracer's frame (world − ``center``): the sample points
+    ``position`` (k, 3) lifted along ``normal`` (k, 3) by ``trace.ray_lift``."""
+    return position - center + ray_lift(position, size, center)[:, None] * normal
+
+
 def _starts(tracer: "_Changed", position, normal, size, length: float):
-    """The rays' origins (k, 3) in the tracer's frame — the sample points ``position`` (k, 3)
-    lifted along ``normal`` by ``trace.ray_lift`` — and the changed geometry's bounding-sphere
-    radii padded for the float32 rays Embree gets (``_near_flags``)."""
-    lift = ray_lift(position, size, tracer.center)
-    starts = position - tracer.center + lift[:, None] * normal
+    """The rays' origins (k, 3) in the tracer's frame (``_lifted``) and the changed geometry's
+    bounding-sphere radii padded for the float32 rays Embree gets (``_near_flags``)."""
+    starts = _lifted(tracer.center, position, normal, size)
     slack = 1e-5 * (length + np.abs(starts).max(initial=0.0))  # float32 directions, origins
     return starts, tracer.sphere_radii + slack
 
@@ -577,10 +581,8 @@ def _may_shadow(texels: Texels, rows: np.ndarray, changed: "_Changed", sources) 
     either, every texel may."""
     if sources.emitters is not None or sources.sky is not None:
         return np.ones(len(rows), bool)
-    position = texels.position[rows]
-    origin = (position - changed.center
-              + ray_lift(position, texels.size(rows), changed.center)[:, None]
-              * texels.geometric_normal(rows))
+    origin = _lifted(changed.center, texels.position[rows], texels.geometric_normal(rows),
+                     texels.size(rows))
     lights = sources.lights
     return _shadow_may_pass(
         origin, np.array([light.kind == "directional" for light in lights], np.bool_),

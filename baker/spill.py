@@ -90,7 +90,7 @@ class Column:
         from disk a block at a time."""
         indices, rows = [], []
         for start, block in self._blocks():
-            keep = np.flatnonzero(_nonzero_rows(block))
+            keep = np.flatnonzero(_nonzero_rows(_words(block)))
             indices.append(keep + start)
             rows.append(block[keep])
         return (np.concatenate(indices) if indices else np.zeros(0, np.int64),
@@ -131,7 +131,7 @@ class Column:
     def _count(self, values: np.ndarray) -> None:
         """Update ``nonzero_rows``, ``first`` and ``repeated`` with the rows ``values``."""
         words = _words(values)
-        self.nonzero_rows += int(np.count_nonzero(_nonzero_rows(values)))
+        self.nonzero_rows += int(np.count_nonzero(_nonzero_rows(words)))
         if self.first is None:
             self.first = values[:1].copy()
         if self.repeated:
@@ -155,10 +155,9 @@ def _words(values: np.ndarray) -> np.ndarray:
     return flat.view(np.dtype(f"u{size}") if size in (1, 2, 4, 8) else np.uint8)
 
 
-def _nonzero_rows(values: np.ndarray) -> np.ndarray:
-    """(n,) bool: the rows of ``values`` (n, ...) with some bit set. Column by column: numpy
-    reduces a short last axis slowly."""
-    words = _words(values)
+def _nonzero_rows(words: np.ndarray) -> np.ndarray:
+    """(n,) bool: the rows of ``words`` (n, w) (``_words``) with some bit set. Column by
+    column: numpy reduces a short last axis slowly."""
     out = np.zeros(len(words), bool)
     for c in range(words.shape[1]):
         out |= words[:, c] != 0

@@ -121,7 +121,9 @@ def _member(archive: zipfile.ZipFile, name: str, data: bytes | Column) -> None:
         data.write_npy(member)
 
 
-_UNWRAP = ("vertices", "triangles", "uv", "pages")  # the per-instance arrays of the atlas
+# The per-instance arrays of the atlas, each as an empty array of its dtype and row shape.
+_UNWRAP = {"vertices": np.zeros(0, np.int64), "triangles": np.zeros((0, 3), np.int64),
+           "uv": np.zeros((0, 2)), "pages": np.zeros(0, np.int64)}
 
 
 def _atlas_group(atlas: Atlas) -> tuple[dict, dict[str, np.ndarray]]:
@@ -132,10 +134,8 @@ def _atlas_group(atlas: Atlas) -> tuple[dict, dict[str, np.ndarray]]:
                "texel_density": atlas.texel_density, "padding": atlas.padding,
                "instances": [u.instance for u in atlas.instances]}
     units = atlas.instances
-    arrays = {name: np.concatenate([getattr(u, name) for u in units]) if units
-              else np.zeros((0, 3) if name == "triangles" else (0, 2) if name == "uv" else 0,
-                            np.float64 if name == "uv" else np.int64)
-              for name in _UNWRAP}
+    arrays = {name: np.concatenate([empty] + [getattr(u, name) for u in units])
+              for name, empty in _UNWRAP.items()}
     arrays["vertex_counts"] = np.array([len(u.vertices) for u in units], np.int64)
     arrays["triangle_counts"] = np.array([len(u.triangles) for u in units], np.int64)
     return scalars, arrays
