@@ -246,13 +246,43 @@ class _Baking:
     surfaces: Surfaces | None = None  # shading of obscurance hits (integrate.surfaces_of)
 
 
+class _StateStaging:
+    """The bake state (docs/bake_state.md), written on a thread of its own into a temporary file
+    beside ``path`` from the moment the texels' results are final (``start``), so that it is
+    written while the pages are denoised, post-processed and encoded and the output written
+    (its CRCs and file writes release the GIL, as numba's kernels and zlib do); put in place
+    only once the output is (``put_in_place``), removed if anything fails (``discard``)."""
+
+    def __init__(self, executor: ThreadPoolExecutor, path: Path, settings: Settings):
+        self._executor, self._path, self._settings = executor, path, settings
+        self._future: Future | None = None
+
+    def start(self, baking: "_Baking", per_texel: PerTexel, fingerprint: dict | None = None
+              ) -> None:
+        """Begin writing the state of ``baking``'s texels ``per_texel`` (``fingerprint``: the
+        scene's, if made already)."""
+        writer = bake_state_writer(baking.scene, baking.world, baking.settings, baking.atlas,
+                                   per_texel, self._settings, fingerprint)
+        self._future = self._executor.submit(stage_atomically, self._path, writer)
+
+    def put_in_place(self) -> None:
+        """Wait for the state to be written and rename it to its path."""
+        _rename(self._future.result(), self._path)
+
+    def discard(self) -> None:
+        """Wait for the state being written, if any, and remove it."""
+        _discard(self._future)
+
+
 def compute(scene: Scene, settings: Settings, quiet: bool = True,
-            spill_folder: str | os.PathLike | None = None) -> Computed:
+            spill_folder: str | os.PathLike | None = None,
+            staging: _StateStaging | None = None) -> Computed:
     """Run every stage from the loaded scene up to the post-processed float lightmaps.
 
     The texels are made, traced and composed a part at a time (``parts.py``); when there are
     several parts, each part's results go to a temporary folder in ``spill_folder`` (None: the
-    system's) until the bake state is written (``Computed.per_texel``).
+    system's) until the bake state is written (``Computed.per_texel``). ``staging``: where the
+    bake state starts to be written once the texels are done.
     """
     times: dict[str, float] = {}
     with _timed(times, "load"):
@@ -279,7 +309,7 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True,
         pages, held = _bake_parts(baking, spill, times, quiet)
         per_texel = (PerTexel.spilled(spill, atlas, world) if spill is not None
                      else PerTexel.held(*held))
-        return _finish_pages(baking, power, plan, per_texel, pages, times)
+        return _finish_pages(baking, power, plan, per_texel, pages, times, staging)
     except BaseException:  # an error or Ctrl-C: no spilled rows left behind
         if spill is not None:
             spill.close()
@@ -336,16 +366,19 @@ def _bake_part(baking: _Baking, rows: slice, times: dict[str, float],
 def finish(scene: Scene, world: World, resolved: Resolved, tracer: Tracer, sources: Sources,
            power: Power, ambient: Ambient, plan: Plan, atlas: Atlas, texels: Texels,
            points: TexelPoints, validity: Validity, terms: Terms, direct: Direct,
-           times: dict[str, float]) -> Computed:
+           times: dict[str, float], staging: _StateStaging | None = None,
+           fingerprint: dict | None = None) -> Computed:
     """From the texels' terms, all held in memory, to the post-processed float lightmaps: an
-    incremental rebake (incremental.py) ends as a full bake does, so both give the same bytes.
+    incremental rebake (incremental.py) ends as a full bake does, so both give the same bytes
+    (``staging`` and the scene's ``fingerprint``: the bake state, as in ``compute``).
     """
     baking = _Baking(scene, world, resolved, tracer, sources, ambient, atlas)
     with _timed(times, "compose"):
         pages = _Pages.blank(baking)
         pages.add(baking, texels, validity, terms, direct)
     return _finish_pages(baking, power, plan,
-                         PerTexel.held(texels, points, validity, terms, direct), pages, times)
+                         PerTexel.held(texels, points, validity, terms, direct), pages, times,
+                         staging, fingerprint)
 
 
 @dataclass
@@ -374,8 +407,12 @@ class _Pages:
 
 
 def _finish_pages(baking: _Baking, power: Power, plan: Plan, per_texel: PerTexel, pages: _Pages,
-                  times: dict[str, float]) -> Computed:
-    """Denoise (if asked) and post-process the composed pages."""
+                  times: dict[str, float], staging: _StateStaging | None = None,
+                  fingerprint: dict | None = None) -> Computed:
+    """Start writing the bake state (``staging``, if any: the texels are final), then denoise
+    (if asked) and post-process the composed pages."""
+    if staging is not None:
+        staging.start(baking, per_texel, fingerprint)
     resolved, lightmaps, masks = baking.settings, pages.lightmaps, pages.masks
     denoised = None
     if resolved.denoise:  # per chart, before the fill of invalid texels and dilation (denoise.py)
@@ -428,40 +465,38 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
     check_input_kept(scene, output, overwrite)
     state_path = None if state is False else (
         default_state_path(output) if state is None or state is True else Path(state))
-    try:
-        done, rebaked = bake_or_rebake(scene, settings, state_path, incremental, quiet,
-                                       relight, (state_path or output).parent)
-    except BakerError as error:  # a setting this scene cannot meet: name the scene
-        error.file = error.file or str(input_path)
-        raise
-    times = dict(done.stage_seconds)
-    times["load"] += loading["load"]
-    resolved = done.settings
-    # closing(): the rows the state is written from (parts.py), if on disk, are removed once
-    # the executor (exited first) has written the state.
-    with closing(done.per_texel), _timed(times, "write"), ThreadPoolExecutor(1) as beside:
-        # The sidecar a rebake starts from (docs/bake_state.md), written while the pages are
-        # encoded (its CRCs and file writes release the GIL, as PIL's compression does), and
-        # put in place only once the output is.
-        state_file = None if state_path is None else beside.submit(
-            stage_atomically, state_path, bake_state_writer(done, rebaked, settings))
+    with ThreadPoolExecutor(1) as beside:
+        staging = None if state_path is None else _StateStaging(beside, state_path, settings)
         try:
-            pages = encode(done.lightmaps, resolved.encoding, resolved.occlusion != "none",
-                           resolved.clip_percentile)
-            info = write(scene, done.atlas, pages, output,
-                         WriteOptions(encoding=resolved.encoding, occlusion=resolved.occlusion,
-                                      clip_percentile=resolved.clip_percentile))
-            if lightmaps_dir is not None:
-                write_page_files(Path(lightmaps_dir), output.stem, pages, done.lightmaps.light,
-                                 lightmaps_format)
-            if error_map_dir is not None:  # per-texel standard error pages (errormap.py)
-                write_error_maps(Path(error_map_dir), output.stem, done, write_atomically)
+            try:
+                done, rebaked = bake_or_rebake(scene, settings, state_path, incremental, quiet,
+                                               relight, (state_path or output).parent, staging)
+            except BakerError as error:  # a setting this scene cannot meet: name the scene
+                error.file = error.file or str(input_path)
+                raise
+            times = dict(done.stage_seconds)
+            times["load"] += loading["load"]
+            resolved = done.settings
+            # closing(): the rows the state is written from (parts.py), if on disk, are
+            # removed once the state is written.
+            with closing(done.per_texel), _timed(times, "write"):
+                pages = encode(done.lightmaps, resolved.encoding, resolved.occlusion != "none",
+                               resolved.clip_percentile)
+                info = write(scene, done.atlas, pages, output,
+                             WriteOptions(encoding=resolved.encoding, occlusion=resolved.occlusion,
+                                          clip_percentile=resolved.clip_percentile))
+                if lightmaps_dir is not None:
+                    write_page_files(Path(lightmaps_dir), output.stem, pages,
+                                     done.lightmaps.light, lightmaps_format)
+                if error_map_dir is not None:  # per-texel standard error pages (errormap.py)
+                    write_error_maps(Path(error_map_dir), output.stem, done, write_atomically)
+                if staging is not None:
+                    staging.put_in_place()
+                    record_full_bake(state_path, rebaked, time.perf_counter() - started)
         except BaseException:
-            _discard(state_file)
+            if staging is not None:
+                staging.discard()
             raise
-        if state_file is not None:
-            _rename(state_file.result(), state_path)
-            record_full_bake(state_path, rebaked, time.perf_counter() - started)
     seconds = time.perf_counter() - started
     rmse = done.rmse_estimate()
     ambient, atlas = done.ambient, done.atlas

@@ -77,15 +77,6 @@ def state_classes() -> dict[str, type]:
     return {"texels": TexelPoints, "validity": Validity, "terms": Terms, "direct": Direct}
 
 
-def make_state(done, fingerprint: dict) -> state_file.BakeState:
-    """The bake state of a finished computation (``bake.Computed``)."""
-    return state_file.BakeState(
-        fingerprints=fingerprint, atlas=done.atlas,
-        groups=done.per_texel.state_groups(),
-        instance_world=np.array([inst.world for inst in done.scene.instances], np.float64
-                                ).reshape(-1, 4, 4))
-
-
 @dataclass(frozen=True)
 class Dirty:
     """Which texels the rebake recomputed, and why.
@@ -671,8 +662,9 @@ def _relight(texels: Texels, tracer: Tracer, sources, settings, light: int,
 
 
 def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
-           relight: bool = False) -> Rebaked:
-    """Recompute the scene's lightmaps from the bake state at ``path``; only what changed.
+           relight: bool = False, staging=None) -> Rebaked:
+    """Recompute the scene's lightmaps from the bake state at ``path``; only what changed
+    (``staging``: where the new bake state starts to be written, as in ``bake.compute``).
 
     Raises FullBake (with the reason) when the state is unusable or the change needs a new
     atlas, new rays for every texel, or a new float32 frame.
@@ -804,47 +796,54 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
             direct = replace(direct, punctual=punctual, punctual_var=punctual_var)
     done = finish(scene, world, resolved, tracer, sources, power, ambient, plan, atlas, texels,
                   TexelPoints.of(texels, raw.position), validity, terms, direct,
-                  times)  # exactly as a full bake goes on
+                  times, staging, fingerprint)  # exactly as a full bake goes on
     dirty = Dirty(rows=rows, reason=reason, tested_rays=tested, relit=tuple(change.lights_placed))
     return Rebaked(computed=done, diff=change, dirty=dirty, fingerprints=fingerprint,
                    rays=fresh_terms.rays + fresh_direct.rays + relit_rays)
 
 
 def bake_or_rebake(scene: Scene, settings: Settings, state_path, incremental: bool,
-                   quiet: bool = True, relight: bool = False, spill_folder=None):
+                   quiet: bool = True, relight: bool = False, spill_folder=None, staging=None):
     """(``bake.Computed``, Rebaked | str | None): a rebake from the state at ``state_path`` when
     ``incremental`` and it can follow, else a full bake and the one-line reason (a str), or None
     when no rebake was asked for. ``relight``: only a recomposition (light colours and
     intensities) may follow; anything else raises InputError before any ray is cast.
     ``spill_folder``: where a full bake keeps its texels' results until the state is written
-    (``bake.compute``)."""
+    (``bake.compute``); ``staging``: where the bake state is written (``bake._StateStaging``)."""
     from .bake import compute
     from .errors import InputError
 
     if not incremental and not relight:
-        return compute(scene, settings, quiet, spill_folder), None
+        return compute(scene, settings, quiet, spill_folder, staging), None
     if state_path is None:
         reason = "no bake state (state=False)"
     else:
         try:
-            rebaked = rebake(scene, settings, state_path, quiet, relight)
+            rebaked = rebake(scene, settings, state_path, quiet, relight, staging)
             return rebaked.computed, rebaked
         except FullBake as why:
             reason = str(why)
     if relight:
         raise InputError(f"cannot relight without tracing: {reason}", file=str(scene.path),
                          fix="use `baker bake` (it rebakes only what changed)")
-    return compute(scene, settings, quiet, spill_folder), reason
+    return compute(scene, settings, quiet, spill_folder, staging), reason
 
 
-def bake_state_writer(done, rebaked, settings: Settings | None = None
+def bake_state_writer(scene: Scene, world: World, resolved, atlas, per_texel,
+                      settings: Settings | None = None, fingerprint: dict | None = None
                       ) -> Callable[[BinaryIO], None]:
-    """What writes the state of ``done`` (``bake.Computed``) baked with ``settings`` to an open
-    file (``state.write_state``): ``bake.py`` runs it beside the output's encoding and renames
-    the file into place only once the output is written."""
-    fingerprint = rebaked.fingerprints if isinstance(rebaked, Rebaked) else fingerprints(
-        done.scene, done.world, done.settings, settings)
-    state = make_state(done, fingerprint)
+    """What writes the bake state to an open file (``state.write_state``): the texels'
+    results ``per_texel`` (``parts.PerTexel``) on ``atlas``, with the ``fingerprint`` of the
+    scene baked (by default that of ``scene`` and ``world`` baked with ``resolved``, asked as
+    ``settings``; a rebake has made it already). ``bake.py`` runs it beside post-processing
+    and the output's encoding, and renames the file into place only once the output is
+    written."""
+    if fingerprint is None:
+        fingerprint = fingerprints(scene, world, resolved, settings)
+    state = state_file.BakeState(
+        fingerprints=fingerprint, atlas=atlas, groups=per_texel.state_groups(),
+        instance_world=np.array([inst.world for inst in scene.instances], np.float64
+                                ).reshape(-1, 4, 4))
     return lambda file: state_file.write_state(file, state)
 
 
