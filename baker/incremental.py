@@ -356,13 +356,15 @@ class _Changed:
                                         self._low, self._high))
 
     def cast_local(self, origins, directions, lengths) -> dict[str, np.ndarray]:
-        """As ``Tracer.cast_local``, but only ``primID`` (−1 for rays that cross no box)."""
+        """As ``Tracer.cast_local``, but only ``primID`` (−1 for rays that cross no box) and
+        ``tfar`` (their length for those)."""
         primitive = np.full(len(origins), -1, np.int32)
+        distance = np.array(lengths, np.float32)
         rows = self._maybe(origins, directions, lengths)
         if len(rows):
-            primitive[rows] = self._tracer.cast_local(origins[rows], directions[rows],
-                                                      lengths[rows].copy())["primID"]
-        return {"primID": primitive}
+            met = self._tracer.cast_local(origins[rows], directions[rows], lengths[rows].copy())
+            primitive[rows], distance[rows] = met["primID"], met["tfar"]
+        return {"primID": primitive, "tfar": distance}
 
     def _local(self, origins, directions, length):
         lengths = np.empty(len(origins), np.float32)
@@ -436,33 +438,61 @@ def _near(texels: Texels, boxes: list[tuple[np.ndarray, np.ndarray]], d_max: flo
     return near
 
 
-def _rays_meet(tracer: Tracer, texels: Texels, rows: np.ndarray, settings) -> tuple[np.ndarray, int]:
-    """(k,) bool: whether any of each texel's own obscurance rays meets ``tracer``'s triangles
-    within d_max; and the number of rays cast."""
+def _rays_meet(changed: _Changed, texels: Texels, rows: np.ndarray, settings,
+               first: tuple[Tracer, np.ndarray] | None = None) -> tuple[np.ndarray, int]:
+    """(k,) bool: whether any of each texel's own obscurance rays meets the ``changed``
+    triangles within d_max — and, with ``first`` = (the whole scene's tracer, (T,) bool its
+    triangles that changed), is not stopped before by a surface that did not
+    (``_stopped_before``); and the number of rays drawn."""
     n = settings.rays
     meets = np.zeros(len(rows), bool)
 
     def work(part: slice) -> None:
         chosen = rows[part]
         normal = texels.geometric_normal(chosen)
-        starts, radii = _starts(tracer, texels.position[chosen], normal, texels.size(chosen),
+        starts, radii = _starts(changed, texels.position[chosen], normal, texels.size(chosen),
                                 settings.d_max)
         texel, x, y, z = _drawn_near_rays(
             TECHNIQUES.index(settings.sampling), np.uint64(settings.seed), texels.key[chosen],
-            n, starts, *tangent_frames(normal), normal, tracer.sphere_centres, radii,
+            n, starts, *tangent_frames(normal), normal, changed.sphere_centres, radii,
             settings.d_max)
         if not len(texel):
             return
         # One ray per "texel" (rays=1): the same bits as the texel's own ray in a bake.
-        origins, directions = world_rays(texels, chosen[texel], 1, x, y, z, tracer.center)
-        primitive = tracer.cast_local(origins, directions,
-                                      np.full(len(origins), settings.d_max, np.float32))["primID"]
+        origins, directions = world_rays(texels, chosen[texel], 1, x, y, z, changed.center)
+        met = changed.cast_local(origins, directions,
+                                 np.full(len(origins), settings.d_max, np.float32))
+        hit = np.flatnonzero(met["primID"] >= 0)
+        if first is not None and len(hit):
+            hit = hit[~_stopped_before(*first, origins[hit], directions[hit], met["tfar"][hit])]
         found = meets[part]
-        found[texel[primitive >= 0]] = True
+        found[texel[hit]] = True
         meets[part] = found
 
     run_chunks(work, _slices(len(rows), max(1, _TEST_RAYS // n)), settings.threads)
     return meets, len(rows) * n
+
+
+def _stopped_before(tracer: Tracer, changed_triangles: np.ndarray, origins: np.ndarray,
+                    directions: np.ndarray, distance: np.ndarray) -> np.ndarray:
+    """(m,) bool, for rays (origins, directions (m, 3) float32 in the tracer's frame, as a bake
+    casts them) that meet the changed geometry at ``distance`` (m,): whether, in the whole
+    scene as it is now (``tracer``, which lets rays through alpha-tested surfaces as a bake
+    does), a surface that did not change stops the ray clearly before (``changed_triangles``
+    (T,) bool: the world triangles that did, a moved node at its new place or a recoloured
+    material's). That surface is then the ray's first hit both before the change and after
+    it, so its part of the texel's terms is the same. The margin, 10⁻³ of the distance plus
+    10⁻⁵ of the coordinates, is far beyond float32 rounding; a mirror or glass that stops the
+    ray is the "chain" search's concern."""
+    distance = distance.astype(np.float64)
+    limit = distance * (1 - 1e-3) - 1e-5 * (np.abs(origins).max(axis=1) + distance)
+    rows = np.flatnonzero(limit > 0)
+    stopped = np.zeros(len(origins), bool)
+    if len(rows):
+        met = tracer.cast_local(origins[rows], directions[rows], limit[rows].astype(np.float32))
+        hit = met["primID"]
+        stopped[rows] = (hit >= 0) & ~changed_triangles[np.maximum(hit, 0)]
+    return stopped
 
 
 def _probes_meet(tracer: Tracer, texels: Texels, rows: np.ndarray, d_max: float,
@@ -501,13 +531,16 @@ def _slices(count: int, step: int) -> list[slice]:
 
 
 def _mark_seen(scene: Scene, world: World, changed: _Changed, boxes: list, texels: Texels,
-               reason: np.ndarray, why: str, settings) -> int:
+               reason: np.ndarray, why: str, settings,
+               first: tuple[Tracer, np.ndarray] | None = None) -> int:
     """Mark with ``why`` (in ``reason`` (N,), in place) the texels not yet dirty whose
     obscurance rays — their own (within d_max of ``boxes``, above their plane) and those from
     their other side (leaves' back faces, translucent insides: ``inner.other_side_rays``) —
-    meet the ``changed`` geometry (held in ``boxes``, (low, high) pairs); return the rays cast."""
+    meet the ``changed`` geometry (held in ``boxes``, (low, high) pairs); return the rays cast.
+    ``first``: their own rays count only if nothing that did not change stops them before
+    (``_rays_meet``)."""
     test = np.flatnonzero(_near(texels, boxes, settings.d_max) & (reason < 0))
-    meets, tested = _rays_meet(changed, texels, test, settings)
+    meets, tested = _rays_meet(changed, texels, test, settings, first)
     reason[test[meets]] = REASONS.index(why)
     table = translucent(scene)
     if not table.any:
@@ -755,7 +788,7 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
             changed = redo[~same]
             reason[changed[reason[changed] < 0]] = REASONS.index("validity")
             n = _mark_seen(scene, world, small, boxes, texels, reason, "obscurance",
-                           resolved)
+                           resolved, (tracer, np.isin(world.tri_instance, moved)))
             tested += n
             rest = np.flatnonzero(reason < 0)
             shadow, n = _shadow_dirty(scene, world, small, texels, rest, sources, resolved)
@@ -767,7 +800,8 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
             corners = np.stack([a, b, c], axis=1)
             box = [(corners.reshape(-1, 3).min(0), corners.reshape(-1, 3).max(0))] if len(tris) else []
             tested += _mark_seen(scene, world, _Changed([corners], world.center), box,
-                                 texels, reason, "colour", resolved)
+                                 texels, reason, "colour", resolved,
+                                 (tracer, np.isin(world.tri_material, change.recoloured)))
         chains = _chain_corners(scene, world)
         if (len(moved) or change.recoloured) and len(chains):
             # A ray that meets a mirror or glass goes on where the searches above do not follow:

@@ -541,3 +541,30 @@ def test_state_atlas_joins_the_instances_and_splits_them_back(tmp_path):
         for name in ("vertices", "triangles", "uv", "pages"):
             a, b = getattr(mine, name), getattr(theirs, name)
             assert a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
+
+
+def test_rays_stopped_before_the_moved_box_leave_their_texels_clean(tmp_path, monkeypatch):
+    """A ray that meets the moved box only behind a surface that did not move has that surface
+    as its first hit before and after the move (``_stopped_before``): the texels behind a
+    screen are not recomputed, and the rebake still gives the full bake's bytes."""
+    from baker import incremental
+
+    screen = {"name": "screen", "size": (0.1, 1.2, 2.5), "at": (0.1, 0.5), "colour": "crate"}
+    settings = baker.Settings(rays=16, page_size=128, shadow_rays=4, threads=1, d_max=1.5)
+    before = _room(BOXES + [screen]).save(tmp_path / "before.glb")
+    after = _room(moved(BOXES, "box3", at=(0.67, 0.55)) + [screen]).save(tmp_path / "after.glb")
+    baker.bake(after, tmp_path / "full.glb", settings)
+    found = {}
+    for name in ("every ray that meets it", "first hits only"):
+        if name == "every ray that meets it":
+            monkeypatch.setattr(incremental, "_stopped_before",
+                                lambda tracer, changed, origins, *_: np.zeros(len(origins), bool))
+        out = tmp_path / f"{name}.glb"
+        baker.bake(before, out, settings)
+        result = baker.bake(after, out, settings, incremental=True)
+        assert result.rebake["incremental"]
+        found[name] = result.rebake["dirty_by_reason"]["obscurance"]
+        assert out.read_bytes() == (tmp_path / "full.glb").read_bytes()
+        assert default_path(out).read_bytes() == default_path(tmp_path / "full.glb").read_bytes()
+        monkeypatch.undo()
+    assert found["first hits only"] < 0.9 * found["every ray that meets it"], found
