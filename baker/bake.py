@@ -40,7 +40,7 @@ from .postprocess import postprocess
 from .progress import bar, wanted
 from .parts import PerTexel, Tally, TexelPoints, part_slices
 from .rasterise import Coverage, Owners, Texels, cover, owners, texels_of
-from .spill import Spill
+from .spill import Spill, remove_later, set_aside
 from .validity import Faces, Validity, check_texels
 from .seams import find_seams
 from .scene import Scene
@@ -266,8 +266,15 @@ class _StateStaging:
         self._future = self._executor.submit(stage_atomically, self._path, writer)
 
     def put_in_place(self) -> None:
-        """Wait for the state to be written and rename it to its path."""
-        _rename(self._future.result(), self._path)
+        """Wait for the state to be written and rename it to its path. The state it replaces
+        is freed on a thread of its own (``spill.set_aside``)."""
+        temp = self._future.result()
+        old = set_aside(self._path)
+        try:
+            _rename(temp, self._path)
+        finally:
+            if old is not None:
+                remove_later(old)
 
     def discard(self) -> None:
         """Wait for the state being written, if any, and remove it."""

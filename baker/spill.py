@@ -19,6 +19,8 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
+import threading
+import uuid
 import weakref
 from dataclasses import dataclass, fields
 from functools import cached_property
@@ -234,18 +236,51 @@ class Spill:
 
 
 def remove_stale(folder: str | os.PathLike | None = None) -> list[str]:
-    """Remove the spill folders in ``folder`` (None: the system's temporary folder) whose
-    process is no longer running; return their paths. A folder whose process id is in use
-    (perhaps by another program since) is kept."""
+    """Remove the spill folders in ``folder`` (None: the system's temporary folder), and the
+    files ``set_aside`` named there, whose process is no longer running; return their paths.
+    One whose process id is in use (perhaps by another program since) is kept."""
     folder = tempfile.gettempdir() if folder is None else os.fspath(folder)
     removed = []
     for name in os.listdir(folder):
         pid = name[len(_PREFIX):].split("-", 1)[0]
         if not name.startswith(_PREFIX) or not pid.isdigit() or _running(int(pid)):
             continue
-        shutil.rmtree(os.path.join(folder, name), ignore_errors=True)
-        removed.append(os.path.join(folder, name))
+        path = os.path.join(folder, name)
+        if os.path.isdir(path):
+            shutil.rmtree(path, ignore_errors=True)
+        else:
+            _remove_quietly(path)
+        removed.append(path)
     return removed
+
+
+def set_aside(path: str | os.PathLike) -> str | None:
+    """Give the file at ``path``, if there is one, a second name beside it that
+    ``remove_stale`` knows (this process's id in it): replacing ``path`` then frees nothing,
+    and ``remove_later`` frees it on a thread of its own. Freeing a large file's pages takes a
+    while — 30 ms for a 50 MB bake state, a tenth of a small rebake. None when there is no
+    file, or its disk has no hard links (the replacement then frees it, as usual)."""
+    folder = os.path.dirname(os.fspath(path)) or "."
+    link = os.path.join(folder, f"{_PREFIX}{os.getpid()}-{uuid.uuid4().hex}.old")
+    try:
+        os.link(path, link)
+    except OSError:
+        return None
+    return link
+
+
+def remove_later(path: str) -> None:
+    """Delete the file ``path`` on a thread of its own. Not a daemon: the interpreter waits for
+    it before it exits, so nothing is left behind but after a kill (``remove_stale``)."""
+    threading.Thread(target=_remove_quietly, args=(path,), name="baker-remove-later").start()
+
+
+def _remove_quietly(path: str) -> None:
+    """Delete the file ``path``; one already gone is no error."""
+    try:
+        os.unlink(path)
+    except OSError:
+        pass
 
 
 def _running(pid: int) -> bool:

@@ -331,6 +331,41 @@ def test_a_failed_write_leaves_the_old_state_and_no_temporary(base, tmp_path, mo
         [output.name, default_path(output).name])
 
 
+def test_the_state_a_rebake_replaces_is_freed_beside_it_and_leaves_nothing(base, tmp_path,
+                                                                           monkeypatch):
+    """The old state is given a second name before the new one replaces it, and deleted on a
+    thread of its own (``spill.set_aside``, ``remove_later``); once that thread is done, the
+    folder holds the output and the state only."""
+    import importlib
+    import threading
+
+    bake_module = importlib.import_module("baker.bake")
+    folder = tmp_path / "out"
+    folder.mkdir()
+    output = folder / "room_baked.glb"
+    shutil.copy(base, output)
+    shutil.copy(default_path(base), default_path(output))
+    old = default_path(output).read_bytes()
+    later = []
+
+    def remove_later(path):
+        later.append((path, Path(path).read_bytes() == old))
+        threads = set(threading.enumerate())
+        real_remove_later(path)
+        later.extend(t for t in threading.enumerate() if t not in threads)
+
+    real_remove_later = bake_module.remove_later
+    monkeypatch.setattr(bake_module, "remove_later", remove_later)
+    edited = _room(moved(BOXES, "box0", at=(-1.0, 1.3))).save(tmp_path / "edited.glb")
+    assert baker.bake(edited, output, SETTINGS, incremental=True).rebake["incremental"]
+    (path, was_the_old_state), thread = later
+    assert was_the_old_state and Path(path).parent == folder
+    thread.join()
+    assert sorted(p.name for p in folder.iterdir()) == sorted(
+        [output.name, default_path(output).name])
+    assert default_path(output).read_bytes() != old
+
+
 def test_state_leaves_out_arrays_of_zeros_and_reads_them_back(base):
     """Arrays of zeros (the atlas's page numbers on a single page) are listed in the header
     instead of stored, and read back equal (same dtype, shape and bytes). Terms a room without

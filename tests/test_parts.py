@@ -109,8 +109,9 @@ def test_an_interrupted_bake_in_parts_leaves_no_rows_on_disk(tmp_path, monkeypat
 
 
 def test_rows_a_killed_bake_left_behind_are_removed_by_the_next(tmp_path):
-    """A SIGKILL leaves the spilled rows (nothing can run then); the next spill in the folder
-    removes the folders of processes that are gone, and keeps those of running ones."""
+    """A SIGKILL leaves the spilled rows (nothing can run then), or a replaced state not yet
+    deleted (``spill.set_aside``); the next spill in the folder removes the folders and files
+    of processes that are gone, and keeps those of running ones."""
     import subprocess
     import sys
 
@@ -120,6 +121,7 @@ def test_rows_a_killed_bake_left_behind_are_removed_by_the_next(tmp_path):
                           capture_output=True, text=True, check=True).stdout.strip()
     (tmp_path / f".baker-spill-{gone}-x1").mkdir()
     (tmp_path / f".baker-spill-{gone}-x1" / "terms.w_hit").write_bytes(b"\0" * 64)
+    (tmp_path / f".baker-spill-{gone}-x3.old").write_bytes(b"\0" * 64)  # a state set aside
     (tmp_path / f".baker-spill-{os.getpid()}-x2").mkdir()  # a bake running now: this one
     (tmp_path / ".baker-spill-notapid").mkdir()
     Spill(tmp_path).close()
