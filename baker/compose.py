@@ -15,7 +15,7 @@ from .atlas import Atlas
 from .direct import Direct
 from .integrate import Terms
 from .obscurance import UNIT_REFLECTIVITY
-from .rasterise import Texels
+from .rasterise import Texels, flat_pages
 from .spill import PER_SCENE
 
 
@@ -74,17 +74,19 @@ def compose_into(lightmaps: Lightmaps, texels: Texels, terms: Terms, ambient: Am
     """
     r_ave = effective_r_ave(ambient, rho)
     count = len(texels)
+    pages, covered, obscurance = (flat_pages(lightmaps.light), flat_pages(lightmaps.covered),
+                                  flat_pages(lightmaps.obscurance))
     for start in range(0, count, _TEXELS_AT_ONCE):
         block = slice(start, start + _TEXELS_AT_ONCE)
-        where = texels.pixels(block)
+        where = texels.pixel_index(block)
         w = _rows(terms, block, count).obscurance(r_ave)
-        if len(lightmaps.obscurance):
-            lightmaps.obscurance[where] = w
-        lightmaps.covered[where] = True
+        if len(obscurance):
+            obscurance[where] = w
+        covered[where] = True
         light = w * ambient.intensity if indirect is None else indirect[block]
         if direct is not None:
             light = light + _rows(direct, block, count).irradiance(light_colours)
-        lightmaps.light[where] = light
+        pages[where] = light
 
 
 _TEXELS_AT_ONCE = 1 << 16

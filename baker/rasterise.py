@@ -48,6 +48,14 @@ _CANDIDATES_PER_CHUNK = 500_000
 _KEY_BITS = np.uint64((1 << 63) - 1)  # a texel key's bits below inner.OTHER_SIDE
 
 
+def flat_pages(pages: np.ndarray) -> np.ndarray:
+    """Pages (P, H, W, …) as one run of P·H·W pixels, for ``Texels.pixel_index``: a view, so
+    that writing to it writes the pages (setting the shape refuses what would need a copy)."""
+    flat = pages.view()
+    flat.shape = (-1,) + pages.shape[3:]
+    return flat
+
+
 @dataclass(frozen=True)
 class Texels:
     """The baked texels, N of them, sorted by ``key``.
@@ -96,10 +104,16 @@ class Texels:
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(page, y, x), each (k,) int64, of the texels ``rows``, from their keys (the other-side
         bit ``inner.OTHER_SIDE`` ignored): ``pages[texels.pixels(rows)]`` reads them."""
-        key = (self.key[rows] & _KEY_BITS).astype(np.int64)
-        page, rest = np.divmod(key, self.page_width * self.page_height)
+        page, rest = np.divmod(self.pixel_index(rows), self.page_width * self.page_height)
         y, x = np.divmod(rest, self.page_width)
         return page, y, x
+
+    def pixel_index(self, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
+        """(k,) int64 index of the texels ``rows``' pixels in pages (P, H, W, …) seen as one
+        run of P·H·W pixels — the key itself, (page·H + y)·W + x, less the other-side bit:
+        ``pages.reshape(P * H * W, …)[index]`` reads them, without the divisions of
+        ``pixels`` or numpy's work on three index arrays (2-3× faster)."""
+        return (self.key[rows] & _KEY_BITS).astype(np.int64)
 
     def instance(self, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
         """(k,) int64 instance of the texels ``rows`` (their triangles')."""

@@ -39,7 +39,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .geometry import World
-from .rasterise import Texels
+from .rasterise import Texels, flat_pages
 from .sampling import jit
 from .scene import Scene
 from .parallel import run_chunks
@@ -96,9 +96,10 @@ class Validity:
     def mark(self, texels: Texels, invalid: np.ndarray, enclosed: np.ndarray) -> None:
         """Set the texels' pixels of the ``page_masks`` ``invalid`` and ``enclosed`` in place
         (a bake made part by part marks each part)."""
+        invalid, enclosed = flat_pages(invalid), flat_pages(enclosed)  # (P·H·W,) views
         for start in range(0, len(texels), _CHUNK):  # the pixels of a chunk at a time
             rows = slice(start, start + _CHUNK)
-            where = texels.pixels(rows)
+            where = texels.pixel_index(rows)
             invalid[where] = self.state[rows] == INVALID
             enclosed[where] = self.state[rows] == ENCLOSED
 
