@@ -154,13 +154,18 @@ def test_stretch_ignores_rotation_and_keeps_mirroring():
     assert np.linalg.det(stretch(np.diag([1.0, 1.0, -1.0]))) < 0
 
 
-@pytest.mark.parametrize("damage", ["missing", "truncated", "version", "foreign", "other scene"])
+@pytest.mark.parametrize("damage", ["missing", "truncated", "flipped bit", "version", "foreign",
+                                    "other scene"])
 def test_unusable_state_means_a_full_bake_with_a_reason(base, tmp_path, damage):
     scene = EDITS["box moved across the room"]().save(tmp_path / "edited.glb")
     state = default_path(tmp_path / "out.glb")
     if damage == "truncated":
         data = default_path(base).read_bytes()
         state.write_bytes(data[: len(data) // 2])
+    elif damage == "flipped bit":  # in the middle of some array: its member's CRC-32 tells
+        data = bytearray(default_path(base).read_bytes())
+        data[len(data) // 2] ^= 0x10
+        state.write_bytes(bytes(data))
     elif damage == "version":
         with zipfile.ZipFile(default_path(base)) as src, zipfile.ZipFile(state, "w") as dst:
             for item in src.infolist():
@@ -180,6 +185,8 @@ def test_unusable_state_means_a_full_bake_with_a_reason(base, tmp_path, damage):
     assert reason and "\n" not in reason
     if damage == "version":
         assert "version 99" in reason
+    if damage == "flipped bit":
+        assert "damaged" in reason
     baker.bake(scene, tmp_path / "full.glb", SETTINGS, state=False)
     assert (tmp_path / "out.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()
 
