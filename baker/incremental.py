@@ -53,7 +53,8 @@ from .rasterise import Coverage, Texels, texels_of
 from .scene import Scene
 from .settings import Settings, resolve
 from .surface import LUMINANCE
-from .sampling import TECHNIQUES, fill_cosine, fill_points, jit, tangent_frames
+from .sampling import (TECHNIQUES, cap_boxes, concentric_hemisphere, fill_cosine, fill_points,
+                       jit, point, sobol_strip_sample, tangent_frames, texel_scrambles)
 from .trace import Hits, Tracer, ray_lift
 from .validity import Validity, check_texels
 
@@ -195,16 +196,20 @@ def _crossing(origins: np.ndarray, directions: np.ndarray, lengths: np.ndarray,
 
 
 @jit
-def _sphere_locals(start, t1, t2, normal, centres, local, distance_sq):
-    """Each sphere centre (b, 3) seen from ``start`` (3,) in the frame (t1, t2, normal), into
-    ``local`` (b, 3), and its squared distance into ``distance_sq`` (b,): once per texel, so a
-    ray's test costs a dot product, not a transform."""
+def _sphere_locals(starts, t1, t2, normals, i, centres, local, distance_sq):
+    """Each sphere centre (b, 3) seen from texel i's ray origin ``starts[i]`` in its frame
+    (``t1[i]``, ``t2[i]``, ``normals[i]``; (k, 3) each), into ``local`` (b, 3), and its squared
+    distance into ``distance_sq`` (b,): once per texel, so a ray's test costs a dot product,
+    not a transform. Scalars only: an array made per texel (a row's view, a difference) cost
+    more than the arithmetic."""
     for b in range(len(centres)):
-        c = centres[b] - start
-        local[b, 0] = c[0] * t1[0] + c[1] * t1[1] + c[2] * t1[2]
-        local[b, 1] = c[0] * t2[0] + c[1] * t2[1] + c[2] * t2[2]
-        local[b, 2] = c[0] * normal[0] + c[1] * normal[1] + c[2] * normal[2]
-        distance_sq[b] = c[0] * c[0] + c[1] * c[1] + c[2] * c[2]
+        cx = centres[b, 0] - starts[i, 0]
+        cy = centres[b, 1] - starts[i, 1]
+        cz = centres[b, 2] - starts[i, 2]
+        local[b, 0] = cx * t1[i, 0] + cy * t1[i, 1] + cz * t1[i, 2]
+        local[b, 1] = cx * t2[i, 0] + cy * t2[i, 1] + cz * t2[i, 2]
+        local[b, 2] = cx * normals[i, 0] + cy * normals[i, 1] + cz * normals[i, 2]
+        distance_sq[b] = cx * cx + cy * cy + cz * cz
 
 
 @jit
@@ -251,7 +256,7 @@ def _fixed_may_meet(x: np.ndarray, y: np.ndarray, z: np.ndarray, starts: np.ndar
     distance_sq = np.empty(len(centres))
     flags = np.empty(len(x), np.bool_)
     for i in range(k):
-        _sphere_locals(starts[i], t1[i], t2[i], normals[i], centres, local, distance_sq)
+        _sphere_locals(starts, t1, t2, normals, i, centres, local, distance_sq)
         out[i] = (_reachable(local, distance_sq, radii, length)
                   and _near_flags(x, y, z, 0, len(x), local, distance_sq, radii, length, flags))
     return out
@@ -260,19 +265,78 @@ def _fixed_may_meet(x: np.ndarray, y: np.ndarray, z: np.ndarray, starts: np.ndar
 # Rays whose directions ``_drawn_near_rays`` draws at once: they stay in the cache (a whole
 # chunk's fresh arrays would cost more in page faults than the drawing).
 _DRAWN_RAYS = 1 << 12
+# A texel's rays are found strip by strip (``_strip_candidates``) when the strips that its
+# spheres' cones cross number at most this share of its rays; else all its rays are drawn.
+_STRIP_SHARE = 0.25
+
+
+@jit
+def _strip_range(low, high, cells):
+    """The first and last of ``cells`` equal strips of [0, 1) that [low, high] meets."""
+    return (min(max(int(np.floor(low * cells)), 0), cells - 1),
+            min(max(int(np.floor(high * cells)), 0), cells - 1))
+
+
+@jit
+def _strip_candidates(local, distance_sq, radii, rays, bits, scrambles, boxes, counts, marks,
+                      candidates):
+    """The samples of a texel (``sobol`` points, its ``scrambles``) whose directions can lie in
+    the cone of some sphere ``local`` (``_sphere_locals``), into ``candidates`` (rays,) int64:
+    returns how many, or −1 when finding them would cost more than drawing every ray.
+    ``boxes`` (b, 8, 4), ``counts`` (b,) and ``marks`` (rays,) uint8 (all 0, and left so) are
+    scratch. A cone's directions come from a few boxes of the unit square
+    (``sampling.cap_boxes``); a box crosses few of the 2^bits strips along its narrower side,
+    and each strip holds one of the texel's first 2^bits points
+    (``sampling.sobol_strip_sample``): those of samples below ``rays`` are the candidates. A
+    texel a few metres from a small object has a ray or two of 64 in its cone, and no reason
+    to draw the others."""
+    cells = 1 << bits
+    budget = int(_STRIP_SHARE * rays)
+    for b in range(len(radii)):  # first the boxes, and whether their strips are few enough
+        distance = np.sqrt(distance_sq[b])
+        if distance <= 1.5 * radii[b]:
+            return -1  # a wide cone, and rays that start near the sphere
+        counts[b] = cap_boxes(local[b, 0] / distance, local[b, 1] / distance,
+                              local[b, 2] / distance, radii[b] / distance, boxes[b])
+        if counts[b] < 0:
+            return -1
+        for row in range(counts[b]):
+            low_u, high_u = _strip_range(boxes[b, row, 0], boxes[b, row, 1], cells)
+            low_v, high_v = _strip_range(boxes[b, row, 2], boxes[b, row, 3], cells)
+            budget -= min(high_u - low_u, high_v - low_v) + 1
+        if budget < 0:
+            return -1
+    found = 0
+    for b in range(len(radii)):
+        for row in range(counts[b]):
+            low_u, high_u = _strip_range(boxes[b, row, 0], boxes[b, row, 1], cells)
+            low_v, high_v = _strip_range(boxes[b, row, 2], boxes[b, row, 3], cells)
+            dimension, low, high = ((0, low_u, high_u) if high_u - low_u <= high_v - low_v
+                                    else (1, low_v, high_v))
+            for strip in range(low, high + 1):
+                sample = sobol_strip_sample(dimension, strip, bits, scrambles)
+                if sample < rays and not marks[sample]:
+                    marks[sample] = 1
+                    candidates[found] = sample
+                    found += 1
+    for c in range(found):
+        marks[candidates[c]] = 0
+    return found
 
 
 @jit
 def _drawn_near_rays(technique: int, seed, keys: np.ndarray, rays: int, starts: np.ndarray,
                      t1: np.ndarray, t2: np.ndarray, normals: np.ndarray, centres: np.ndarray,
-                     radii: np.ndarray, length: float):
+                     radii: np.ndarray, length: float, strips: bool = True):
     """The obscurance rays of texels keys (k,) — each texel's rays from ``starts[i]`` (k, 3) in
     its frame t1, t2, normals (k, 3) each — that may pass near the spheres (``_near_flags``):
     (texel (m,) int64 index into keys, x, y, z (m,) their local directions, the bits
-    ``cosine_directions`` gives). The directions of the texels that can reach a sphere
-    (``_reachable``) are drawn here (``sampling.fill_points``, ``fill_cosine``) a few at a time
-    into small buffers, so that no (k·rays,) arrays are made; a texel's rays are tested one
-    by one only when some of them passes near."""
+    ``cosine_directions`` gives). Texels that cannot reach a sphere (``_reachable``) draw
+    nothing. With ``sobol`` points (and ``strips``; False draws every ray, for the tests), a
+    texel whose spheres subtend narrow cones draws only the rays that may lie in them
+    (``_strip_candidates``); the others' directions are drawn (``sampling.fill_points``,
+    ``fill_cosine``) a few texels at a time into small buffers, so that no (k·rays,) arrays
+    are made. Either way each drawn ray meets the same test."""
     k = len(starts)
     local = np.empty((len(centres), 3))
     distance_sq = np.empty(len(centres))
@@ -281,37 +345,65 @@ def _drawn_near_rays(technique: int, seed, keys: np.ndarray, rays: int, starts: 
     u, v = np.empty(block * rays), np.empty(block * rays)
     x, y, z = np.empty(block * rays), np.empty(block * rays), np.empty(block * rays)
     flags = np.empty(block * rays, np.bool_)
+    bits = 0
+    while (1 << bits) < rays:
+        bits += 1
+    boxes, counts = np.empty((len(centres), 8, 4)), np.empty(len(centres), np.int64)
+    marks, candidates = np.zeros(rays, np.uint8), np.empty(rays, np.int64)
+    strips = strips and technique == 0 and bits <= 24  # (a point has 24 bits: ``_unit``)
     texel = np.empty(1024, np.int64)
     near = np.empty((1024, 3))
     m = 0
     for first in range(0, k, block):
         count = 0
         for i in range(first, min(first + block, k)):
-            _sphere_locals(starts[i], t1[i], t2[i], normals[i], centres, local, distance_sq)
-            if _reachable(local, distance_sq, radii, length):
+            _sphere_locals(starts, t1, t2, normals, i, centres, local, distance_sq)
+            if not _reachable(local, distance_sq, radii, length):
+                continue
+            found = -1
+            if strips:
+                scrambles = texel_scrambles(seed, keys[i], np.uint64(0))
+                found = _strip_candidates(local, distance_sq, radii, rays, bits, scrambles,
+                                          boxes, counts, marks, candidates)
+            if found < 0:  # drawn with the block's other texels, below
                 todo[count], todo_keys[count] = i, keys[i]
                 count += 1
+                continue
+            for c in range(found):
+                pu, pv = point(0, candidates[c], rays, scrambles)
+                x[c], y[c], z[c] = concentric_hemisphere(pu, pv)
+            if not _near_flags(x, y, z, 0, found, local, distance_sq, radii, length, flags):
+                continue
+            for r in range(found):
+                if flags[r]:
+                    texel, near, m = _append_ray(texel, near, m, i, x[r], y[r], z[r])
         drawn = count * rays
         fill_points(technique, seed, todo_keys[:count], 0, rays, np.uint64(0), u[:drawn],
                     v[:drawn])
         fill_cosine(u[:drawn], v[:drawn], x[:drawn], y[:drawn], z[:drawn])
         for c in range(count):
             i = todo[c]
-            _sphere_locals(starts[i], t1[i], t2[i], normals[i], centres, local, distance_sq)
+            _sphere_locals(starts, t1, t2, normals, i, centres, local, distance_sq)
             base = c * rays
             if not _near_flags(x, y, z, base, base + rays, local, distance_sq, radii, length,
                                flags):
                 continue
             for r in range(base, base + rays):
-                if not flags[r]:
-                    continue
-                if m == len(texel):  # grow the outputs
-                    texel = np.concatenate((texel, np.empty(m, np.int64)))
-                    near = np.concatenate((near, np.empty((m, 3))))
-                texel[m] = i
-                near[m, 0], near[m, 1], near[m, 2] = x[r], y[r], z[r]
-                m += 1
+                if flags[r]:
+                    texel, near, m = _append_ray(texel, near, m, i, x[r], y[r], z[r])
     return texel[:m], near[:m, 0].copy(), near[:m, 1].copy(), near[:m, 2].copy()
+
+
+@jit
+def _append_ray(texel, near, m, i, x, y, z):
+    """Append the ray (texel i, direction x, y, z) to the outputs, grown when full; returns
+    them and the new count."""
+    if m == len(texel):
+        texel = np.concatenate((texel, np.empty(m, np.int64)))
+        near = np.concatenate((near, np.empty((m, 3))))
+    texel[m] = i
+    near[m, 0], near[m, 1], near[m, 2] = x, y, z
+    return texel, near, m + 1
 
 
 def _lifted(center: np.ndarray, position, normal, size) -> np.ndarray:

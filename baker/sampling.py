@@ -89,16 +89,26 @@ def owen_scramble(x, seed):
     return _reverse_bits(_laine_karras(_reverse_bits(_U32(x)), _U32(seed)))
 
 
-def _sobol_second_table() -> np.ndarray:
-    """(4, 256) uint32: dimension 1 of Sobol for each byte value at each byte position.
-
-    The generator matrix of the polynomial x + 1 has direction numbers v_k = v_{k-1} ^
-    (v_{k-1} >> 1), v_0 = 2^31; the point of an index is the XOR of v_k over its set bits, so it
-    is the XOR of one table entry per byte of the index.
-    """
+def _sobol_second_directions() -> list[int]:
+    """The 32 direction numbers of dimension 1 of Sobol: the generator matrix of the polynomial
+    x + 1 has v_k = v_{k-1} ^ (v_{k-1} >> 1), v_0 = 2^31 (rows of Pascal's triangle mod 2: v_k's
+    lowest set bit is bit 31 − k)."""
     directions = [1 << 31]
     for _ in range(31):
         directions.append(directions[-1] ^ (directions[-1] >> 1))
+    return directions
+
+
+_SOBOL_SECOND_DIRECTIONS = np.array(_sobol_second_directions(), np.uint32)
+
+
+def _sobol_second_table() -> np.ndarray:
+    """(4, 256) uint32: dimension 1 of Sobol for each byte value at each byte position.
+
+    The point of an index is the XOR of the direction numbers v_k over its set bits, so it is
+    the XOR of one table entry per byte of the index.
+    """
+    directions = _sobol_second_directions()
     table = np.zeros((4, 256), np.uint32)
     for position in range(4):
         for value in range(256):
@@ -147,6 +157,135 @@ def _sobol_point(sample, shuffle, sx, sy):
     index = owen_scramble(_U32(sample), shuffle)
     return (_unit(_reverse_bits(_laine_karras(index, sx))),
             _unit(_reverse_bits(_laine_karras(_sobol_second_reversed(index), sy))))
+
+
+@jit
+def _laine_karras_preimage(target, seed, bits):
+    """The x < 2^bits with ``_laine_karras(x, seed)`` ≡ ``target`` (mod 2^bits). Bit j of the
+    permutation is bit j of x flipped by a function of x's lower bits, so x is found a bit at a
+    time from the lowest, ``bits`` evaluations in all."""
+    x = _U32(0)
+    for j in range(bits):
+        bit = _U32(1) << _U32(j)
+        if (_laine_karras(x, seed) ^ _U32(target)) & bit:
+            x |= bit
+    return x
+
+
+@jit
+def _sample_of_index(low, shuffle, bits):
+    """The sample s < 2^bits whose scrambled index ``owen_scramble(s, shuffle)`` has ``low`` as
+    its lowest ``bits`` bits. Index bit i is bit 31 − i of LK(rev(s)), which depends on the
+    bits of rev(s) up to 31 − i (those of s from i): solved a bit at a time as above."""
+    w = _U32(0)
+    for p in range(32 - bits, 32):
+        bit = _U32(1) << _U32(p)
+        want = (_U32(low) >> _U32(31 - p)) & _U32(1)
+        if ((_laine_karras(w, shuffle) >> _U32(p)) & _U32(1)) != want:
+            w |= bit
+    return _reverse_bits(w)
+
+
+@jit
+def sobol_strip_sample(dimension, strip, bits, scrambles):
+    """Which sample s < 2^bits of a texel (its ``texel_scrambles``) has its ``sobol`` point in
+    the ``strip``-th of 2^bits equal strips of [0, 1) along ``dimension`` (0: the point's x,
+    1: its y). The first 2^bits points of each texel form a (0, bits, 2)-net, so exactly one
+    does: a texel's rays that can go in a narrow cone of directions are found without drawing
+    the others (``incremental._drawn_near_rays``). Both coordinates are Owen-scrambled values of
+    the index, and the index an Owen-scrambled sample number: each scramble is undone a bit at
+    a time (``_laine_karras_preimage``); dimension 1 also undoes Sobol's generator matrix, which
+    is triangular (back substitution on ``_SOBOL_SECOND_DIRECTIONS``)."""
+    if bits == 0:
+        return 0
+    shuffle, sx, sy = scrambles
+    target = _reverse_bits(_U32(strip)) >> _U32(32 - bits)  # the strip's bits, lowest first
+    if dimension == 0:  # x = rev(LK(index, sx)): its top bits are LK(index)'s low ones
+        low = _laine_karras_preimage(target, sx, bits)
+    else:  # y = rev(LK(rev(sobol2(index)), sy)): the top bits of sobol2(index) are known
+        top = _reverse_bits(_laine_karras_preimage(target, sy, bits))
+        mask = (_U32(1) << _U32(bits)) - _U32(1)
+        high = owen_scramble(0, shuffle) & ~mask  # the index's bits from ``bits`` up: the same
+        residual = top ^ _reverse_bits(_sobol_second_reversed(high))  # for every sample < 2^bits
+        low = _U32(0)
+        for j in range(bits - 1, -1, -1):
+            if (residual >> _U32(31 - j)) & _U32(1):
+                low |= _U32(1) << _U32(j)
+                residual ^= _SOBOL_SECOND_DIRECTIONS[j]
+    return int(_sample_of_index(low, shuffle, bits))
+
+
+_QUARTER_PI = np.pi / 4
+_ANGLE_SLACK = 1e-7  # radians added to the cap's azimuths: far beyond rounding of the map
+_UNIT_SLACK = 1e-9  # added to the boxes in [0, 1)²
+
+
+@jit
+def _region_box(region, r0, r1, lo, hi, boxes, row):
+    """Row ``row`` of ``boxes``: (u0, u1, v0, v1), the box of the points that
+    ``concentric_hemisphere`` maps into radii [r0, r1] and azimuths [lo, hi] of one of its
+    four regions (0: a = r, azimuths [−π/4, π/4]; 1: b = r, [π/4, 3π/4]; 2: a = −r,
+    [3π/4, 5π/4]; 3: b = −r, [5π/4, 7π/4]), where (a, b) = (2u − 1, 2v − 1). In each region (a, b) is bilinear in (r, azimuth): the box of
+    the four corners holds them all."""
+    a_low = b_low = 1.0
+    a_high = b_high = -1.0
+    for r in (r0, r1):
+        for phi in (lo, hi):
+            if region == 0:
+                a, b = r, r * phi / _QUARTER_PI
+            elif region == 1:
+                a, b = r * (2 * _QUARTER_PI - phi) / _QUARTER_PI, r
+            elif region == 2:
+                a, b = -r, -r * (phi - 4 * _QUARTER_PI) / _QUARTER_PI
+            else:
+                a, b = r * (phi - 6 * _QUARTER_PI) / _QUARTER_PI, -r
+            a_low, a_high = min(a_low, a), max(a_high, a)
+            b_low, b_high = min(b_low, b), max(b_high, b)
+    boxes[row, 0] = (a_low + 1.0) / 2 - _UNIT_SLACK
+    boxes[row, 1] = (a_high + 1.0) / 2 + _UNIT_SLACK
+    boxes[row, 2] = (b_low + 1.0) / 2 - _UNIT_SLACK
+    boxes[row, 3] = (b_high + 1.0) / 2 + _UNIT_SLACK
+
+
+@jit
+def cap_boxes(cx, cy, cz, sin_half, boxes):
+    """Boxes of [0, 1)² that hold every point ``concentric_hemisphere`` maps into the cap of
+    directions within asin(``sin_half``) of the unit axis (cx, cy, cz) (any z): rows (u0, u1,
+    v0, v1) of ``boxes`` (8, 4), at most two per region of the map. Returns how many, or −1 when
+    the cap holds the pole, so that any point may (0: the cap is below the hemisphere).
+
+    A direction at polar angle θ and azimuth φ comes from a point at "radius" max(|a|, |b|) =
+    sin θ, in the region of its azimuth: the cap spans θ ∈ [θc − α, θc + α] and, when it holds
+    no pole, φ ∈ φc ± asin(sin α / sin θc). The radii come from the sines and cosines of θc and
+    α without an angle (two calls to libm's trigonometry remain: a texel's search makes
+    millions of these)."""
+    sin_alpha = min(max(sin_half, 0.0) * (1.0 + 1e-9) + 1e-9, 1.0)
+    cos_alpha = np.sqrt(1.0 - sin_alpha * sin_alpha)
+    sin_theta = np.sqrt(cx * cx + cy * cy)
+    if cz >= cos_alpha:  # θc ≤ α
+        return -1
+    if cz * cos_alpha + sin_theta * sin_alpha <= 0.0:  # cos(θc − α) ≤ 0: all below
+        return 0
+    r0 = max(sin_theta * cos_alpha - cz * sin_alpha - _UNIT_SLACK, 0.0)  # sin(θc − α)
+    if cz * cos_alpha - sin_theta * sin_alpha >= 0.0:  # θc + α ≤ π/2
+        r1 = min(sin_theta * cos_alpha + cz * sin_alpha + _UNIT_SLACK, 1.0)
+    else:
+        r1 = 1.0
+    if sin_alpha >= sin_theta:
+        spread = 4 * _QUARTER_PI  # every azimuth
+    else:
+        spread = np.arcsin(sin_alpha / sin_theta) + _ANGLE_SLACK
+    centre = np.arctan2(cy, cx)
+    count = 0
+    for region in range(4):
+        start = (2 * region - 1) * _QUARTER_PI  # the region's azimuths [start, start + π/2]
+        for turn in (-8 * _QUARTER_PI, 0.0, 8 * _QUARTER_PI):
+            lo = max(centre - spread, start + turn)
+            hi = min(centre + spread, start + 2 * _QUARTER_PI + turn)
+            if lo <= hi:
+                _region_box(region, r0, r1, lo - turn, hi - turn, boxes, count)
+                count += 1
+    return count
 
 
 @jit

@@ -610,3 +610,27 @@ def test_rays_stopped_before_the_moved_box_leave_their_texels_clean(tmp_path, mo
         assert default_path(out).read_bytes() == default_path(tmp_path / "full.glb").read_bytes()
         monkeypatch.undo()
     assert found["first hits only"] < 0.9 * found["every ray that meets it"], found
+
+
+def test_the_strip_search_finds_the_rays_drawing_them_all_finds():
+    """``_drawn_near_rays`` finds the rays of texels far from the spheres strip by strip
+    (``_strip_candidates``) and draws all the rays of the others: the same rays, bit for bit,
+    as drawing every texel's rays, for texels near and far, facing the spheres or not, and ray
+    counts that are powers of two or not."""
+    from baker.incremental import _drawn_near_rays
+    from baker.sampling import tangent_frames
+
+    rng = np.random.default_rng(6)
+    for rays in (16, 64, 100):
+        count = 3000
+        normals = rng.normal(size=(count, 3))
+        normals /= np.linalg.norm(normals, axis=1)[:, None]
+        starts = rng.uniform(-3, 3, (count, 3))
+        centres = np.array([[0.3, 0.2, -0.1], [1.2, -0.4, 0.5]])
+        radii = np.array([0.25, 0.1])
+        keys = rng.integers(0, 2**40, count).astype(np.uint64)
+        args = (0, np.uint64(11), keys, rays, starts, *tangent_frames(normals), normals,
+                centres, radii, 2.5)
+        found = [sorted(zip(*(a.tolist() for a in _drawn_near_rays(*args, strips))))
+                 for strips in (True, False)]
+        assert found[0] == found[1] and len(found[0]) > 100, rays

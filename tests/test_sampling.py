@@ -2,8 +2,8 @@
 
 import numpy as np
 
-from baker.sampling import (cosine_hemisphere, fill_points, hash_u32, owen_scramble, sample_2d,
-                            tangent_frames)
+from baker.sampling import (cap_boxes, cosine_hemisphere, fill_points, hash_u32, owen_scramble,
+                            sample_2d, sobol_strip_sample, tangent_frames, texel_scrambles)
 
 
 def test_same_arguments_same_numbers_however_split():
@@ -82,3 +82,49 @@ def test_tangent_frames_are_orthonormal_even_at_the_poles():
     for a, b in ((t1, n), (t2, n), (t1, t2)):
         assert np.abs((a * b).sum(axis=1)).max() < 1e-12
     assert np.allclose(np.linalg.norm(t1, axis=1), 1) and np.allclose(np.linalg.norm(t2, axis=1), 1)
+
+
+def test_the_sample_in_each_strip_is_found_without_drawing_the_others():
+    """Among a texel's first 2^m Sobol points one lies in each of 2^m strips of either
+    coordinate; ``sobol_strip_sample`` names it, undoing the scrambles, for every m."""
+    rng = np.random.default_rng(4)
+    for trial in range(60):
+        seed, key, bits = int(rng.integers(2**32)), int(rng.integers(2**40)), trial % 11
+        cells = 1 << bits
+        points = sample_2d(seed, np.uint64(key), np.arange(cells), 0)
+        scrambles = texel_scrambles(np.uint64(seed), np.uint64(key), np.uint64(0))
+        for dimension in (0, 1):
+            strip = np.floor(points[:, dimension] * cells).astype(int)
+            assert sorted(strip) == list(range(cells))
+            found = [sobol_strip_sample(dimension, k, bits, scrambles) for k in range(cells)]
+            assert np.array_equal(strip[found], np.arange(cells)), (trial, dimension)
+
+
+def test_cap_boxes_hold_every_point_whose_direction_is_in_the_cap():
+    """``cap_boxes`` bounds the points of the unit square that the cosine map sends within a
+    cap of directions: no point of 2,000 random ones per cap, over 2,000 caps (axes anywhere,
+    some below the horizon; narrow and wide), falls outside them; and narrow caps far from the
+    pole keep to a small part of the square."""
+    rng = np.random.default_rng(5)
+    boxes = np.empty((8, 4))
+    inside = outside = 0
+    narrow = []
+    for trial in range(2000):
+        axis = rng.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        sin_half = float(rng.uniform(0, 0.1 if trial % 2 else 0.8))
+        count = cap_boxes(axis[0], axis[1], axis[2], sin_half, boxes)
+        if count < 0:
+            assert axis[2] >= np.cos(np.arcsin(sin_half)) - 1e-6  # the cap holds the pole
+            continue
+        points = rng.random((2000, 2))
+        seen = cosine_hemisphere(points) @ axis >= np.sqrt(1 - sin_half ** 2)
+        b = boxes[:count]
+        held = ((points[:, None, 0] >= b[:, 0]) & (points[:, None, 0] <= b[:, 1])
+                & (points[:, None, 1] >= b[:, 2]) & (points[:, None, 1] <= b[:, 3])).any(axis=1)
+        inside += int(seen.sum())
+        outside += int((seen & ~held).sum())
+        if sin_half < 0.1 and 0.1 < axis[2] < 0.9:
+            narrow.append(np.sum((b[:, 1] - b[:, 0]) * (b[:, 3] - b[:, 2])))
+    assert inside > 10000 and outside == 0
+    assert np.median(narrow) < 0.05
