@@ -876,6 +876,7 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
             same = (_same_rows(old_validity, fresh, redo) & ~old_validity.touching[redo]
                     & (texels.position[redo] == checked.position).all(axis=1))
             texels.position[redo] = checked.position
+            old_texels.record(redo, checked.position, raw.position[redo])
             validity = merge(old_validity, fresh, redo)
             changed = redo[~same]
             reason[changed[reason[changed] < 0]] = REASONS.index("validity")
@@ -921,7 +922,7 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
                 relit_rays += len(clean) * int(sources.samples[light])
             direct = replace(direct, punctual=punctual, punctual_var=punctual_var)
     done = finish(scene, world, resolved, tracer, sources, power, ambient, plan, atlas, texels,
-                  TexelPoints.of(texels, raw.position), validity, terms, direct,
+                  old_texels, validity, terms, direct,
                   times, staging, fingerprint)  # exactly as a full bake goes on
     dirty = Dirty(rows=rows, reason=reason, tested_rays=tested, relit=tuple(change.lights_placed))
     return Rebaked(computed=done, diff=change, dirty=dirty, fingerprints=fingerprint,

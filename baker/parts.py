@@ -60,15 +60,33 @@ class TexelPoints:
     def of(cls, texels: Texels, made: np.ndarray) -> "TexelPoints":
         """The points of ``texels``, whose sample points ``texels_of`` made at ``made`` (N, 3)
         before the probes moved some (a point counts as moved if any bit differs)."""
-        moved = np.zeros(len(made), bool)
-        for c in range(3):  # column by column: numpy reduces a 3-long axis slowly
-            moved |= texels.position[:, c].view(np.int64) != made[:, c].view(np.int64)
+        moved = _moved(texels.position, made)
         return cls(texels.key, texels.triangle, texels.triangle_texels, moved,
                    np.where(moved[:, None], texels.position, 0.0))
 
     def positions(self, made: np.ndarray) -> np.ndarray:
-        """(N, 3) the texels' sample points, from those ``texels_of`` made (N, 3)."""
-        return np.where(self.moved[:, None], self.moved_position, made)
+        """(N, 3) the texels' sample points, from those ``texels_of`` made (N, 3): a copy of
+        ``made`` with the moved rows' points (few: a copy and a scatter, not a where)."""
+        out = made.copy()
+        rows = np.flatnonzero(self.moved)
+        out[rows] = self.moved_position[rows]
+        return out
+
+    def record(self, rows: np.ndarray, position: np.ndarray, made: np.ndarray) -> None:
+        """In place, what ``of`` gives the texels ``rows`` (k,) whose sample points are now
+        ``position`` (k, 3), made at ``made`` (k, 3): a rebake probes a few texels again and
+        keeps the other rows as they were."""
+        moved = _moved(position, made)
+        self.moved[rows] = moved
+        self.moved_position[rows] = np.where(moved[:, None], position, 0.0)
+
+
+def _moved(position: np.ndarray, made: np.ndarray) -> np.ndarray:
+    """(n,) bool: whether any bit of each point ``position`` (n, 3) differs from ``made``."""
+    moved = np.zeros(len(made), bool)
+    for c in range(3):  # column by column: numpy reduces a 3-long axis slowly
+        moved |= position[:, c].view(np.int64) != made[:, c].view(np.int64)
+    return moved
 
 
 @dataclass
