@@ -47,7 +47,7 @@ from .geometry import World, build_world
 from .inner import other_side_rays, translucent
 from .integrate import Terms, integrate, world_rays
 from .materials import SPECULAR, TRANSPARENT, material_table
-from .parallel import run_chunks
+from .parallel import cores, run_chunks
 from .parts import TexelPoints, part_slices
 from .rasterise import Coverage, Texels, texels_of
 from .scene import Scene
@@ -561,7 +561,7 @@ def _rays_meet(changed: _Changed, texels: Texels, rows: np.ndarray, settings,
         found[texel[hit]] = True
         meets[part] = found
 
-    run_chunks(work, _slices(len(rows), max(1, _TEST_RAYS // n)), settings.threads)
+    run_chunks(work, _slices(len(rows), max(1, _TEST_RAYS // n), 2 * cores()), settings.threads)
     return meets, len(rows) * n
 
 
@@ -612,14 +612,18 @@ def _probes_meet(tracer: Tracer, texels: Texels, rows: np.ndarray, d_max: float,
         found[some] = (hits.triangle.reshape(len(some), -1) >= 0).any(axis=1)
         meets[part] = found
 
-    run_chunks(work, _slices(len(rows), max(1, _TEST_RAYS // validity_module.HEMISPHERE_RAYS)),
-               threads)
+    run_chunks(work, _slices(len(rows), max(1, _TEST_RAYS // validity_module.HEMISPHERE_RAYS),
+                             2 * cores()), threads)
     return meets, len(rows) * validity_module.HEMISPHERE_RAYS
 
 
-def _slices(count: int, step: int) -> list[slice]:
-    """Consecutive slices of ``step`` covering ``range(count)``."""
-    return [slice(start, min(start + step, count)) for start in range(0, count, step)]
+def _slices(count: int, step: int, least: int = 1) -> list[slice]:
+    """Consecutive slices covering ``range(count)``: of at most ``step`` rows, at least
+    ``least`` of them (when there are rows enough), all of about the same size, so that
+    threads given a few chunks end together."""
+    chunks = min(max(-(-count // step), least), count) if count else 0
+    bounds = [count * k // chunks for k in range(chunks + 1)] if chunks else [0]
+    return [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:])]
 
 
 def _mark_seen(scene: Scene, world: World, changed: _Changed, boxes: list, texels: Texels,
