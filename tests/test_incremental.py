@@ -191,6 +191,20 @@ def test_unusable_state_means_a_full_bake_with_a_reason(base, tmp_path, damage):
     assert (tmp_path / "out.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()
 
 
+def test_a_state_of_another_build_of_baker_means_a_full_bake(base, tmp_path, monkeypatch):
+    """A state keeps the terms the code that wrote it computed: written by another build (other
+    sources, or another Embree, numba or numpy), it is not mixed with this build's terms."""
+    from baker import diff as diff_module
+
+    scene = EDITS["box moved across the room"]().save(tmp_path / "edited.glb")
+    shutil.copy(default_path(base), default_path(tmp_path / "out.glb"))
+    assert diff_module.code_fingerprint() in default_path(base).read_bytes().decode("latin-1")
+    monkeypatch.setattr(diff_module, "code_fingerprint", lambda: "another build")
+    result = baker.bake(scene, tmp_path / "out.glb", SETTINGS, incremental=True)
+    assert result.rebake["incremental"] is False
+    assert "another build of baker" in result.rebake["full_bake_reason"]
+
+
 def test_unchanged_scene_recomputes_nothing(base, tmp_path):
     scene = _room().save(tmp_path / "same.glb")
     shutil.copy(default_path(base), default_path(tmp_path / "out.glb"))
