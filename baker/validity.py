@@ -182,7 +182,10 @@ def _tangent_step(tracer: Tracer, faces: Faces, position: np.ndarray, normal: np
 
 def _touching(distance: np.ndarray, lift: np.ndarray) -> np.ndarray:
     """(k,) bool: some of each point's probes (k·m distances, point-major; inf for misses) met
-    a surface within ``TOUCH`` × its ray ``lift`` (k,)."""
+    a surface within ``TOUCH`` × its ray ``lift`` (k,) (none for no point: a part whose texels
+    are all degenerate probes none)."""
+    if not len(lift):
+        return np.zeros(0, bool)
     return (distance.reshape(len(lift), -1) <= TOUCH * lift[:, None]).any(axis=1)
 
 

@@ -326,6 +326,15 @@ def test_rebake_reports_its_time_against_the_last_full_bake(base, tmp_path, caps
     assert f"of the last full bake ({full:.2f} s)" in capsys.readouterr().out
 
 
+def _baked_copy(base: Path, folder: Path) -> Path:
+    """A copy of the base room's baked output, with its state, in a new ``folder``."""
+    folder.mkdir()
+    output = folder / base.name
+    shutil.copy(base, output)
+    shutil.copy(default_path(base), default_path(output))
+    return output
+
+
 def test_a_failed_write_leaves_the_old_state_and_no_temporary(base, tmp_path, monkeypatch):
     """The state is written while the pages are encoded, but put in place only once the output
     is: when writing the output fails, the previous state stays as it was, byte for byte, and
@@ -333,11 +342,8 @@ def test_a_failed_write_leaves_the_old_state_and_no_temporary(base, tmp_path, mo
     import importlib
 
     bake_module = importlib.import_module("baker.bake")
-    folder = tmp_path / "out"
-    folder.mkdir()
-    output = folder / "room_baked.glb"
-    shutil.copy(base, output)
-    shutil.copy(default_path(base), default_path(output))
+    output = _baked_copy(base, tmp_path / "out")
+    folder = output.parent
     before = default_path(output).read_bytes()
 
     def failing_write(*args, **kwargs):
@@ -361,11 +367,8 @@ def test_the_state_a_rebake_replaces_is_freed_beside_it_and_leaves_nothing(base,
     import threading
 
     bake_module = importlib.import_module("baker.bake")
-    folder = tmp_path / "out"
-    folder.mkdir()
-    output = folder / "room_baked.glb"
-    shutil.copy(base, output)
-    shutil.copy(default_path(base), default_path(output))
+    output = _baked_copy(base, tmp_path / "out")
+    folder = output.parent
     old = default_path(output).read_bytes()
     later = []
 
