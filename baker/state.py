@@ -4,8 +4,8 @@ Written next to the output (``<output>.bake`` by default) after every bake; read
 incremental rebake (``incremental.py``), which diffs the new scene against its fingerprints
 (``diff.py``). The format is documented in ``docs/bake_state.md``:
 
-- a ZIP archive (stored, no compression) whose members have a fixed timestamp, so the same bake
-  gives the same bytes (DESIGN.md §4: an incremental rebake's state equals a full bake's);
+- a ZIP archive (stored, no compression; ``storedzip.py``) whose members have a fixed
+  timestamp, so the same bake gives the same bytes (DESIGN.md §4: an incremental rebake's state equals a full bake's);
 - ``header.json``: ``{"format": "baker-bake-state", "version": 5, "fingerprints": {...},
   "groups": {name: {"class": ..., "fields": {...}, "scalars": {...}}}, "zeros": {...},
   "repeated": {...}, "sparse": {...}}``;
@@ -36,11 +36,12 @@ from isal import isal_zlib
 
 from .atlas import Atlas, InstanceUV
 from .spill import Column, Group
+from .storedzip import StoredZip
 
 FORMAT = "baker-bake-state"
 VERSION = 5
 SUFFIX = ".bake"
-_DATE = (1980, 1, 1, 0, 0, 0)  # fixed member timestamp: same content, same bytes
+_NPY_HEAD = 1 << 16  # bytes enough for any .npy header baker writes (version 1.0: < 64 KiB)
 
 
 class StateUnusable(Exception):
@@ -109,19 +110,14 @@ class BakeState:
     instance_world: np.ndarray
 
 
-def _member(archive: zipfile.ZipFile, name: str, data: bytes | Column) -> None:
-    """Add one stored member dated ``_DATE``: bytes as they are, an array (``spill.Column``,
-    in memory or spilled to disk) as ``.npy``, streamed into the archive (no copy of its
-    bytes in memory)."""
-    info = zipfile.ZipInfo(name, date_time=_DATE)
-    info.compress_type = zipfile.ZIP_STORED
-    info.external_attr = 0o644 << 16
+def _member(archive: StoredZip, name: str, data: bytes | Column) -> None:
+    """Add one member: bytes as they are, an array (``spill.Column``, in memory or spilled to
+    disk) as ``.npy``, streamed into the archive (no copy of its bytes in memory)."""
     if isinstance(data, bytes):
-        archive.writestr(info, data)
+        archive.add(name, lambda member: member.write(data), len(data))
         return
     nbytes = int(np.prod(data.shape)) * data.dtype.itemsize
-    with archive.open(info, "w", force_zip64=nbytes > 2**31) as member:
-        data.write_npy(member)
+    archive.add(name, data.write_npy, nbytes + _NPY_HEAD)
 
 
 # The per-instance arrays of the atlas, each as an empty array of its dtype and row shape.
@@ -196,21 +192,20 @@ def write_state(file: BinaryIO, state: BakeState) -> None:
             members[name] = column
     header = {"format": FORMAT, "version": VERSION, "fingerprints": state.fingerprints,
               "groups": groups, **listed}
-    with zipfile.ZipFile(file, "w", zipfile.ZIP_STORED) as archive:
+    with StoredZip(file) as archive:
         _member(archive, "header.json", json.dumps(header, sort_keys=True, indent=1).encode())
         for name in sorted(members):
             _member(archive, f"{name}.npy", members[name])
 
 
 _LOCAL_HEADER = struct.Struct("<4s22xHH")  # a member's local header: signature, name, extra
-_NPY_HEAD = 1 << 16  # bytes enough for any .npy header baker writes (version 1.0: < 64 KiB)
 
 
 def _read_member(archive: zipfile.ZipFile, file: BinaryIO, name: str) -> np.ndarray:
     """The array of the stored member ``<name>.npy`` of ``archive`` (whose bytes ``file``
-    reads), read once into its own memory, its CRC-32 checked. The member's bytes are read straight from the file, not through ``zipfile``, so
-    that the CRC is ISA-L's (isal_zlib, 12 GB/s) rather than zlib's (1.3 GB/s): 23 ms of a
-    50 MB state's 60 ms read, before."""
+    reads), read once into its own memory, its CRC-32 checked. ``zipfile`` finds the member;
+    its bytes are read straight from the file, so that the CRC is ISA-L's (isal_zlib,
+    12 GB/s) rather than zlib's (1.3 GB/s): 23 ms of a 50 MB state's 60 ms read, before."""
     info = archive.getinfo(f"{name}.npy")
     if info.compress_type != zipfile.ZIP_STORED:
         raise ValueError(f"{name}.npy is compressed")

@@ -651,3 +651,20 @@ def test_the_strip_search_finds_the_rays_drawing_them_all_finds():
         found = [sorted(zip(*(a.tolist() for a in _drawn_near_rays(*args, strips))))
                  for strips in (True, False)]
         assert found[0] == found[1] and len(found[0]) > 100, rays
+
+
+def test_a_state_with_zip64_members_reads_back_and_rebakes(tmp_path, monkeypatch):
+    """Past 2 GiB (a 4096² bake's state) members and offsets get ZIP64 fields; forced here
+    for every member, the state reads back and the rebake still gives the full bake's bytes."""
+    from baker import storedzip
+
+    monkeypatch.setattr(storedzip, "ZIP64_LIMIT", 16)
+    scene = _room().save(tmp_path / "room.glb")
+    baker.bake(scene, tmp_path / "out.glb", SETTINGS)
+    assert b"PK\x06\x06" in default_path(tmp_path / "out.glb").read_bytes()
+    incremental, full = _rebake_and_full(tmp_path / "out.glb", EDITS["box moved across the room"](),
+                                         tmp_path)
+    assert incremental.rebake["incremental"], incremental.rebake.get("full_bake_reason")
+    assert (tmp_path / "incremental.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()
+    assert (default_path(tmp_path / "incremental.glb").read_bytes()
+            == default_path(tmp_path / "full.glb").read_bytes())
