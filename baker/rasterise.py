@@ -241,66 +241,79 @@ INSET = 0.01  # texels: sample points keep at least this far inside their triang
 
 
 @jit
-def _barycentric(corners: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Barycentric coordinates (c, 3) of ``points`` (c, 2) in triangles (c, 3, 2) (UV, texel
-    units), clamped into the triangle (negative weights cut to 0 and the rest renormalised),
-    then drawn in from any edge closer than its inset (``INSET``, ``_inset``); degenerate
-    triangles give their centroid."""
-    bary = np.empty((len(points), 3))
-    for i in range(len(points)):
-        ax, ay = corners[i, 0, 0], corners[i, 0, 1]
-        x0, y0 = corners[i, 1, 0] - ax, corners[i, 1, 1] - ay
-        x1, y1 = corners[i, 2, 0] - ax, corners[i, 2, 1] - ay
-        x2, y2 = points[i, 0] - ax, points[i, 1] - ay
-        d00, d01, d11 = x0 * x0 + y0 * y0, x0 * x1 + y0 * y1, x1 * x1 + y1 * y1
-        d20, d21 = x2 * x0 + y2 * y0, x2 * x1 + y2 * y1
-        denom = d00 * d11 - d01 * d01
-        if not abs(denom) > 1e-30 * max(d00 * d11, 1e-300):
-            bary[i, 0] = bary[i, 1] = bary[i, 2] = 1.0 / 3.0
-            continue
-        v = (d11 * d20 - d01 * d21) / denom
-        w = (d00 * d21 - d01 * d20) / denom
-        u, v, w = max(1.0 - v - w, 0.0), max(v, 0.0), max(w, 0.0)
-        total = u + v + w
-        if total > 0:
-            bary[i, 0], bary[i, 1], bary[i, 2] = u / total, v / total, w / total
-        else:
-            bary[i, 0] = bary[i, 1] = bary[i, 2] = 1.0 / 3.0
-            continue
-        _inset(bary[i], abs(x0 * y1 - x1 * y0), ((x1 - x0, y1 - y0), (x1, y1), (x0, y0)))
+def _texel_barycentrics(key: np.ndarray, tri: np.ndarray, uv: np.ndarray, width: int,
+                        height: int) -> np.ndarray:
+    """Barycentric coordinates (k, 3) of the texels' centres — from their keys (k,) on pages of
+    ``width`` × ``height`` — in their owning triangles ``tri`` (k,), whose UV corners in texel
+    units ``uv`` (T, 3, 2) holds (``_barycentric``). One compiled pass: no (k, 3, 2) gather."""
+    bary = np.empty((len(tri), 3))
+    page = width * height
+    for i in range(len(tri)):
+        rest = np.int64(key[i]) % page
+        x, y = rest % width + 0.5, rest // width + 0.5
+        t = tri[i]
+        bary[i, 0], bary[i, 1], bary[i, 2] = _barycentric(
+            uv[t, 0, 0], uv[t, 0, 1], uv[t, 1, 0], uv[t, 1, 1], uv[t, 2, 0], uv[t, 2, 1], x, y)
     return bary
 
 
 @jit
-def _inset(weights: np.ndarray, area2: float, edges) -> None:
-    """Draw barycentric ``weights`` (3,) in place away from edges closer than their inset.
+def _barycentric(ax, ay, bx, by, cx, cy, px, py):
+    """Barycentric coordinates of the point (px, py) in the triangle (a, b, c) (UV, texel
+    units), clamped into the triangle (negative weights cut to 0 and the rest renormalised),
+    then drawn in from any edge closer than its inset (``INSET``, ``_inset``); degenerate
+    triangles give their centroid."""
+    x0, y0 = bx - ax, by - ay
+    x1, y1 = cx - ax, cy - ay
+    x2, y2 = px - ax, py - ay
+    d00, d01, d11 = x0 * x0 + y0 * y0, x0 * x1 + y0 * y1, x1 * x1 + y1 * y1
+    d20, d21 = x2 * x0 + y2 * y0, x2 * x1 + y2 * y1
+    denom = d00 * d11 - d01 * d01
+    third = 1.0 / 3.0
+    if not abs(denom) > 1e-30 * max(d00 * d11, 1e-300):
+        return third, third, third
+    v = (d11 * d20 - d01 * d21) / denom
+    w = (d00 * d21 - d01 * d20) / denom
+    u, v, w = max(1.0 - v - w, 0.0), max(v, 0.0), max(w, 0.0)
+    total = u + v + w
+    if not total > 0:
+        return third, third, third
+    return _inset(u / total, v / total, w / total, abs(x0 * y1 - x1 * y0),
+                  x1 - x0, y1 - y0, x1, y1, x0, y0)
 
-    area2: twice the triangle's UV area (texels²); edges: the UV vectors (dx, dy) of the edges
-    facing each corner. The distance to edge j is weight_j · area2 / |edge_j|, so weight j
+
+@jit
+def _inset(b0, b1, b2, area2, e0x, e0y, e1x, e1y, e2x, e2y):
+    """Barycentric weights (b0, b1, b2) drawn away from edges closer than their inset.
+
+    area2: twice the triangle's UV area (texels²); e_j: the UV vector (dx, dy) of the edge
+    facing corner j. The distance to edge j is weight_j · area2 / |edge_j|, so weight j
     must be at least f_j = inset_j · |edge_j| / area2, with inset_j = ``INSET`` ·
     (1 + 0.7·θ_j/π) and θ_j ∈ [0, π) the edge's direction. Where a weight is below its f, the
     weights become f + (1 − Σf) · weights (still summing to 1, each at least its f). A triangle
     too small for the insets (Σf over ½) scales them down to Σf = ½."""
-    near = False  # first the cheap test against the largest inset, 1.7 · INSET (no arctan)
-    for j in range(3):
-        dx, dy = edges[j]
-        reach = 1.7 * INSET * (dx * dx + dy * dy) ** 0.5
-        near = near or weights[j] * area2 < reach
-    if not near:
-        return
-    floor = np.empty(3)
-    for j in range(3):
-        dx, dy = edges[j]
-        theta = np.arctan2(dy, dx) % np.pi
-        floor[j] = INSET * (1.0 + 0.7 * theta / np.pi) * np.sqrt(dx * dx + dy * dy) / area2
-    total = floor[0] + floor[1] + floor[2]
+    reach = 1.7 * INSET  # first the cheap test against the largest inset (no arctan)
+    if not (b0 * area2 < reach * (e0x * e0x + e0y * e0y) ** 0.5
+            or b1 * area2 < reach * (e1x * e1x + e1y * e1y) ** 0.5
+            or b2 * area2 < reach * (e2x * e2x + e2y * e2y) ** 0.5):
+        return b0, b1, b2
+    f0, f1, f2 = _floor(e0x, e0y, area2), _floor(e1x, e1y, area2), _floor(e2x, e2y, area2)
+    total = f0 + f1 + f2
     if total > 0.5:
-        floor *= 0.5 / total
+        scale = 0.5 / total
+        f0, f1, f2 = f0 * scale, f1 * scale, f2 * scale
         total = 0.5
-    if weights[0] >= floor[0] and weights[1] >= floor[1] and weights[2] >= floor[2]:
-        return
-    for j in range(3):
-        weights[j] = floor[j] + (1.0 - total) * weights[j]
+    if b0 >= f0 and b1 >= f1 and b2 >= f2:
+        return b0, b1, b2
+    return f0 + (1.0 - total) * b0, f1 + (1.0 - total) * b1, f2 + (1.0 - total) * b2
+
+
+@jit
+def _floor(dx, dy, area2):
+    """The least weight that keeps a point ``INSET`` · (1 + 0.7·θ/π) texels off the edge (dx,
+    dy) (θ its direction in [0, π)) of a triangle of twice the area ``area2`` (``_inset``)."""
+    theta = np.arctan2(dy, dx) % np.pi
+    return INSET * (1.0 + 0.7 * theta / np.pi) * np.sqrt(dx * dx + dy * dy) / area2
 
 
 @dataclass(frozen=True)
@@ -397,8 +410,7 @@ def texels_of(atlas: Atlas, world: World, coverage: Coverage, rows: slice = slic
     position, normal, terminator = (np.empty((len(tri), 3)) for _ in range(3))
 
     def work(block: slice) -> None:
-        y, x = np.divmod(key[block].astype(np.int64) % (atlas.width * atlas.height), atlas.width)
-        bary = _barycentric(owned.uv[tri[block]], np.stack([x + 0.5, y + 0.5], axis=1))
+        bary = _texel_barycentrics(key[block], tri[block], owned.uv, atlas.width, atlas.height)
         position[block], normal[block], terminator[block] = _texel_points(
             world.positions, world.normals, world.smooth, world.triangles, tri[block], bary,
             owned.normal)
