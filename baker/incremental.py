@@ -54,7 +54,7 @@ from .scene import Scene
 from .settings import Settings, resolve
 from .surface import LUMINANCE
 from .sampling import (TECHNIQUES, cap_boxes, concentric_hemisphere, fill_cosine, fill_points,
-                       jit, point, sobol_strip_sample, tangent_frames, texel_scrambles)
+                       inline, jit, point, sobol_strip_sample, tangent_frames, texel_scrambles)
 from .trace import Hits, Tracer, ray_lift
 from .validity import Validity, check_texels
 
@@ -195,7 +195,7 @@ def _crossing(origins: np.ndarray, directions: np.ndarray, lengths: np.ndarray,
     return out
 
 
-@jit
+@inline
 def _sphere_locals(starts, t1, t2, normals, i, centres, local, distance_sq):
     """Each sphere centre (b, 3) seen from texel i's ray origin ``starts[i]`` in its frame
     (``t1[i]``, ``t2[i]``, ``normals[i]``; (k, 3) each), into ``local`` (b, 3), and its squared
@@ -212,7 +212,7 @@ def _sphere_locals(starts, t1, t2, normals, i, centres, local, distance_sq):
         distance_sq[b] = cx * cx + cy * cy + cz * cz
 
 
-@jit
+@inline
 def _near_flags(x, y, z, start, stop, local, distance_sq, radii, length, flags):
     """Set ``flags[r]`` for the rays r = ``start`` … ``stop − 1`` from the origin along the
     local directions x, y, z: whether it passes within ``radii[b]`` of some sphere
@@ -232,7 +232,7 @@ def _near_flags(x, y, z, start, stop, local, distance_sq, radii, length, flags):
     return near
 
 
-@jit
+@inline
 def _reachable(local, distance_sq, radii, length):
     """Whether a ray of the hemisphere (local z ≥ 0) no longer than ``length`` can pass near
     some sphere (``_sphere_locals``): one not wholly below the plane nor out of reach. Spares
@@ -277,7 +277,7 @@ def _strip_range(low, high, cells):
             min(max(int(np.floor(high * cells)), 0), cells - 1))
 
 
-@jit
+@inline
 def _strip_candidates(local, distance_sq, radii, rays, bits, scrambles, boxes, counts, marks,
                       candidates):
     """The samples of a texel (``sobol`` points, its ``scrambles``) whose directions can lie in
@@ -394,7 +394,7 @@ def _drawn_near_rays(technique: int, seed, keys: np.ndarray, rays: int, starts: 
     return texel[:m], near[:m, 0].copy(), near[:m, 1].copy(), near[:m, 2].copy()
 
 
-@jit
+@inline
 def _append_ray(texel, near, m, i, x, y, z):
     """Append the ray (texel i, direction x, y, z) to the outputs, grown when full; returns
     them and the new count."""

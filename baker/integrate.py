@@ -23,7 +23,7 @@ from .geometry import World
 from .obscurance import RHO_KINDS, UNIT_REFLECTIVITY, rho
 from .parallel import run_chunks, texels_per_chunk
 from .rasterise import Texels
-from .sampling import TECHNIQUES, fill_cosine, fill_points, frame, jit
+from .sampling import TECHNIQUES, fill_cosine, fill_points, frame, inline, jit
 from .scene import Scene
 from .settings import Resolved
 from .materials import DIFFUSE, SPECULAR, TRANSLUCENT, TRANSPARENT, MaterialTable, material_table
@@ -81,9 +81,19 @@ class Terms:
 
     def obscurance(self, r_ave: np.ndarray) -> np.ndarray:
         """W (N, 3) for average reflectivity ``r_ave`` (3,), with the light through
-        translucent surfaces (``through_hit``, ``through_ave``) when there is some."""
-        w = self._front(r_ave)
-        return w if self.through_hit is None else w + self.through_hit + self.through_ave * r_ave
+        translucent surfaces (``through_hit``, ``through_ave``) when there is some
+        (``obscurance_at``)."""
+        out = np.empty((len(self.escaped), 3))
+        _obscurance_kernel(*self.w_parts(), np.asarray(r_ave, np.float64), out)
+        return out
+
+    def w_parts(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(w_hit, escaped, through_hit, through_ave) as ``obscurance_at`` takes them: the
+        light through translucent surfaces as (0, 3) arrays when there is none."""
+        none = np.zeros((0, 3))
+        return (self.w_hit, self.escaped,
+                none if self.through_hit is None else self.through_hit,
+                none if self.through_ave is None else self.through_ave)
 
     def _front(self, r_ave: np.ndarray) -> np.ndarray:
         """(N, 3) the part of W that the texel's own rays estimate."""
@@ -133,6 +143,27 @@ def rmse_of(squares: np.ndarray, count: int, technique: str) -> float:
         return float(np.sqrt(half))
     ratio = float(np.clip(half / quarter, 0.05, 0.5)) if quarter > 0 else 0.5
     return float(np.sqrt(half * ratio / (1.0 - ratio)))
+
+
+@inline
+def obscurance_at(w_hit, escaped, through_hit, through_ave, r_ave, i):
+    """W (3 floats) of texel i: w_hit + escaped · R_ave, plus the light through translucent
+    surfaces, through_hit + through_ave · R_ave, when those have rows (``Terms.w_parts``).
+    Inlined where it is called: arrays passed to a call cost reference counts per texel."""
+    out = (w_hit[i, 0] + escaped[i] * r_ave[0], w_hit[i, 1] + escaped[i] * r_ave[1],
+           w_hit[i, 2] + escaped[i] * r_ave[2])
+    if not len(through_hit):
+        return out
+    return (out[0] + through_hit[i, 0] + through_ave[i, 0] * r_ave[0],
+            out[1] + through_hit[i, 1] + through_ave[i, 1] * r_ave[1],
+            out[2] + through_hit[i, 2] + through_ave[i, 2] * r_ave[2])
+
+
+@jit
+def _obscurance_kernel(w_hit, escaped, through_hit, through_ave, r_ave, out):
+    for i in range(len(out)):
+        out[i, 0], out[i, 1], out[i, 2] = obscurance_at(w_hit, escaped, through_hit,
+                                                        through_ave, r_ave, i)
 
 
 @jit

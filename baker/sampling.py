@@ -41,6 +41,10 @@ _LOW32 = _U64(0xFFFFFFFF)
 _TO_UNIT = 1.0 / 16777216.0  # 2^-24: a 24-bit fixed-point value to [0, 1)
 
 jit = numba.njit(nogil=True, cache=True)
+# For helpers that take arrays and run once per texel or ray inside a kernel: inlined into the
+# kernels that call them (numba IR), where a call passing arrays costs several times their
+# arithmetic (``incremental._near_flags``: 907 -> 105 ns a texel of 64 rays).
+inline = numba.njit(nogil=True, cache=True, inline="always")
 
 
 @jit
@@ -220,7 +224,7 @@ _ANGLE_SLACK = 1e-7  # radians added to the cap's azimuths: far beyond rounding 
 _UNIT_SLACK = 1e-9  # added to the boxes in [0, 1)²
 
 
-@jit
+@inline
 def _region_box(region, r0, r1, lo, hi, boxes, row):
     """Row ``row`` of ``boxes``: (u0, u1, v0, v1), the box of the points that
     ``concentric_hemisphere`` maps into radii [r0, r1] and azimuths [lo, hi] of one of its
@@ -247,7 +251,7 @@ def _region_box(region, r0, r1, lo, hi, boxes, row):
     boxes[row, 3] = (b_high + 1.0) / 2 + _UNIT_SLACK
 
 
-@jit
+@inline
 def cap_boxes(cx, cy, cz, sin_half, boxes):
     """Boxes of [0, 1)² that hold every point ``concentric_hemisphere`` maps into the cap of
     directions within asin(``sin_half``) of the unit axis (cx, cy, cz) (any z): rows (u0, u1,
