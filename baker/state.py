@@ -5,7 +5,8 @@ incremental rebake (``incremental.py``), which diffs the new scene against its f
 (``diff.py``). The format is documented in ``docs/bake_state.md``:
 
 - a ZIP archive (stored, no compression; ``storedzip.py``) whose members have a fixed
-  timestamp, so the same bake gives the same bytes (DESIGN.md §4: an incremental rebake's state equals a full bake's);
+  timestamp, so the same bake gives the same bytes (DESIGN.md §4: an incremental rebake's
+  state equals a full bake's);
 - ``header.json``: ``{"format": "baker-bake-state", "version": 5, "fingerprints": {...},
   "groups": {name: {"class": ..., "fields": {...}, "scalars": {...}}}, "zeros": {...},
   "repeated": {...}, "sparse": {...}}``;
