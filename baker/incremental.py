@@ -1040,7 +1040,7 @@ def asked_settings(path, **overrides) -> Settings:
 
 def node_names(path) -> dict[int, str]:
     """Node index → name (or the index as text) of a glTF file, for messages."""
-    import pygltflib
+    from .load import read_document
 
-    document = pygltflib.GLTF2().load(str(path))
+    document = read_document(path)
     return {i: node.name or f"nodes[{i}]" for i, node in enumerate(document.nodes or [])}

@@ -44,7 +44,6 @@ import re
 import struct
 import urllib.parse
 import warnings
-import dataclasses
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -54,6 +53,7 @@ import numpy as np
 import pygltflib
 from PIL import Image as PILImage
 
+from baker import gltf_document
 from baker.errors import InputError
 from baker.materials import MIRROR_ROUGHNESS, UNLIT_REASON, classify, no_lightmap_reason
 from baker.scene import REPEAT, Image, Instance, Light, Material, Primitive, Scene, Skipped, TextureRef
@@ -230,51 +230,14 @@ def read_document(path: str | Path) -> pygltflib.GLTF2:
     return document
 
 
-_NODE_INDICES = ("mesh", "skin", "camera")
-_NODE_VECTORS = ("translation", "rotation", "scale", "matrix")
-
-
-def _plain_node(node: Any) -> pygltflib.Node | None:
-    """The pygltflib Node of a JSON node whose every field has its plain type (what
-    ``Node.from_dict`` would make of it, numbers of vectors as floats), else None."""
-    if not isinstance(node, dict) or not set(node) <= _NODE_FIELDS:
-        return None
-    fields = dict(node)
-    for key in _NODE_INDICES:
-        if key in fields and not (fields[key] is None or type(fields[key]) is int):
-            return None
-    for key in _NODE_VECTORS:
-        value = fields.get(key)
-        if value is None:
-            continue
-        if not isinstance(value, list) or not all(type(v) in (int, float) for v in value):
-            return None
-        fields[key] = [float(v) for v in value]
-    children = fields.get("children", [])
-    if not isinstance(children, list) or not all(type(c) is int for c in children):
-        return None
-    if not isinstance(fields.get("name", ""), (str, type(None))) or not all(
-            isinstance(fields.get(k, {}), dict) for k in ("extensions", "extras")):
-        return None
-    return pygltflib.Node(**fields)
-
-
-_NODE_FIELDS = frozenset(f.name for f in dataclasses.fields(pygltflib.Node))
-
-
 def _document_from_json(text: str, raw: dict) -> pygltflib.GLTF2:
-    """pygltflib's document of the JSON ``text`` (parsed: ``raw``). pygltflib decodes every
-    object through dataclasses_json, about 0.5 ms a node: a level of 10 000 nodes spent 5 s
-    there. Plain nodes (``_plain_node``) are made directly, the rest of the document as
-    pygltflib makes it; any other node sends the whole document the usual way."""
-    nodes = raw.get("nodes")
-    plain = [_plain_node(n) for n in nodes] if isinstance(nodes, list) else None
-    if not plain or any(n is None for n in plain):
+    """pygltflib's document of the JSON ``text`` (parsed: ``raw``): made directly
+    (``gltf_document.document``, 50 ms sooner for 60 nodes, 5 s for 10 000), or by pygltflib
+    itself when a value has another type than its field's."""
+    try:
+        return gltf_document.document(raw)
+    except gltf_document.NotPlain:
         return pygltflib.GLTF2.gltf_from_json(text)
-    document = pygltflib.GLTF2.gltf_from_json(json.dumps({k: v for k, v in raw.items()
-                                                          if k != "nodes"}))
-    document.nodes = plain
-    return document
 
 
 def _split_glb(data: bytes, file: str) -> tuple[str, bytes | None]:

@@ -7,6 +7,7 @@ checks numbers computed by hand. The real sample scenes in shared/scenes must al
 from __future__ import annotations
 
 import base64
+import dataclasses
 import io
 import json
 import math
@@ -18,6 +19,7 @@ import pygltflib
 import pytest
 from PIL import Image as PILImage
 
+from baker import load as load_module
 from baker.errors import InputError
 from baker.load import expand_triangles, load, read_accessor, resolve_buffers
 from baker.scene import CLAMP_TO_EDGE, MIRRORED_REPEAT
@@ -626,18 +628,79 @@ def test_lights_punctual_lamp_reads_external_images():
     assert len(scene.document.extensions["KHR_lights_punctual"]["lights"]) == 5
 
 
-def test_plain_nodes_parse_as_pygltflib_parses_them():
-    """Nodes made directly (the fast path for scenes of many nodes) equal pygltflib's own; a node
-    with a field of another type sends the document through pygltflib whole."""
+def _same_objects(a, b, path="document"):
+    """Assert a and b (pygltflib objects, lists, dicts, scalars) equal, types included (1 and
+    1.0 are not the same here)."""
+    assert type(a) is type(b), f"{path}: {type(a).__name__} vs {type(b).__name__}"
+    if dataclasses.is_dataclass(a):
+        for f in dataclasses.fields(a):
+            _same_objects(getattr(a, f.name), getattr(b, f.name), f"{path}.{f.name}")
+    elif isinstance(a, pygltflib.Attributes):
+        _same_objects(a.__dict__, b.__dict__, f"{path}.attributes")
+    elif isinstance(a, dict):
+        assert list(a) == list(b), path
+        for key in a:
+            _same_objects(a[key], b[key], f"{path}[{key!r}]")
+    elif isinstance(a, list):
+        assert len(a) == len(b), path
+        for i, (x, y) in enumerate(zip(a, b)):
+            _same_objects(x, y, f"{path}[{i}]")
+    else:
+        assert a == b, f"{path}: {a!r} vs {b!r}"
+
+
+def _document_text(path: Path) -> str:
+    data = path.read_bytes()
+    return (load_module._split_glb(data, str(path))[0] if data[:4] == b"glTF"
+            else load_module._decode_text(data, str(path)))
+
+
+@pytest.mark.parametrize("name", ["shared", "cornell", "baked"])
+def test_documents_parse_as_pygltflib_parses_them(name, tmp_path):
+    """The document made directly from the JSON (``gltf_document``) equals pygltflib's own,
+    field by field and type by type: for the shared scenes, a scene of ours, and a baked one
+    (lightmap textures, images, the second UV set)."""
+    import baker
+    from assets.make_scenes import cornell_box
+    from baker import gltf_document
+
+    if name == "shared":
+        paths = sorted(SCENES.glob("*/*.gl*"))
+        assert len(paths) >= 5
+    else:
+        paths = [cornell_box().save(tmp_path / "cornell.glb")]
+        if name == "baked":
+            baker.bake(paths[0], tmp_path / "baked.glb", baker.Settings(page_size=64, rays=4))
+            paths = [tmp_path / "baked.glb"]
+    for path in paths:
+        text = _document_text(path)
+        _same_objects(gltf_document.document(json.loads(text)),
+                      pygltflib.GLTF2.gltf_from_json(text), path.name)
+
+
+def test_documents_with_odd_values_parse_as_pygltflib_parses_them():
+    """Ints for floats are floats, unknown keys are dropped, null stays None; a value of
+    another JSON type than its field's (a float for an index, a string for a number) is left
+    to pygltflib, which decides what it means."""
+    from baker import gltf_document
     from baker.load import _document_from_json
 
     nodes = [{"name": "a", "mesh": 0, "translation": [1, 2, 3], "rotation": [0, 0, 0, 1]},
-             {"children": [0], "scale": [2, 2.5, 1], "extras": {"k": 1}},
-             {"matrix": [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1], "camera": 0,
+             {"children": [0], "scale": [2, 2.5, 1], "extras": {"k": 1}, "weights": [0.5]},
+             {"matrix": [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1], "camera": None,
               "extensions": {"KHR_lights_punctual": {"light": 0}}}]
-    for extra in ({}, {"mesh": 1.0}, {"weights": [0.5]}):
-        raw = {"asset": {"version": "2.0"}, "nodes": [*nodes, dict(nodes[0], **extra)]}
-        text = json.dumps(raw)
-        fast = _document_from_json(text, raw)
-        assert fast.to_json() == pygltflib.GLTF2.gltf_from_json(text).to_json()
-        assert fast.nodes[0].translation == [1.0, 2.0, 3.0]
+    raw = {"asset": {"version": "2.0"}, "nodes": nodes, "scene": 0,
+           "materials": [{"pbrMetallicRoughness": {"baseColorFactor": [1, 0.5, 0, 1],
+                                                   "metallicFactor": 0}, "alphaCutoff": 1}],
+           "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "_CUSTOM": 1},
+                                       "targets": [{"POSITION": 2}]}]}]}
+    text = json.dumps(raw)
+    fast = gltf_document.document(json.loads(text))
+    _same_objects(fast, pygltflib.GLTF2.gltf_from_json(text))
+    assert fast.nodes[0].translation == [1.0, 2.0, 3.0] and fast.materials[0].alphaCutoff == 1.0
+    for odd in ({"mesh": 1.0}, {"name": 3}, {"translation": ["1", 2, 3]}):
+        raw_odd = dict(raw, nodes=[*nodes, dict(nodes[0], **odd)])
+        with pytest.raises(gltf_document.NotPlain):
+            gltf_document.document(raw_odd)
+        text = json.dumps(raw_odd)
+        _same_objects(_document_from_json(text, raw_odd), pygltflib.GLTF2.gltf_from_json(text))
