@@ -351,8 +351,8 @@ def _drawn_near_rays(technique: int, seed, keys: np.ndarray, rays: int, starts: 
     boxes, counts = np.empty((len(centres), 8, 4)), np.empty(len(centres), np.int64)
     marks, candidates = np.zeros(rays, np.uint8), np.empty(rays, np.int64)
     strips = strips and technique == 0 and bits <= 24  # (a point has 24 bits: ``_unit``)
-    texel = np.empty(1024, np.int64)
-    near = np.empty((1024, 3))
+    texel = np.empty(k * rays, np.int64)  # room for every ray: only the pages written are
+    near = np.empty((k * rays, 3))  # touched, and no test to grow them slows the loops
     m = 0
     for first in range(0, k, block):
         count = 0
@@ -376,7 +376,8 @@ def _drawn_near_rays(technique: int, seed, keys: np.ndarray, rays: int, starts: 
                 continue
             for r in range(found):
                 if flags[r]:
-                    texel, near, m = _append_ray(texel, near, m, i, x[r], y[r], z[r])
+                    texel[m], near[m, 0], near[m, 1], near[m, 2] = i, x[r], y[r], z[r]
+                    m += 1
         drawn = count * rays
         fill_points(technique, seed, todo_keys[:count], 0, rays, np.uint64(0), u[:drawn],
                     v[:drawn])
@@ -390,20 +391,9 @@ def _drawn_near_rays(technique: int, seed, keys: np.ndarray, rays: int, starts: 
                 continue
             for r in range(base, base + rays):
                 if flags[r]:
-                    texel, near, m = _append_ray(texel, near, m, i, x[r], y[r], z[r])
+                    texel[m], near[m, 0], near[m, 1], near[m, 2] = i, x[r], y[r], z[r]
+                    m += 1
     return texel[:m], near[:m, 0].copy(), near[:m, 1].copy(), near[:m, 2].copy()
-
-
-@inline
-def _append_ray(texel, near, m, i, x, y, z):
-    """Append the ray (texel i, direction x, y, z) to the outputs, grown when full; returns
-    them and the new count."""
-    if m == len(texel):
-        texel = np.concatenate((texel, np.empty(m, np.int64)))
-        near = np.concatenate((near, np.empty((m, 3))))
-    texel[m] = i
-    near[m, 0], near[m, 1], near[m, 2] = x, y, z
-    return texel, near, m + 1
 
 
 def _lifted(center: np.ndarray, position, normal, size) -> np.ndarray:
