@@ -24,10 +24,10 @@ _FILL_RINGS = 8  # how far (texels) valid values reach into a patch of invalid t
 
 
 @jit
-def _grow_ring(values: np.ndarray, filled: np.ndarray, into: np.ndarray,
-               frontier: np.ndarray) -> np.ndarray:
-    """One ring of dilation, in place, over flat pages: values (P·H·W, C), filled and into
-    (P·H·W,) bool, each page ``shape``-sized. Every texel of ``into`` not ``filled`` next to a
+def _grow_ring(pages, filled: np.ndarray, into: np.ndarray, frontier: np.ndarray) -> np.ndarray:
+    """One ring of dilation, in place, over flat pages: ``pages`` a tuple of value arrays
+    (P·H·W, C) grown alike (the light and the W pages share their masks, so the ring is found
+    once for both), filled and into (P, H, W) bool. Every texel of ``into`` not ``filled`` next to a
     texel of ``frontier`` (flat indices of the texels filled last ring, or all filled ones at
     first) gets the mean of its filled 8-neighbours (summed in ``_NEIGHBOURS`` order); returns
     the flat indices of the texels grown, and marks them filled only after the ring. It reads
@@ -36,7 +36,6 @@ def _grow_ring(values: np.ndarray, filled: np.ndarray, into: np.ndarray,
     page (a sparse 8192² page costs what its charts' borders cost)."""
     height, width = filled.shape[1], filled.shape[2]
     flat_filled, flat_into = filled.reshape(-1), into.reshape(-1)
-    flat_values = values.reshape(-1, values.shape[-1])
     candidate = np.empty(len(frontier) * 8, np.int64)
     seen = 0
     for f in frontier:
@@ -53,23 +52,24 @@ def _grow_ring(values: np.ndarray, filled: np.ndarray, into: np.ndarray,
     candidate = candidate[:seen]
     for n in candidate:
         flat_into[n] = True
-    channels = flat_values.shape[1]
-    total = np.zeros(channels)
-    for n in candidate:
-        page, rest = divmod(n, height * width)
-        y, x = divmod(rest, width)
-        count = 0.0
-        total[:] = 0.0
-        for k in range(len(_NEIGHBOURS)):
-            v, u = y + _NEIGHBOURS[k, 0], x + _NEIGHBOURS[k, 1]
-            if 0 <= v < height and 0 <= u < width:
-                m = (page * height + v) * width + u
-                if flat_filled[m]:
-                    for c in range(channels):
-                        total[c] += flat_values[m, c]
-                    count += 1.0
-        for c in range(channels):
-            flat_values[n, c] = total[c] / count
+    for flat_values in pages:
+        channels = flat_values.shape[1]
+        total = np.zeros(channels)
+        for n in candidate:
+            page, rest = divmod(n, height * width)
+            y, x = divmod(rest, width)
+            count = 0.0
+            total[:] = 0.0
+            for k in range(len(_NEIGHBOURS)):
+                v, u = y + _NEIGHBOURS[k, 0], x + _NEIGHBOURS[k, 1]
+                if 0 <= v < height and 0 <= u < width:
+                    m = (page * height + v) * width + u
+                    if flat_filled[m]:
+                        for c in range(channels):
+                            total[c] += flat_values[m, c]
+                        count += 1.0
+            for c in range(channels):
+                flat_values[n, c] = total[c] / count
     for n in candidate:
         flat_filled[n] = True
     return candidate
@@ -102,19 +102,21 @@ def dilate(values: np.ndarray, filled: np.ndarray, rings: int,
     texels inside charts, so that the fill never crosses the padding to another chart).
     """
     values = np.ascontiguousarray(values, np.float64).copy()
-    return values, _dilate_in_place(values, filled, rings, into)
+    return values, _dilate_in_place((values,), filled, rings, into)
 
 
-def _dilate_in_place(values: np.ndarray, filled: np.ndarray, rings: int,
+def _dilate_in_place(pages: tuple[np.ndarray, ...], filled: np.ndarray, rings: int,
                      into: np.ndarray | None = None) -> np.ndarray:
-    """``dilate`` on ``values`` itself (C-contiguous float64); returns the grown mask."""
+    """``dilate`` on each of ``pages`` itself ((P, H, W, C) C-contiguous float64 arrays, grown
+    alike); returns the grown mask."""
     filled = np.ascontiguousarray(filled).copy()
     into = np.ones(filled.shape, bool) if into is None else np.ascontiguousarray(into)
     border = np.zeros(filled.shape, bool)
     _border(filled, into, border)
     frontier = np.flatnonzero(border)
+    flat = tuple(values.reshape(-1, values.shape[-1]) for values in pages)
     for _ in range(rings):
-        frontier = _grow_ring(values, filled, into, frontier)
+        frontier = _grow_ring(flat, filled, into, frontier)
         if not len(frontier):
             break
     return filled
@@ -126,14 +128,14 @@ def fill_invalid(values: np.ndarray, covered: np.ndarray, invalid: np.ndarray,
     8-neighbours, ring after ring inwards (up to ``rings``); invalid texels no valid texel
     reaches keep their own value."""
     filled = np.array(values, np.float64, order="C")
-    _fill_invalid_in_place(filled, covered, invalid, rings)
+    _fill_invalid_in_place((filled,), covered, invalid, rings)
     return filled
 
 
-def _fill_invalid_in_place(values: np.ndarray, covered: np.ndarray, invalid: np.ndarray,
-                           rings: int = _FILL_RINGS) -> None:
-    """``fill_invalid`` on ``values`` itself (C-contiguous float64)."""
-    _dilate_in_place(values, covered & ~invalid, rings, into=invalid & covered)
+def _fill_invalid_in_place(pages: tuple[np.ndarray, ...], covered: np.ndarray,
+                           invalid: np.ndarray, rings: int = _FILL_RINGS) -> None:
+    """``fill_invalid`` on each of ``pages`` itself (C-contiguous float64)."""
+    _dilate_in_place(pages, covered & ~invalid, rings, into=invalid & covered)
 
 
 def postprocess(lightmaps: Lightmaps, padding: int, invalid: np.ndarray | None = None,
@@ -150,18 +152,15 @@ def postprocess(lightmaps: Lightmaps, padding: int, invalid: np.ndarray | None =
     needed after, and a copy of a 4096² page pair would add 800 MB to the bake's peak memory.
     """
     covered = lightmaps.covered
-    pages = []
-    for values in (lightmaps.light, lightmaps.obscurance):
-        values = np.ascontiguousarray(values, np.float64)
-        if not len(values):  # W's pages not kept (compose.Lightmaps)
-            pages.append(values)
-            continue
-        if enclosed is not None and enclosed.any():
+    pages = [np.ascontiguousarray(values, np.float64)
+             for values in (lightmaps.light, lightmaps.obscurance)]
+    kept = tuple(values for values in pages if len(values))  # W's pages may not be kept
+    if enclosed is not None and enclosed.any():
+        for values in kept:
             values[enclosed] = 0.0  # shut inside a solid: no light reaches it
-        if invalid is not None and invalid.any():
-            _fill_invalid_in_place(values, covered, invalid)
-        _dilate_in_place(values, covered, max(2 * padding, 4))
-        if seams is not None and len(seams):
-            values = stitch(values, covered, seams)
-        pages.append(values)
+    if invalid is not None and invalid.any():
+        _fill_invalid_in_place(kept, covered, invalid)
+    _dilate_in_place(kept, covered, max(2 * padding, 4))
+    if seams is not None and len(seams):
+        pages = [stitch(values, covered, seams) if len(values) else values for values in pages]
     return Lightmaps(light=pages[0], obscurance=pages[1], covered=covered)
