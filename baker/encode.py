@@ -28,6 +28,7 @@ from isal import isal_zlib
 
 from .compose import Lightmaps
 from .parallel import run_chunks
+from .sampling import jit
 from .surface import LUMINANCE
 
 CLIP_PERCENTILE = 99.9
@@ -154,10 +155,31 @@ def error_bound(values: np.ndarray, intensity: float, encoding: str) -> np.ndarr
     return np.where(x > 1.0, x - 1.0, step) * intensity
 
 
-def _brightest(rgb: np.ndarray) -> np.ndarray:
-    """(…) the largest of each texel's 3 channels (…, 3): the same as ``max(axis=-1)``, 7×
-    faster (numpy reduces a 3-long last axis slowly)."""
-    return np.maximum(np.maximum(rgb[..., 0], rgb[..., 1]), rgb[..., 2])
+@jit
+def _covered_brightest(light: np.ndarray, covered: np.ndarray) -> np.ndarray:
+    """(n,) the brightest channel of each of the n ``covered`` (H, W) texels of ``light``
+    (H, W, 3), row by row: one pass, no (n, 3) copy (``np.maximum``, so NaN stays NaN)."""
+    out = np.empty(np.count_nonzero(covered))
+    k = 0
+    for y in range(light.shape[0]):
+        for x in range(light.shape[1]):
+            if covered[y, x]:
+                out[k] = np.maximum(np.maximum(light[y, x, 0], light[y, x, 1]), light[y, x, 2])
+                k += 1
+    return out
+
+
+@jit
+def _quantise_linear(page: np.ndarray, scale: float, out: np.ndarray) -> None:
+    """``quantise(page / scale, "linear")`` into ``out`` (H, W, 3) uint8 in one pass, with the
+    same arithmetic (clip, round half to even), so the same bytes, and no float temporaries
+    of the page. (Not the sRGB curve: numba's pow differs from numpy's in the last bit at a
+    few values, and a code's rounding edge can fall there.)"""
+    for y in range(page.shape[0]):
+        for x in range(page.shape[1]):
+            for c in range(3):
+                value = min(max(page[y, x, c] / scale, 0.0), 1.0)
+                out[y, x, c] = np.uint8(np.round(value * 255.0))
 
 
 def page_scale(light: np.ndarray, covered: np.ndarray,
@@ -169,9 +191,8 @@ def page_scale(light: np.ndarray, covered: np.ndarray,
     "higher" method), so a page mostly in the dark still scales to its lit part; 100 gives the
     peak (nothing clips). A page with nothing above 0 gets intensity 1.
     """
-    brightest = np.concatenate([np.zeros(0)] + [  # by rows: no (N, 3) copy of the texels
-        _brightest(light[start:start + _ROWS])[covered[start:start + _ROWS]]
-        for start in range(0, len(light), _ROWS)])
+    brightest = _covered_brightest(np.ascontiguousarray(light, np.float64),
+                                   np.ascontiguousarray(covered, np.bool_))
     lit = brightest[brightest > 0]
     if not len(lit):
         return 1.0, 0.0, 0.0
@@ -193,7 +214,11 @@ def encode(lightmaps: Lightmaps, encoding: str, occlusion: bool,
         if occlusion:
             occlusion_png = png_bytes(_page_texels(lightmaps.obscurance[p], lambda rows: quantise(
                 np.repeat((rows @ LUMINANCE)[..., None], 3, axis=-1), "linear")))
-        texels = _page_texels(light, lambda rows: quantise(rows / intensity, encoding))
+        if encoding == "linear":
+            texels = np.empty(light.shape[:2] + (3,), np.uint8)
+            _quantise_linear(np.ascontiguousarray(light, np.float64), intensity, texels)
+        else:
+            texels = _page_texels(light, lambda rows: quantise(rows / intensity, encoding))
         pages.append(EncodedPage(png=png_bytes(texels),
                                  intensity=intensity, occlusion_png=occlusion_png,
                                  peak=peak, clipped=clipped))

@@ -1,4 +1,5 @@
-"""pygltflib documents made straight from parsed glTF JSON, as pygltflib itself would make them.
+"""pygltflib documents made straight from parsed glTF JSON, as pygltflib itself would make them,
+and back.
 
 pygltflib decodes every JSON object through dataclasses_json, which looks up each field's type
 hints anew for every object: about 0.5 ms a node, 50 ms for a room of 60 crates (a tenth of a
@@ -7,11 +8,13 @@ fields are int, float, str, bool, Optional, List, Dict[str, Any], other such dat
 ``Attributes``; ``document`` walks the JSON once with a plan made per class (``_plan``), with
 dataclasses_json's rules for these types (see ``_value``). Any value of another JSON type than
 its field's (an int where a str is expected, say) is left to pygltflib (``NotPlain``), so that
-what it makes of it, or the error it raises, stays pygltflib's.
+what it makes of it, or the error it raises, stays pygltflib's. ``data`` goes the other way
+(what ``pygltflib.gltf_asdict`` gives, cleaned for writing) in one walk.
 """
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import functools
 import typing
@@ -116,3 +119,37 @@ def document(raw: dict) -> pygltflib.GLTF2:
             if primitive.attributes:  # as pygltflib's from_json does
                 primitive.attributes = pygltflib.Attributes(**primitive.attributes)
     return result
+
+
+@functools.cache
+def _field_names(cls) -> tuple[str, ...]:
+    return tuple(f.name for f in dataclasses.fields(cls))
+
+
+def data(value):
+    """The glTF JSON data of a pygltflib document (or any object in it), a deep copy: None and
+    empty properties dropped, ``extensions`` and ``extras`` values kept verbatim unless they
+    are {} (an extension's empty object means something), list items never dropped (indices
+    stay valid). What cleaning ``pygltflib.gltf_asdict(value)`` so gives, without building the
+    uncleaned copy first: 18 -> 2 ms for a room of 60 crates."""
+    if isinstance(value, pygltflib.Attributes):
+        value = value.__dict__
+    elif dataclasses.is_dataclass(value):
+        value = {name: getattr(value, name) for name in _field_names(type(value))}
+    if isinstance(value, dict):
+        out = {}
+        for key, item in value.items():
+            if item is None:
+                continue
+            if key in ("extensions", "extras"):
+                if item != {}:
+                    out[key] = copy.deepcopy(item)
+                continue
+            item = data(item)
+            if isinstance(item, (dict, list)) and not item:
+                continue
+            out[key] = item
+        return out
+    if isinstance(value, (list, tuple)):
+        return [data(item) for item in value]
+    return copy.deepcopy(value)

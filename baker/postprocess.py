@@ -155,6 +155,8 @@ def postprocess(lightmaps: Lightmaps, padding: int, invalid: np.ndarray | None =
     pages = [np.ascontiguousarray(values, np.float64)
              for values in (lightmaps.light, lightmaps.obscurance)]
     kept = tuple(values for values in pages if len(values))  # W's pages may not be kept
+    if not kept:  # nothing baked
+        return Lightmaps(light=pages[0], obscurance=pages[1], covered=covered)
     if enclosed is not None and enclosed.any():
         for values in kept:
             values[enclosed] = 0.0  # shut inside a solid: no light reaches it

@@ -34,6 +34,7 @@ from urllib.parse import quote, unquote
 import numpy as np
 import pygltflib
 
+from . import gltf_document
 from .atlas import Atlas, InstanceUV
 from .encode import PNG_SIGNATURE, EncodedPage
 from .errors import InputError, OutputError, SettingsError
@@ -134,26 +135,7 @@ def _document_data(document: pygltflib.GLTF2) -> dict:
     ``extensions`` and ``extras`` values are kept verbatim (an extension's empty object means
     something); list items are never dropped, so indices stay valid.
     """
-    def clean(value):
-        if isinstance(value, dict):
-            out = {}
-            for key, item in value.items():
-                if item is None:
-                    continue
-                if key in ("extensions", "extras"):
-                    if item != {}:
-                        out[key] = copy.deepcopy(item)
-                    continue
-                item = clean(item)
-                if isinstance(item, (dict, list)) and not item:
-                    continue
-                out[key] = item
-            return out
-        if isinstance(value, list):
-            return [clean(item) for item in value]
-        return value
-
-    data = clean(pygltflib.gltf_asdict(document))
+    data = gltf_document.data(document)
     # pygltflib fills in byteOffset 0 and normalized false; on an accessor without bufferView
     # (zeros or sparse only) byteOffset is an error, so drop these defaults everywhere.
     for accessor in data.get("accessors", []):
@@ -215,9 +197,9 @@ def _file_winding(scene: Scene, unwrap: InstanceUV) -> np.ndarray:
                          f"{len(primitive.triangles)} in the primitive")
     mapped = vertices[triangles]
 
-    def same_cycle(a: np.ndarray) -> np.ndarray:
-        return np.any([np.all(np.roll(a, r, axis=1) == primitive.triangles, axis=1)
-                       for r in range(3)], axis=0)
+    def same_cycle(a: np.ndarray) -> np.ndarray:  # (corner orders by index: np.roll is slow)
+        return np.any([np.all(a[:, order] == primitive.triangles, axis=1)
+                       for order in ([0, 1, 2], [2, 0, 1], [1, 2, 0])], axis=0)
 
     kept = same_cycle(mapped)
     flipped = ~kept & same_cycle(mapped[:, [0, 2, 1]])

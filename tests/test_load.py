@@ -655,27 +655,65 @@ def _document_text(path: Path) -> str:
             else load_module._decode_text(data, str(path)))
 
 
-@pytest.mark.parametrize("name", ["shared", "cornell", "baked"])
-def test_documents_parse_as_pygltflib_parses_them(name, tmp_path):
-    """The document made directly from the JSON (``gltf_document``) equals pygltflib's own,
-    field by field and type by type: for the shared scenes, a scene of ours, and a baked one
-    (lightmap textures, images, the second UV set)."""
+def _document_paths(name: str, tmp_path: Path) -> list[Path]:
+    """The shared scenes, a scene of ours, or a baked one (lightmap textures, images, the
+    second UV set)."""
     import baker
     from assets.make_scenes import cornell_box
-    from baker import gltf_document
 
     if name == "shared":
         paths = sorted(SCENES.glob("*/*.gl*"))
         assert len(paths) >= 5
-    else:
-        paths = [cornell_box().save(tmp_path / "cornell.glb")]
-        if name == "baked":
-            baker.bake(paths[0], tmp_path / "baked.glb", baker.Settings(page_size=64, rays=4))
-            paths = [tmp_path / "baked.glb"]
-    for path in paths:
+        return paths
+    paths = [cornell_box().save(tmp_path / "cornell.glb")]
+    if name == "baked":
+        baker.bake(paths[0], tmp_path / "baked.glb", baker.Settings(page_size=64, rays=4))
+        paths = [tmp_path / "baked.glb"]
+    return paths
+
+
+@pytest.mark.parametrize("name", ["shared", "cornell", "baked"])
+def test_documents_parse_as_pygltflib_parses_them(name, tmp_path):
+    """The document made directly from the JSON (``gltf_document.document``) equals
+    pygltflib's own, field by field and type by type."""
+    from baker import gltf_document
+
+    for path in _document_paths(name, tmp_path):
         text = _document_text(path)
         _same_objects(gltf_document.document(json.loads(text)),
                       pygltflib.GLTF2.gltf_from_json(text), path.name)
+
+
+def _cleaned(value):
+    """pygltflib.gltf_asdict's data with None and empty properties dropped, but extensions and
+    extras kept unless {} (the rule ``gltf_document.data`` follows)."""
+    if isinstance(value, dict):
+        out = {}
+        for key, item in value.items():
+            if item is None or (key in ("extensions", "extras") and item == {}):
+                continue
+            item = item if key in ("extensions", "extras") else _cleaned(item)
+            if key in ("extensions", "extras") or not (isinstance(item, (dict, list)) and not item):
+                out[key] = item
+        return out
+    return [_cleaned(item) for item in value] if isinstance(value, list) else value
+
+
+@pytest.mark.parametrize("name", ["shared", "baked"])
+def test_document_data_is_pygltflib_data_cleaned(name, tmp_path):
+    """``gltf_document.data`` (the writer's JSON data) equals pygltflib's ``gltf_asdict``
+    cleaned, types included, and shares nothing with the document (a deep copy)."""
+    from baker import gltf_document
+    from baker.load import read_document
+
+    for path in _document_paths(name, tmp_path):
+        document = read_document(path)
+        made = gltf_document.data(document)
+        _same_objects(made, _cleaned(pygltflib.gltf_asdict(document)), path.name)
+        if made.get("nodes"):
+            made["nodes"][0]["name"] = "changed"
+            made["nodes"][0].setdefault("extras", {})["k"] = 1
+            assert document.nodes[0].name != "changed" and "k" not in (document.nodes[0].extras or {})
 
 
 def test_documents_with_odd_values_parse_as_pygltflib_parses_them():

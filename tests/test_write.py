@@ -537,3 +537,20 @@ def test_png_bytes_decode_to_the_image(height, width):
     assert decoded.mode == "RGB"
     assert np.array_equal(np.asarray(decoded), pixels)
     assert png_bytes(pixels.copy()) == png
+
+
+def test_compiled_quantiser_gives_quantise_bytes():
+    """``encode._quantise_linear`` (one pass over a page) gives ``quantise``'s bytes: on the
+    values either side of every code's rounding edge, out of range, and at random, for a few
+    page scales."""
+    from baker.encode import _quantise_linear, quantise
+
+    rng = np.random.default_rng(7)
+    edges = ((np.arange(256)[:, None] + np.array([-0.5, 0.5])) / 255).ravel()
+    edges = np.concatenate([edges, np.nextafter(edges, 2), np.nextafter(edges, -2)])
+    values = np.concatenate([rng.random(300_000) * 1.4 - 0.2, edges, [-0.0, 1.0, 2.0]])
+    values = values[:len(values) // 3 * 3].reshape(1, -1, 3)
+    for scale in (1.0, 0.37, 5.0):
+        out = np.empty(values.shape, np.uint8)
+        _quantise_linear(values * scale, scale, out)
+        assert np.array_equal(out, quantise(values * scale / scale, "linear")), scale
