@@ -54,7 +54,8 @@ from .scene import Scene
 from .settings import Settings, resolve
 from .surface import LUMINANCE
 from .sampling import (TECHNIQUES, cap_boxes, concentric_hemisphere, fill_cosine, fill_points,
-                       inline, jit, point, sobol_strip_sample, tangent_frames, texel_scrambles)
+                       inline, jit, net_solve, point, sobol_cell_sample, tangent_frames,
+                       texel_scrambles)
 from .trace import Hits, Tracer, ray_lift
 from .validity import Validity, check_texels
 
@@ -265,34 +266,48 @@ def _fixed_may_meet(x: np.ndarray, y: np.ndarray, z: np.ndarray, starts: np.ndar
 # Rays whose directions ``_drawn_near_rays`` draws at once: they stay in the cache (a whole
 # chunk's fresh arrays would cost more in page faults than the drawing).
 _DRAWN_RAYS = 1 << 12
-# A texel's rays are found strip by strip (``_strip_candidates``) when the strips that its
+# A texel's rays are found cell by cell (``_cell_candidates``) when the cells that its
 # spheres' cones cross number at most this share of its rays; else all its rays are drawn.
-_STRIP_SHARE = 0.25
+_CELL_SHARE = 0.25
 
 
-@jit
-def _strip_range(low, high, cells):
-    """The first and last of ``cells`` equal strips of [0, 1) that [low, high] meets."""
+@inline
+def _cell_range(low, high, cells):
+    """The first and last of ``cells`` equal intervals of [0, 1) that [low, high] meets."""
     return (min(max(int(np.floor(low * cells)), 0), cells - 1),
             min(max(int(np.floor(high * cells)), 0), cells - 1))
 
 
 @inline
-def _strip_candidates(local, distance_sq, radii, rays, bits, scrambles, boxes, counts, marks,
-                      candidates):
+def _box_grid(box, bits):
+    """(columns, cells) for the box (u0, u1, v0, v1) of [0, 1)²: the grid of 2^columns ×
+    2^(bits − columns) cells (``sampling.sobol_cell_sample``) that it crosses fewest cells of,
+    and how many."""
+    best, fewest = bits, 1 << 30
+    for columns in range(bits + 1):
+        low_u, high_u = _cell_range(box[0], box[1], 1 << columns)
+        low_v, high_v = _cell_range(box[2], box[3], 1 << (bits - columns))
+        count = (high_u - low_u + 1) * (high_v - low_v + 1)
+        if count < fewest:
+            best, fewest = columns, count
+    return best, fewest
+
+
+@inline
+def _cell_candidates(local, distance_sq, radii, rays, bits, scrambles, solve, boxes, counts,
+                     grids, marks, candidates):
     """The samples of a texel (``sobol`` points, its ``scrambles``) whose directions can lie in
     the cone of some sphere ``local`` (``_sphere_locals``), into ``candidates`` (rays,) int64:
     returns how many, or −1 when finding them would cost more than drawing every ray.
-    ``boxes`` (b, 8, 4), ``counts`` (b,) and ``marks`` (rays,) uint8 (all 0, and left so) are
-    scratch. A cone's directions come from a few boxes of the unit square
-    (``sampling.cap_boxes``); a box crosses few of the 2^bits strips along its narrower side,
-    and each strip holds one of the texel's first 2^bits points
-    (``sampling.sobol_strip_sample``): those of samples below ``rays`` are the candidates. A
-    texel a few metres from a small object has a ray or two of 64 in its cone, and no reason
-    to draw the others."""
-    cells = 1 << bits
-    budget = int(_STRIP_SHARE * rays)
-    for b in range(len(radii)):  # first the boxes, and whether their strips are few enough
+    ``boxes`` (b, 8, 4), ``counts`` (b,), ``grids`` (b, 8) and ``marks`` (rays,) uint8 (all 0,
+    and left so) are scratch; ``solve`` is ``sampling.net_solve(bits)``. A cone's directions
+    come from a few boxes of the unit square (``sampling.cap_boxes``); a box crosses few cells
+    of some grid of 2^bits cells (``_box_grid``), and each cell holds one of the texel's first
+    2^bits points (``sampling.sobol_cell_sample``): those of samples below ``rays`` are the
+    candidates. A texel a few metres from a small object has a ray or two of 64 in its cone,
+    and no reason to draw the others."""
+    budget = int(_CELL_SHARE * rays)
+    for b in range(len(radii)):  # first the boxes, and whether their cells are few enough
         distance = np.sqrt(distance_sq[b])
         if distance <= 1.5 * radii[b]:
             return -1  # a wide cone, and rays that start near the sphere
@@ -301,24 +316,23 @@ def _strip_candidates(local, distance_sq, radii, rays, bits, scrambles, boxes, c
         if counts[b] < 0:
             return -1
         for row in range(counts[b]):
-            low_u, high_u = _strip_range(boxes[b, row, 0], boxes[b, row, 1], cells)
-            low_v, high_v = _strip_range(boxes[b, row, 2], boxes[b, row, 3], cells)
-            budget -= min(high_u - low_u, high_v - low_v) + 1
+            grids[b, row], cells = _box_grid(boxes[b, row], bits)
+            budget -= cells
         if budget < 0:
             return -1
     found = 0
     for b in range(len(radii)):
         for row in range(counts[b]):
-            low_u, high_u = _strip_range(boxes[b, row, 0], boxes[b, row, 1], cells)
-            low_v, high_v = _strip_range(boxes[b, row, 2], boxes[b, row, 3], cells)
-            dimension, low, high = ((0, low_u, high_u) if high_u - low_u <= high_v - low_v
-                                    else (1, low_v, high_v))
-            for strip in range(low, high + 1):
-                sample = sobol_strip_sample(dimension, strip, bits, scrambles)
-                if sample < rays and not marks[sample]:
-                    marks[sample] = 1
-                    candidates[found] = sample
-                    found += 1
+            columns = grids[b, row]
+            low_u, high_u = _cell_range(boxes[b, row, 0], boxes[b, row, 1], 1 << columns)
+            low_v, high_v = _cell_range(boxes[b, row, 2], boxes[b, row, 3], 1 << (bits - columns))
+            for column in range(low_u, high_u + 1):
+                for cell_row in range(low_v, high_v + 1):
+                    sample = sobol_cell_sample(columns, column, cell_row, bits, scrambles, solve)
+                    if sample < rays and not marks[sample]:
+                        marks[sample] = 1
+                        candidates[found] = sample
+                        found += 1
     for c in range(found):
         marks[candidates[c]] = 0
     return found
@@ -327,14 +341,14 @@ def _strip_candidates(local, distance_sq, radii, rays, bits, scrambles, boxes, c
 @jit
 def _drawn_near_rays(technique: int, seed, keys: np.ndarray, rays: int, starts: np.ndarray,
                      t1: np.ndarray, t2: np.ndarray, normals: np.ndarray, centres: np.ndarray,
-                     radii: np.ndarray, length: float, strips: bool = True):
+                     radii: np.ndarray, length: float, cells: bool = True):
     """The obscurance rays of texels keys (k,) — each texel's rays from ``starts[i]`` (k, 3) in
     its frame t1, t2, normals (k, 3) each — that may pass near the spheres (``_near_flags``):
     (texel (m,) int64 index into keys, x, y, z (m,) their local directions, the bits
     ``cosine_directions`` gives). Texels that cannot reach a sphere (``_reachable``) draw
-    nothing. With ``sobol`` points (and ``strips``; False draws every ray, for the tests), a
+    nothing. With ``sobol`` points (and ``cells``; False draws every ray, for the tests), a
     texel whose spheres subtend narrow cones draws only the rays that may lie in them
-    (``_strip_candidates``); the others' directions are drawn (``sampling.fill_points``,
+    (``_cell_candidates``); the others' directions are drawn (``sampling.fill_points``,
     ``fill_cosine``) a few texels at a time into small buffers, so that no (k·rays,) arrays
     are made. Either way each drawn ray meets the same test."""
     k = len(starts)
@@ -349,8 +363,10 @@ def _drawn_near_rays(technique: int, seed, keys: np.ndarray, rays: int, starts: 
     while (1 << bits) < rays:
         bits += 1
     boxes, counts = np.empty((len(centres), 8, 4)), np.empty(len(centres), np.int64)
+    grids = np.empty((len(centres), 8), np.int64)
     marks, candidates = np.zeros(rays, np.uint8), np.empty(rays, np.int64)
-    strips = strips and technique == 0 and bits <= 24  # (a point has 24 bits: ``_unit``)
+    cells = cells and technique == 0 and bits <= 24  # (a point has 24 bits: ``_unit``)
+    solve = net_solve(min(bits, 24))
     texel = np.empty(k * rays, np.int64)  # room for every ray: only the pages written are
     near = np.empty((k * rays, 3))  # touched, and no test to grow them slows the loops
     m = 0
@@ -361,10 +377,10 @@ def _drawn_near_rays(technique: int, seed, keys: np.ndarray, rays: int, starts: 
             if not _reachable(local, distance_sq, radii, length):
                 continue
             found = -1
-            if strips:
+            if cells:
                 scrambles = texel_scrambles(seed, keys[i], np.uint64(0))
-                found = _strip_candidates(local, distance_sq, radii, rays, bits, scrambles,
-                                          boxes, counts, marks, candidates)
+                found = _cell_candidates(local, distance_sq, radii, rays, bits, scrambles, solve,
+                                         boxes, counts, grids, marks, candidates)
             if found < 0:  # drawn with the block's other texels, below
                 todo[count], todo_keys[count] = i, keys[i]
                 count += 1

@@ -168,7 +168,7 @@ def _laine_karras_preimage(target, seed, bits, most):
     """The x < 2^bits with ``_laine_karras(x, seed)`` ≡ ``target`` (mod 2^bits). Bit j of the
     permutation is bit j of x flipped by a function of x's lower bits, so x is found a bit at a
     time from the lowest, ``bits`` evaluations in all. The loop runs ``most`` ≥ ``bits`` times
-    (a constant where it is inlined, ``sobol_strip_sample``), the steps past ``bits`` doing
+    (a constant where it is inlined, ``sobol_cell_sample``), the steps past ``bits`` doing
     nothing: unrolled, it costs half what a loop of ``bits`` steps does."""
     x = _U32(0)
     for j in range(most):
@@ -195,47 +195,90 @@ def _sample_of_index(low, shuffle, bits, most):
     return _reverse_bits(w)
 
 
+@jit
+def net_solve(bits):
+    """(bits + 1, 24) uint32: row a solves for the index bits a … bits − 1 of a point of the
+    first 2^bits of a texel's ``sobol`` points from the top bits − a bits of its Sobol y
+    (``sobol_cell_sample``). Those y bits are the XOR of the direction numbers v_k
+    (``_SOBOL_SECOND_DIRECTIONS``) of the index's set bits; with the index's other bits known,
+    that is a square system over GF(2), invertible because the points form a (0, bits, 2)-net.
+    Entry r of row a is the mask (over y bits j = 0 … bits − a − 1, bit 31 − j of y as bit j)
+    whose parity is index bit a + r: Gauss–Jordan elimination, made once per search."""
+    out = np.zeros((bits + 1, 24), np.uint32)
+    system = np.zeros(24, np.uint32)
+    for a in range(bits + 1):
+        c = bits - a
+        for j in range(c):  # row j of the system: which unknowns bit 31 − j of y holds
+            system[j] = _U32(0)
+            for r in range(c):
+                if (_SOBOL_SECOND_DIRECTIONS[a + r] >> _U32(31 - j)) & _U32(1):
+                    system[j] |= _U32(1) << _U32(r)
+            out[a, j] = _U32(1) << _U32(j)
+        for r in range(c):
+            pivot = r
+            while not (system[pivot] >> _U32(r)) & _U32(1):
+                pivot += 1
+            system[r], system[pivot] = system[pivot], system[r]
+            out[a, r], out[a, pivot] = out[a, pivot], out[a, r]
+            for j in range(c):
+                if j != r and (system[j] >> _U32(r)) & _U32(1):
+                    system[j] ^= system[r]
+                    out[a, j] ^= out[a, r]
+    return out
+
+
 @inline
-def _strip_sample(dimension, strip, bits, scrambles, most):
-    """``sobol_strip_sample`` with its loops run ``most`` ≥ ``bits`` times."""
+def _parity(x):
+    """The parity of the set bits of a uint32."""
+    x ^= x >> _U32(16)
+    x ^= x >> _U32(8)
+    x ^= x >> _U32(4)
+    x ^= x >> _U32(2)
+    x ^= x >> _U32(1)
+    return x & _U32(1)
+
+
+@inline
+def _cell_sample(columns, column, row, bits, scrambles, solve, most):
+    """``sobol_cell_sample`` with its loops run ``most`` ≥ ``bits`` times."""
     shuffle, sx, sy = scrambles
-    target = _reverse_bits(_U32(strip)) >> _U32(32 - bits)  # the strip's bits, lowest first
-    if dimension == 0:  # x = rev(LK(index, sx)): its top bits are LK(index)'s low ones
-        low = _laine_karras_preimage(target, sx, bits, most)
-    else:  # y = rev(LK(rev(sobol2(index)), sy)): the top bits of sobol2(index) are known
-        top = _reverse_bits(_laine_karras_preimage(target, sy, bits, most))
+    c = bits - columns
+    low = _U32(0)
+    if columns > 0:  # x = rev(LK(index, sx)): its top bits are LK(index)'s low ones
+        target = _reverse_bits(_U32(column)) >> _U32(32 - columns)  # lowest first
+        low = _laine_karras_preimage(target, sx, columns, most)
+    if c > 0:  # y = rev(LK(rev(sobol2(index)), sy)): the top c bits of sobol2(index)
+        target = _reverse_bits(_U32(row)) >> _U32(32 - c)
+        top = _reverse_bits(_laine_karras_preimage(target, sy, c, most))
         mask = (_U32(1) << _U32(bits)) - _U32(1)
-        high = owen_scramble(0, shuffle) & ~mask  # the index's bits from ``bits`` up: the same
-        residual = top ^ _reverse_bits(_sobol_second_reversed(high))  # for every sample < 2^bits
-        low = _U32(0)
-        for q in range(most):
-            if q < bits:
-                j = bits - 1 - q
-                if (residual >> _U32(31 - j)) & _U32(1):
-                    low |= _U32(1) << _U32(j)
-                    residual ^= _SOBOL_SECOND_DIRECTIONS[j]
+        known = (owen_scramble(0, shuffle) & ~mask) | low  # the same for every sample < 2^bits
+        rhs = _reverse_bits(top ^ _reverse_bits(_sobol_second_reversed(known)))
+        for r in range(most):
+            if r < c:
+                low |= _parity(solve[columns, r] & rhs) << _U32(columns + r)
     return int(_sample_of_index(low, shuffle, bits, most))
 
 
-@jit
-def sobol_strip_sample(dimension, strip, bits, scrambles):
+@inline
+def sobol_cell_sample(columns, column, row, bits, scrambles, solve):
     """Which sample s < 2^bits of a texel (its ``texel_scrambles``) has its ``sobol`` point in
-    the ``strip``-th of 2^bits equal strips of [0, 1) along ``dimension`` (0: the point's x,
-    1: its y); bits ≤ 24. The first 2^bits points of each texel form a (0, bits, 2)-net, so
-    exactly one does: a texel's rays that can go in a narrow cone of directions are found
-    without drawing the others (``incremental._drawn_near_rays``). Both coordinates are
+    cell (``column``, ``row``) of the grid of 2^columns columns × 2^(bits − columns) rows on
+    [0, 1)²; bits ≤ 24, ``solve`` = ``net_solve(bits)``. The first 2^bits points of each texel
+    form a (0, bits, 2)-net, so exactly one lies in each such cell: a texel's rays that can go
+    in a narrow cone of directions are found without drawing the others
+    (``incremental._cell_candidates``), in the grid whose cells a box of the cone crosses
+    fewest of (columns = bits: strips of x; 0: strips of y). Both coordinates are
     Owen-scrambled values of the index, and the index an Owen-scrambled sample number: each
-    scramble is undone a bit at a time (``_laine_karras_preimage``); dimension 1 also undoes
-    Sobol's generator matrix, which is triangular (back substitution on
-    ``_SOBOL_SECOND_DIRECTIONS``). Each bit loop has a fixed length, 8 up to 256 rays, so that
-    it is unrolled: 108 -> 76 ns a strip at 64 rays."""
+    scramble is undone a bit at a time (``_laine_karras_preimage``); x gives the index's low
+    bits, y the others through Sobol's generator matrix (``net_solve``). The bit loops have a
+    fixed length, 8 up to 256 rays, so that they unroll: 108 -> 76 ns a cell at 64 rays."""
     if bits == 0:
         return 0
     if bits <= 8:
-        return _strip_sample(dimension, strip, bits, scrambles, 8)
+        return _cell_sample(columns, column, row, bits, scrambles, solve, 8)
     if bits <= 16:
-        return _strip_sample(dimension, strip, bits, scrambles, 16)
-    return _strip_sample(dimension, strip, bits, scrambles, 24)
+        return _cell_sample(columns, column, row, bits, scrambles, solve, 16)
+    return _cell_sample(columns, column, row, bits, scrambles, solve, 24)
 
 
 _QUARTER_PI = np.pi / 4

@@ -629,9 +629,9 @@ def test_rays_stopped_before_the_moved_box_leave_their_texels_clean(tmp_path, mo
     assert found["first hits only"] < 0.9 * found["every ray that meets it"], found
 
 
-def test_the_strip_search_finds_the_rays_drawing_them_all_finds():
-    """``_drawn_near_rays`` finds the rays of texels far from the spheres strip by strip
-    (``_strip_candidates``) and draws all the rays of the others: the same rays, bit for bit,
+def test_the_cell_search_finds_the_rays_drawing_them_all_finds():
+    """``_drawn_near_rays`` finds the rays of texels far from the spheres cell by cell
+    (``_cell_candidates``) and draws all the rays of the others: the same rays, bit for bit,
     as drawing every texel's rays, for texels near and far, facing the spheres or not, and ray
     counts that are powers of two or not."""
     from baker.incremental import _drawn_near_rays
@@ -648,8 +648,8 @@ def test_the_strip_search_finds_the_rays_drawing_them_all_finds():
         keys = rng.integers(0, 2**40, count).astype(np.uint64)
         args = (0, np.uint64(11), keys, rays, starts, *tangent_frames(normals), normals,
                 centres, radii, 2.5)
-        found = [sorted(zip(*(a.tolist() for a in _drawn_near_rays(*args, strips))))
-                 for strips in (True, False)]
+        found = [sorted(zip(*(a.tolist() for a in _drawn_near_rays(*args, cells))))
+                 for cells in (True, False)]
         assert found[0] == found[1] and len(found[0]) > 100, rays
 
 

@@ -3,7 +3,8 @@
 import numpy as np
 
 from baker.sampling import (cap_boxes, cosine_hemisphere, fill_points, hash_u32, owen_scramble,
-                            sample_2d, sobol_strip_sample, tangent_frames, texel_scrambles)
+                            net_solve, sample_2d, sobol_cell_sample, tangent_frames,
+                            texel_scrambles)
 
 
 def test_same_arguments_same_numbers_however_split():
@@ -84,21 +85,25 @@ def test_tangent_frames_are_orthonormal_even_at_the_poles():
     assert np.allclose(np.linalg.norm(t1, axis=1), 1) and np.allclose(np.linalg.norm(t2, axis=1), 1)
 
 
-def test_the_sample_in_each_strip_is_found_without_drawing_the_others():
-    """Among a texel's first 2^m Sobol points one lies in each of 2^m strips of either
-    coordinate; ``sobol_strip_sample`` names it, undoing the scrambles, for every m."""
+def test_the_sample_in_each_cell_is_found_without_drawing_the_others():
+    """Among a texel's first 2^m Sobol points one lies in each cell of every grid of 2^a
+    columns × 2^(m − a) rows (strips of x or y at a = m or 0); ``sobol_cell_sample`` names it,
+    undoing the scrambles and Sobol's matrix, for every m and a."""
     rng = np.random.default_rng(4)
-    for trial in range(62):  # bits 0 to 10, and 17 (the loops of each bit range differ)
+    for trial in range(46):  # bits 0 to 10, and 17 (the loops of each bit range differ)
         seed, key, bits = int(rng.integers(2**32)), int(rng.integers(2**40)), (
-            trial % 11 if trial < 60 else 17)
-        cells = 1 << bits
-        points = sample_2d(seed, np.uint64(key), np.arange(cells), 0)
+            trial % 11 if trial < 44 else 17)
+        points = sample_2d(seed, np.uint64(key), np.arange(1 << bits), 0)
         scrambles = texel_scrambles(np.uint64(seed), np.uint64(key), np.uint64(0))
-        for dimension in (0, 1):
-            strip = np.floor(points[:, dimension] * cells).astype(int)
-            assert sorted(strip) == list(range(cells))
-            found = [sobol_strip_sample(dimension, k, bits, scrambles) for k in range(cells)]
-            assert np.array_equal(strip[found], np.arange(cells)), (trial, dimension)
+        solve = net_solve(bits)
+        for columns in ([0, bits, bits // 2] if bits > 10 else range(bits + 1)):
+            rows = bits - columns
+            cell = (np.floor(points[:, 0] * (1 << columns)).astype(int) * (1 << rows)
+                    + np.floor(points[:, 1] * (1 << rows)).astype(int))
+            assert sorted(cell) == list(range(1 << bits))
+            found = [sobol_cell_sample(columns, k >> rows, k & ((1 << rows) - 1), bits,
+                                       scrambles, solve) for k in range(1 << bits)]
+            assert np.array_equal(cell[found], np.arange(1 << bits)), (trial, columns)
 
 
 def test_cap_boxes_hold_every_point_whose_direction_is_in_the_cap():
