@@ -16,6 +16,7 @@ time) and the medians compared: on a shared machine one run can be 30 % off.
 from __future__ import annotations
 
 import argparse
+import os
 import shutil
 import statistics
 import sys
@@ -63,9 +64,11 @@ def main() -> None:
         rebakes, fulls = [], []
         for _ in range(max(1, args.repeat)):
             shutil.copyfile(folder / "first.bake", state)
+            os.sync()  # the copy written out, as a state written at the last bake would be
             t = time.perf_counter()
             again = baker.bake(after, folder / "incremental.glb", settings, incremental=True)
             rebakes.append(time.perf_counter() - t)
+            os.sync()
             t = time.perf_counter()
             full = baker.bake(after, folder / "full.glb", settings)
             fulls.append(time.perf_counter() - t)
