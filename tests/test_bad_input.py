@@ -484,8 +484,9 @@ def _slow_bake_started(tmp_path: Path, marker: Path, *args: str) -> subprocess.P
     """A real ``baker bake`` of the Cornell box that takes seconds in ray casting; returns once
     it has started casting rays (its integrate stage touched ``marker``)."""
     source = cornell_box().save(tmp_path / "cornell.glb")
-    script = (
-        "import importlib, pathlib, sys\n"
+    script = (  # Ctrl-C as a terminal sends it, even where the suite's shell ignores SIGINT
+        "import importlib, pathlib, signal, sys\n"
+        "signal.signal(signal.SIGINT, signal.default_int_handler)\n"
         "b = importlib.import_module('baker.bake')\n"
         "from cli.main import main\n"
         "real = b.integrate\n"
