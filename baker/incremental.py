@@ -47,7 +47,7 @@ from .geometry import World, build_world
 from .inner import other_side_rays, translucent
 from .integrate import Terms, integrate, world_rays
 from .materials import SPECULAR, TRANSPARENT, material_table
-from .parallel import cores, run_chunks
+from .parallel import cores, even_slices, run_chunks
 from .parts import TexelPoints, part_slices
 from .rasterise import Coverage, Texels, texels_of
 from .scene import Scene
@@ -532,7 +532,7 @@ def _near(texels: Texels, boxes: list[tuple[np.ndarray, np.ndarray]], d_max: flo
         near[rows] = _within(texels.position[rows], texels.size(rows), float(d_max),
                              float(_REACH_TEXELS), middle, low, high)
 
-    run_chunks(work, _slices(len(texels), 1 << 16))
+    run_chunks(work, even_slices(len(texels), 1 << 16))
     return near
 
 
@@ -567,7 +567,8 @@ def _rays_meet(changed: _Changed, texels: Texels, rows: np.ndarray, settings,
         found[texel[hit]] = True
         meets[part] = found
 
-    run_chunks(work, _slices(len(rows), max(1, _TEST_RAYS // n), 2 * cores()), settings.threads)
+    run_chunks(work, even_slices(len(rows), max(1, _TEST_RAYS // n), 2 * cores()),
+               settings.threads)
     return meets, len(rows) * n
 
 
@@ -618,18 +619,9 @@ def _probes_meet(tracer: Tracer, texels: Texels, rows: np.ndarray, d_max: float,
         found[some] = (hits.triangle.reshape(len(some), -1) >= 0).any(axis=1)
         meets[part] = found
 
-    run_chunks(work, _slices(len(rows), max(1, _TEST_RAYS // validity_module.HEMISPHERE_RAYS),
-                             2 * cores()), threads)
+    run_chunks(work, even_slices(len(rows), max(1, _TEST_RAYS // validity_module.HEMISPHERE_RAYS),
+                                 2 * cores()), threads)
     return meets, len(rows) * validity_module.HEMISPHERE_RAYS
-
-
-def _slices(count: int, step: int, least: int = 1) -> list[slice]:
-    """Consecutive slices covering ``range(count)``: of at most ``step`` rows, at least
-    ``least`` of them (when there are rows enough), all of about the same size, so that
-    threads given a few chunks end together."""
-    chunks = min(max(-(-count // step), least), count) if count else 0
-    bounds = [count * k // chunks for k in range(chunks + 1)] if chunks else [0]
-    return [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:])]
 
 
 def _mark_seen(scene: Scene, world: World, changed: _Changed, boxes: list, texels: Texels,
@@ -650,7 +642,7 @@ def _mark_seen(scene: Scene, world: World, changed: _Changed, boxes: list, texel
     rest = np.flatnonzero(reason < 0)
     material = world.tri_material[texels.triangle[rest]]
     rest = rest[table.leaf[material] | table.inner[material]]  # texels with another side
-    for part in _slices(len(rest), max(1, _TEST_RAYS // settings.rays)):
+    for part in even_slices(len(rest), max(1, _TEST_RAYS // settings.rays)):
         rows = rest[part]
         which, origins, directions, lengths = other_side_rays(
             scene, world, take(texels, rows), np.arange(len(rows)), settings, changed.center)

@@ -23,6 +23,15 @@ def texels_per_chunk(chunk_texels: int, rays: int) -> int:
     return max(1, min(chunk_texels, CHUNK_RAYS // max(rays, 1)))
 
 
+def even_slices(count: int, step: int, least: int = 1) -> list[slice]:
+    """Consecutive slices covering ``range(count)``: of at most ``step`` rows, at least
+    ``least`` of them (when there are rows enough), all of about the same size, so that
+    threads given a few chunks end together (no small last one to idle on); none for none."""
+    chunks = min(max(-(-count // step), least), count) if count else 0
+    bounds = [count * k // chunks for k in range(chunks + 1)] if chunks else [0]
+    return [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:])]
+
+
 def cores() -> int:
     """Cores this process may run on."""
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)

@@ -19,6 +19,7 @@ from .atlas import Atlas
 from .direct import Direct
 from .geometry import World
 from .integrate import Terms, rmse_of
+from .parallel import even_slices
 from .rasterise import Coverage, Texels, texels_of
 from .spill import Spill
 from .validity import STATE_NAMES, Validity
@@ -35,9 +36,7 @@ def part_slices(count: int) -> list[slice]:
     """The rows of each part of ``count`` texels, in order: as few parts of at most
     ``PART_TEXELS`` as will do, of equal size (no small last part, whose threads would idle;
     one empty part for none)."""
-    parts = max(1, -(-count // PART_TEXELS))
-    bounds = [count * k // parts for k in range(parts + 1)]
-    return [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:])]
+    return even_slices(count, PART_TEXELS) or [slice(0, 0)]
 
 
 @dataclass(frozen=True)

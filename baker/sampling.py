@@ -291,8 +291,8 @@ def _region_box(region, r0, r1, lo, hi, boxes, row):
     """Row ``row`` of ``boxes``: (u0, u1, v0, v1), the box of the points that
     ``concentric_hemisphere`` maps into radii [r0, r1] and azimuths [lo, hi] of one of its
     four regions (0: a = r, azimuths [−π/4, π/4]; 1: b = r, [π/4, 3π/4]; 2: a = −r,
-    [3π/4, 5π/4]; 3: b = −r, [5π/4, 7π/4]), where (a, b) = (2u − 1, 2v − 1). In each region (a, b) is bilinear in (r, azimuth): the box of
-    the four corners holds them all."""
+    [3π/4, 5π/4]; 3: b = −r, [5π/4, 7π/4]), where (a, b) = (2u − 1, 2v − 1). In each region
+    (a, b) is bilinear in (r, azimuth): the box of the four corners holds them all."""
     a_low = b_low = 1.0
     a_high = b_high = -1.0
     for r in (r0, r1):

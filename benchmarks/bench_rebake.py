@@ -86,8 +86,8 @@ def main() -> None:
     print(f"dirty texels: {info['dirty_texels']:,} of {info['texels']:,} = "
           f"{100 * info['dirty_fraction']:.2f} % ({info['dirty_by_reason']}); "
           f"{info['rays']:,} rays re-cast, {info['test_rays']:,} test rays")
-    print(f"full bake {full_before:.2f} s (edited scene, median of {len(fulls)}: {full_after:.2f} s, "
-          f"{min(fulls):.2f}–{max(fulls):.2f}), rebake median {rebake:.3f} s "
+    print(f"full bake {full_before:.2f} s (edited scene, median of {len(fulls)}: "
+          f"{full_after:.2f} s, {min(fulls):.2f}–{max(fulls):.2f}), rebake median {rebake:.3f} s "
           f"({min(rebakes):.3f}–{max(rebakes):.3f}) = {100 * rebake / full_after:.1f} % of the "
           f"full bake; state file {state_mb:.1f} MB; identical bytes: {same}")
     print_stage_seconds({"full": full, "rebake": again})

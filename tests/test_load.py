@@ -713,7 +713,8 @@ def test_document_data_is_pygltflib_data_cleaned(name, tmp_path):
         if made.get("nodes"):
             made["nodes"][0]["name"] = "changed"
             made["nodes"][0].setdefault("extras", {})["k"] = 1
-            assert document.nodes[0].name != "changed" and "k" not in (document.nodes[0].extras or {})
+            assert document.nodes[0].name != "changed"
+            assert "k" not in (document.nodes[0].extras or {})
 
 
 def test_documents_with_odd_values_parse_as_pygltflib_parses_them():

@@ -45,13 +45,15 @@ def test_zipfile_and_numpy_read_the_members_back(monkeypatch, zip64):
     arrays = np.load(io.BytesIO(data))
     for name, value in MEMBERS.items():
         if name.endswith(".npy"):
-            assert np.array_equal(arrays[name[:-4]], value) and arrays[name[:-4]].dtype == value.dtype
+            read = arrays[name[:-4]]
+            assert np.array_equal(read, value) and read.dtype == value.dtype
     assert (b"PK\x06\x06" in data) == zip64  # the ZIP64 end record only when needed
 
 
 def test_the_same_members_give_the_same_bytes():
     assert _archive(MEMBERS) == _archive(dict(MEMBERS))
-    assert _archive(MEMBERS) != _archive(dict(MEMBERS, **{"a/key.npy": np.arange(8, dtype=np.uint64)}))
+    other = dict(MEMBERS, **{"a/key.npy": np.arange(8, dtype=np.uint64)})
+    assert _archive(MEMBERS) != _archive(other)
 
 
 def test_a_member_longer_than_announced_is_refused():
