@@ -45,7 +45,8 @@ from . import validity as validity_module
 from .direct import Direct, direct_light, light_dimension, punctual_irradiance, texel_receivers
 from .geometry import World, build_world
 from .inner import other_side_rays, translucent
-from .integrate import Terms, integrate, world_rays
+from .integrate import (EXACT_RAYS, Terms, changed_terms, integrate, ray_changes, surfaces_of,
+                        world_rays)
 from .materials import SPECULAR, TRANSPARENT, material_table
 from .parallel import cores, even_slices, run_chunks
 from .parts import TexelPoints, part_slices
@@ -57,7 +58,7 @@ from .sampling import (TECHNIQUES, cap_boxes, concentric_hemisphere, fill_cosine
                        inline, jit, net_solve, point, sobol_cell_sample, tangent_frames,
                        texel_scrambles)
 from .trace import Hits, Tracer, ray_lift
-from .validity import Validity, check_texels
+from .validity import Faces, Validity, check_texels
 
 # Extra reach (in texel sides of each texel) beyond d_max: the validity probes move a sample
 # point by up to rounds × (probe radius + push) sides, then probe a radius further; plus one.
@@ -111,10 +112,10 @@ class Rebaked:
     rays: int
 
 
-def take(texels: Texels, rows: np.ndarray) -> Texels:
-    """The texels ``rows`` (k,) as a Texels of k rows (the per-triangle ``triangle_*`` fields
-    and empty ones kept whole)."""
-    return replace(texels, **{f.name: value[rows] for f in fields(Texels)
+def take(texels, rows: np.ndarray):
+    """The texels ``rows`` (k,) of ``texels`` (Texels, Terms: a dataclass of per-texel arrays)
+    as one of k rows (the per-triangle ``triangle_*`` fields and empty ones kept whole)."""
+    return replace(texels, **{f.name: value[rows] for f in fields(texels)
                               if isinstance(value := getattr(texels, f.name), np.ndarray)
                               and not f.name.startswith("triangle_")
                               and len(value)})  # an absent terminator_push
@@ -344,8 +345,8 @@ def _drawn_near_rays(technique: int, seed, keys: np.ndarray, rays: int, starts: 
                      radii: np.ndarray, length: float, cells: bool = True):
     """The obscurance rays of texels keys (k,) — each texel's rays from ``starts[i]`` (k, 3) in
     its frame t1, t2, normals (k, 3) each — that may pass near the spheres (``_near_flags``):
-    (texel (m,) int64 index into keys, x, y, z (m,) their local directions, the bits
-    ``cosine_directions`` gives). Texels that cannot reach a sphere (``_reachable``) draw
+    (texel (m,) int64 index into keys, sample (m,) int64 its sample index, x, y, z (m,) their
+    local directions, the bits ``cosine_directions`` gives). Texels that cannot reach a sphere (``_reachable``) draw
     nothing. With ``sobol`` points (and ``cells``; False draws every ray, for the tests), a
     texel whose spheres subtend narrow cones draws only the rays that may lie in them
     (``_cell_candidates``); the others' directions are drawn (``sampling.fill_points``,
@@ -368,7 +369,8 @@ def _drawn_near_rays(technique: int, seed, keys: np.ndarray, rays: int, starts: 
     cells = cells and technique == 0 and bits <= 24  # (a point has 24 bits: ``_unit``)
     solve = net_solve(min(bits, 24))
     texel = np.empty(k * rays, np.int64)  # room for every ray: only the pages written are
-    near = np.empty((k * rays, 3))  # touched, and no test to grow them slows the loops
+    sample = np.empty(k * rays, np.int64)  # touched, and no test to grow them slows the loops
+    near = np.empty((k * rays, 3))
     m = 0
     for first in range(0, k, block):
         count = 0
@@ -392,7 +394,8 @@ def _drawn_near_rays(technique: int, seed, keys: np.ndarray, rays: int, starts: 
                 continue
             for r in range(found):
                 if flags[r]:
-                    texel[m], near[m, 0], near[m, 1], near[m, 2] = i, x[r], y[r], z[r]
+                    texel[m], sample[m] = i, candidates[r]
+                    near[m, 0], near[m, 1], near[m, 2] = x[r], y[r], z[r]
                     m += 1
         drawn = count * rays
         fill_points(technique, seed, todo_keys[:count], 0, rays, np.uint64(0), u[:drawn],
@@ -407,9 +410,11 @@ def _drawn_near_rays(technique: int, seed, keys: np.ndarray, rays: int, starts: 
                 continue
             for r in range(base, base + rays):
                 if flags[r]:
-                    texel[m], near[m, 0], near[m, 1], near[m, 2] = i, x[r], y[r], z[r]
+                    texel[m], sample[m] = i, r - base
+                    near[m, 0], near[m, 1], near[m, 2] = x[r], y[r], z[r]
                     m += 1
-    return texel[:m], near[:m, 0].copy(), near[:m, 1].copy(), near[:m, 2].copy()
+    return (texel[:m], sample[:m], near[:m, 0].copy(), near[:m, 1].copy(),
+            near[:m, 2].copy())
 
 
 def _lifted(center: np.ndarray, position, normal, size) -> np.ndarray:
@@ -486,13 +491,30 @@ class _Changed:
         return blocked
 
 
-def _placed_corners(scene: Scene, world: World, instance: int, matrix: np.ndarray) -> np.ndarray:
-    """(t, 3, 3) corners of an instance's world triangles had its node the world ``matrix``,
+def _placed_positions(scene: Scene, instance: int, matrix: np.ndarray) -> np.ndarray:
+    """(v, 3) world positions of an instance's vertices had its node the world ``matrix``,
     with the arithmetic of ``geometry.build_world`` (so the new place matches it bit for bit)."""
     prim = scene.primitives[scene.instances[instance].primitive]
-    positions = prim.positions @ matrix[:3, :3].T + matrix[:3, 3]
+    return prim.positions @ matrix[:3, :3].T + matrix[:3, 3]
+
+
+def _placed_corners(scene: Scene, world: World, instance: int, matrix: np.ndarray) -> np.ndarray:
+    """(t, 3, 3) corners of an instance's world triangles had its node the world ``matrix``
+    (``_placed_positions``)."""
     local = world.triangles[world.instance_triangles(instance)] - world.vertex_start[instance]
-    return positions[local]
+    return _placed_positions(scene, instance, matrix)[local]
+
+
+def _world_before(scene: Scene, world: World, moved: np.ndarray,
+                  old_worlds: np.ndarray) -> World:
+    """``world`` with the ``moved`` instances back at their world matrices of the last bake
+    (``old_worlds`` (I, 4, 4)): the triangles that bake traced, bit for bit (a move that
+    changes the tracer's frame is a full bake, so its ``center`` is the same)."""
+    positions = world.positions.copy()
+    for i in moved:
+        positions[world.vertex_start[i]:world.vertex_start[i + 1]] = _placed_positions(
+            scene, i, old_worlds[i])
+    return replace(world, positions=positions)
 
 
 @jit
@@ -537,11 +559,10 @@ def _near(texels: Texels, boxes: list[tuple[np.ndarray, np.ndarray]], d_max: flo
 
 
 def _rays_meet(changed: _Changed, texels: Texels, rows: np.ndarray, settings,
-               first: tuple[Tracer, np.ndarray] | None = None) -> tuple[np.ndarray, int]:
+               judge: Callable | None = None) -> tuple[np.ndarray, int]:
     """(k,) bool: whether any of each texel's own obscurance rays meets the ``changed``
-    triangles within d_max — and, with ``first`` = (the whole scene's tracer, (T,) bool its
-    triangles that changed), is not stopped before by a surface that did not
-    (``_stopped_before``); and the number of rays drawn."""
+    triangles within d_max — and, with a ``judge`` (``_NotStopped``, ``_HitsCompared``), is
+    judged to have changed; and the number of rays drawn."""
     n = settings.rays
     meets = np.zeros(len(rows), bool)
 
@@ -550,7 +571,7 @@ def _rays_meet(changed: _Changed, texels: Texels, rows: np.ndarray, settings,
         normal = texels.geometric_normal(chosen)
         starts, radii = _starts(changed, texels.position[chosen], normal, texels.size(chosen),
                                 settings.d_max)
-        texel, x, y, z = _drawn_near_rays(
+        texel, sample, x, y, z = _drawn_near_rays(
             TECHNIQUES.index(settings.sampling), np.uint64(settings.seed), texels.key[chosen],
             n, starts, *tangent_frames(normal), normal, changed.sphere_centres, radii,
             settings.d_max)
@@ -561,8 +582,9 @@ def _rays_meet(changed: _Changed, texels: Texels, rows: np.ndarray, settings,
         met = changed.cast_local(origins, directions,
                                  np.full(len(origins), settings.d_max, np.float32))
         hit = np.flatnonzero(met["primID"] >= 0)
-        if first is not None and len(hit):
-            hit = hit[~_stopped_before(*first, origins[hit], directions[hit], met["tfar"][hit])]
+        if judge is not None and len(hit):
+            hit = hit[judge(chosen[texel[hit]], sample[hit], origins[hit], directions[hit],
+                            met["tfar"][hit])]
         found = meets[part]
         found[texel[hit]] = True
         meets[part] = found
@@ -572,17 +594,67 @@ def _rays_meet(changed: _Changed, texels: Texels, rows: np.ndarray, settings,
     return meets, len(rows) * n
 
 
+class _NotStopped:
+    """Judges a ray that meets a recoloured material's triangles (``changed_triangles`` (T,)
+    bool) changed unless, in the whole scene (``tracer``), a surface that did not change stops
+    it before (``_stopped_before``)."""
+
+    def __init__(self, tracer: Tracer, changed_triangles: np.ndarray):
+        self._tracer, self._changed = tracer, changed_triangles
+
+    def __call__(self, rows, samples, origins, directions, distance) -> np.ndarray:
+        return ~_stopped_before(self._tracer, self._changed, origins, directions, distance)
+
+
+class _HitsCompared:
+    """Judges a ray that meets a moved node (at its old or new place) changed when its nearest
+    hit within d_max in the whole scene now (``after``) differs from its hit in the scene of the
+    last bake (``before``, of ``_world_before``), which gave the stored terms. With ``keep``, the
+    changed rays are kept: ``changed`` gives them for ``integrate.ray_changes``. Called from
+    several threads at once (each call's rays are its own)."""
+
+    def __init__(self, after: Tracer, before: Tracer, d_max: float, keep: bool):
+        self._after, self._before, self._d_max, self._keep = after, before, d_max, keep
+        self._pieces: list = []
+        self.cast = 0
+
+    def __call__(self, rows, samples, origins, directions, distance) -> np.ndarray:
+        lengths = np.full(len(origins), self._d_max, np.float32)
+        new = self._after.cast_local(origins, directions, lengths.copy())
+        old = self._before.cast_local(origins, directions, lengths)
+        hit = new["primID"] >= 0
+        differ = (new["primID"] != old["primID"]) | (hit & (
+            (new["tfar"] != old["tfar"]) | (new["u"] != old["u"]) | (new["v"] != old["v"])))
+        if self._keep:
+            self._pieces.append((rows[differ], samples[differ],
+                                 {k: v[differ] for k, v in old.items()},
+                                 {k: v[differ] for k, v in new.items()}))
+        self.cast += 2 * len(origins)  # (list.append and += on ints: safe across threads)
+        return differ
+
+    def changed(self) -> tuple[np.ndarray, np.ndarray, dict, dict]:
+        """The changed rays kept: texel rows (m,), samples (m,), and embreex's hits before and
+        after (each field (m,))."""
+        if not self._pieces:
+            empty = np.zeros(0, np.int64)
+            hits = {"primID": np.zeros(0, np.int32), "tfar": np.zeros(0, np.float32),
+                    "u": np.zeros(0, np.float32), "v": np.zeros(0, np.float32)}
+            return empty, empty, hits, dict(hits)
+        rows, samples, old, new = zip(*self._pieces)
+        join = lambda hits: {k: np.concatenate([h[k] for h in hits]) for k in hits[0]}
+        return np.concatenate(rows), np.concatenate(samples), join(old), join(new)
+
+
 def _stopped_before(tracer: Tracer, changed_triangles: np.ndarray, origins: np.ndarray,
                     directions: np.ndarray, distance: np.ndarray) -> np.ndarray:
     """(m,) bool, for rays (origins, directions (m, 3) float32 in the tracer's frame, as a bake
     casts them) that meet the changed geometry at ``distance`` (m,): whether, in the whole
     scene as it is now (``tracer``, which lets rays through alpha-tested surfaces as a bake
     does), a surface that did not change stops the ray clearly before (``changed_triangles``
-    (T,) bool: the world triangles that did, a moved node at its new place or a recoloured
-    material's). That surface is then the ray's first hit both before the change and after
-    it, so its part of the texel's terms is the same. The margin, 10⁻³ of the distance plus
-    10⁻⁵ of the coordinates, is far beyond float32 rounding; a mirror or glass that stops the
-    ray is the "chain" search's concern."""
+    (T,) bool: the world triangles that did, a recoloured material's). That surface is then
+    the ray's first hit both before the change and after it, so its part of the texel's terms
+    is the same. The margin, 10⁻³ of the distance plus 10⁻⁵ of the coordinates, is far beyond
+    float32 rounding; a mirror or glass that stops the ray is the "chain" search's concern."""
     distance = distance.astype(np.float64)
     limit = distance * (1 - 1e-3) - 1e-5 * (np.abs(origins).max(axis=1) + distance)
     rows = np.flatnonzero(limit > 0)
@@ -595,9 +667,11 @@ def _stopped_before(tracer: Tracer, changed_triangles: np.ndarray, origins: np.n
 
 
 def _probes_meet(tracer: Tracer, texels: Texels, rows: np.ndarray, d_max: float,
-                 threads: int = 0) -> tuple[np.ndarray, int]:
+                 threads: int = 0, judge: "_ProbesCompared | None" = None
+                 ) -> tuple[np.ndarray, int]:
     """(k,) bool: whether any of the validity module's fixed hemisphere probes from each texel's
-    (probed) sample point meets ``tracer``'s triangles within d_max; and the rays cast."""
+    (probed) sample point meets ``tracer``'s triangles within d_max — and, with a ``judge``,
+    is judged to have changed; and the rays cast."""
     meets = np.zeros(len(rows), bool)
     m = validity_module.HEMISPHERE_RAYS
     x, y, z = np.ascontiguousarray(validity_module._hemisphere_directions(m).T)
@@ -614,9 +688,11 @@ def _probes_meet(tracer: Tracer, texels: Texels, rows: np.ndarray, d_max: float,
         origins, directions = validity_module.hemisphere_probes(
             texels.position[chosen[some]], normal[some], texels.size(chosen[some]),
             tracer.center)
-        hits = tracer.cast(origins, directions, d_max)
+        met = tracer.cast(origins, directions, d_max).triangle >= 0
+        if judge is not None and met.any():
+            met[met] = judge(origins[met], directions[met], d_max)
         found = meets[part]
-        found[some] = (hits.triangle.reshape(len(some), -1) >= 0).any(axis=1)
+        found[some] = met.reshape(len(some), -1).any(axis=1)
         meets[part] = found
 
     run_chunks(work, even_slices(len(rows), max(1, _TEST_RAYS // validity_module.HEMISPHERE_RAYS),
@@ -624,17 +700,32 @@ def _probes_meet(tracer: Tracer, texels: Texels, rows: np.ndarray, d_max: float,
     return meets, len(rows) * validity_module.HEMISPHERE_RAYS
 
 
+class _ProbesCompared:
+    """Judges a hemisphere probe of a far texel (beyond its tangent probes' reach of the move)
+    that meets a moved node changed when whether it meets a back face first (what validity
+    counts, ``validity.Faces.back``) differs between the whole scene now (``after``) and the
+    scene of the last bake (``before``): each a (Tracer, Faces) pair. Its other findings cannot
+    change: the tangent probes do not reach the move, and a probe touches (``Validity.touching``)
+    only what lies within a few ray lifts of its origin."""
+
+    def __init__(self, after: tuple[Tracer, Faces], before: tuple[Tracer, Faces]):
+        self._after, self._before = after, before
+
+    def __call__(self, origins: np.ndarray, directions: np.ndarray, d_max: float) -> np.ndarray:
+        (now, faces_now), (then, faces_then) = self._after, self._before
+        return (faces_now.back(now.cast(origins, directions, d_max).triangle, directions)
+                != faces_then.back(then.cast(origins, directions, d_max).triangle, directions))
+
+
 def _mark_seen(scene: Scene, world: World, changed: _Changed, boxes: list, texels: Texels,
-               reason: np.ndarray, why: str, settings,
-               first: tuple[Tracer, np.ndarray] | None = None) -> int:
+               reason: np.ndarray, why: str, settings, judge: Callable | None = None) -> int:
     """Mark with ``why`` (in ``reason`` (N,), in place) the texels not yet dirty whose
     obscurance rays — their own (within d_max of ``boxes``, above their plane) and those from
     their other side (leaves' back faces, translucent insides: ``inner.other_side_rays``) —
     meet the ``changed`` geometry (held in ``boxes``, (low, high) pairs); return the rays cast.
-    ``first``: their own rays count only if nothing that did not change stops them before
-    (``_rays_meet``)."""
+    ``judge``: their own rays count only if it judges them changed (``_rays_meet``)."""
     test = np.flatnonzero(_near(texels, boxes, settings.d_max) & (reason < 0))
-    meets, tested = _rays_meet(changed, texels, test, settings, first)
+    meets, tested = _rays_meet(changed, texels, test, settings, judge)
     reason[test[meets]] = REASONS.index(why)
     table = translucent(scene)
     if not table.any:
@@ -788,6 +879,19 @@ def _relight(texels: Texels, tracer: Tracer, sources, settings, light: int,
     return value, variance
 
 
+def _by_ray(stored: Terms, judge: _HitsCompared, surfaces, settings
+            ) -> tuple[tuple[Terms, np.ndarray], np.ndarray]:
+    """The new terms of the texels whose rays the move changed (``judge.changed``), from their
+    ``stored`` terms and those rays' change alone (``integrate.ray_changes``): ((their terms,
+    their rows), the rows whose stored sums could not be recovered exactly, which must be
+    traced anew)."""
+    rows, samples, before, after = judge.changed()
+    texels, target = np.unique(rows, return_inverse=True)
+    changes = ray_changes(surfaces, settings, target, samples, before, after, len(texels))
+    terms, exact = changed_terms(take(stored, texels), changes)
+    return (take(terms, np.flatnonzero(exact)), texels[exact]), texels[~exact]
+
+
 def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
            relight: bool = False, staging=None) -> Rebaked:
     """Recompute the scene's lightmaps from the bake state at ``path``; only what changed
@@ -849,6 +953,13 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
 
     reason = np.full(count, -1, np.int8)
     tested = 0
+    surfaces = surfaces_of(scene, world)
+    # Texels whose rays changed take only those rays' change (``_by_ray``) when each ray's part
+    # of its texel's terms stands alone and their sums are exact: no chains, no other side, no
+    # adaptive rounds, albedos within [0, 1].
+    by_ray = (surfaces.exact_sums and resolved.rays <= EXACT_RAYS and not translucent(scene).any
+              and resolved.target_error is None and not change.recoloured)
+    judge = None
     texels = replace(raw, position=old_texels.positions(raw.position))  # changed in place below
     validity = old_validity
     with _timed(times, "dirty"):
@@ -860,17 +971,22 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
             boxes = [(c.reshape(-1, 3).min(0), c.reshape(-1, 3).max(0))
                      for c in old_corners + new_corners if len(c)]
             small = _Changed(old_corners + new_corners, world.center)
+            before = _world_before(scene, world, moved, stored.instance_world)
+            tracer_before, faces = Tracer(before), Faces(scene, world)
             near = _near(raw, boxes, resolved.d_max)
             # Validity: tangent probes reach a few texel sides; hemisphere probes d_max.
             close = own | _near(raw, boxes, 0.0)
             far = np.flatnonzero(near & ~close)
-            meets, n = _probes_meet(small, texels, far, resolved.d_max, resolved.threads)
+            meets, n = _probes_meet(small, texels, far, resolved.d_max, resolved.threads,
+                                    _ProbesCompared((tracer, faces),
+                                                    (tracer_before, Faces(scene, before))))
             tested += n
             # Texels touching other geometry: which coincident triangle a probe or ray meets
             # there depends on Embree's BVH, which the move changed (``Validity.touching``).
             redo = np.union1d(np.union1d(np.flatnonzero(close), far[meets]),
                               np.flatnonzero(old_validity.touching))
-            checked, fresh = check_texels(scene, world, tracer, take(raw, redo), resolved.d_max)
+            checked, fresh = check_texels(scene, world, tracer, take(raw, redo), resolved.d_max,
+                                          faces=faces)
             tested += len(redo) * (validity_module.HEMISPHERE_RAYS + validity_module.TANGENT_RAYS
                                    * validity_module.TANGENT_ROUNDS)
             # Probes that met the moved object mostly find what they found before: such a
@@ -882,9 +998,9 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
             validity = merge(old_validity, fresh, redo)
             changed = redo[~same]
             reason[changed[reason[changed] < 0]] = REASONS.index("validity")
-            n = _mark_seen(scene, world, small, boxes, texels, reason, "obscurance",
-                           resolved, (tracer, np.isin(world.tri_instance, moved)))
-            tested += n
+            judge = _HitsCompared(tracer, tracer_before, resolved.d_max, keep=by_ray)
+            tested += _mark_seen(scene, world, small, boxes, texels, reason, "obscurance",
+                                 resolved, judge)
             rest = np.flatnonzero(reason < 0)
             shadow, n = _shadow_dirty(scene, world, small, texels, rest, sources, resolved)
             tested += n
@@ -896,7 +1012,8 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
             box = [(corners.reshape(-1, 3).min(0), corners.reshape(-1, 3).max(0))] if len(tris) else []
             tested += _mark_seen(scene, world, _Changed([corners], world.center), box,
                                  texels, reason, "colour", resolved,
-                                 (tracer, np.isin(world.tri_material, change.recoloured)))
+                                 _NotStopped(tracer, np.isin(world.tri_material,
+                                                             change.recoloured)))
         chains = _chain_corners(scene, world)
         if (len(moved) or change.recoloured) and len(chains):
             # A ray that meets a mirror or glass goes on where the searches above do not follow:
@@ -906,10 +1023,19 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
                                  texels, reason, "chain", resolved)
     rows = np.flatnonzero(reason >= 0)
     with _timed(times, "trace"):
+        traced, updated, by_ray_rays = rows, None, 0
+        if by_ray and judge is not None:
+            updated, retrace = _by_ray(old_terms, judge, surfaces, resolved)
+            # Shadow-dirty texels' obscurance rays met nothing that changed.
+            kept = np.isin(reason[rows], [REASONS.index("obscurance"), REASONS.index("shadow")])
+            traced = np.union1d(rows[~kept], retrace)
+            by_ray_rays = judge.cast
         error_scale = (effective_r_ave(ambient, resolved.rho), float(ambient.intensity @ LUMINANCE))
-        fresh_terms = integrate(scene, world, tracer, texels, resolved, None, rows=rows,
-                                error_scale=error_scale)
-        terms = merge(old_terms, fresh_terms, rows)
+        fresh_terms = integrate(scene, world, tracer, texels, resolved, None, rows=traced,
+                                error_scale=error_scale, surfaces=surfaces)
+        terms = merge(old_terms, fresh_terms, traced)
+        if updated is not None:
+            terms = merge(terms, *updated)
     with _timed(times, "direct"):
         fresh_direct = direct_light(scene, world, tracer, take(texels, rows), sources, resolved)
         direct = merge(old_direct, fresh_direct, rows, light_colours=sources.light_colours(),
@@ -928,7 +1054,7 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
                   times, staging, fingerprint)  # exactly as a full bake goes on
     dirty = Dirty(rows=rows, reason=reason, tested_rays=tested, relit=tuple(change.lights_placed))
     return Rebaked(computed=done, diff=change, dirty=dirty, fingerprints=fingerprint,
-                   rays=fresh_terms.rays + fresh_direct.rays + relit_rays)
+                   rays=fresh_terms.rays + by_ray_rays + fresh_direct.rays + relit_rays)
 
 
 def bake_or_rebake(scene: Scene, settings: Settings, state_path, incremental: bool,

@@ -29,7 +29,7 @@ from .settings import Resolved
 from .materials import DIFFUSE, SPECULAR, TRANSLUCENT, TRANSPARENT, MaterialTable, material_table
 from .sampling import hash_u32
 from .supersample import sub_positions
-from .surface import LUMINANCE, albedo, base_colour, triangle_albedo
+from .surface import LUMINANCE, albedo, base_colour, diffuse_factors, triangle_albedo
 from .trace import Tracer, ray_lift
 
 _SPLIT_MAX = 1e100  # |half/quarter differences| beyond this (garbage albedos) are clipped, so
@@ -129,9 +129,20 @@ class Terms:
         """(2,) the sums over the texels of e² for the halves and for the quarters (see
         ``rmse``), in luminance of W: what ``rmse_of`` needs, added up part by part when a
         bake makes its texels a part at a time."""
-        lum = np.array([1.0, float(r_ave @ LUMINANCE)])
-        return np.array([np.sum(np.clip(0.5 * split @ lum, -_SPLIT_MAX, _SPLIT_MAX) ** 2)
+        escaped_lum = float(r_ave @ LUMINANCE)
+        return np.array([_split_square_sum(split, escaped_lum)
                          for split in (self.half_split, self.quarter_split)])
+
+
+@jit
+def _split_square_sum(split, escaped_lum):
+    """Σ over rows of e², e = ½ (split[:, 0] + escaped_lum · split[:, 1]) clipped to
+    ±``_SPLIT_MAX`` (``Terms.split_squares``; split (N, 2))."""
+    total = 0.0
+    for i in range(len(split)):
+        e = min(max(0.5 * (split[i, 0] + escaped_lum * split[i, 1]), -_SPLIT_MAX), _SPLIT_MAX)
+        total += e * e
+    return total
 
 
 def rmse_of(squares: np.ndarray, count: int, technique: str) -> float:
@@ -253,68 +264,77 @@ _COLUMNS = 9
 
 _CONSTANT, _VARYING, _SPECIAL = 0, 1, 2  # per-triangle kinds of ``_accumulate_kernel``
 
+# Each ray's values are rounded to multiples of 2^-40 before they are summed (``_on_grid``).
+# Sums of such values stay exact in float64 while below 2^13, so they do not depend on the
+# order of the rays, and a rebake can take a ray's old value out of a texel's sums and put its
+# new one in to get the very bits a full bake sums (``ray_changes``, incremental.py): with
+# every value in [0, 1] (``Surfaces.exact_sums``), for up to ``EXACT_RAYS`` rays a texel.
+# 2^-40 ≈ 10^-12 is far below float32's output precision.
+_SHIFT = 1.5 * 2.0 ** 12  # x + _SHIFT for x in [−2^11, 2^11) has float64 spacing 2^-40
+EXACT_RAYS = 1 << 11
+
+
+@inline
+def _on_grid(x):
+    """x rounded to the nearest multiple of 2^-40 (ties to even), for x in [−2^11, 2^11): the
+    same as rint(x · 2^40) · 2^-40, without its overflow for garbage albedos far beyond."""
+    return (x + _SHIFT) - _SHIFT
+
 
 @jit
 def _accumulate_kernel(rays, primitive, distance, d_max, rho_kind, table, kind, ray_albedo,
-                       luminance, sums):
-    """Per texel, summed over its ``rays`` rays, into ``sums`` (k, 9): R(Q)·ρ(d) (RGB), escaped
-    rays, squared luminance of R·ρ; then over the first ⌊rays/2⌋ rays and over the first
-    ⌊rays/4⌋ rays alone: luminance of R·ρ, escaped rays (for the split error estimate, see
-    ``Terms.rmse``).
+                       luminance, sums, target=np.zeros(0, np.int64),
+                       sample=np.zeros(0, np.int64), sign=1.0):
+    """Add each ray's values to its texel's sums (k, 9): R(Q)·ρ(d) (RGB), escaped weight (1 for
+    a miss), squared luminance of R·ρ; then, for the rays among the first ⌊rays/2⌋ and the
+    first ⌊rays/4⌋ of their texel, luminance of R·ρ and escaped weight (for the split error
+    estimate, see ``Terms.rmse``). Every value is rounded to the grid (``_on_grid``) first, so
+    the sums are exact: the same bits in any order.
 
-    primitive/distance: (k·rays,) Embree's primID (−1: no hit within d_max) and tfar.
+    primitive/distance: Embree's primID (−1: no hit within d_max) and tfar of the rays; by
+    default (k·rays,), texel-major, ray r being sample r mod rays of texel r // rays; else ray
+    j is sample ``sample[j]`` of texel ``target[j]`` (m,) (a rebake's changed rays, added with
+    ``sign`` −1 for their old hits and +1 for their new ones: ``ray_changes``).
     table: ``surface.triangle_albedo``'s; kind: (T,) uint8 per triangle, ``_CONSTANT`` (albedo
     from ``table``), ``_VARYING`` (ray_albedo[r, :3] is the albedo at the hit) or ``_SPECIAL``
     (a mirror, glass or translucent material, ``_special_hits``: ray_albedo[r, :3] is the ray's
     R·ρ itself and ray_albedo[r, 3] its escaped weight, R_ave·ρ = 1 counting that fraction).
-    ray_albedo: (k·rays, 4), or (0, 4) when every kind is ``_CONSTANT``.
+    ray_albedo: one row of 4 per ray, or (0, 4) when every kind is ``_CONSTANT``.
     """
     half, quarter = rays // 2, rays // 4
-    for i in range(len(sums)):
-        red = green = blue = square = half_hit = quarter_hit = 0.0
-        missed = half_missed = quarter_missed = 0.0
-        for s in range(rays):
-            r = i * rays + s
-            t = primitive[r]
-            if t < 0:
-                missed += 1.0
-                if s < half:
-                    half_missed += 1.0
-                if s < quarter:
-                    quarter_missed += 1.0
-                continue
+    indexed = len(target) > 0
+    for r in range(len(primitive)):
+        i, s = (target[r], sample[r]) if indexed else (r // rays, r % rays)
+        t = primitive[r]
+        escape = 0.0
+        if t < 0:
+            escape = 1.0
+            cr = cg = cb = 0.0
+        else:
             k = kind[t]
             if k == 2:
-                escape = ray_albedo[r, 3]
-                missed += escape
-                if s < half:
-                    half_missed += escape
-                if s < quarter:
-                    quarter_missed += escape
+                escape = _on_grid(ray_albedo[r, 3])
                 weight = 1.0
                 cr, cg, cb = ray_albedo[r, 0], ray_albedo[r, 1], ray_albedo[r, 2]
             else:
                 weight = rho(rho_kind, distance[r] / d_max)
-                if weight == 0.0:
-                    continue
                 if k == 1:
                     cr, cg, cb = ray_albedo[r, 0], ray_albedo[r, 1], ray_albedo[r, 2]
                 else:
                     cr, cg, cb = table[t, 0], table[t, 1], table[t, 2]
-            cr, cg, cb = cr * weight, cg * weight, cb * weight
-            red += cr
-            green += cg
-            blue += cb
-            lum = cr * luminance[0] + cg * luminance[1] + cb * luminance[2]
-            square += lum * lum
-            if s < half:
-                half_hit += lum
-            if s < quarter:
-                quarter_hit += lum
-        sums[i, 0], sums[i, 1], sums[i, 2] = red, green, blue
-        sums[i, 3], sums[i, 4] = missed, square
-        sums[i, 5], sums[i, 6] = half_hit, half_missed
-        sums[i, 7], sums[i, 8] = quarter_hit, quarter_missed
+            cr, cg, cb = _on_grid(cr * weight), _on_grid(cg * weight), _on_grid(cb * weight)
+        lum = _on_grid(cr * luminance[0] + cg * luminance[1] + cb * luminance[2])
+        sums[i, 0] += sign * cr
+        sums[i, 1] += sign * cg
+        sums[i, 2] += sign * cb
+        sums[i, 3] += sign * escape
+        sums[i, 4] += sign * _on_grid(lum * lum)
+        if s < half:
+            sums[i, 5] += sign * lum
+            sums[i, 6] += sign * escape
+        if s < quarter:
+            sums[i, 7] += sign * lum
+            sums[i, 8] += sign * escape
 
 
 @dataclass(frozen=True)
@@ -341,6 +361,16 @@ class Surfaces:
     def special(self) -> bool:
         """Whether any triangle needs ``_special_hits`` (mirrors, glass, translucency)."""
         return len(self.normals) > 0
+
+    @property
+    def exact_sums(self) -> bool:
+        """Whether every ray's values lie in [0, 1], so that the sums of up to ``EXACT_RAYS``
+        rays are exact (``_on_grid``): no special triangle, and albedos within [0, 1] (base
+        colours and vertex colours are; textures always are)."""
+        colours = self.world.colors[:, :3]
+        base = diffuse_factors(self.scene)
+        return (not self.special and bool(((base >= 0) & (base <= 1)).all())
+                and bool(((colours >= 0) & (colours <= 1)).all()))
 
     def varying_albedo(self, primitive: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """(n, 4) albedo at the hits on varying triangles in columns 0–2 (other rows zero)."""
@@ -539,6 +569,26 @@ def _rho(kind: int, x: np.ndarray) -> np.ndarray:
     return np.zeros_like(x)
 
 
+def _shading(surfaces: Surfaces, settings: Resolved, hits: dict[str, np.ndarray]
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """What ``_accumulate_kernel`` needs to shade the rays with embreex's ``hits``: the
+    triangles' kinds (T,) uint8 and ray_albedo, one row of 4 per ray (the albedo at hits on
+    varying triangles; rows that ``_special_hits`` fills for special ones), or (0, 4) when
+    neither occurs."""
+    primitive = hits["primID"]
+    varying = surfaces.varying.any() and settings.rho not in UNIT_REFLECTIVITY
+    if varying:
+        ray_albedo = surfaces.varying_albedo(primitive, hits["u"], hits["v"])
+    elif surfaces.special:
+        ray_albedo = np.zeros((len(primitive), 4))
+    else:
+        ray_albedo = np.zeros((0, 4))
+    kind = surfaces.kind if len(ray_albedo) else np.zeros_like(surfaces.kind)
+    if not varying and len(ray_albedo):
+        kind = np.where(kind == _VARYING, _CONSTANT, kind).astype(np.uint8)
+    return kind, ray_albedo
+
+
 def _chunk_sums(surfaces: Surfaces, tracer: Tracer, texels: Texels, rows: np.ndarray,
                 first: int, rays: int, settings: Resolved) -> tuple[np.ndarray, _Chains]:
     """(k, 9) sums over samples ``first`` … ``first + rays − 1`` of the texels ``rows``, as
@@ -548,23 +598,13 @@ def _chunk_sums(surfaces: Surfaces, tracer: Tracer, texels: Texels, rows: np.nda
     origins, directions = hemisphere_rays(texels, rows, rays, settings.seed, tracer.center,
                                           settings.sampling, first, sub)
     hits = tracer.cast_local(origins, directions, np.full(len(origins), settings.d_max, np.float32))
-    primitive = hits["primID"]
     chains = _Chains(np.zeros(len(rows), np.int64), np.zeros(len(rows), np.int64))
-    varying = surfaces.varying.any() and settings.rho not in UNIT_REFLECTIVITY
-    if varying:
-        ray_albedo = surfaces.varying_albedo(primitive, hits["u"], hits["v"])
-    elif surfaces.special:
-        ray_albedo = np.zeros((len(primitive), 4))
-    else:
-        ray_albedo = np.zeros((0, 4))
+    kind, ray_albedo = _shading(surfaces, settings, hits)
     if surfaces.special:
         _special_hits(surfaces, tracer, origins, directions, hits, texels.key[rows], first, rays,
                       settings, ray_albedo, chains)
-    kind = surfaces.kind if len(ray_albedo) else np.zeros_like(surfaces.kind)
-    if not varying and len(ray_albedo):
-        kind = np.where(kind == _VARYING, _CONSTANT, kind).astype(np.uint8)
-    sums = np.empty((len(rows), _COLUMNS))
-    _accumulate_kernel(rays, primitive, hits["tfar"], np.float32(settings.d_max),
+    sums = np.zeros((len(rows), _COLUMNS))
+    _accumulate_kernel(rays, hits["primID"], hits["tfar"], np.float32(settings.d_max),
                        RHO_KINDS[settings.rho], surfaces.table, kind, ray_albedo, LUMINANCE,
                        sums)
     return sums, chains
@@ -629,6 +669,64 @@ def integrate(scene: Scene, world: World, tracer: Tracer, texels: Texels, settin
         return terms
     from .inner import add_translucency  # leaves and inner obscurances (§4); inner.py casts
     return add_translucency(scene, world, tracer, texels, rows, settings, terms, error_scale)
+
+
+def ray_changes(surfaces: Surfaces, settings: Resolved, target: np.ndarray,
+                sample: np.ndarray, before: dict[str, np.ndarray], after: dict[str, np.ndarray],
+                count: int) -> np.ndarray:
+    """(count, 9) what some rays' change adds to their texels' sums (``_accumulate_kernel``'s
+    columns, exact): rays of no mirror, glass or translucent surface (``Surfaces.special``),
+    ray j being sample ``sample[j]`` (m,) of texel ``target[j]`` (m,) (rows 0 … count − 1),
+    whose embreex hits went from ``before`` to ``after`` (within d_max)."""
+    changes = np.zeros((count, _COLUMNS))
+    for sign, hits in ((-1.0, before), (1.0, after)):
+        kind, ray_albedo = _shading(surfaces, settings, hits)
+        _accumulate_kernel(settings.rays, hits["primID"], hits["tfar"],
+                           np.float32(settings.d_max), RHO_KINDS[settings.rho], surfaces.table,
+                           kind, ray_albedo, LUMINANCE, changes, target, sample, sign)
+    return changes
+
+
+def _grid(x: np.ndarray) -> np.ndarray:
+    """x rounded to multiples of 2^-40, as ``_on_grid``."""
+    return (x + _SHIFT) - _SHIFT
+
+
+def _sums_of(terms: Terms) -> np.ndarray:
+    """(k, 9) the sums ``_means`` made ``terms`` from (of one round of rays), worked back from
+    the means: each is a multiple of 2^-40 far smaller than float64's precision can tell apart,
+    so rounding recovers it. The splits give the halves' and quarters' sums through
+    split = part/p − (whole − part)/(n − p). ``changed_terms`` checks the result."""
+    n = terms.counts.astype(np.float64)
+    sums = np.zeros((len(n), _COLUMNS))
+    sums[:, _RGB] = _grid(terms.w_hit * n[:, None])
+    sums[:, _ESCAPED] = _grid(terms.escaped * n)
+    sums[:, _SQUARE] = _grid(terms.hit_sq * n)
+    half, quarter = terms.counts // 2, terms.counts // 4
+    for columns, split, part, whole, whole_count in (
+            (_HALF, terms.half_split, half, _luminance_and_escaped(sums), terms.counts),
+            (_QUARTER, terms.quarter_split, quarter, None, half)):
+        whole = sums[:, _HALF] if whole is None else whole
+        p, rest = part.astype(np.float64)[:, None], (whole_count - part).astype(np.float64)[:, None]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            found = (split + whole / rest) * (p * rest) / (p + rest)
+        sums[:, columns] = np.where((p >= 1) & (rest >= 1), _grid(found), 0.0)
+    return sums
+
+
+def changed_terms(terms: Terms, changes: np.ndarray) -> tuple[Terms, np.ndarray]:
+    """The terms (k rows) of texels whose rays' values changed by ``changes`` (k, 9)
+    (``ray_changes``), and (k,) bool: the rows whose old sums were recovered exactly (the
+    others must be traced anew). ``terms``: the texels' terms from one round of rays (no
+    adaptive rounds, no light through translucent surfaces)."""
+    sums = _sums_of(terms)
+    again = _means(sums, terms.counts)
+    exact = np.ones(len(sums), bool)
+    for name in ("w_hit", "escaped", "hit_sq", "half_split", "quarter_split"):
+        mine, theirs = getattr(again, name), getattr(terms, name)
+        same = mine == theirs
+        exact &= same.all(axis=tuple(range(1, same.ndim)))
+    return _means(sums + changes, terms.counts), exact
 
 
 def _luminance_and_escaped(sums: np.ndarray) -> np.ndarray:

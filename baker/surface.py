@@ -76,7 +76,7 @@ def _textured(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray,
     return result
 
 
-def _base_colours(scene: Scene) -> np.ndarray:
+def diffuse_factors(scene: Scene) -> np.ndarray:
     """(M, 3) diffuse albedo factor of every material: baseColorFactor RGB × diffuse weight."""
     from .materials import material_table  # materials → surface → geometry → materials
 
@@ -94,7 +94,7 @@ def base_colour(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray) 
 
 def albedo(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray) -> np.ndarray:
     """Diffuse albedo (k, 3), linear RGB, at barycentric points (k, 3) of world triangles (k,)."""
-    colour = _textured(scene, world, tris, bary, _base_colours(scene),
+    colour = _textured(scene, world, tris, bary, diffuse_factors(scene),
                        lambda m: m.base_color_texture)
     return colour * _interpolate(world.colors[:, :3], world, tris, bary)
 
@@ -140,7 +140,7 @@ def triangle_albedo(scene: Scene, world: World) -> tuple[np.ndarray, np.ndarray]
     corners = world.colors[world.triangles][..., :3]  # (T, 3 corners, 3)
     uniform = np.all(corners == corners[:, :1], axis=(1, 2))
     textured = np.array([m.base_color_texture is not None for m in scene.materials], bool)
-    table = _base_colours(scene)[world.tri_material] * corners[:, 0]
+    table = diffuse_factors(scene)[world.tri_material] * corners[:, 0]
     return table, textured[world.tri_material] | ~uniform
 
 

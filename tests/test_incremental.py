@@ -604,7 +604,7 @@ def test_state_atlas_joins_the_instances_and_splits_them_back(tmp_path):
 
 def test_rays_stopped_before_the_moved_box_leave_their_texels_clean(tmp_path, monkeypatch):
     """A ray that meets the moved box only behind a surface that did not move has that surface
-    as its first hit before and after the move (``_stopped_before``): the texels behind a
+    as its first hit before and after the move (``_HitsCompared``): the texels behind a
     screen are not recomputed, and the rebake still gives the full bake's bytes."""
     from baker import incremental
 
@@ -616,8 +616,9 @@ def test_rays_stopped_before_the_moved_box_leave_their_texels_clean(tmp_path, mo
     found = {}
     for name in ("every ray that meets it", "first hits only"):
         if name == "every ray that meets it":
-            monkeypatch.setattr(incremental, "_stopped_before",
-                                lambda tracer, changed, origins, *_: np.zeros(len(origins), bool))
+            judged = incremental._HitsCompared.__call__  # every ray that meets it: changed
+            monkeypatch.setattr(incremental._HitsCompared, "__call__",
+                                lambda self, *rays: judged(self, *rays) | True)
         out = tmp_path / f"{name}.glb"
         baker.bake(before, out, settings)
         result = baker.bake(after, out, settings, incremental=True)
@@ -668,3 +669,65 @@ def test_a_state_with_zip64_members_reads_back_and_rebakes(tmp_path, monkeypatch
     assert (tmp_path / "incremental.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()
     assert (default_path(tmp_path / "incremental.glb").read_bytes()
             == default_path(tmp_path / "full.glb").read_bytes())
+
+
+@pytest.mark.parametrize("case", ["recovered", "not recovered", "albedo above 1"])
+def test_texels_whose_rays_the_move_changed_recast_only_those_rays(tmp_path, monkeypatch, case):
+    """In a diffuse scene a texel whose rays meet the moved box takes the change of those rays
+    alone (``integrate.ray_changes``): far fewer rays than its own are cast. Where its stored
+    sums are not recovered exactly (forced here), or an albedo above 1 could make sums inexact
+    (``Surfaces.exact_sums``), it is traced anew. The bytes are the full bake's either way."""
+    from baker import integrate, incremental
+
+    if case == "not recovered":
+        exactness = integrate.changed_terms
+        monkeypatch.setattr(incremental, "changed_terms", lambda terms, changes: (
+            exactness(terms, changes)[0], np.zeros(len(changes), bool)))
+    colours = {"accent": (3.0, 0.5, 0.9)} if case == "albedo above 1" else {}
+    settings = baker.Settings(rays=16, page_size=128, shadow_rays=4, threads=1, d_max=1.5)
+    before = _room(lamp=None, colours=colours).save(tmp_path / "before.glb")
+    after = _room(moved(BOXES, "box1", at=(1.2, -1.1)), lamp=None, colours=colours).save(
+        tmp_path / "after.glb")
+    baker.bake(after, tmp_path / "full.glb", settings)
+    baker.bake(before, tmp_path / "out.glb", settings)
+    result = baker.bake(after, tmp_path / "out.glb", settings, incremental=True)
+    assert (tmp_path / "out.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()
+    assert default_path(tmp_path / "out.glb").read_bytes() == default_path(
+        tmp_path / "full.glb").read_bytes()
+    info = result.rebake
+    by_reason = info["dirty_by_reason"]
+    assert by_reason["obscurance"] > 100
+    traced = (by_reason["own"] + by_reason["validity"]) * settings.rays
+    if case == "recovered":
+        assert info["rays"] < traced + 0.3 * by_reason["obscurance"] * settings.rays, info
+    else:
+        assert info["rays"] >= traced + by_reason["obscurance"] * settings.rays, info
+
+
+def test_far_texels_whose_probes_see_the_same_faces_keep_their_validity(tmp_path, monkeypatch):
+    """A far texel's validity changes only if one of its hemisphere probes meets a back face
+    first before the move and not after, or the other way round (``_ProbesCompared``): the
+    texels whose probes merely see the moved box are not probed again, and the rebake still
+    gives the full bake's bytes."""
+    from baker import incremental
+
+    settings = baker.Settings(rays=16, page_size=128, shadow_rays=4, threads=1, d_max=1.5)
+    before = _room(lamp=None).save(tmp_path / "before.glb")
+    after = _room(moved(BOXES, "box1", at=(1.2, -1.1)), lamp=None).save(tmp_path / "after.glb")
+    baker.bake(after, tmp_path / "full.glb", settings)
+    probed = {}
+    check = incremental.check_texels
+    for name in ("every probe that meets it", "back faces compared"):
+        if name == "every probe that meets it":
+            judged = incremental._ProbesCompared.__call__
+            monkeypatch.setattr(incremental._ProbesCompared, "__call__",
+                                lambda self, *probes: judged(self, *probes) | True)
+        monkeypatch.setattr(incremental, "check_texels", lambda *args, **kwargs: (
+            probed.__setitem__(name, len(args[3])) or check(*args, **kwargs)))
+        out = tmp_path / f"{name}.glb"
+        baker.bake(before, out, settings)
+        assert baker.bake(after, out, settings, incremental=True).rebake["incremental"]
+        assert out.read_bytes() == (tmp_path / "full.glb").read_bytes()
+        assert default_path(out).read_bytes() == default_path(tmp_path / "full.glb").read_bytes()
+        monkeypatch.undo()
+    assert probed["back faces compared"] < 0.8 * probed["every probe that meets it"], probed

@@ -71,3 +71,67 @@ def test_standard_error_of_a_known_variance():
                   half_split=np.zeros((1, 2)), quarter_split=np.zeros((1, 2)))
     stderr = terms.standard_error(np.zeros(3))
     assert np.isclose(stderr[0], np.sqrt(0.25 * 100 / 99 / 100))
+
+
+def _random_rays(seed: int, texels: int, rays: int, triangles: int = 50):
+    """Embree-like hits of texels × rays rays, texel-major: primID (−1 for misses), tfar."""
+    rng = np.random.default_rng(seed)
+    primitive = np.where(rng.random(texels * rays) < 0.3, -1,
+                         rng.integers(0, triangles, texels * rays)).astype(np.int32)
+    distance = (rng.random(texels * rays) * 2.0).astype(np.float32)
+    return primitive, distance, rng.random((triangles, 3))
+
+
+def test_texel_sums_are_exact_in_any_order_and_recovered_from_the_means():
+    """Every ray's values are rounded to a grid fine enough to be exact when summed, so a
+    texel's sums are the same bits whatever the order of its rays (what a rebake that swaps one
+    ray's old value for its new one relies on), and the stored means give them back exactly."""
+    from baker.integrate import _COLUMNS, _accumulate_kernel, _means, _sums_of
+    from baker.surface import LUMINANCE
+
+    texels, rays = 300, 64
+    primitive, distance, table = _random_rays(4, texels, rays)
+    kind = np.zeros(len(table), np.uint8)
+    shade = (np.float32(2.0), 0, table, kind, np.zeros((0, 4)), LUMINANCE)
+    in_order = np.zeros((texels, _COLUMNS))
+    _accumulate_kernel(rays, primitive, distance, *shade, in_order)
+    shuffled = np.random.default_rng(5).permutation(texels * rays)
+    any_order = np.zeros((texels, _COLUMNS))
+    _accumulate_kernel(rays, primitive[shuffled], distance[shuffled], *shade, any_order,
+                       shuffled // rays, shuffled % rays)
+    assert np.array_equal(in_order, any_order)
+    assert (in_order[:, 5] > 0).any() and (in_order[:, 8] > 0).any()  # halves, quarters
+    counts = np.full(texels, rays, np.int64)
+    assert np.array_equal(_sums_of(_means(in_order, counts)), in_order)
+
+
+def test_a_rays_change_replaces_its_value_in_the_sums_exactly():
+    """The kernel's signed sums of changed rays (what ``ray_changes`` adds up) and
+    ``changed_terms``: the terms of texels after some of their rays' hits changed are the bits
+    of the terms of the new hits, summed afresh."""
+    from baker.integrate import (_COLUMNS, _accumulate_kernel, _means, changed_terms)
+    from baker.surface import LUMINANCE
+
+    texels, rays = 200, 16
+    primitive, distance, table = _random_rays(6, texels, rays)
+    rng = np.random.default_rng(7)
+    changed = np.flatnonzero(rng.random(texels * rays) < 0.05)
+    new_primitive, new_distance = primitive.copy(), distance.copy()
+    new_primitive[changed] = rng.integers(-1, len(table), len(changed))
+    new_distance[changed] = rng.random(len(changed)).astype(np.float32)
+    kind = np.zeros(len(table), np.uint8)
+    shade = (np.float32(2.0), 0, table, kind, np.zeros((0, 4)), LUMINANCE)
+    before, after = np.zeros((texels, _COLUMNS)), np.zeros((texels, _COLUMNS))
+    _accumulate_kernel(rays, primitive, distance, *shade, before)
+    _accumulate_kernel(rays, new_primitive, new_distance, *shade, after)
+    changes = np.zeros((texels, _COLUMNS))
+    for sign, hits, dist in ((-1.0, primitive, distance), (1.0, new_primitive, new_distance)):
+        _accumulate_kernel(rays, hits[changed], dist[changed], *shade, changes,
+                           changed // rays, changed % rays, sign)
+    counts = np.full(texels, rays, np.int64)
+    terms, exact = changed_terms(_means(before, counts), changes)
+    assert exact.all()
+    fresh = _means(after, counts)
+    for name in ("w_hit", "escaped", "hit_sq", "half_split", "quarter_split"):
+        assert np.array_equal(getattr(terms, name), getattr(fresh, name)), name
+    assert not np.array_equal(fresh.w_hit, _means(before, counts).w_hit)
