@@ -21,7 +21,7 @@ import numpy as np
 
 from .geometry import World
 from .obscurance import RHO_KINDS, UNIT_REFLECTIVITY, rho
-from .parallel import run_chunks, texels_per_chunk
+from .parallel import cores, even_slices, run_chunks, texels_per_chunk
 from .rasterise import Texels
 from .sampling import TECHNIQUES, fill_cosine, fill_points, frame, inline, jit
 from .scene import Scene
@@ -652,7 +652,7 @@ def integrate(scene: Scene, world: World, tracer: Tracer, texels: Texels, settin
                 progress(len(chunk))
 
         step = texels_per_chunk(settings.chunk_texels, batch)
-        run_chunks(work, [active[start:start + step] for start in range(0, len(active), step)],
+        run_chunks(work, [active[rows] for rows in even_slices(len(active), step, 2 * cores())],
                    settings.threads)
         counts[active] += batch
         first += batch
