@@ -281,10 +281,14 @@ def _on_grid(x):
     return (x + _SHIFT) - _SHIFT
 
 
+_TEXEL_MAJOR = (np.zeros(0, np.int64), np.zeros(0, np.int64))  # ``_accumulate_kernel``'s
+# (target, sample) for rays laid out texel by texel (an array default argument of a numba
+# function is a constant it must not free: passed each time instead)
+
+
 @jit
 def _accumulate_kernel(rays, primitive, distance, d_max, rho_kind, table, kind, ray_albedo,
-                       luminance, sums, target=np.zeros(0, np.int64),
-                       sample=np.zeros(0, np.int64), sign=1.0):
+                       luminance, sums, target, sample, sign):
     """Add each ray's values to its texel's sums (k, 9): R(Q)·ρ(d) (RGB), escaped weight (1 for
     a miss), squared luminance of R·ρ; then, for the rays among the first ⌊rays/2⌋ and the
     first ⌊rays/4⌋ of their texel, luminance of R·ρ and escaped weight (for the split error
@@ -292,9 +296,10 @@ def _accumulate_kernel(rays, primitive, distance, d_max, rho_kind, table, kind, 
     the sums are exact: the same bits in any order.
 
     primitive/distance: Embree's primID (−1: no hit within d_max) and tfar of the rays; by
-    default (k·rays,), texel-major, ray r being sample r mod rays of texel r // rays; else ray
-    j is sample ``sample[j]`` of texel ``target[j]`` (m,) (a rebake's changed rays, added with
-    ``sign`` −1 for their old hits and +1 for their new ones: ``ray_changes``).
+    texel-major (k·rays,), ray r being sample r mod rays of texel r // rays, when ``target``
+    and ``sample`` are empty (``_TEXEL_MAJOR``); else ray j is sample ``sample[j]`` of texel
+    ``target[j]`` (m,) (a rebake's changed rays, added with ``sign`` −1 for their old hits and
+    +1 for their new ones: ``ray_changes``). ``sign``: 1.0 to add each ray's values.
     table: ``surface.triangle_albedo``'s; kind: (T,) uint8 per triangle, ``_CONSTANT`` (albedo
     from ``table``), ``_VARYING`` (ray_albedo[r, :3] is the albedo at the hit) or ``_SPECIAL``
     (a mirror, glass or translucent material, ``_special_hits``: ray_albedo[r, :3] is the ray's
@@ -606,7 +611,7 @@ def _chunk_sums(surfaces: Surfaces, tracer: Tracer, texels: Texels, rows: np.nda
     sums = np.zeros((len(rows), _COLUMNS))
     _accumulate_kernel(rays, hits["primID"], hits["tfar"], np.float32(settings.d_max),
                        RHO_KINDS[settings.rho], surfaces.table, kind, ray_albedo, LUMINANCE,
-                       sums)
+                       sums, *_TEXEL_MAJOR, 1.0)
     return sums, chains
 
 

@@ -86,7 +86,7 @@ def test_texel_sums_are_exact_in_any_order_and_recovered_from_the_means():
     """Every ray's values are rounded to a grid fine enough to be exact when summed, so a
     texel's sums are the same bits whatever the order of its rays (what a rebake that swaps one
     ray's old value for its new one relies on), and the stored means give them back exactly."""
-    from baker.integrate import _COLUMNS, _accumulate_kernel, _means, _sums_of
+    from baker.integrate import _COLUMNS, _TEXEL_MAJOR, _accumulate_kernel, _means, _sums_of
     from baker.surface import LUMINANCE
 
     texels, rays = 300, 64
@@ -94,11 +94,11 @@ def test_texel_sums_are_exact_in_any_order_and_recovered_from_the_means():
     kind = np.zeros(len(table), np.uint8)
     shade = (np.float32(2.0), 0, table, kind, np.zeros((0, 4)), LUMINANCE)
     in_order = np.zeros((texels, _COLUMNS))
-    _accumulate_kernel(rays, primitive, distance, *shade, in_order)
+    _accumulate_kernel(rays, primitive, distance, *shade, in_order, *_TEXEL_MAJOR, 1.0)
     shuffled = np.random.default_rng(5).permutation(texels * rays)
     any_order = np.zeros((texels, _COLUMNS))
     _accumulate_kernel(rays, primitive[shuffled], distance[shuffled], *shade, any_order,
-                       shuffled // rays, shuffled % rays)
+                       shuffled // rays, shuffled % rays, 1.0)
     assert np.array_equal(in_order, any_order)
     assert (in_order[:, 5] > 0).any() and (in_order[:, 8] > 0).any()  # halves, quarters
     counts = np.full(texels, rays, np.int64)
@@ -109,7 +109,7 @@ def test_a_rays_change_replaces_its_value_in_the_sums_exactly():
     """The kernel's signed sums of changed rays (what ``ray_changes`` adds up) and
     ``changed_terms``: the terms of texels after some of their rays' hits changed are the bits
     of the terms of the new hits, summed afresh."""
-    from baker.integrate import (_COLUMNS, _accumulate_kernel, _means, changed_terms)
+    from baker.integrate import _COLUMNS, _TEXEL_MAJOR, _accumulate_kernel, _means, changed_terms
     from baker.surface import LUMINANCE
 
     texels, rays = 200, 16
@@ -122,8 +122,8 @@ def test_a_rays_change_replaces_its_value_in_the_sums_exactly():
     kind = np.zeros(len(table), np.uint8)
     shade = (np.float32(2.0), 0, table, kind, np.zeros((0, 4)), LUMINANCE)
     before, after = np.zeros((texels, _COLUMNS)), np.zeros((texels, _COLUMNS))
-    _accumulate_kernel(rays, primitive, distance, *shade, before)
-    _accumulate_kernel(rays, new_primitive, new_distance, *shade, after)
+    _accumulate_kernel(rays, primitive, distance, *shade, before, *_TEXEL_MAJOR, 1.0)
+    _accumulate_kernel(rays, new_primitive, new_distance, *shade, after, *_TEXEL_MAJOR, 1.0)
     changes = np.zeros((texels, _COLUMNS))
     for sign, hits, dist in ((-1.0, primitive, distance), (1.0, new_primitive, new_distance)):
         _accumulate_kernel(rays, hits[changed], dist[changed], *shade, changes,
