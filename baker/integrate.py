@@ -281,9 +281,8 @@ def _on_grid(x):
     return (x + _SHIFT) - _SHIFT
 
 
-_TEXEL_MAJOR = (np.zeros(0, np.int64), np.zeros(0, np.int64))  # ``_accumulate_kernel``'s
-# (target, sample) for rays laid out texel by texel (an array default argument of a numba
-# function is a constant it must not free: passed each time instead)
+# ``_accumulate_kernel``'s (target, sample) for rays laid out texel by texel.
+_TEXEL_MAJOR = (np.zeros(0, np.int64), np.zeros(0, np.int64))
 
 
 @jit
@@ -295,9 +294,9 @@ def _accumulate_kernel(rays, primitive, distance, d_max, rho_kind, table, kind, 
     estimate, see ``Terms.rmse``). Every value is rounded to the grid (``_on_grid``) first, so
     the sums are exact: the same bits in any order.
 
-    primitive/distance: Embree's primID (−1: no hit within d_max) and tfar of the rays; by
-    texel-major (k·rays,), ray r being sample r mod rays of texel r // rays, when ``target``
-    and ``sample`` are empty (``_TEXEL_MAJOR``); else ray j is sample ``sample[j]`` of texel
+    primitive/distance: Embree's primID (−1: no hit within d_max) and tfar of the rays, laid
+    out texel by texel (k·rays,), ray r being sample r mod rays of texel r // rays, when
+    ``target`` and ``sample`` are empty (``_TEXEL_MAJOR``); else ray j is sample ``sample[j]`` of texel
     ``target[j]`` (m,) (a rebake's changed rays, added with ``sign`` −1 for their old hits and
     +1 for their new ones: ``ray_changes``). ``sign``: 1.0 to add each ray's values.
     table: ``surface.triangle_albedo``'s; kind: (T,) uint8 per triangle, ``_CONSTANT`` (albedo

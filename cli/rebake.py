@@ -54,6 +54,10 @@ def run(args: argparse.Namespace) -> int:
         names = baker.incremental.node_names(args.scene)
         found = set(result.rebake["moved_nodes"])
         named = {names.get(int(n), n) if n.isdigit() else n for n in args.moved}
+        unknown = sorted(named - set(names.values()))
+        if unknown:
+            print(f"baker: note: {args.scene} has no node named {', '.join(unknown)} (--moved)",
+                  file=sys.stderr)
         if found != named:
             print(f"baker: note: --moved named {', '.join(sorted(named))}; the diff found "
                   f"{', '.join(sorted(found)) or 'no node'} moved (the rebake followed the diff)",

@@ -229,6 +229,8 @@ def test_cli_bakes_incrementally_rebakes_and_watches(base, tmp_path, capsys):
     assert "rebake:" not in capsys.readouterr().out
     assert main(["bake", str(scene), "-o", str(out), *args]) == 0  # the state is used by default
     assert "0 of" in capsys.readouterr().out
+    assert main(["rebake", str(scene), "-o", str(out), "--moved", "crate_99"]) == 0
+    assert "has no node named crate_99" in capsys.readouterr().err
     assert main(["watch", str(scene), "-o", str(out), "--rays", "16", "--max-bakes", "1",
                  "--interval", "0.01"]) == 0
     assert "baked" in capsys.readouterr().out
