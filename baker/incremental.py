@@ -223,10 +223,13 @@ def _near_flags(x, y, z, start, stop, local, distance_sq, radii, length, flags):
     """Set ``flags[r]`` for the rays r = ``start`` … ``stop − 1`` from the origin along the
     local directions x, y, z: whether it passes within ``radii[b]`` of some sphere
     ``local[b]`` (``_sphere_locals``) before ``length``; return whether any does. Spheres
-    outside, rays inside, without branches: the loop over the rays vectorises."""
+    outside (those out of reach skipped, ``_sphere_reachable``), rays inside, without
+    branches: the loop over the rays vectorises."""
     for r in range(start, stop):
         flags[r] = False
     for b in range(len(radii)):
+        if not _sphere_reachable(local, distance_sq, radii, length, b):
+            continue
         cx, cy, cz, radius = local[b, 0], local[b, 1], local[b, 2], radii[b]
         low, high, room = -radius, length + radius, radius * radius - distance_sq[b]
         for r in range(start, stop):
@@ -239,12 +242,18 @@ def _near_flags(x, y, z, start, stop, local, distance_sq, radii, length, flags):
 
 
 @inline
-def _reachable(local, distance_sq, radii, length):
+def _sphere_reachable(local, distance_sq, radii, length, b):
     """Whether a ray of the hemisphere (local z ≥ 0) no longer than ``length`` can pass near
-    some sphere (``_sphere_locals``): one not wholly below the plane nor out of reach. Spares
-    drawing and testing the rays of texels that face away from the change."""
+    sphere b (``_sphere_locals``): it is not wholly below the plane nor out of reach."""
+    return local[b, 2] >= -radii[b] and distance_sq[b] <= (length + radii[b]) ** 2
+
+
+@inline
+def _reachable(local, distance_sq, radii, length):
+    """Whether some sphere is reachable (``_sphere_reachable``). Spares drawing and testing
+    the rays of texels that face away from the change."""
     for b in range(len(radii)):
-        if local[b, 2] >= -radii[b] and distance_sq[b] <= (length + radii[b]) ** 2:
+        if _sphere_reachable(local, distance_sq, radii, length, b):
             return True
     return False
 
@@ -299,10 +308,11 @@ def _box_grid(box, bits):
 
 
 @inline
-def _cell_candidates(local, distance_sq, radii, rays, bits, scrambles, solve, boxes, counts,
-                     grids, marks, candidates):
+def _cell_candidates(local, distance_sq, radii, length, rays, bits, scrambles, solve, boxes,
+                     counts, grids, marks, candidates):
     """The samples of a texel (``sobol`` points, its ``scrambles``) whose directions can lie in
-    the cone of some sphere ``local`` (``_sphere_locals``), into ``candidates`` (rays,) int64:
+    the cone of some sphere ``local`` (``_sphere_locals``) that rays of ``length`` can reach
+    (``_sphere_reachable``), into ``candidates`` (rays,) int64:
     returns how many, or −1 when finding them would cost more than drawing every ray.
     ``boxes`` (b, 8, 4), ``counts`` (b,), ``grids`` (b, 8) and ``marks`` (rays,) uint8 (all 0,
     and left so) are scratch; ``solve`` is ``sampling.net_solve(bits)``. A cone's directions
@@ -313,6 +323,9 @@ def _cell_candidates(local, distance_sq, radii, rays, bits, scrambles, solve, bo
     and no reason to draw the others."""
     budget = int(_CELL_SHARE * rays)
     for b in range(len(radii)):  # first the boxes, and whether their cells are few enough
+        counts[b] = 0
+        if not _sphere_reachable(local, distance_sq, radii, length, b):
+            continue  # no ray of the texel comes near it
         distance = np.sqrt(distance_sq[b])
         if distance <= 1.5 * radii[b]:
             return -1  # a wide cone, and rays that start near the sphere
@@ -385,8 +398,9 @@ def _drawn_near_rays(technique: int, seed, keys: np.ndarray, rays: int, starts: 
             found = -1
             if cells:
                 scrambles = texel_scrambles(seed, keys[i], np.uint64(0))
-                found = _cell_candidates(local, distance_sq, radii, rays, bits, scrambles, solve,
-                                         boxes, counts, grids, marks, candidates)
+                found = _cell_candidates(local, distance_sq, radii, length, rays, bits,
+                                         scrambles, solve, boxes, counts, grids, marks,
+                                         candidates)
             if found < 0:  # drawn with the block's other texels, below
                 todo[count], todo_keys[count] = i, keys[i]
                 count += 1
