@@ -9,12 +9,14 @@ matrix), so moving or turning a node leaves the atlas bit for bit as it was (inc
 from __future__ import annotations
 
 import functools
+from dataclasses import dataclass
 
 import numpy as np
 import xatlas
 
 from .atlas import Atlas, InstanceUV
 from .errors import SettingsError
+from .forked import call_forked
 from .geometry import World
 from .scene import Scene
 from .settings import Resolved
@@ -104,24 +106,45 @@ def frame_area(scene: Scene, world: World, instances: list[int] | None = None) -
     return total
 
 
+@dataclass(frozen=True)
+class _Packed:
+    """What an xatlas run gave: its page size, page and chart counts, and per mesh (one per
+    instance, in the order added) xatlas's (vertices, triangles, uv) and the pages and charts of
+    its vertices (``xatlas.Atlas.get_mesh_vertex_assignment``)."""
+
+    width: int
+    height: int
+    atlas_count: int
+    chart_count: int
+    meshes: tuple[tuple[np.ndarray, ...], ...]
+
+
 def _generate(scene: Scene, world: World, instances: list[int], settings: Resolved,
-              resolution: int) -> xatlas.Atlas:
+              resolution: int) -> _Packed:
     """One xatlas run over the instances' triangles in their rigid-free frames
-    (``frame_positions``), scaled to texel units.
+    (``frame_positions``), scaled to texel units, in a forked child (``forked.py``: xatlas's
+    threads can crash it, and a crashed run is run again).
 
     xatlas takes float32 and ignores faces with an area under about 1e-7 of its units; in texel
     units only faces far below a texel's size fall under that, not merely small ones.
     """
-    atlas = xatlas.Atlas()
+    meshes = []
     for i in instances:
-        tris = world.instance_triangles(i)
-        vertices = world.triangles[tris]
-        first = world.vertex_start[i]
         positions = frame_positions(scene, i) * settings.texel_density
-        positions = positions.astype(np.float32)
-        atlas.add_mesh(positions, (vertices - first).astype(np.uint32))
-    atlas.generate(xatlas.ChartOptions(), _pack_options(settings, resolution))
-    return atlas
+        local = world.triangles[world.instance_triangles(i)] - world.vertex_start[i]
+        meshes.append((positions.astype(np.float32), local.astype(np.uint32)))
+
+    def run() -> _Packed:
+        atlas = xatlas.Atlas()
+        for positions, triangles in meshes:
+            atlas.add_mesh(positions, triangles)
+        atlas.generate(xatlas.ChartOptions(), _pack_options(settings, resolution))
+        return _Packed(width=int(atlas.width), height=int(atlas.height),
+                       atlas_count=int(atlas.atlas_count), chart_count=int(atlas.chart_count),
+                       meshes=tuple(tuple(atlas[m]) + tuple(atlas.get_mesh_vertex_assignment(m))
+                                    for m in range(len(meshes))))
+
+    return call_forked(run, "the unwrapper (xatlas)")
 
 
 def unwrap(scene: Scene, world: World, settings: Resolved) -> Atlas:
@@ -147,8 +170,7 @@ def unwrap(scene: Scene, world: World, settings: Resolved) -> Atlas:
     _check_not_shrunk(atlas, world, scene, instances, settings)
     result = []
     for mesh, i in enumerate(instances):
-        vertices, triangles, uv = atlas[mesh]
-        page_of_vertex, _chart = atlas.get_mesh_vertex_assignment(mesh)
+        vertices, triangles, uv, page_of_vertex, _chart = atlas.meshes[mesh]
         vertices, triangles = vertices.astype(np.int64), triangles.astype(np.int64)
         uv, page = _snap_unplaced(frame_positions(scene, i), vertices, uv.astype(np.float64),
                                   page_of_vertex.astype(np.int64), int(_NO_PAGE))
@@ -184,7 +206,7 @@ def _snap_unplaced(frame: np.ndarray, vertices: np.ndarray, uv: np.ndarray,
     return uv, page
 
 
-def _check_not_shrunk(atlas: xatlas.Atlas, world: World, scene: Scene, instances: list[int],
+def _check_not_shrunk(atlas: _Packed, world: World, scene: Scene, instances: list[int],
                       settings: Resolved) -> None:
     """Raise PageTooSmall when xatlas shrank a chart to fit it in a page.
 
@@ -195,8 +217,7 @@ def _check_not_shrunk(atlas: xatlas.Atlas, world: World, scene: Scene, instances
     """
     uv_length, world_length, extent, label = [], [], [], []
     for mesh, i in enumerate(instances):
-        _vertices, triangles, uv = atlas[mesh]
-        _page, chart = atlas.get_mesh_vertex_assignment(mesh)
+        _vertices, triangles, uv, _page, chart = atlas.meshes[mesh]
         corners = uv.astype(np.float64)[triangles.astype(np.int64)] * [atlas.width, atlas.height]
         charts = chart.astype(np.int64)[triangles[:, 0].astype(np.int64)]
         placed = (charts >= 0) & (charts < atlas.chart_count)

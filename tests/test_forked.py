@@ -1,0 +1,69 @@
+"""A call run in a forked child (``baker/forked.py``, how xatlas runs): its value or its error
+comes back, and a child killed by a signal is run again."""
+
+from __future__ import annotations
+
+import faulthandler
+import os
+import signal
+import sys
+
+import numpy as np
+import pytest
+
+from baker import forked
+from baker.errors import BakerError
+
+pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"),
+                                reason="forked calls are made on Linux only; elsewhere in-process")
+
+
+def test_the_childs_value_comes_back_and_the_child_is_another_process():
+    def work():
+        return os.getpid(), np.arange(5.0) * 2
+
+    pid, values = forked.call_forked(work, "a test")
+    assert pid != os.getpid()
+    assert np.array_equal(values, np.arange(5.0) * 2)
+
+
+def _crash() -> None:
+    """Die of SIGSEGV, as xatlas's race does (without pytest's fault handler's report)."""
+    faulthandler.disable()
+    os.kill(os.getpid(), signal.SIGSEGV)
+
+
+def test_a_child_killed_by_a_signal_is_run_again(tmp_path):
+    marker = tmp_path / "first"
+
+    def crashes_once():
+        if not marker.exists():
+            marker.write_text("crashed")
+            _crash()
+        return "second run"
+
+    assert forked.call_forked(crashes_once, "a test") == "second run"
+    assert marker.read_text() == "crashed"
+
+
+def test_a_child_that_always_crashes_ends_in_a_clear_error(tmp_path):
+    runs = tmp_path / "runs"
+    runs.mkdir()
+
+    def always():
+        (runs / str(len(list(runs.iterdir())))).touch()
+        _crash()
+
+    with pytest.raises(BakerError) as caught:
+        forked.call_forked(always, "the unwrapper (xatlas)")
+    assert "the unwrapper (xatlas) crashed 3 times in a row (SIGSEGV" in str(caught.value)
+    assert "fix:" in str(caught.value)
+    assert len(list(runs.iterdir())) == forked.ATTEMPTS
+
+
+def test_the_childs_error_is_raised_here():
+    def fails():
+        raise ValueError("no mesh")
+
+    with pytest.raises(ValueError, match="no mesh"):
+        forked.call_forked(fails, "a test")
