@@ -5,10 +5,13 @@ lets go of the queue's lock and only then reads the task, while another thread m
 task that makes the queue reallocate (``TaskScheduler::workerThread`` and ``run`` in xatlas.cpp).
 The worker then calls a stale function pointer: SIGSEGV in an xatlas worker, seen in 2 of about
 12 runs of the test suite here (gdb: ``?? ()`` called from ``TaskScheduler::workerThread``).
-``unwrap.py`` runs xatlas through ``call_forked``: the child is forked (copy-on-write, so the
-inputs cost nothing to pass), its result comes back pickled through a pipe, and a child killed
-by a signal is run again — xatlas's result does not depend on its threads' timing. Where
-``os.fork`` is missing (Windows) the call runs in this process, unprotected.
+The same race can leave a task unfinished, so that xatlas waits for it for ever (a fuzzed bake
+of a few triangles once ran past the test's 20 s). ``unwrap.py`` runs xatlas through
+``call_forked``: the child is forked (copy-on-write, so the inputs cost nothing to pass), its
+result comes back pickled through a pipe, and a child killed by a signal, or running far longer
+than its work can take, is killed and run again — xatlas's result does not depend on its
+threads' timing. Where ``os.fork`` is missing (Windows) the call runs in this process,
+unprotected.
 """
 
 from __future__ import annotations
@@ -16,8 +19,10 @@ from __future__ import annotations
 import ctypes
 import os
 import pickle
+import select
 import signal
 import sys
+import time
 import warnings
 from typing import Any, Callable
 
@@ -30,30 +35,31 @@ class ChildCrashed(BakerError):
     """Every attempt at a forked call died of a signal."""
 
 
-def call_forked(function: Callable[[], Any], what: str) -> Any:
+def call_forked(function: Callable[[], Any], what: str, seconds: float) -> Any:
     """``function()`` run in a forked child: its value, or the exception it raised, raised here
-    (as RuntimeError when it cannot be pickled). A child killed by a signal is run again, up to
-    ``ATTEMPTS`` times, then ChildCrashed names ``what`` was being done. Ctrl-C here kills the
-    child. Without ``os.fork``, ``function()`` is simply called."""
+    (as RuntimeError when it cannot be pickled). A child killed by a signal, or still running
+    after ``seconds``, is killed and run again, up to ``ATTEMPTS`` times; then ChildCrashed
+    names ``what`` was being done. Ctrl-C here kills the child. Without ``os.fork``,
+    ``function()`` is simply called."""
     if not hasattr(os, "fork") or not sys.platform.startswith("linux"):
         return function()
-    signals = []
+    failures = []
     for _ in range(ATTEMPTS):
-        outcome = _attempt(function)
-        if isinstance(outcome, int):
-            signals.append(signal.Signals(outcome).name)
+        outcome = _attempt(function, seconds)
+        if isinstance(outcome, str):
+            failures.append(outcome)
             continue
         ok, value = outcome
         if ok:
             return value
         raise value
-    raise ChildCrashed(f"{what} crashed {ATTEMPTS} times in a row ({', '.join(signals)})",
+    raise ChildCrashed(f"{what} crashed {ATTEMPTS} times in a row ({', '.join(failures)})",
                        fix="run the bake again; if it keeps crashing, report it with the scene")
 
 
-def _attempt(function: Callable[[], Any]) -> tuple[bool, Any] | int:
-    """One forked run: (True, value) or (False, exception), or the number of the signal that
-    killed the child."""
+def _attempt(function: Callable[[], Any], seconds: float) -> tuple[bool, Any] | str:
+    """One forked run: (True, value) or (False, exception), or why the child was lost: the
+    name of the signal that killed it, or that it ran past ``seconds`` (it is killed)."""
     _trim_heap()
     read, write = os.pipe()
     with warnings.catch_warnings():  # Python 3.12+ warns of forking a threaded process: the
@@ -63,19 +69,38 @@ def _attempt(function: Callable[[], Any]) -> tuple[bool, Any] | int:
         _child(function, read, write)
     os.close(write)
     try:
-        with os.fdopen(read, "rb") as pipe:
-            data = pipe.read()
+        data = _read_until(read, time.monotonic() + seconds)
     except BaseException:  # Ctrl-C while the child runs: it goes too
         os.kill(pid, signal.SIGKILL)
         os.waitpid(pid, 0)
         raise
+    finally:
+        os.close(read)
+    if data is None:
+        os.kill(pid, signal.SIGKILL)
     _, status = os.waitpid(pid, 0)
+    if data is None:
+        return f"still running after {seconds:.0f} s"
     if os.WIFSIGNALED(status):
-        return os.WTERMSIG(status)
+        return signal.Signals(os.WTERMSIG(status)).name
     try:
         return pickle.loads(data)
     except Exception as error:  # a child that exited without a whole answer
         return False, RuntimeError(f"the forked call gave no usable result ({error!r})")
+
+
+def _read_until(fd: int, deadline: float) -> bytes | None:
+    """All of pipe ``fd`` up to its end, or None if it has not ended by ``deadline``
+    (``time.monotonic``)."""
+    parts = []
+    while True:
+        left = deadline - time.monotonic()
+        if left <= 0 or not select.select([fd], [], [], left)[0]:
+            return None
+        part = os.read(fd, 1 << 20)
+        if not part:
+            return b"".join(parts)
+        parts.append(part)
 
 
 def _trim_heap() -> None:

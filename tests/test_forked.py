@@ -7,6 +7,7 @@ import faulthandler
 import os
 import signal
 import sys
+import time
 
 import numpy as np
 import pytest
@@ -22,7 +23,7 @@ def test_the_childs_value_comes_back_and_the_child_is_another_process():
     def work():
         return os.getpid(), np.arange(5.0) * 2
 
-    pid, values = forked.call_forked(work, "a test")
+    pid, values = forked.call_forked(work, "a test", 60)
     assert pid != os.getpid()
     assert np.array_equal(values, np.arange(5.0) * 2)
 
@@ -42,7 +43,7 @@ def test_a_child_killed_by_a_signal_is_run_again(tmp_path):
             _crash()
         return "second run"
 
-    assert forked.call_forked(crashes_once, "a test") == "second run"
+    assert forked.call_forked(crashes_once, "a test", 60) == "second run"
     assert marker.read_text() == "crashed"
 
 
@@ -55,7 +56,7 @@ def test_a_child_that_always_crashes_ends_in_a_clear_error(tmp_path):
         _crash()
 
     with pytest.raises(BakerError) as caught:
-        forked.call_forked(always, "the unwrapper (xatlas)")
+        forked.call_forked(always, "the unwrapper (xatlas)", 60)
     assert "the unwrapper (xatlas) crashed 3 times in a row (SIGSEGV" in str(caught.value)
     assert "fix:" in str(caught.value)
     assert len(list(runs.iterdir())) == forked.ATTEMPTS
@@ -66,4 +67,18 @@ def test_the_childs_error_is_raised_here():
         raise ValueError("no mesh")
 
     with pytest.raises(ValueError, match="no mesh"):
-        forked.call_forked(fails, "a test")
+        forked.call_forked(fails, "a test", 60)
+
+
+def test_a_child_that_hangs_is_killed_and_run_again(tmp_path):
+    marker = tmp_path / "first"
+
+    def hangs_once():
+        if not marker.exists():
+            marker.write_text("hung")
+            time.sleep(600)
+        return "second run"
+
+    start = time.monotonic()
+    assert forked.call_forked(hangs_once, "a test", 1.0) == "second run"
+    assert time.monotonic() - start < 10
