@@ -82,3 +82,39 @@ def test_a_child_that_hangs_is_killed_and_run_again(tmp_path):
     start = time.monotonic()
     assert forked.call_forked(hangs_once, "a test", 1.0) == "second run"
     assert time.monotonic() - start < 10
+
+
+def test_a_bake_whose_unwrapper_crashes_once_gives_the_same_bytes(tmp_path, monkeypatch):
+    """The unwrap goes through ``call_forked``: xatlas dying of SIGSEGV in its first run (as its
+    task scheduler's race makes it) costs a re-run, not the bake."""
+    import xatlas
+
+    import baker
+    from assets.make_scenes import cornell_box
+
+    scene = cornell_box().save(tmp_path / "cornell.glb")
+    settings = baker.Settings(page_size=128, rays=4, shadow_rays=1, threads=1)
+    baker.bake(scene, tmp_path / "calm.glb", settings, state=False)
+    marker = tmp_path / "crashed"
+    real = xatlas.Atlas
+
+    class CrashesOnce:
+        def __init__(self):
+            self._atlas = real()
+
+        def __getattr__(self, name):
+            return getattr(self._atlas, name)
+
+        def __getitem__(self, mesh):
+            return self._atlas[mesh]
+
+        def generate(self, *options):
+            if not marker.exists():
+                marker.write_text("crashed")
+                _crash()
+            return self._atlas.generate(*options)
+
+    monkeypatch.setattr(xatlas, "Atlas", CrashesOnce)
+    baker.bake(scene, tmp_path / "crashed.glb", settings, state=False)
+    assert marker.read_text() == "crashed"
+    assert (tmp_path / "crashed.glb").read_bytes() == (tmp_path / "calm.glb").read_bytes()
