@@ -363,8 +363,8 @@ def _drawn_near_rays(technique: int, seed, keys: np.ndarray, rays: int, starts: 
     """The obscurance rays of texels keys (k,) — each texel's rays from ``starts[i]`` (k, 3) in
     its frame t1, t2, normals (k, 3) each — that may pass near the spheres (``_near_flags``):
     (texel (m,) int64 index into keys, sample (m,) int64 its sample index, x, y, z (m,) their
-    local directions, the bits ``cosine_directions`` gives). Texels that cannot reach a sphere (``_reachable``) draw
-    nothing. With ``sobol`` points (and ``cells``; False draws every ray, for the tests), a
+    local directions, the bits ``cosine_directions`` gives). Texels that cannot reach a sphere
+    (``_reachable``) draw nothing. With ``sobol`` points (and ``cells``; False draws every ray, for the tests), a
     texel whose spheres subtend narrow cones draws only the rays that may lie in them
     (``_cell_candidates``); the others' directions are drawn (``sampling.fill_points``,
     ``fill_cosine``) a few texels at a time into small buffers, so that no (k·rays,) arrays
@@ -624,6 +624,9 @@ class _NotStopped:
         return ~_stopped_before(self._tracer, self._changed, origins, directions, distance)
 
 
+_HIT_FIELDS = ("primID", "tfar", "u", "v")  # embreex's fields of a hit that shading reads
+
+
 class _HitsCompared:
     """Judges a ray that meets a moved node (at its old or new place) changed when its nearest
     hit within d_max in the whole scene now (``after``) differs from its hit in the scene of the
@@ -648,10 +651,10 @@ class _HitsCompared:
         hit = new["primID"] >= 0
         differ = (new["primID"] != old["primID"]) | (hit & (
             (new["tfar"] != old["tfar"]) | (new["u"] != old["u"]) | (new["v"] != old["v"])))
-        if self._keep:
+        if self._keep:  # what ``integrate.ray_changes`` reads of the hits
             self._pieces.append((rows[differ], samples[differ],
-                                 {k: v[differ] for k, v in old.items()},
-                                 {k: v[differ] for k, v in new.items()}))
+                                 {k: old[k][differ] for k in _HIT_FIELDS},
+                                 {k: new[k][differ] for k in _HIT_FIELDS}))
         self._cast.append(2 * len(origins))
         return differ
 
@@ -660,8 +663,8 @@ class _HitsCompared:
         after (each field (m,))."""
         if not self._pieces:
             empty = np.zeros(0, np.int64)
-            hits = {"primID": np.zeros(0, np.int32), "tfar": np.zeros(0, np.float32),
-                    "u": np.zeros(0, np.float32), "v": np.zeros(0, np.float32)}
+            hits = {k: np.zeros(0, np.int32 if k == "primID" else np.float32)
+                    for k in _HIT_FIELDS}
             return empty, empty, hits, dict(hits)
         rows, samples, old, new = zip(*self._pieces)
         join = lambda hits: {k: np.concatenate([h[k] for h in hits]) for k in hits[0]}

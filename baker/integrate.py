@@ -296,9 +296,9 @@ def _accumulate_kernel(rays, primitive, distance, d_max, rho_kind, table, kind, 
 
     primitive/distance: Embree's primID (−1: no hit within d_max) and tfar of the rays, laid
     out texel by texel (k·rays,), ray r being sample r mod rays of texel r // rays, when
-    ``target`` and ``sample`` are empty (``_TEXEL_MAJOR``); else ray j is sample ``sample[j]`` of texel
-    ``target[j]`` (m,) (a rebake's changed rays, added with ``sign`` −1 for their old hits and
-    +1 for their new ones: ``ray_changes``). ``sign``: 1.0 to add each ray's values.
+    ``target`` and ``sample`` are empty (``_TEXEL_MAJOR``); else ray j is sample ``sample[j]``
+    of texel ``target[j]`` (m,) (a rebake's changed rays, added with ``sign`` −1 for their old
+    hits and +1 for their new ones: ``ray_changes``). ``sign``: 1.0 to add each ray's values.
     table: ``surface.triangle_albedo``'s; kind: (T,) uint8 per triangle, ``_CONSTANT`` (albedo
     from ``table``), ``_VARYING`` (ray_albedo[r, :3] is the albedo at the hit) or ``_SPECIAL``
     (a mirror, glass or translucent material, ``_special_hits``: ray_albedo[r, :3] is the ray's
@@ -699,23 +699,29 @@ def _grid(x: np.ndarray) -> np.ndarray:
 def _sums_of(terms: Terms) -> np.ndarray:
     """(k, 9) the sums ``_means`` made ``terms`` from (of one round of rays), worked back from
     the means: each is a multiple of 2^-40 far smaller than float64's precision can tell apart,
-    so rounding recovers it. The splits give the halves' and quarters' sums through
-    split = part/p − (whole − part)/(n − p). ``changed_terms`` checks the result."""
+    so rounding recovers it. ``changed_terms`` checks the result."""
     n = terms.counts.astype(np.float64)
     sums = np.zeros((len(n), _COLUMNS))
     sums[:, _RGB] = _grid(terms.w_hit * n[:, None])
     sums[:, _ESCAPED] = _grid(terms.escaped * n)
     sums[:, _SQUARE] = _grid(terms.hit_sq * n)
     half, quarter = terms.counts // 2, terms.counts // 4
-    for columns, split, part, whole, whole_count in (
-            (_HALF, terms.half_split, half, _luminance_and_escaped(sums), terms.counts),
-            (_QUARTER, terms.quarter_split, quarter, None, half)):
-        whole = sums[:, _HALF] if whole is None else whole
-        p, rest = part.astype(np.float64)[:, None], (whole_count - part).astype(np.float64)[:, None]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            found = (split + whole / rest) * (p * rest) / (p + rest)
-        sums[:, columns] = np.where((p >= 1) & (rest >= 1), _grid(found), 0.0)
+    sums[:, _HALF] = _part_sums(terms.half_split, half, _luminance_and_escaped(sums),
+                                terms.counts)
+    sums[:, _QUARTER] = _part_sums(terms.quarter_split, quarter, sums[:, _HALF], half)
     return sums
+
+
+def _part_sums(split: np.ndarray, part: np.ndarray, whole: np.ndarray,
+               whole_count: np.ndarray) -> np.ndarray:
+    """(k, 2) the sums over the first ``part`` (k,) of ``whole_count`` (k,) rays, whose sums are
+    ``whole`` (k, 2), from ``_split``'s split = sum/p − (whole − sum)/(n − p), rounded to the
+    grid; 0 where ``_split`` gave 0 for want of rays."""
+    p = part.astype(np.float64)[:, None]
+    rest = (whole_count - part).astype(np.float64)[:, None]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        found = (split + whole / rest) * (p * rest) / (p + rest)
+    return np.where((p >= 1) & (rest >= 1), _grid(found), 0.0)
 
 
 def changed_terms(terms: Terms, changes: np.ndarray) -> tuple[Terms, np.ndarray]:
