@@ -10,7 +10,7 @@ from baker.load import load
 from baker.scene import Scene
 from baker.settings import Settings
 
-SHARED_SCENES = Path(__file__).resolve().parents[2] / "shared" / "scenes"
+SHARED_SCENES = Path(__file__).resolve().parent / "scenes"  # third-party, with licences: scenes/README.md
 REAL_SCENES = {
     "GlassVaseFlowers": SHARED_SCENES / "GlassVaseFlowers" / "GlassVaseFlowers.glb",
     "NegativeScaleTest": SHARED_SCENES / "NegativeScaleTest" / "NegativeScaleTest.glb",

@@ -1,7 +1,7 @@
 """Tests of baker.load: glTF decoding, node flattening and the errors a technical artist sees.
 
 Each test builds a small document with pygltflib objects (``Doc`` below), writes it to tmp_path and
-checks numbers computed by hand. The real sample scenes in shared/scenes must all load.
+checks numbers computed by hand. The real sample scenes in tests/scenes must all load.
 """
 
 from __future__ import annotations
@@ -24,7 +24,9 @@ from baker.errors import InputError
 from baker.load import expand_triangles, load, read_accessor, resolve_buffers
 from baker.scene import CLAMP_TO_EDGE, MIRRORED_REPEAT
 
-SCENES = Path(__file__).resolve().parents[2] / "shared" / "scenes"
+from tests.bakehelp import SHARED_SCENES
+
+SCENES = SHARED_SCENES
 
 BYTE, UBYTE, SHORT, USHORT, UINT, FLOAT = 5120, 5121, 5122, 5123, 5125, 5126
 DTYPES = {BYTE: "<i1", UBYTE: "<u1", SHORT: "<i2", USHORT: "<u2", UINT: "<u4", FLOAT: "<f4"}
