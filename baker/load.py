@@ -58,35 +58,53 @@ from baker.errors import InputError
 from baker.materials import MIRROR_ROUGHNESS, UNLIT_REASON, classify, no_lightmap_reason
 from baker.scene import REPEAT, Image, Instance, Light, Material, Primitive, Scene, Skipped, TextureRef
 
-SUPPORTED_EXTENSIONS = frozenset(
+VIEW_ONLY_EXTENSIONS = frozenset(
     {
+        "KHR_materials_anisotropy",
+        "KHR_materials_clearcoat",
+        "KHR_materials_dispersion",
         "KHR_materials_emissive_strength",
+        "KHR_materials_iridescence",
+        "KHR_materials_sheen",
+        "KHR_materials_specular",
+        "KHR_materials_variants",
+    }
+)
+"""Material extensions that change only what a viewer draws over the lightmap (specular layers,
+the default of several material variants, emission's scale, which is read): the diffuse light a
+lightmap stores is baked the same with or without them, so they need nothing from baker."""
+
+SUPPORTED_EXTENSIONS = VIEW_ONLY_EXTENSIONS | frozenset(
+    {
         "KHR_materials_unlit",
         "KHR_texture_transform",
         "KHR_materials_transmission",
         "KHR_materials_volume",
         "KHR_materials_ior",
+        "KHR_materials_pbrSpecularGlossiness",
         "KHR_lights_punctual",
         "EXT_mesh_gpu_instancing",
         "KHR_mesh_quantization",
         "KHR_materials_diffuse_transmission",
-        "KHR_materials_specular",
     }
 )
 """Extensions a file may list in ``extensionsRequired`` and still be baked."""
 
-MATERIAL_EXTENSIONS = frozenset(
+MATERIAL_EXTENSIONS = VIEW_ONLY_EXTENSIONS | frozenset(
     {
-        "KHR_materials_emissive_strength",
         "KHR_materials_unlit",
         "KHR_materials_transmission",
         "KHR_materials_volume",
         "KHR_materials_ior",
         "KHR_materials_diffuse_transmission",
+        "KHR_materials_pbrSpecularGlossiness",
     }
 )
-"""Material extensions the bake understands (``materials.classify``); any other one on a material
-(clearcoat, sheen, specular, iridescence, a vendor's …) is left out with a warning."""
+"""Material extensions the bake reads (``materials.classify``) or has no need of
+(``VIEW_ONLY_EXTENSIONS``); any other one on a material (a vendor's, a new one) is left out
+with a warning."""
+
+_SPEC_GLOSS = "KHR_materials_pbrSpecularGlossiness"
 
 # componentType → little-endian numpy dtype, and the divisor of normalized integers (glTF §3.11).
 _COMPONENT_DTYPES = {
@@ -376,19 +394,31 @@ def _check_arrays(raw: dict, file: str) -> None:
 
 
 def _check_required_extensions(raw: dict, file: str) -> None:
-    """Refuse a file that requires an extension baker cannot honour (compression, KTX2, …)."""
+    """Refuse a file that requires an extension baker cannot honour, naming what each one is."""
     required = raw.get("extensionsRequired") or []
     if not isinstance(required, list):
         raise _invalid("extensionsRequired is not a list", file, "extensionsRequired")
     missing = [str(name) for name in required if name not in SUPPORTED_EXTENSIONS]
     if missing:
         names = ", ".join(missing)
+        kinds = "; ".join(f"{name}: {_unsupported_kind(name)}" for name in missing)
         raise InputError(
-            f"the file requires {names}, which baker does not support",
+            f"the file requires {names}, which baker does not support ({kinds})",
             file=file,
             where="extensionsRequired",
-            fix=f"re-export without {names} (e.g. turn off Draco/meshopt compression or KTX2/WebP textures)",
+            fix=f"re-export without {names}",
         )
+
+
+def _unsupported_kind(name: str) -> str:
+    """What an extension baker does not support is, from its name, for the refusal's message."""
+    if "compression" in name:
+        return "compressed geometry"
+    if name.startswith(("KHR_texture_", "EXT_texture_")):
+        return "a texture format or sampling extension"
+    if "_materials_" in name:
+        return "a material extension"
+    return "an extension baker does not know"
 
 
 # --------------------------------------------------------------------------------------------
@@ -653,11 +683,9 @@ def _read_materials(ctx: _Context) -> list[Material]:
 def _read_material(ctx: _Context, i: int, material: pygltflib.Material) -> Material:
     """The baker's view of ``materials[i]``: factors as float64 linear values, texture refs."""
     where = f"materials[{i}]"
-    pbr = material.pbrMetallicRoughness or pygltflib.PbrMetallicRoughness()
     extensions = material.extensions or {}
     strength = (extensions.get("KHR_materials_emissive_strength") or {}).get("emissiveStrength", 1.0)
-    pbr_where = f"{where}.pbrMetallicRoughness"
-    base_color = _factor(ctx, pbr.baseColorFactor, [1.0, 1.0, 1.0, 1.0], f"{pbr_where}.baseColorFactor")
+    base = _base_terms(ctx, material, extensions, where)
     emissive = _factor(ctx, material.emissiveFactor, [0.0, 0.0, 0.0], f"{where}.emissiveFactor")
     alpha_mode = material.alphaMode or "OPAQUE"
     if alpha_mode not in ("OPAQUE", "MASK", "BLEND"):
@@ -677,22 +705,15 @@ def _read_material(ctx: _Context, i: int, material: pygltflib.Material) -> Mater
     return Material(
         index=i,
         name=material.name or "",
-        base_color=base_color,
-        base_color_texture=_texture_ref(ctx, pbr.baseColorTexture, f"{pbr_where}.baseColorTexture"),
+        **base,
         emissive=_emission(ctx, emissive, strength, where),
         emissive_texture=_texture_ref(ctx, material.emissiveTexture, f"{where}.emissiveTexture"),
-        metallic=value({"metallicFactor": pbr.metallicFactor}, "metallicFactor", 1.0, 0.0, 1.0,
-                       pbr_where),
-        roughness=value({"roughnessFactor": pbr.roughnessFactor}, "roughnessFactor", 1.0, 0.0,
-                        1.0, pbr_where),
         alpha_mode=alpha_mode,
         alpha_cutoff=value({"alphaCutoff": material.alphaCutoff}, "alphaCutoff", 0.5, 0.0,
                            math.inf, where),
         double_sided=bool(material.doubleSided),
         unlit="KHR_materials_unlit" in extensions,
         extensions=tuple(extensions),
-        metallic_roughness_texture=_optional_texture(ctx, pbr.metallicRoughnessTexture,
-                                                     f"{pbr_where}.metallicRoughnessTexture"),
         transmission=value(_extension(extensions, "KHR_materials_transmission"),
                            "transmissionFactor", 0.0, 0.0, 1.0, f"{ext}.KHR_materials_transmission"),
         ior=value(_extension(extensions, "KHR_materials_ior"), "ior", 1.5, 1.0, math.inf,
@@ -709,6 +730,41 @@ def _read_material(ctx: _Context, i: int, material: pygltflib.Material) -> Mater
             ctx, diffuse_transmission.get("diffuseTransmissionColorFactor"), [1.0, 1.0, 1.0],
             f"{where}.extensions.KHR_materials_diffuse_transmission.diffuseTransmissionColorFactor"),
     )
+
+
+def _base_terms(ctx: _Context, material: pygltflib.Material, extensions: dict,
+                where: str) -> dict[str, Any]:
+    """The Material fields of the base layer: base colour factor and texture, metallic,
+    roughness and their texture, from pbrMetallicRoughness, or from
+    KHR_materials_pbrSpecularGlossiness when the material has it (the extension replaces the
+    core terms): its diffuseFactor/diffuseTexture are the diffuse albedo a lightmap needs, as a
+    dielectric (metallic 0) of roughness 1 − glossinessFactor."""
+    spec_gloss = extensions.get(_SPEC_GLOSS)
+    if isinstance(spec_gloss, dict):
+        at = f"{where}.extensions.{_SPEC_GLOSS}"
+        texture = spec_gloss.get("diffuseTexture")
+        info = None
+        if isinstance(texture, dict):
+            info = pygltflib.TextureInfo(index=texture.get("index"), texCoord=texture.get("texCoord"),
+                                         extensions=texture.get("extensions"))
+        glossiness = _material_number(ctx, spec_gloss, "glossinessFactor", 1.0, 0.0, 1.0,
+                                      f"{at}.glossinessFactor")
+        return dict(
+            base_color=_factor(ctx, spec_gloss.get("diffuseFactor"), [1.0, 1.0, 1.0, 1.0],
+                               f"{at}.diffuseFactor"),
+            base_color_texture=_texture_ref(ctx, info, f"{at}.diffuseTexture"),
+            metallic=0.0, roughness=1.0 - glossiness, metallic_roughness_texture=None)
+    pbr = material.pbrMetallicRoughness or pygltflib.PbrMetallicRoughness()
+    at = f"{where}.pbrMetallicRoughness"
+    return dict(
+        base_color=_factor(ctx, pbr.baseColorFactor, [1.0, 1.0, 1.0, 1.0], f"{at}.baseColorFactor"),
+        base_color_texture=_texture_ref(ctx, pbr.baseColorTexture, f"{at}.baseColorTexture"),
+        metallic=_material_number(ctx, {"metallicFactor": pbr.metallicFactor}, "metallicFactor",
+                                  1.0, 0.0, 1.0, f"{at}.metallicFactor"),
+        roughness=_material_number(ctx, {"roughnessFactor": pbr.roughnessFactor}, "roughnessFactor",
+                                   1.0, 0.0, 1.0, f"{at}.roughnessFactor"),
+        metallic_roughness_texture=_optional_texture(ctx, pbr.metallicRoughnessTexture,
+                                                     f"{at}.metallicRoughnessTexture"))
 
 
 def _optional_texture(ctx: _Context, info: Any, where: str) -> TextureRef | None:
