@@ -12,7 +12,6 @@ import json
 import os
 import tempfile
 import time
-import urllib.parse
 from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import closing, contextmanager
 from dataclasses import dataclass, field, replace
@@ -44,11 +43,12 @@ from .spill import Spill, remove_later, set_aside
 from .validity import Faces, Validity, check_texels
 from .seams import find_seams
 from .scene import Scene
+from .scene_files import inside
 from .settings import Resolved, Settings, resolve
 from .surface import LUMINANCE
 from .trace import Tracer
 from .unwrap import PageTooSmall, baked_instances, frame_area, unwrap
-from .write import WriteOptions, write
+from .write import WriteOptions, image_file_name, write
 from .incremental import bake_or_rebake, bake_state_writer, details, record_full_bake, summary
 from .state import default_path as default_state_path
 
@@ -131,34 +131,32 @@ def _check_writable(path: Path) -> None:
 
 
 def check_input_kept(scene: Scene, output: Path, overwrite: bool = False) -> None:
-    """Refuse an output whose files would replace a file the input uses (its .bin, its images)
-    or a different file of the same name beside the output, unless ``overwrite``.
+    """Refuse an output whose files would replace a file the input uses (its .bin, its images),
+    unless ``overwrite``.
 
-    A ``.gltf`` output writes ``<stem>.bin`` beside it, and copies the images the input names by
-    relative path into the output's folder when that is another folder (``write.py``).
+    A ``.gltf`` output writes ``<stem>.bin`` beside it, and any output in another folder than
+    the input's copies the images the input names by URI beside it (``write.image_file_name``).
     """
     if overwrite:
         return
     written = [output] + ([output.with_name(output.stem + ".bin")]
                           if output.suffix.lower() == ".gltf" else [])
-    folder, elsewhere = scene.path.parent, output.parent.resolve() != scene.path.parent.resolve()
+    folder = scene.path.parent
+    if output.parent.resolve() != folder.resolve():
+        written += [output.with_name(image_file_name(output, i, image.uri))
+                    for i, image in enumerate(scene.document.images)
+                    if isinstance(image.uri, str) and not image.uri.startswith("data:")]
     fix = "choose another output name or folder, or add --overwrite to replace it"
     for kind, items in (("buffers", scene.document.buffers), ("images", scene.document.images)):
         for i, item in enumerate(items):
             uri = item.uri
-            if not isinstance(uri, str) or not uri or uri.startswith("data:") or ":" in uri.split("/")[0]:
+            if not isinstance(uri, str) or not uri or uri.startswith("data:"):
                 continue
-            relative = Path(urllib.parse.unquote(uri))
-            source = folder / relative
+            source = inside(uri, folder, str(scene.path), f"{kind}[{i}]")
             for target in written:
                 if target.exists() and source.exists() and os.path.samefile(source, target):
                     raise OutputError(f"the output would replace {source}, which the input uses",
                                       file=str(output), where=f"{kind}[{i}].uri", fix=fix)
-            copy = output.parent / relative
-            if (kind == "images" and elsewhere and not relative.is_absolute() and ".." not in relative.parts
-                    and copy.is_file() and source.is_file() and copy.read_bytes() != source.read_bytes()):
-                raise OutputError(f"the output's copy of {uri} would replace a different {copy}",
-                                  file=str(output), where=f"{kind}[{i}].uri", fix=fix)
 
 
 @dataclass(frozen=True)

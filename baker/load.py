@@ -56,6 +56,7 @@ from PIL import Image as PILImage
 from baker import gltf_document
 from baker.errors import InputError
 from baker.materials import MIRROR_ROUGHNESS, UNLIT_REASON, classify, no_lightmap_reason
+from baker.scene_files import read_inside
 from baker.scene import REPEAT, Image, Instance, Light, Material, Primitive, Scene, Skipped, TextureRef
 
 VIEW_ONLY_EXTENSIONS = frozenset(
@@ -139,11 +140,12 @@ _TRIANGLES, _STRIP, _FAN = 4, 5, 6
 _GLB_MAGIC = b"glTF"
 _CHUNK_JSON = 0x4E4F534A
 _CHUNK_BIN = 0x004E4942
-_URI_SCHEME = re.compile(r"^[A-Za-z][A-Za-z0-9+.\-]*:")
 
 _REEXPORT = "re-export the asset from your DCC tool; the Khronos glTF Validator shows what is wrong"
 MAX_IMAGE_PIXELS = 16384 * 8192
 """Largest colour texture decoded (512 MiB as RGBA); larger ones are refused from their header."""
+MAX_IMAGE_FILE_BYTES = 1 << 30
+"""Most bytes read of an image file (a PNG of ``MAX_IMAGE_PIXELS`` is at most about 512 MiB)."""
 MAX_ACCESSOR_COMPONENTS = 1 << 28
 """Largest accessor without a bufferView (all zeros: nothing in the file bounds its count)."""
 _GPU_REASON = "GPU-instanced (EXT_mesh_gpu_instancing): occluder only"
@@ -443,17 +445,18 @@ def resolve_buffers(document: pygltflib.GLTF2, path: str | Path) -> list[bytes]:
 
 
 def _buffer_bytes(buffer: pygltflib.Buffer, blob: bytes | None, path: Path, where: str) -> bytes:
-    """The ``byteLength`` bytes of one buffer: ``blob`` (GLB binary chunk) when it has no uri."""
+    """The ``byteLength`` bytes of one buffer: ``blob`` (GLB binary chunk) when it has no uri; of
+    a file, at most ``byteLength`` bytes are read (``scene_files.read_inside``)."""
     file = str(path)
+    length = buffer.byteLength
+    if not isinstance(length, int) or isinstance(length, bool) or length < 0:
+        raise _invalid(f"byteLength {length!r} is not a byte count", file, where)
     if buffer.uri is None:
         if blob is None:
             raise _invalid("buffer has no uri and the file has no GLB binary chunk for it", file, where)
         data = blob
     else:
-        data = _read_uri(buffer.uri, path.parent, file, where)
-    length = buffer.byteLength
-    if not isinstance(length, int) or length < 0:
-        raise _invalid(f"byteLength {length!r} is not a byte count", file, where)
+        data = _read_uri(buffer.uri, path.parent, file, where, length)
     if len(data) < length:
         raise InputError(
             f"buffer holds {len(data)} bytes but its byteLength is {length}",
@@ -464,30 +467,12 @@ def _buffer_bytes(buffer: pygltflib.Buffer, blob: bytes | None, path: Path, wher
     return bytes(data[:length])
 
 
-def _read_uri(uri: str, folder: Path, file: str, where: str) -> bytes:
-    """The bytes a glTF ``uri`` points to: a data URI, or a file relative to ``folder``."""
-    if not isinstance(uri, str):
-        raise _invalid(f"uri {uri!r} is not a string", file, f"{where}.uri")
-    if uri.startswith("data:"):
+def _read_uri(uri: str, folder: Path, file: str, where: str, limit: int) -> bytes:
+    """The bytes a glTF ``uri`` points to, at most ``limit`` of a file: a data URI, or a regular
+    file inside ``folder`` (``scene_files.read_inside``)."""
+    if isinstance(uri, str) and uri.startswith("data:"):
         return _decode_data_uri(uri, file, where)
-    if _URI_SCHEME.match(uri):
-        raise InputError(
-            f'uri "{uri[:80]}" is not a relative file path: baker reads neither web nor absolute URIs',
-            file=file,
-            where=f"{where}.uri",
-            fix="put the file beside the .gltf and refer to it by a relative path, or export a .glb",
-        )
-    target = folder / urllib.parse.unquote(uri)
-    try:
-        return target.read_bytes()
-    except OSError as exc:
-        what = "not found" if isinstance(exc, FileNotFoundError) else f"unreadable ({exc.strerror or exc})"
-        raise InputError(
-            f'"{uri}" is {what} (looked for {target})',
-            file=file,
-            where=f"{where}.uri",
-            fix="keep the files the exporter wrote beside the .gltf, or export a single .glb",
-        ) from None
+    return read_inside(uri, folder, limit, file, where)
 
 
 def _decode_data_uri(uri: str, file: str, where: str) -> bytes:
@@ -878,7 +863,7 @@ def _decode_image(ctx: _Context, index: int) -> np.ndarray:
         view, _ = _buffer_view(ctx.document, ctx.buffers, image.bufferView, ctx.file, f"{where}.bufferView")
         data, label = bytes(view), f"the image in bufferViews[{image.bufferView}]"
     elif image.uri is not None:
-        data = _read_uri(image.uri, ctx.folder, ctx.file, where)
+        data = _read_uri(image.uri, ctx.folder, ctx.file, where, MAX_IMAGE_FILE_BYTES)
         label = "the embedded image" if image.uri.startswith("data:") else f'"{image.uri}"'
     else:
         raise _invalid("image has neither uri nor bufferView", ctx.file, where)

@@ -23,8 +23,8 @@ from __future__ import annotations
 import copy
 import json
 import os
+import re
 import secrets
-import shutil
 import struct
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -38,8 +38,9 @@ from . import gltf_document
 from .atlas import Atlas, InstanceUV
 from .encode import PNG_SIGNATURE, EncodedPage
 from .errors import InputError, OutputError, SettingsError
-from .load import read_accessor, resolve_buffers
+from .load import MAX_IMAGE_FILE_BYTES, read_accessor, resolve_buffers
 from .scene import Scene
+from .scene_files import inside, read_inside
 
 LIGHTMAP_EXTENSION = "MOZ_lightmap"
 ENCODINGS = ("linear", "srgb")
@@ -502,9 +503,9 @@ class _Builder:
         }
         asset["extras"] = extras
 
-    def finish(self, kind: str) -> list[tuple[Path, bytes | Path]]:
+    def finish(self, kind: str) -> list[tuple[Path, bytes]]:
         """The files to write, in order: copied images, then .bin, then the .gltf or .glb."""
-        files: list[tuple[Path, bytes | Path]] = self._external_images()
+        files = self._external_images()
         self._align()
         blob = bytes(self.blob)
         if blob:
@@ -523,31 +524,37 @@ class _Builder:
             files.append((self.output, _glb(self.data, blob)))
         return files
 
-    def _external_images(self) -> list[tuple[Path, bytes | Path]]:
-        """Images the input names by relative URI: copied beside the output (same relative
-        path) when the output folder differs; a URI leading out of the input's folder is
-        rewritten to point at the original file instead."""
+    def _external_images(self) -> list[tuple[Path, bytes]]:
+        """Images the input names by a relative URI, each a file inside the input's folder
+        (``scene_files``; anything else is an ``InputError``): referred to as they are when the
+        output goes to the input's folder, else copied beside the output under a name baker
+        makes (``image_file_name``), never at a path taken from the input."""
         target = self.output.parent
-        if target.resolve() == self.base.resolve():
-            return []
-        files: list[tuple[Path, bytes | Path]] = []
+        same_folder = target.resolve() == self.base.resolve()
+        files: list[tuple[Path, bytes]] = []
         for i, image in enumerate(self.data.get("images", [])):
             uri = image.get("uri")
-            if not uri or uri.startswith("data:") or ":" in uri.split("/")[0]:
+            if uri is None or (isinstance(uri, str) and uri.startswith("data:")):
                 continue
-            relative = PurePosixPath(unquote(uri))
-            source = self.base / relative
-            if not source.is_file():
-                raise InputError(f"cannot find the image file {source}", file=str(self.scene.path),
-                                 where=f"images[{i}].uri", fix="keep the images beside the .gltf")
-            if relative.is_absolute() or ".." in relative.parts:
-                image["uri"] = quote(Path(os.path.relpath(source.resolve(), target.resolve()))
-                                     .as_posix())
-                self._note(f"images[{i}] ({uri}) lies outside the input's folder; the output "
-                           f"refers to it as {image['uri']}")
+            where = f"images[{i}]"
+            if same_folder:
+                inside(uri, self.base, str(self.scene.path), where)
                 continue
-            files.append((target / relative, source))
+            data = read_inside(uri, self.base, MAX_IMAGE_FILE_BYTES, str(self.scene.path), where)
+            name = image_file_name(self.output, i, uri)
+            image["uri"] = quote(name)
+            files.append((target / name, data))
         return files
+
+
+def image_file_name(output: Path, index: int, uri: str) -> str:
+    """The name of the copy of ``images[index]`` (file ``uri``) beside ``output`` when the output
+    goes to another folder than the input: ``<stem>_image<index>`` and the URI's suffix when it
+    is a short alphanumeric one (``.png``, ``.jpg``)."""
+    suffix = PurePosixPath(unquote(uri)).suffix.lower()
+    if not re.fullmatch(r"\.[a-z0-9]{1,5}", suffix):
+        suffix = ""
+    return f"{output.stem}_image{index}{suffix}"
 
 
 def _glb(data: dict, blob: bytes) -> bytes:
@@ -579,10 +586,10 @@ def _output_kind(output: Path) -> str:
     return suffix[1:]
 
 
-def _commit(files: list[tuple[Path, bytes | Path]], output: Path) -> None:
+def _commit(files: list[tuple[Path, bytes]], output: Path) -> None:
     """Write every file to a temporary beside it, then move them into place in order.
 
-    ``files`` pairs a destination with its bytes, or with a source file to copy. On any failure
+    ``files`` pairs a destination with its bytes. On any failure
     the temporaries are removed and the existing files are left as they were.
     """
     temporaries: list[tuple[Path, Path]] = []
@@ -590,16 +597,11 @@ def _commit(files: list[tuple[Path, bytes | Path]], output: Path) -> None:
     try:
         for destination, content in files:
             current = destination
-            destination.parent.mkdir(parents=True, exist_ok=True)
             temporary = destination.with_name(f".{destination.name}.{secrets.token_hex(4)}.tmp")
             temporaries.append((temporary, destination))
             descriptor = os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
             with os.fdopen(descriptor, "wb") as stream:
-                if isinstance(content, Path):
-                    with open(content, "rb") as source:
-                        shutil.copyfileobj(source, stream)
-                else:
-                    stream.write(content)
+                stream.write(content)
                 stream.flush()
                 os.fsync(stream.fileno())
         for temporary, destination in temporaries:

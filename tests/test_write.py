@@ -454,7 +454,11 @@ def test_gltf_output_copies_referenced_images(tmp_path):
     output = tmp_path / "out" / "level.gltf"
     output.parent.mkdir()
     write(scene, _atlas(), _pages(), output, WriteOptions())
-    assert (output.parent / "textures" / "brick.png").read_bytes() == _png(128)
+    # a name baker makes, never the input's path (which could lead anywhere under the output)
+    assert sorted(p.name for p in output.parent.iterdir()) == ["level.bin", "level.gltf",
+                                                              "level_image0.png"]
+    assert (output.parent / "level_image0.png").read_bytes() == _png(128)
+    assert json.loads(output.read_text())["images"][0]["uri"] == "level_image0.png"
     _assert_valid(output)
 
 
