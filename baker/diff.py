@@ -53,7 +53,8 @@ def instance_key(scene: Scene, i: int) -> str:
 def _image_digest(scene: Scene, ref) -> str | None:
     if ref is None:
         return None
-    return digest(scene.images[ref.image].pixels, ref.texcoord, ref.wrap_s, ref.wrap_t)
+    return digest(scene.images[ref.image].pixels, ref.texcoord, ref.wrap_s, ref.wrap_t,
+                  ref.transform)
 
 
 def _material(scene: Scene, m) -> dict:

@@ -812,8 +812,7 @@ def _texture_ref(ctx: _Context, info: Any, where: str) -> TextureRef | None:
 
     A texture whose image is only in an extension (``EXT_texture_webp``, ``KHR_texture_basisu``…)
     is used when pillow decodes that image, else left out and recorded in ``ctx.skipped``.
-    ``KHR_texture_transform``: its texCoord override is honoured; offset, rotation and scale are
-    not (TextureRef has no place for them) and are recorded in ``ctx.skipped``.
+    ``KHR_texture_transform``: its texCoord override and its UV transform are honoured.
     """
     if info is None:
         return None
@@ -841,16 +840,35 @@ def _texture_ref(ctx: _Context, info: Any, where: str) -> TextureRef | None:
             return None
     texcoord = int(_default(info.texCoord, 0))
     transform = (info.extensions or {}).get("KHR_texture_transform")
+    affine = None
     if isinstance(transform, dict):
         texcoord = int(transform.get("texCoord", texcoord))  # the extension's override (spec)
-        reason = "UV offset/rotation/scale not applied: the texture is sampled with the UVs as stored"
-        ctx.skip(f"{where}.extensions.KHR_texture_transform", reason)
+        affine = _uv_transform(ctx, transform, f"{where}.extensions.KHR_texture_transform")
     wrap_s = wrap_t = REPEAT
     if texture.sampler is not None:
         samplers = ctx.document.samplers
         sampler = _item(samplers, texture.sampler, "samplers", ctx.file, f"{texture_where}.sampler")
         wrap_s, wrap_t = _default(sampler.wrapS, REPEAT), _default(sampler.wrapT, REPEAT)
-    return TextureRef(image=source, texcoord=texcoord, wrap_s=wrap_s, wrap_t=wrap_t)
+    return TextureRef(image=source, texcoord=texcoord, wrap_s=wrap_s, wrap_t=wrap_t,
+                      transform=affine)
+
+
+def _uv_transform(ctx: _Context, transform: dict, where: str) -> tuple[float, ...] | None:
+    """KHR_texture_transform's offset, rotation and scale as ``TextureRef.transform``:
+    uv' = offset + R(rotation) · (scale ⊙ uv), with u' = u·cos + v·sin and v' = v·cos − u·sin
+    (the extension's matrix T · R · S; the UVs turn counter-clockwise, the image clockwise).
+    None when it is the identity; a value that is not finite numbers is left out with a
+    warning (the UVs are then used as stored)."""
+    try:
+        offset = _finite(ctx, _default(transform.get("offset"), [0.0, 0.0]), 2, f"{where}.offset")
+        rotation = _finite(ctx, [_default(transform.get("rotation"), 0.0)], 1, f"{where}.rotation")[0]
+        scale = _finite(ctx, _default(transform.get("scale"), [1.0, 1.0]), 2, f"{where}.scale")
+    except InputError as error:
+        ctx.skip(where, f"{error.message}: the texture is sampled with the UVs as stored")
+        return None
+    cos, sin = math.cos(rotation), math.sin(rotation)
+    affine = (scale[0] * cos, scale[1] * sin, offset[0], -scale[0] * sin, scale[1] * cos, offset[1])
+    return None if affine == (1.0, 0.0, 0.0, 0.0, 1.0, 0.0) else tuple(float(x) for x in affine)
 
 
 def _decode_image(ctx: _Context, index: int) -> np.ndarray:

@@ -35,12 +35,17 @@ class Image:
 
 @dataclass(frozen=True)
 class TextureRef:
-    """A material's reference to a texture: which image, which UV set, how UVs wrap."""
+    """A material's reference to a texture: which image, which UV set, how UVs wrap.
+
+    ``transform``: KHR_texture_transform as the affine map (a, b, c, d, e, f) of the stored UVs
+    to the sampled ones, u' = a·u + b·v + c and v' = d·u + e·v + f; None without one.
+    """
 
     image: int  # index into Scene.images
     texcoord: int = 0  # the primitive's TEXCOORD_<texcoord> set
     wrap_s: int = REPEAT
     wrap_t: int = REPEAT
+    transform: tuple[float, float, float, float, float, float] | None = None
 
 
 @dataclass(frozen=True)

@@ -2,7 +2,8 @@
 
 Albedo R(Q) = baseColorFactor × baseColorTexture(uv) × COLOR_0 × the material's diffuse weight
 (``materials.classify``: metal mirrors, glass and translucency take their share), the texture
-sRGB-decoded and sampled bilinearly with its sampler's wrap modes. Emission = emissiveFactor × emissive strength ×
+sRGB-decoded and sampled bilinearly with its sampler's wrap modes at the UVs its
+KHR_texture_transform maps the stored ones to (``texture_uv``). Emission = emissiveFactor × emissive strength ×
 emissiveTexture(uv). Work is vectorised over points, looping only over the scene's materials.
 """
 
@@ -59,6 +60,17 @@ def _interpolate(values: np.ndarray, world: World, tris: np.ndarray, bary: np.nd
     return np.einsum("kv,kvc->kc", bary, values[world.triangles[tris]])
 
 
+def texture_uv(world: World, ref: TextureRef, tris: np.ndarray, bary: np.ndarray) -> np.ndarray:
+    """The UVs (k, 2) at which ``ref`` is sampled at barycentric points (k, 3) of world
+    triangles (k,): its UV set interpolated, then its KHR_texture_transform applied (an affine
+    map, so transforming the interpolated UVs equals interpolating transformed corners)."""
+    uv = _interpolate(world.texcoords[ref.texcoord], world, tris, bary)
+    if ref.transform is None:
+        return uv
+    a, b, c, d, e, f = ref.transform
+    return np.stack([a * uv[:, 0] + b * uv[:, 1] + c, d * uv[:, 0] + e * uv[:, 1] + f], axis=1)
+
+
 def _textured(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray,
               factor: np.ndarray, texture_of) -> np.ndarray:
     """factor[material] (k, 3) times each material's texture, looked up where it has one."""
@@ -71,7 +83,7 @@ def _textured(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray,
         mask = materials == m
         if not mask.any():
             continue
-        uv = _interpolate(world.texcoords[ref.texcoord], world, tris[mask], bary[mask])
+        uv = texture_uv(world, ref, tris[mask], bary[mask])
         result[mask] *= sample_texture(scene.images[ref.image], ref, uv)
     return result
 
@@ -125,7 +137,7 @@ def alpha(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray) -> np.
         mask = materials == m
         if ref is None or not mask.any():
             continue
-        uv = _interpolate(world.texcoords[ref.texcoord], world, tris[mask], bary[mask])
+        uv = texture_uv(world, ref, tris[mask], bary[mask])
         out[mask] *= sample_alpha(scene.images[ref.image], ref, uv)
     return out * _interpolate(world.colors[:, 3:4], world, tris, bary)[:, 0]
 
