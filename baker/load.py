@@ -11,7 +11,8 @@ In order, ``load`` does:
    check ``asset.version`` and ``extensionsRequired``;
 2. resolve every buffer to bytes (GLB binary chunk, data URI, or a file beside the ``.gltf``);
 3. read the materials, then the default material glTF prescribes (appended last), and decode the
-   images their base colour and emissive textures use;
+   images their base colour and emissive textures use; check that every other image file is
+   there, so that nothing the output carries is found missing after the bake;
 4. walk the scene's node tree into float64 world matrices, read the meshes the nodes use and make
    one ``Instance`` per (node, primitive), or per GPU instance of it.
 
@@ -191,6 +192,7 @@ def load(path: str | Path, mirror_roughness: float = MIRROR_ROUGHNESS) -> Scene:
     materials = _read_materials(ctx)
     placements = _walk_nodes(ctx)
     images = _images(ctx)
+    _check_image_files(ctx)
     unbaked = [no_lightmap_reason(classify(m, images, mirror_roughness)) for m in materials]
     primitives, instances = _instantiate(ctx, placements, materials, unbaked)
     lights = _read_lights(ctx, placements)
@@ -930,6 +932,18 @@ def _rgba(image: PILImage.Image) -> np.ndarray:
         high = (np.asarray(image).astype(np.int64) >> 8).clip(0, 255).astype(np.uint8)
         image = PILImage.fromarray(high, "L")
     return np.array(image.convert("RGBA"), dtype=np.uint8)
+
+
+def _check_image_files(ctx: _Context) -> None:
+    """Check that every image file the output will carry (normal, occlusion, metallic-roughness
+    maps, unused images) is a readable regular file inside the scene's folder, so that a missing
+    one fails here, before any work, and not at writing; the colour textures were read already.
+    ``read_inside`` with a limit of 0 bytes makes every check of a read and reads nothing."""
+    for i, image in enumerate(ctx.document.images):
+        uri = image.uri
+        if i in ctx.decoded or not isinstance(uri, str) or uri.startswith("data:"):
+            continue
+        read_inside(uri, ctx.folder, 0, ctx.file, f"images[{i}]")
 
 
 def _images(ctx: _Context) -> tuple[Image, ...]:

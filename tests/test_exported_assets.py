@@ -189,3 +189,32 @@ def test_a_transformed_texture_bakes_as_the_pre_transformed_one(tmp_path):
     settings = Settings(rays=16, texel_density=8)
     light = [compute(s, settings).lightmaps.light for s in scenes]
     assert np.abs(light[0] - light[1]).max() < 1e-5 * light[1].max()  # measured: 4e-8 of 0.05
+
+
+# ------------------------------------------------------------------- every file, before any work
+
+@pytest.mark.parametrize("slot", ["normalTexture", "occlusionTexture", "emissiveTexture",
+                                  "metallicRoughnessTexture", None])
+def test_a_missing_image_file_fails_at_load_whatever_uses_it(tmp_path, slot):
+    """An image file the scene names but the bake never samples (a normal map, an occlusion
+    map, an unused image) is carried into the output: missing, it fails at load (before any
+    ray), naming the image and the file, as a missing colour texture does."""
+    pixels = np.full((2, 2, 4), 255, np.uint8)
+    b = GltfBuilder()
+    b.node("floor", b.shape_mesh("floor", quad(1.0, 1.0), material=b.material(
+        "floor", base_color_image=pixels)))
+    path = b.save(tmp_path / "scene.gltf")
+    document = json.loads(path.read_text())
+    document["images"].append({"uri": "gone%20away.png"})
+    document["textures"].append({"source": 1})
+    material = document["materials"][0]
+    if slot == "metallicRoughnessTexture":
+        material["pbrMetallicRoughness"][slot] = {"index": 1}
+    elif slot is not None:
+        material[slot] = {"index": 1}
+    path.write_text(json.dumps(document))
+    with pytest.raises(InputError) as error:
+        load(path)
+    assert error.value.where.endswith("images[1].uri")
+    assert '"gone%20away.png" is not found' in error.value.message
+    assert str(tmp_path / "gone away.png") in error.value.message

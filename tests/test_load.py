@@ -369,7 +369,7 @@ def test_materials_textures_images_skins_and_unlit(tmp_path):
     gltf.images = [
         pygltflib.Image(bufferView=doc.view(png_bytes(pixels)), mimeType="image/png", name="checker"),
         pygltflib.Image(bufferView=doc.view(b"\xabKTX 20\xbb\r\n\x1a\n" + bytes(60)), mimeType="image/ktx2"),
-        pygltflib.Image(uri="normal.png"),  # never decoded: not a colour texture, and the file is absent
+        pygltflib.Image(uri="normal.png"),  # never decoded: not a colour texture (not a PNG either)
     ]
     gltf.samplers = [pygltflib.Sampler(wrapS=CLAMP_TO_EDGE, wrapT=MIRRORED_REPEAT)]
     gltf.textures = [
@@ -402,6 +402,7 @@ def test_materials_textures_images_skins_and_unlit(tmp_path):
     doc.node(mesh=mesh)
     skinned = doc.node(mesh=mesh, skin=0)
     gltf.skins = [pygltflib.Skin(joints=[skinned])]
+    (tmp_path / "normal.png").write_bytes(b"not decoded")
     scene = load(doc.save(tmp_path / "materials.glb"))
 
     painted, flat, default = scene.materials
