@@ -1,4 +1,4 @@
-"""Extreme and stiff scenes for the numerics tests (issue 7, DESIGN.md §7).
+"""Extreme and stiff scenes for the numerics tests (issue 7, docs/design.md §7).
 
 Each function returns a ``GltfBuilder`` (assets/gltf_builder.py); tests save and bake it.
 """

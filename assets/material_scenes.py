@@ -1,4 +1,4 @@
-"""Small scenes with non-diffuse materials, for the material tests (issue 4, DESIGN.md §2).
+"""Small scenes with non-diffuse materials, for the material tests (issue 4, docs/design.md §2).
 
 Every function returns a ``GltfBuilder`` and records in ``builder.info`` what the tests need.
 Metres, linear RGB. The floor is node 0 unless said otherwise: a horizontal quad at y = 0,

@@ -3,30 +3,34 @@
     import baker
     result = baker.bake("level.glb", "level_baked.glb", baker.Settings(rays=128))
 
-The pipeline, one module per stage (DESIGN.md §3):
+The pipeline, stage by stage (docs/design.md §3); each stage hands a frozen dataclass on:
 
-    load.load            glTF file → Scene (instances with float64 world matrices)
-    geometry.build_world Scene → World (every triangle in world space)
-    unwrap.unwrap        World → Atlas (xatlas lightmap pages)
-    rasterise.cover      Atlas → Coverage (which triangle owns each texel)
-    rasterise.texels_of  Coverage → Texels (world sample point of every texel of a part)
-    integrate.integrate  Texels → Terms (obscurance terms, rays cast with trace.Tracer)
-    direct.direct_light  Texels → Direct (lights, emitters, sky per texel, with shadow rays)
-    compose.compose_into Terms + Direct → Lightmaps (L = D + I_A · W per page)
-    denoise.denoise      optional (--denoise): Open Image Denoise per chart, before dilation
-    postprocess          dilation into the padding
-    encode.encode        Lightmaps → 8-bit PNG pages, each scaled by a percentile of its texels
-    hdr.page_file        float pages as .hdr / .exr files (``--lightmaps DIR --format``)
-    write.write          Scene + Atlas + pages → glTF file with MOZ_lightmap
+    gltf.load.load               glTF file → Scene (instances with float64 world matrices)
+    geometry.world.build_world   Scene → World (every triangle in world space)
+    pipeline.plan.make_plan      Scene + lights → Plan (what runs, what is left out, why)
+    atlas.unwrap.unwrap          World → Atlas (xatlas lightmap pages)
+    atlas.rasterise.cover        Atlas → Coverage (which triangle owns each texel)
+    atlas.rasterise.texels_of    Coverage → Texels (world sample point of every texel of a part)
+    atlas.validity.check_texels  Texels → Texels + Validity (points inside geometry moved/flagged)
+    light.integrate.integrate    Texels → Terms (obscurance terms, rays cast with rays.trace)
+    light.direct.direct_light    Texels → Direct (lights, emitters, sky per texel, shadow rays)
+    light.gi.indirect_light      Texels → GI irradiance (``--method gi``, the reference)
+    image.compose.compose_into   Terms + Direct → Lightmaps (L = D + I_A · W per page)
+    image.denoise.denoise        optional (--denoise): Open Image Denoise per chart
+    image.postprocess            invalid texels filled, seams stitched, dilation into the padding
+    image.encode.encode          Lightmaps → 8-bit PNG pages, each scaled by a percentile
+    output.write.write           Scene + Atlas + pages → glTF file with MOZ_lightmap
 
-``bake.bake`` runs them in order; from ``texels_of`` to ``compose`` a part of the texels at a
-time, each part's results kept on disk for the bake state (``parts.py``, ``spill.py``), so a
-large page needs little more memory than its pages.
+``pipeline.full.compute`` runs them from the scene to the lightmaps, from ``texels_of`` to
+``compose`` a part of the texels at a time (``pipeline.parts``, ``run.spill``), so a large page
+needs little more memory than its pages. ``rebake.incremental.rebake`` recomputes only what an
+edit changed, from the bake state (``rebake.state``). ``api.bake`` chooses between the two,
+writes the files and the report; ``baker.cli`` is the command line over it.
 """
 
-from .bake import BakeResult, bake
-from .errors import BakerError, InputError, OutputError, SettingsError
-from .settings import Settings
+from baker.api import BakeResult, bake
+from baker.errors import BakerError, InputError, OutputError, SettingsError
+from baker.settings import Settings
 
 __all__ = ["bake", "BakeResult", "Settings", "BakerError", "InputError", "OutputError",
            "SettingsError"]

@@ -34,13 +34,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .encode import linear_to_srgb, png_bytes
-from .errors import InputError, OutputError, SettingsError
-from .geometry import World, build_world
-from .load import _Context, _decode_image, load, resolve_buffers, trs_matrices
-from .scene import Scene
-from .surface import LUMINANCE, SRGB_TO_LINEAR, albedo, emission
-from .trace import Tracer
+from baker.errors import InputError, OutputError, SettingsError
+from baker.geometry.surface import LUMINANCE, SRGB_TO_LINEAR, albedo, emission
+from baker.geometry.world import World, build_world
+from baker.gltf.load import _Context, _decode_image, load, resolve_buffers, trs_matrices
+from baker.gltf.scene import Scene
+from baker.image.encode import linear_to_srgb, png_bytes
+from baker.rays.trace import Tracer
+from baker.run.atomic import write_atomically
 
 MODES = ("lit", "lightmap", "checker", "unlit")
 _RAYS_PER_CHUNK = 1 << 16
@@ -447,7 +448,6 @@ def preview(input: str | os.PathLike, output: str | os.PathLike, mode: str = "li
 
     The PNG is written atomically; nothing is written when anything fails.
     """
-    from .bake import write_atomically  # late: bake imports the whole pipeline
 
     output = Path(output)
     if output.suffix.lower() != ".png":

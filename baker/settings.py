@@ -6,17 +6,20 @@ into ``Resolved`` with every value fixed, which is what the report prints and wh
 
 from __future__ import annotations
 
+import importlib.util
 import math
 from dataclasses import asdict, dataclass, fields
 
-from .errors import SettingsError
-from .sampling import TECHNIQUES
+from baker.errors import SettingsError
 
 RHO_FUNCTIONS = ("sqrt", "step", "linear")
 ENCODINGS = ("linear", "srgb")
 OCCLUSION_MODES = ("none", "also", "only")
 METHODS = ("obscurance", "gi")
 SPECULAR_STRATEGIES = ("b", "a", "c")
+TECHNIQUES = ("sobol", "stratified", "random")  # how ray directions are drawn: rays.sampling
+INSTALL_FIX = ('pip install "baker[denoise]" (or pip install ".[denoise]" from a checkout of '
+               'baker), or leave out --denoise')
 
 
 @dataclass(frozen=True)
@@ -139,7 +142,6 @@ class Settings:
         self._check_lights()
         self._check_materials()
         if self.denoise:  # pyoidn is optional: say how to install it before any work
-            from .denoise import require_oidn
             require_oidn()
         if not (isinstance(self.clip_percentile, (int, float)) and 50 < self.clip_percentile <= 100):
             raise SettingsError(f"clip_percentile must be above 50 and at most 100, not "
@@ -258,3 +260,16 @@ def resolve(settings: Settings, surface_area: float, diagonal: float) -> Resolve
     if values["d_max"] is None:
         values["d_max"] = settings.d_max_fraction * quarter_octave(diagonal) if diagonal > 0 else 1.0
     return Resolved(**values)
+
+
+def require_oidn() -> None:
+    """Raise SettingsError naming the fix when pyoidn is missing or has no CPU device."""
+    if importlib.util.find_spec("pyoidn") is None:
+        raise SettingsError("denoising needs Intel Open Image Denoise's Python binding pyoidn, "
+                            "which is not installed", fix=INSTALL_FIX)
+    import pyoidn
+
+    if not pyoidn.Device.is_cpu_available():
+        raise SettingsError("pyoidn is installed but Open Image Denoise has no CPU device on this "
+                            "machine (it needs a 64-bit x86 CPU with SSE4.1, or Apple silicon)",
+                            fix="bake without --denoise")

@@ -1,4 +1,4 @@
-"""Error against run time: the convergence study behind ``baker study`` (DESIGN.md §6).
+"""Error against run time: the convergence study behind ``baker study`` (docs/design.md §6).
 
 The scene is unwrapped and rasterised once; then, for each sampling technique and each number
 of rays per texel, the obscurance terms are estimated again and timed. Each run's lightmap
@@ -15,13 +15,14 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .bake import Computed
-from .compose import effective_r_ave
-from .gi import indirect_light
-from .integrate import Terms, integrate
-from .sampling import TECHNIQUES
-from .surface import LUMINANCE
-from .trace import Tracer
+from baker.geometry.surface import LUMINANCE
+from baker.image.compose import effective_r_ave
+from baker.light.gi import indirect_light
+from baker.light.hemisphere import Terms
+from baker.light.integrate import integrate
+from baker.pipeline.full import Computed
+from baker.rays.trace import Tracer
+from baker.settings import TECHNIQUES
 
 DEFAULT_RAYS = (4, 8, 16, 32, 64, 128, 256, 512, 1024)
 

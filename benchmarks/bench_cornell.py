@@ -22,12 +22,13 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from assets.make_scenes import cornell_box  # noqa: E402
-from baker.bake import compute  # noqa: E402
-from baker.integrate import hemisphere_rays, integrate  # noqa: E402
-from baker.load import load  # noqa: E402
-from baker.parallel import cores  # noqa: E402
+from baker.pipeline.full import compute  # noqa: E402
+from baker.light.hemisphere import hemisphere_rays
+from baker.light.integrate import integrate  # noqa: E402
+from baker.gltf.load import load  # noqa: E402
+from baker.run.parallel import cores  # noqa: E402
 from baker.settings import Settings  # noqa: E402
-from baker.trace import Tracer  # noqa: E402
+from baker.rays.trace import Tracer  # noqa: E402
 
 RAW_RAYS = 8_000_000  # how many of the bake's rays the raw measurement casts
 

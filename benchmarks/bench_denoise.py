@@ -32,9 +32,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from assets.make_scenes import cornell_box, vase_room  # noqa: E402
-from baker.bake import Computed, compute  # noqa: E402
-from baker.load import load  # noqa: E402
-from baker.parallel import cores  # noqa: E402
+from baker.pipeline.full import Computed, compute  # noqa: E402
+from baker.gltf.load import load  # noqa: E402
+from baker.run.parallel import cores  # noqa: E402
 from baker.settings import Settings  # noqa: E402
 
 SCENES = {"Cornell room": cornell_box, "vase room": vase_room}

@@ -34,16 +34,16 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import baker  # noqa: E402
-import baker.inner as inner_module  # noqa: E402
-import baker.integrate as integrate_module  # noqa: E402
-import baker.materials as materials_module  # noqa: E402
+import baker.geometry.world as world_module  # noqa: E402
+import baker.light.hemisphere as hemisphere_module  # noqa: E402
+import baker.light.integrate as integrate_module  # noqa: E402
 from assets.make_scenes import cornell_box  # noqa: E402
 from assets.material_scenes import leaf, mirror_wall, wax_cylinder  # noqa: E402
-from baker.bake import compute  # noqa: E402
-from baker.load import load  # noqa: E402
-from baker.surface import LUMINANCE  # noqa: E402
+from baker.pipeline.full import compute  # noqa: E402
+from baker.gltf.load import load  # noqa: E402
+from baker.geometry.surface import LUMINANCE  # noqa: E402
 
-bake_module = sys.modules["baker.bake"]  # the module (``baker.bake`` is also the function)
+bake_module = sys.modules["baker.pipeline.full"]  # the module (``baker.bake`` is also the function)
 
 
 def strategies(folder: Path, rays: int, repeat: int) -> None:
@@ -78,34 +78,34 @@ def _trace_seconds(done) -> float:
 def diffuse_only():
     """The baker with every material stage cut out: no special-hit shading, no alpha table, no
     leaves or inner obscurances (what the bake was before issue 4, for a diffuse scene)."""
-    surfaces, alpha = integrate_module.surfaces_of, materials_module.alpha_test
+    surfaces, alpha = hemisphere_module.surfaces_of, world_module.alpha_test
 
     def plain_surfaces(scene, world):
         s = surfaces(scene, world)
-        kind = np.where(s.kind == integrate_module._SPECIAL, integrate_module._CONSTANT, s.kind)
-        return integrate_module.Surfaces(s.scene, s.world, s.table, s.varying,
+        kind = np.where(s.kind == hemisphere_module._SPECIAL, hemisphere_module._CONSTANT, s.kind)
+        return hemisphere_module.Surfaces(s.scene, s.world, s.table, s.varying,
                                           kind.astype(np.uint8), s.materials, np.zeros((0, 3)),
                                           s.step)
 
-    integrate_module.surfaces_of = bake_module.surfaces_of = plain_surfaces
-    materials_module.alpha_test = lambda scene, world: None
+    hemisphere_module.surfaces_of = bake_module.surfaces_of = plain_surfaces
+    world_module.alpha_test = lambda scene, world: None
     try:
         with without_translucency():
             yield
     finally:
-        integrate_module.surfaces_of, materials_module.alpha_test = surfaces, alpha
+        hemisphere_module.surfaces_of, world_module.alpha_test = surfaces, alpha
         bake_module.surfaces_of = surfaces
 
 
 @contextmanager
 def without_translucency():
     """The baker without leaves and inner obscurances (every other stage as it is)."""
-    translucency = inner_module.add_translucency
-    inner_module.add_translucency = lambda *args, **kwargs: args[6]
+    translucency = integrate_module.add_translucency
+    integrate_module.add_translucency = lambda *args, **kwargs: args[6]
     try:
         yield
     finally:
-        inner_module.add_translucency = translucency
+        integrate_module.add_translucency = translucency
 
 
 def plan_cost(folder: Path, rays: int, repeat: int) -> None:

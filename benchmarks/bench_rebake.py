@@ -28,7 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import baker  # noqa: E402
 from assets.rebake_scenes import box_room, grid_boxes, moved  # noqa: E402
-from baker.state import default_path  # noqa: E402
+from baker.rebake.state import default_path  # noqa: E402
 
 
 def main() -> None:

@@ -27,13 +27,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from assets.gltf_builder import GltfBuilder, box, uv_sphere  # noqa: E402
 from assets.make_scenes import cornell_box  # noqa: E402
-from baker.bake import compute  # noqa: E402
-from baker.compose import effective_r_ave  # noqa: E402
-from baker.load import load  # noqa: E402
-from baker.parallel import cores  # noqa: E402
-from baker.scene import Scene  # noqa: E402
+from baker.pipeline.full import compute  # noqa: E402
+from baker.image.compose import effective_r_ave  # noqa: E402
+from baker.gltf.load import load  # noqa: E402
+from baker.run.parallel import cores  # noqa: E402
+from baker.gltf.scene import Scene  # noqa: E402
 from baker.settings import Settings  # noqa: E402
-from baker.surface import LUMINANCE  # noqa: E402
+from baker.geometry.surface import LUMINANCE  # noqa: E402
 from benchmarks.bench_cornell import raw_embree_rate  # noqa: E402
 
 

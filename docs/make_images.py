@@ -18,7 +18,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from assets.make_scenes import cornell_box  # noqa: E402
-from cli.main import main as baker_main  # noqa: E402
+from baker.cli.main import main as baker_main  # noqa: E402
 
 IMAGES = ROOT / "docs" / "images"
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 
-from baker.bake import Computed, compute
-from baker.load import load
-from baker.scene import Scene
+from baker.pipeline.full import Computed, compute
+from baker.gltf.load import load
+from baker.gltf.scene import Scene
 from baker.settings import Settings
 
 SHARED_SCENES = Path(__file__).resolve().parent / "scenes"  # third-party, with licences: scenes/README.md

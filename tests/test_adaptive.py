@@ -3,10 +3,10 @@
 import numpy as np
 
 from assets.make_scenes import cornell_box
-from baker.compose import effective_r_ave
-from baker.integrate import integrate
-from baker.surface import LUMINANCE
-from baker.trace import Tracer
+from baker.image.compose import effective_r_ave
+from baker.light.integrate import integrate
+from baker.geometry.surface import LUMINANCE
+from baker.rays.trace import Tracer
 from tests.bakehelp import computed
 
 SETTINGS = dict(texel_density=6.0, rays=16, max_rays=256, d_max=0.6)

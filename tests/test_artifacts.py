@@ -8,12 +8,12 @@ import pytest
 
 from assets.artifact_scenes import lit_leak_room, low_poly_sphere, shadow_edge
 from baker.errors import SettingsError
-from baker.geometry import build_world
-from baker.rasterise import rasterise
+from baker.geometry.world import build_world
+from baker.atlas.rasterise import rasterise
 from baker.settings import Settings
-from baker.supersample import sub_offsets
-from baker.trace import Tracer
-from baker.validity import _raise
+from baker.atlas.supersample import sub_offsets
+from baker.rays.trace import Tracer
+from baker.atlas.validity import _raise
 from tests.bakehelp import computed, loaded
 from tests.test_validity import DENSITY, _floor_lookup_texels, _grid, _interior_points, _node_of
 
@@ -86,7 +86,7 @@ def test_no_floor_texel_is_lit_through_the_walls(light, supersample, tmp_path):
 def test_unchecked_sub_positions_would_leak(tmp_path, monkeypatch):
     """Without the segment check (sub-positions straight from the texel's square) floor texels
     moved inside the room get sub-positions beyond the thin walls: light leaks in."""
-    direct = importlib.import_module("baker.direct")
+    direct = importlib.import_module("baker.light.direct")
     monkeypatch.setattr(direct, "sub_positions", lambda tracer, texels, rows, count, seed: (
         texels.position[rows][:, None] + sub_offsets(texels, rows, count, seed)))
     room = lit_leak_room(*LIGHTS["grazing_thin_wall"], half=1.57)
@@ -163,7 +163,7 @@ def test_no_faceted_shadow_terminator_on_a_low_poly_sphere(elevation, tmp_path, 
     neighbouring texels no more than that cosine does; without the terminator push it drops to
     0 at facet edges (errors and extra steps of 0.21 at 0°, 0.12 at 30° elevation, measured)."""
     scene = low_poly_sphere(elevation=elevation)
-    rasterise_module = importlib.import_module("baker.rasterise")
+    rasterise_module = importlib.import_module("baker.atlas.rasterise")
 
     def worst(done):
         errors, steps = [], []
@@ -202,8 +202,8 @@ def test_terminator_push_stops_at_geometry(tmp_path):
 
 def test_report_counts_validity_states_and_cli_sets_supersample(tmp_path):
     import baker
-    from cli.bake import settings_from
-    from cli.main import build_parser
+    from baker.cli.bake import settings_from
+    from baker.cli.main import build_parser
 
     room = lit_leak_room(*LIGHTS["sun"], half=1.57)
     result = baker.bake(room.save(tmp_path / "room.glb"), tmp_path / "out.glb",

@@ -1,6 +1,6 @@
 """Bad input never costs the user data (issue 7).
 
-Every case runs the command line as a user does — in-process through ``cli.main.main`` (so the
+Every case runs the command line as a user does — in-process through ``baker.cli.main.main`` (so the
 exit code and stderr are checked exactly), and a few as a real ``baker bake`` subprocess — and
 checks three things:
 - the exit code (1 for bad input, settings or output; 130 when interrupted);
@@ -30,12 +30,13 @@ import pytest
 import baker
 from assets.gltf_builder import GltfBuilder, box, quad
 from assets.make_scenes import checker, cornell_box
-from baker.load import load
-from baker.parallel import run_chunks
-from cli.main import main
+from baker.gltf.load import load
+from baker.run.parallel import run_chunks
+from baker.cli.main import main
 
 ROOT = Path(__file__).resolve().parents[1]
-BAKE = importlib.import_module("baker.bake")  # the module (``baker.bake`` is the function)
+API = importlib.import_module("baker.api")  # the modules (``baker.bake`` is the function)
+FULL = importlib.import_module("baker.pipeline.full")
 PREVIOUS = b"the previous bake: must survive every failure\n"
 FAST = ["--rays", "2", "--page-size", "64", "--quiet"]
 
@@ -346,8 +347,8 @@ def _without_file_permission_override() -> None:
 
 
 def _baker(*argv: str, **kwargs) -> subprocess.Popen:
-    """``baker`` as a real process (``python -m cli.main``), from the repository root."""
-    return subprocess.Popen([sys.executable, "-m", "cli.main", *argv], cwd=ROOT,
+    """``baker`` as a real process (``python -m baker.cli.main``), from the repository root."""
+    return subprocess.Popen([sys.executable, "-m", "baker.cli.main", *argv], cwd=ROOT,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kwargs)
 
 
@@ -423,14 +424,17 @@ def _every_primitive_lightmapped(scene) -> bool:
 # interruption
 
 
-@pytest.mark.parametrize("stage", ["load", "unwrap", "integrate", "encode"])
-def test_ctrl_c_during_a_stage_leaves_the_previous_output(tmp_path, capsys, monkeypatch, stage):
+@pytest.mark.parametrize("module,stage", [(API, "load"), (FULL, "unwrap"), (FULL, "integrate"),
+                                          (API, "encode")], ids=["load", "unwrap", "integrate",
+                                                                 "encode"])
+def test_ctrl_c_during_a_stage_leaves_the_previous_output(tmp_path, capsys, monkeypatch, module,
+                                                          stage):
     source = small_scene().save(tmp_path / "scene.glb")
 
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(BAKE, stage, interrupted)
+    monkeypatch.setattr(module, stage, interrupted)
     output = tmp_path / "baked.glb"
     output.write_bytes(PREVIOUS)
     before = snapshot(tmp_path)
@@ -487,8 +491,8 @@ def _slow_bake_started(tmp_path: Path, marker: Path, *args: str) -> subprocess.P
     script = (  # Ctrl-C as a terminal sends it, even where the suite's shell ignores SIGINT
         "import importlib, pathlib, signal, sys\n"
         "signal.signal(signal.SIGINT, signal.default_int_handler)\n"
-        "b = importlib.import_module('baker.bake')\n"
-        "from cli.main import main\n"
+        "b = importlib.import_module('baker.pipeline.full')\n"
+        "from baker.cli.main import main\n"
         "real = b.integrate\n"
         f"def integrate(*a, **k):\n    pathlib.Path({str(marker)!r}).touch()\n    return real(*a, **k)\n"
         "b.integrate = integrate\n"

@@ -10,7 +10,7 @@ import io
 
 import baker
 from assets.make_scenes import cornell_box, three_instances, vase_room
-from baker.load import load, read_accessor, resolve_buffers
+from baker.gltf.load import load, read_accessor, resolve_buffers
 from tests.bakehelp import REAL_SCENES, saved
 from tests.gltf_validator import describe, issue_codes, validate
 
@@ -124,8 +124,8 @@ def _image_size(doc, image):
 
 
 def test_instances_differ_where_their_surroundings_differ(tmp_path):
-    from baker.bake import compute
-    from baker.compose import effective_r_ave
+    from baker.pipeline.full import compute
+    from baker.image.compose import effective_r_ave
 
     builder = three_instances()
     scene = load(saved(builder, tmp_path))

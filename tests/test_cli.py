@@ -7,8 +7,9 @@ from pathlib import Path
 
 import pytest
 
+import baker
 from assets.make_scenes import cornell_box
-from cli.main import main
+from baker.cli.main import main
 
 
 def test_help_explains_every_setting(capsys):
@@ -46,7 +47,7 @@ def test_quiet_prints_nothing(tmp_path, capsys):
 
 def test_a_missing_scene_is_one_message_and_exit_1(tmp_path):
     out = tmp_path / "o.glb"
-    run = subprocess.run([sys.executable, "-m", "cli.main", "bake", str(tmp_path / "nope.glb"),
+    run = subprocess.run([sys.executable, "-m", "baker.cli.main", "bake", str(tmp_path / "nope.glb"),
                           "-o", str(out)], capture_output=True, text=True)
     assert run.returncode == 1
     assert "nope.glb" in run.stderr and "Traceback" not in run.stderr
@@ -63,8 +64,8 @@ def test_bad_settings_say_what_to_do(tmp_path, capsys):
 
 
 def test_material_and_sampling_options_reach_the_settings():
-    from cli.bake import settings_from
-    from cli.main import build_parser
+    from baker.cli.bake import settings_from
+    from baker.cli.main import build_parser
 
     args = build_parser().parse_args(
         ["bake", "in.glb", "-o", "out.glb", "--specular", "c", "--mirror-roughness", "0.3",
@@ -76,15 +77,29 @@ def test_material_and_sampling_options_reach_the_settings():
 
 
 def test_the_command_ignores_a_second_ctrl_c_once_done(tmp_path):
-    """``baker`` (``cli.main.entry``) ignores Ctrl-C once its command has returned, so a second
+    """``baker`` (``baker.cli.main.entry``) ignores Ctrl-C once its command has returned, so a second
     Ctrl-C while Python ends the worker threads prints no traceback from the interpreter's
     shutdown; the exit code stays the command's. Run in a child process: the test's own
     Ctrl-C stays as it is."""
     script = ("import signal, sys; sys.argv = ['baker', 'bake', sys.argv[1], '-o', sys.argv[2]]; "
-              "from cli.main import entry; code = entry(); "
+              "from baker.cli.main import entry; code = entry(); "
               "print(signal.getsignal(signal.SIGINT) is signal.SIG_IGN); sys.exit(code)")
     run = subprocess.run([sys.executable, "-c", script, str(tmp_path / "nope.glb"),
                           str(tmp_path / "o.glb")],
                          capture_output=True, text=True, cwd=Path(__file__).resolve().parent.parent)
     assert run.returncode == 1 and "baker: error:" in run.stderr
     assert run.stdout.strip() == "True"
+
+
+def test_every_setting_has_its_option_and_the_same_default():
+    """``settings_from`` takes every ``Settings`` field the parser knows: a bake with no option
+    asks for ``Settings()`` exactly, and only the two internal fields have no option."""
+    import dataclasses
+
+    from baker.cli.bake import settings_from
+    from baker.cli.main import build_parser
+
+    args = build_parser().parse_args(["bake", "in.glb", "-o", "out.glb"])
+    assert settings_from(args) == baker.Settings()
+    missing = {f.name for f in dataclasses.fields(baker.Settings) if not hasattr(args, f.name)}
+    assert missing == {"chunk_texels", "d_max_fraction"}

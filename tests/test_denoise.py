@@ -15,12 +15,12 @@ import pytest
 
 import baker
 from assets.make_scenes import cornell_box
-from baker.bake import compute
-from baker.compose import Lightmaps
-from baker.denoise import MIN_TEXELS, chart_labels, denoise
+from baker.pipeline.full import compute
+from baker.image.compose import Lightmaps
+from baker.image.denoise import MIN_TEXELS, chart_labels, denoise
 from baker.errors import SettingsError
-from baker.load import load
-from baker.rasterise import Texels
+from baker.gltf.load import load
+from baker.atlas.rasterise import Texels
 from baker.settings import Settings
 
 
@@ -173,7 +173,7 @@ def test_missing_pyoidn_names_the_fix(monkeypatch):
 def test_cli_flag():
     import argparse
 
-    from cli import bake as cli_bake
+    from baker.cli import bake as cli_bake
     parser = argparse.ArgumentParser()
     cli_bake.add_parser(parser.add_subparsers())
     args = parser.parse_args(["bake", "in.glb", "-o", "out.glb", "--denoise"])

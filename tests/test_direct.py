@@ -7,8 +7,8 @@ import pytest
 
 import baker
 from assets.light_scenes import blocked_floor, emissive_square, lit_floor, open_floor, penumbra
-from baker.direct import spot_attenuation
-from baker.surface import LUMINANCE
+from baker.light.direct import spot_attenuation
+from baker.geometry.surface import LUMINANCE
 from tests.bakehelp import REAL_SCENES, computed, loaded
 
 FAST = dict(texel_density=8.0, rays=4, page_size=256)
@@ -250,8 +250,8 @@ def test_lamp_scene_bakes_its_five_point_lights(tmp_path):
 
 
 def test_command_line_light_options_reach_the_settings(tmp_path):
-    from cli.bake import settings_from
-    from cli.main import build_parser
+    from baker.cli.bake import settings_from
+    from baker.cli.main import build_parser
 
     args = build_parser().parse_args(
         ["bake", "in.glb", "-o", "out.glb", "--shadow-rays", "32", "--light-radius", "0.05",

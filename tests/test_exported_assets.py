@@ -10,10 +10,10 @@ import pytest
 
 from assets.gltf_builder import GltfBuilder, box, quad
 from baker.errors import InputError
-from baker.load import VIEW_ONLY_EXTENSIONS, load
-from baker.materials import DIFFUSE, classify
+from baker.gltf.load import VIEW_ONLY_EXTENSIONS, load
+from baker.gltf.materials import DIFFUSE, classify
 from baker.settings import Settings
-from baker.bake import compute
+from baker.pipeline.full import compute
 
 VIEW_ONLY = {
     "KHR_materials_clearcoat": {"clearcoatFactor": 1.0, "clearcoatRoughnessFactor": 0.1},
@@ -150,8 +150,8 @@ def _textured_floor(folder, uv_of, transform: dict | None):
 
 def test_texture_transform_is_the_map_the_extension_defines(tmp_path):
     """A quarter turn, a scale and an offset: the UVs sampled are the closed form's."""
-    from baker.geometry import build_world
-    from baker.surface import texture_uv
+    from baker.geometry.world import build_world
+    from baker.geometry.surface import texture_uv
 
     transform = {"offset": [0.25, 0.5], "rotation": np.pi / 2, "scale": [2.0, 1.0]}
     scene = load(_textured_floor(tmp_path, lambda uv: uv, transform))
@@ -169,8 +169,8 @@ def test_a_transformed_texture_bakes_as_the_pre_transformed_one(tmp_path):
     """Albedo, alpha and emission of a texture with KHR_texture_transform equal those of the same
     texture without it on UVs transformed beforehand, at any point; so does the lightmap (the
     emissive texture lights the roof, the alpha-tested floor lets rays through)."""
-    from baker.geometry import build_world
-    from baker.surface import albedo, alpha, emission
+    from baker.geometry.world import build_world
+    from baker.geometry.surface import albedo, alpha, emission
 
     for folder in ("a", "b"):
         (tmp_path / folder).mkdir()

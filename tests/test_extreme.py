@@ -1,4 +1,4 @@
-"""Extreme and stiff scenes bake to finite, sensible values (issue 7, DESIGN.md §7).
+"""Extreme and stiff scenes bake to finite, sensible values (issue 7, docs/design.md §7).
 
 The stiff case of equation (3), the model's limits on a closed room, the same room at every scale
 and far from the origin, meshes as exporters leave them, transforms, instancing and page size.
@@ -14,13 +14,13 @@ import pytest
 import baker
 from assets.extreme_scenes import (closed_room, defect_panels, instanced_boxes, l_strip,
                                    non_manifold_fin, panel_over_floor, single_triangle)
-from baker.ambient import MAX_BOUNCES, bounce_factor
-from baker.compose import effective_r_ave
-from baker.geometry import build_world
-from baker.input_warnings import input_warnings
-from baker.rasterise import INSET, degenerate
-from baker.scene import Skipped
-from cli.bake import print_summary
+from baker.light.ambient import MAX_BOUNCES, bounce_factor
+from baker.image.compose import effective_r_ave
+from baker.geometry.world import build_world
+from baker.pipeline.input_warnings import input_warnings
+from baker.atlas.rasterise import INSET, degenerate
+from baker.gltf.scene import Skipped
+from baker.cli.bake import print_summary
 from tests.bakehelp import computed, loaded, saved
 
 

@@ -12,7 +12,7 @@ import time
 import numpy as np
 import pytest
 
-from baker import forked
+from baker.run import forked as forked
 from baker.errors import BakerError
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"),

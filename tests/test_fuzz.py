@@ -34,7 +34,7 @@ from hypothesis import strategies as st
 import baker
 from assets.gltf_builder import GltfBuilder, box, quad
 from assets.make_scenes import checker
-from baker.load import load
+from baker.gltf.load import load
 
 EXAMPLES = int(os.environ.get("BAKER_FUZZ_EXAMPLES", "2000"))
 HANG_SECONDS = 20

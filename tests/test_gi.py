@@ -3,10 +3,10 @@
 import numpy as np
 
 from assets.gltf_builder import GltfBuilder, box
-from baker.direct import light_sources
-from baker.gi import indirect_light
+from baker.light.direct import light_sources
+from baker.light.gi import indirect_light
 from baker.study import compare_with_gi
-from baker.trace import Tracer
+from baker.rays.trace import Tracer
 from tests.bakehelp import computed
 
 
@@ -41,7 +41,7 @@ def test_a_small_lamp_is_found_from_every_path_vertex(tmp_path):
     from dataclasses import replace
 
     from assets.make_scenes import cornell_box
-    from baker.surface import LUMINANCE
+    from baker.geometry.surface import LUMINANCE
 
     done = computed(cornell_box(), tmp_path, page_size=48, rays=4)
     tracer = Tracer(done.world)

@@ -12,10 +12,10 @@ from PIL import Image
 
 import baker
 from assets.light_scenes import lit_floor
-from baker.compose import Lightmaps
-from baker.encode import decode, encode, error_bound
-from baker.hdr import exr_bytes, hdr_bytes
-from cli.main import main
+from baker.image.compose import Lightmaps
+from baker.image.encode import decode, encode, error_bound
+from baker.image.hdr import exr_bytes, hdr_bytes
+from baker.cli.main import main
 from tests.bakehelp import computed, saved
 from tests.gltf_validator import ERROR, describe, issue_codes, validate
 
@@ -182,7 +182,7 @@ def test_bake_writes_float_pages_that_match_the_float_lightmaps(tmp_path):
     assert 0 < page["clipped_fraction"] <= 0.002 and page["intensity"] < page["peak"]
     assert any("clip to it" in note for note in report["notes"])
     assert report["settings"]["clip_percentile"] == 99.9
-    gltf = baker.load.load(out).document
+    gltf = baker.gltf.load.load(out).document
     assert gltf.asset.extras["baker"]["lightmap_intensity_percentile"] == 99.9
     assert gltf.materials[-1].extensions["MOZ_lightmap"]["intensity"] == page["intensity"]
     validation = validate(out)

@@ -22,7 +22,7 @@ from PIL import Image as PILImage
 
 from assets.gltf_builder import GltfBuilder, quad
 from assets.make_scenes import checker
-from cli.main import main
+from baker.cli.main import main
 
 FAST = ["--rays", "2", "--page-size", "32", "--quiet"]
 PREVIOUS = b"the previous bake: must survive every failure\n"

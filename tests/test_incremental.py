@@ -1,6 +1,6 @@
 """Incremental rebake (issue 5): rigid-move-invariant atlas, bake state, diff, dirty texels, and
 the invariant everything leans on — an incremental rebake gives the same bytes as a full bake of
-the edited scene (DESIGN.md §4–5)."""
+the edited scene (docs/design.md §4–5)."""
 
 from __future__ import annotations
 
@@ -15,15 +15,15 @@ import pytest
 import baker
 from assets.gltf_builder import quat_axis_angle, rotation_matrix
 from assets.rebake_scenes import box_room, grid_boxes, moved
-from baker.bake import compute
-from baker.geometry import build_world
-from baker.incremental import FullBake, rebake
-from baker.load import load
-from baker.rasterise import rasterise
+from baker.pipeline.full import compute
+from baker.geometry.world import build_world
+from baker.rebake.incremental import FullBake, rebake
+from baker.gltf.load import load
+from baker.atlas.rasterise import rasterise
 from baker.settings import resolve
-from baker.state import default_path
-from baker.unwrap import frame_area, stretch, unwrap
-from cli.main import main
+from baker.rebake.state import default_path
+from baker.atlas.unwrap import frame_area, stretch, unwrap
+from baker.cli.main import main
 
 ROOM = (4.0, 3.0, 4.0)
 BOXES = grid_boxes(4, room=ROOM, size=0.4)
@@ -171,7 +171,7 @@ def test_unusable_state_means_a_full_bake_with_a_reason(base, tmp_path, damage):
             for item in src.infolist():
                 data = src.read(item)
                 if item.filename == "header.json":
-                    data = data.replace(f'"version": {baker.state.VERSION}'.encode(),
+                    data = data.replace(f'"version": {baker.rebake.state.VERSION}'.encode(),
                                         b'"version": 99')
                 dst.writestr(item, data)
     elif damage == "foreign":
@@ -194,7 +194,7 @@ def test_unusable_state_means_a_full_bake_with_a_reason(base, tmp_path, damage):
 def test_a_state_of_another_build_of_baker_means_a_full_bake(base, tmp_path, monkeypatch):
     """A state keeps the terms the code that wrote it computed: written by another build (other
     sources, or another Embree, numba or numpy), it is not mixed with this build's terms."""
-    from baker import diff as diff_module
+    from baker.rebake import diff as diff_module
 
     scene = EDITS["box moved across the room"]().save(tmp_path / "edited.glb")
     shutil.copy(default_path(base), default_path(tmp_path / "out.glb"))
@@ -316,10 +316,10 @@ def test_moving_an_alpha_cut_quad_rebakes_like_a_full_bake(tmp_path):
 def test_rebake_reports_its_time_against_the_last_full_bake(base, tmp_path, capsys):
     scene = EDITS["box moved across the room"]().save(tmp_path / "edited.glb")
     shutil.copy(default_path(base), default_path(tmp_path / "out.glb"))
-    assert baker.state.last_full_bake_seconds(default_path(tmp_path / "out.glb")) is None
-    shutil.copy(baker.state.timing_path(default_path(base)),
-                baker.state.timing_path(default_path(tmp_path / "out.glb")))
-    full = baker.state.last_full_bake_seconds(default_path(base))
+    assert baker.rebake.state.last_full_bake_seconds(default_path(tmp_path / "out.glb")) is None
+    shutil.copy(baker.rebake.state.timing_path(default_path(base)),
+                baker.rebake.state.timing_path(default_path(tmp_path / "out.glb")))
+    full = baker.rebake.state.last_full_bake_seconds(default_path(base))
     assert full is not None and full > 0
     result = baker.bake(scene, tmp_path / "out.glb", SETTINGS, incremental=True)
     assert result.rebake["last_full_bake_seconds"] == full
@@ -343,7 +343,7 @@ def test_a_failed_write_leaves_the_old_state_and_no_temporary(base, tmp_path, mo
     no temporary file is left beside it."""
     import importlib
 
-    bake_module = importlib.import_module("baker.bake")
+    bake_module = importlib.import_module("baker.api")
     output = _baked_copy(base, tmp_path / "out")
     folder = output.parent
     before = default_path(output).read_bytes()
@@ -368,7 +368,7 @@ def test_the_state_a_rebake_replaces_is_freed_beside_it_and_leaves_nothing(base,
     import importlib
     import threading
 
-    bake_module = importlib.import_module("baker.bake")
+    bake_module = importlib.import_module("baker.rebake.staging")
     output = _baked_copy(base, tmp_path / "out")
     folder = output.parent
     old = default_path(output).read_bytes()
@@ -398,7 +398,7 @@ def test_state_leaves_out_arrays_of_zeros_and_reads_them_back(base):
     sky or mirrors does not have are not held at all (0 rows)."""
     import json
 
-    from baker.incremental import state_classes
+    from baker.rebake.incremental import state_classes
 
     path = default_path(base)
     with zipfile.ZipFile(path) as archive:
@@ -406,7 +406,7 @@ def test_state_leaves_out_arrays_of_zeros_and_reads_them_back(base):
         zeros = json.loads(archive.read("header.json"))["zeros"]
     assert "atlas/pages" in zeros and "atlas/pages.npy" not in names
     assert "terms/w_hit" not in zeros and "terms/w_hit.npy" in names
-    stored = baker.state.load(path, state_classes())
+    stored = baker.rebake.state.load(path, state_classes())
     pages = stored.atlas.instances[0].pages
     assert len(pages) == stored.atlas.instances[0].triangles.shape[0] and pages.dtype == np.int64
     assert sum(len(u.pages) for u in stored.atlas.instances) == zeros["atlas/pages"]["shape"][0]
@@ -421,7 +421,7 @@ def test_state_stores_repeated_and_sparse_arrays_compactly_and_reads_them_back(b
     with the bits, shape and dtype it was written with."""
     import json
 
-    from baker.incremental import state_classes
+    from baker.rebake.incremental import state_classes
 
     path = default_path(base)
     with zipfile.ZipFile(path) as archive:
@@ -430,10 +430,10 @@ def test_state_stores_repeated_and_sparse_arrays_compactly_and_reads_them_back(b
     assert "terms/counts" in header["repeated"] and sizes["terms/counts.npy"] < 200
     assert "validity/moved_by" in header["sparse"] and "validity/moved_by.rows.npy" in sizes
     assert "terms/w_hit" not in header["sparse"] and "terms/w_hit" not in header["repeated"]
-    stored = baker.state.load(path, state_classes())
+    stored = baker.rebake.state.load(path, state_classes())
     again = tmp_path / "again.bake"
     with open(again, "wb") as file:
-        baker.state.write_state(file, stored)
+        baker.rebake.state.write_state(file, stored)
     assert again.read_bytes() == path.read_bytes()
     counts = stored.groups["terms"].counts
     assert counts.dtype == np.int64 and counts.shape == (header["repeated"]["terms/counts"][
@@ -522,7 +522,7 @@ def test_the_shadow_ray_prefilter_keeps_every_texel_whose_rays_meet_the_move(tmp
     """``_may_shadow`` skips the texels whose shadow rays cannot pass the moved box (by the rays'
     geometry); with a soft point light, a spot and a soft sun, the rebake finds the same
     shadow-dirty texels as when every texel's shadow rays are cast, and the same bytes."""
-    from baker import incremental
+    from baker.rebake import incremental as incremental
 
     def lit(boxes):
         builder = _room(boxes, lamp=dict(LAMP, radius=0.3))
@@ -579,7 +579,7 @@ def test_state_atlas_joins_the_instances_and_splits_them_back(tmp_path):
     """The atlas is stored as one array per ``InstanceUV`` field over all instances (not four
     members per instance) and read back instance by instance with the same bits — including
     an instance with no triangles."""
-    from baker.atlas import Atlas, InstanceUV
+    from baker.atlas.layout import Atlas, InstanceUV
 
     rng = np.random.default_rng(2)
     units = tuple(InstanceUV(instance=i, vertices=rng.integers(0, 99, k),
@@ -590,11 +590,11 @@ def test_state_atlas_joins_the_instances_and_splits_them_back(tmp_path):
                   instances=units)
     path = tmp_path / "atlas.bake"
     with open(path, "wb") as file:
-        baker.state.write_state(file, baker.state.BakeState(
+        baker.rebake.state.write_state(file, baker.rebake.state.BakeState(
             fingerprints={}, atlas=atlas, groups={}, instance_world=np.zeros((0, 4, 4))))
     with zipfile.ZipFile(path) as archive:
         assert sum(name.startswith("atlas/") for name in archive.namelist()) == 6
-    back = baker.state.load(path, {}).atlas
+    back = baker.rebake.state.load(path, {}).atlas
     assert (back.width, back.height, back.page_count, back.texel_density, back.padding) == (
         64, 32, 3, 12.5, 2)
     assert [u.instance for u in back.instances] == [4, 0, 7]
@@ -608,7 +608,7 @@ def test_rays_stopped_before_the_moved_box_leave_their_texels_clean(tmp_path, mo
     """A ray that meets the moved box only behind a surface that did not move has that surface
     as its first hit before and after the move (``_HitsCompared``): the texels behind a
     screen are not recomputed, and the rebake still gives the full bake's bytes."""
-    from baker import incremental
+    from baker.rebake import incremental as incremental
 
     screen = {"name": "screen", "size": (0.1, 1.2, 2.5), "at": (0.1, 0.5), "colour": "crate"}
     settings = baker.Settings(rays=16, page_size=128, shadow_rays=4, threads=1, d_max=1.5)
@@ -637,8 +637,8 @@ def test_the_cell_search_finds_the_rays_drawing_them_all_finds():
     (``_cell_candidates``) and draws all the rays of the others: the same rays, bit for bit,
     as drawing every texel's rays, for texels near and far, facing the spheres or not, and ray
     counts that are powers of two or not."""
-    from baker.incremental import _drawn_near_rays
-    from baker.sampling import tangent_frames
+    from baker.rebake.incremental import _drawn_near_rays
+    from baker.rays.sampling import tangent_frames
 
     rng = np.random.default_rng(6)
     for rays in (16, 64, 100):
@@ -659,7 +659,7 @@ def test_the_cell_search_finds_the_rays_drawing_them_all_finds():
 def test_a_state_with_zip64_members_reads_back_and_rebakes(tmp_path, monkeypatch):
     """Past 2 GiB (a 4096² bake's state) members and offsets get ZIP64 fields; forced here
     for every member, the state reads back and the rebake still gives the full bake's bytes."""
-    from baker import storedzip
+    from baker.rebake import storedzip as storedzip
 
     monkeypatch.setattr(storedzip, "ZIP64_LIMIT", 16)
     scene = _room().save(tmp_path / "room.glb")
@@ -679,7 +679,8 @@ def test_texels_whose_rays_the_move_changed_recast_only_those_rays(tmp_path, mon
     alone (``integrate.ray_changes``): far fewer rays than its own are cast. Where its stored
     sums are not recovered exactly (forced here), or an albedo above 1 could make sums inexact
     (``Surfaces.exact_sums``), it is traced anew. The bytes are the full bake's either way."""
-    from baker import integrate, incremental
+    from baker.light import hemisphere as integrate
+    from baker.rebake import incremental as incremental
 
     if case == "not recovered":
         exactness = integrate.changed_terms
@@ -711,7 +712,7 @@ def test_far_texels_whose_probes_see_the_same_faces_keep_their_validity(tmp_path
     first before the move and not after, or the other way round (``_ProbesCompared``): the
     texels whose probes merely see the moved box are not probed again, and the rebake still
     gives the full bake's bytes."""
-    from baker import incremental
+    from baker.rebake import incremental as incremental
 
     settings = baker.Settings(rays=16, page_size=128, shadow_rays=4, threads=1, d_max=1.5)
     before = _room(lamp=None).save(tmp_path / "before.glb")

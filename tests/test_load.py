@@ -1,4 +1,4 @@
-"""Tests of baker.load: glTF decoding, node flattening and the errors a technical artist sees.
+"""Tests of baker.gltf.load: glTF decoding, node flattening and the errors a technical artist sees.
 
 Each test builds a small document with pygltflib objects (``Doc`` below), writes it to tmp_path and
 checks numbers computed by hand. The real sample scenes in tests/scenes must all load.
@@ -19,10 +19,10 @@ import pygltflib
 import pytest
 from PIL import Image as PILImage
 
-from baker import load as load_module
+from baker.gltf import load as load_module
 from baker.errors import InputError
-from baker.load import expand_triangles, load, read_accessor, resolve_buffers
-from baker.scene import CLAMP_TO_EDGE, MIRRORED_REPEAT
+from baker.gltf.load import expand_triangles, load, read_accessor, resolve_buffers
+from baker.gltf.scene import CLAMP_TO_EDGE, MIRRORED_REPEAT
 
 from tests.bakehelp import SHARED_SCENES
 
@@ -678,7 +678,7 @@ def _document_paths(name: str, tmp_path: Path) -> list[Path]:
 def test_documents_parse_as_pygltflib_parses_them(name, tmp_path):
     """The document made directly from the JSON (``gltf_document.document``) equals
     pygltflib's own, field by field and type by type."""
-    from baker import gltf_document
+    from baker.gltf import document as gltf_document
 
     for path in _document_paths(name, tmp_path):
         text = _document_text(path)
@@ -705,8 +705,8 @@ def _cleaned(value):
 def test_document_data_is_pygltflib_data_cleaned(name, tmp_path):
     """``gltf_document.data`` (the writer's JSON data) equals pygltflib's ``gltf_asdict``
     cleaned, types included, and shares nothing with the document (a deep copy)."""
-    from baker import gltf_document
-    from baker.load import read_document
+    from baker.gltf import document as gltf_document
+    from baker.gltf.load import read_document
 
     for path in _document_paths(name, tmp_path):
         document = read_document(path)
@@ -723,8 +723,8 @@ def test_documents_with_odd_values_parse_as_pygltflib_parses_them():
     """Ints for floats are floats, unknown keys are dropped, null stays None; a value of
     another JSON type than its field's (a float for an index, a string for a number) is left
     to pygltflib, which decides what it means."""
-    from baker import gltf_document
-    from baker.load import _document_from_json
+    from baker.gltf import document as gltf_document
+    from baker.gltf.load import _document_from_json
 
     nodes = [{"name": "a", "mesh": 0, "translation": [1, 2, 3], "rotation": [0, 0, 0, 1]},
              {"children": [0], "scale": [2, 2.5, 1], "extras": {"k": 1}, "weights": [0.5]},

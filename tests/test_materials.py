@@ -8,20 +8,19 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-import baker.integrate as integrate_module
+import baker.light.hemisphere as integrate_module
 from assets.material_scenes import (DIFFUSE_TRANSMISSION, TRANSMISSION, VOLUME, WAX,
                                     alpha_cut_quad, facing_mirrors, glass_slab, leaf, material_zoo,
                                     mirror_wall, wax_cylinder)
-from baker.geometry import build_world
-from baker.integrate import (_Chains, _refract, _special_hits, surfaces_of, hemisphere_rays,
-                             integrate)
-from baker.materials import (DIFFUSE, SPECULAR, TRANSLUCENT, classify,
-                             no_lightmap_reason)
-from baker.scene import Material
+from baker.geometry.world import build_world
+from baker.light.hemisphere import _Chains, _refract, _special_hits, hemisphere_rays, surfaces_of
+from baker.light.integrate import integrate
+from baker.gltf.materials import DIFFUSE, SPECULAR, TRANSLUCENT, classify, no_lightmap_reason
+from baker.gltf.scene import Material
 from baker.settings import Settings, resolve
-from baker.surface import LUMINANCE
-from baker.trace import Tracer
-from baker.load import load
+from baker.geometry.surface import LUMINANCE
+from baker.rays.trace import Tracer
+from baker.gltf.load import load
 from bakehelp import computed, loaded, saved
 from gltf_validator import issue_codes, validate
 
@@ -415,7 +414,7 @@ def test_other_side_rays_are_what_a_rebake_must_test(tmp_path):
     """A crate under a leaf is met by the leaf's back-face rays, not by its own (front) rays; a
     wax cylinder's inner rays are as long as its d_in and reach its far side."""
     from assets.gltf_builder import box
-    from baker.inner import other_side_rays
+    from baker.light.inner import other_side_rays
 
     b = leaf()
     b.node("crate", b.shape_mesh("crate", box((0.4, 0.1, 0.4)), material=b.material(

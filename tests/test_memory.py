@@ -7,13 +7,13 @@ import numpy as np
 import pytest
 
 from assets.make_scenes import cornell_box
-from baker import compose as compose_module
-from baker import encode as encode_module
-from baker import integrate as integrate_module
-from baker.compose import compose
-from baker.encode import encode
-from baker.postprocess import postprocess
-from baker.seams import find_seams
+from baker.image import compose as compose_module
+from baker.image import encode as encode_module
+from baker.light import hemisphere as integrate_module
+from baker.image.compose import compose
+from baker.image.encode import encode
+from baker.image.postprocess import postprocess
+from baker.image.seams import find_seams
 from tests.bakehelp import computed
 
 
@@ -82,8 +82,9 @@ def test_a_bake_in_parts_grows_with_its_pages_not_its_texels(tmp_path, monkeypat
     """Made a part at a time, with the parts' rows on disk (parts.py), a bake's peak grows by
     its pages (two float pages, the coverage's page-sized arrays, masks), not by what it holds
     per texel: all at once, the same growth was 9 light pages."""
-    from baker import parts, rasterise
-    from baker.bake import compute
+    from baker.pipeline import parts as parts
+    from baker.atlas import rasterise as rasterise
+    from baker.pipeline.full import compute
     from baker.settings import Settings
     from tests.bakehelp import loaded
 
@@ -104,7 +105,7 @@ def test_a_bake_in_parts_grows_with_its_pages_not_its_texels(tmp_path, monkeypat
 def test_pages_of_w_are_kept_only_for_the_occlusion_texture(done, tmp_path):
     """Without ``occlusion`` the bake holds no pages of W (a float page pair less), and its
     light is the same."""
-    from baker.bake import compute
+    from baker.pipeline.full import compute
     from baker.settings import Settings
 
     plain = compute(done.scene, Settings(page_size=384, rays=4))

@@ -1,11 +1,11 @@
-"""The obscurance estimator against closed forms (DESIGN.md §2, equations 2–4)."""
+"""The obscurance estimator against closed forms (docs/design.md §2, equations 2–4)."""
 
 import numpy as np
 import pytest
 
 from assets.make_scenes import open_plane, parallel_planes, red_wall_floor
-from baker.compose import effective_r_ave
-from baker.integrate import Terms
+from baker.image.compose import effective_r_ave
+from baker.light.hemisphere import Terms
 from tests.bakehelp import computed
 
 
@@ -86,8 +86,8 @@ def test_texel_sums_are_exact_in_any_order_and_recovered_from_the_means():
     """Every ray's values are rounded to a grid fine enough to be exact when summed, so a
     texel's sums are the same bits whatever the order of its rays (what a rebake that swaps one
     ray's old value for its new one relies on), and the stored means give them back exactly."""
-    from baker.integrate import _COLUMNS, _TEXEL_MAJOR, _accumulate_kernel, _means, _sums_of
-    from baker.surface import LUMINANCE
+    from baker.light.hemisphere import _COLUMNS, _TEXEL_MAJOR, _accumulate_kernel, _means, _sums_of
+    from baker.geometry.surface import LUMINANCE
 
     texels, rays = 300, 64
     primitive, distance, table = _random_rays(4, texels, rays)
@@ -109,8 +109,8 @@ def test_a_rays_change_replaces_its_value_in_the_sums_exactly():
     """The kernel's signed sums of changed rays (what ``ray_changes`` adds up) and
     ``changed_terms``: the terms of texels after some of their rays' hits changed are the bits
     of the terms of the new hits, summed afresh."""
-    from baker.integrate import _COLUMNS, _TEXEL_MAJOR, _accumulate_kernel, _means, changed_terms
-    from baker.surface import LUMINANCE
+    from baker.light.hemisphere import _COLUMNS, _TEXEL_MAJOR, _accumulate_kernel, _means, changed_terms
+    from baker.geometry.surface import LUMINANCE
 
     texels, rays = 200, 16
     primitive, distance, table = _random_rays(6, texels, rays)

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 import baker
-from baker import parts
-from baker.spill import Column, Spill
+from baker.pipeline import parts as parts
+from baker.run.spill import Column, Spill
 from tests.bakehelp import REAL_SCENES
 
 SCENES = {"lamp": (REAL_SCENES["LightsPunctualLamp"], 192),  # punctual lights
@@ -40,8 +40,8 @@ def test_parts_on_disk_give_the_bytes_of_one_part(name, tmp_path, monkeypatch):
 def test_a_computation_in_parts_gives_back_its_texels_and_terms(tmp_path, monkeypatch):
     """What tests, the error maps and the denoiser read (``Computed.texels``, ``terms``, …) is
     the same whether it was held or spilled."""
-    from baker.bake import compute
-    from baker.load import load
+    from baker.pipeline.full import compute
+    from baker.gltf.load import load
 
     scene = load(REAL_SCENES["LightsPunctualLamp"])
     settings = baker.Settings(rays=8, page_size=128)
@@ -92,7 +92,7 @@ def test_a_spilled_column_is_written_as_numpy_writes_the_array(tmp_path):
 def test_an_interrupted_bake_in_parts_leaves_no_rows_on_disk(tmp_path, monkeypatch):
     import importlib
 
-    bake_module = importlib.import_module("baker.bake")
+    bake_module = importlib.import_module("baker.pipeline.full")
     monkeypatch.setattr(parts, "PART_TEXELS", 1000)
     lit, original = [], bake_module.direct_light
 
@@ -115,7 +115,7 @@ def test_rows_a_killed_bake_left_behind_are_removed_by_the_next(tmp_path):
     import subprocess
     import sys
 
-    from baker.spill import remove_stale
+    from baker.run.spill import remove_stale
 
     gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
                           capture_output=True, text=True, check=True).stdout.strip()
@@ -167,7 +167,7 @@ def test_texel_points_keep_only_the_moved_sample_points():
     made ones; the others are stored as zero rows, which the state leaves out."""
     from types import SimpleNamespace
 
-    from baker.parts import TexelPoints
+    from baker.pipeline.parts import TexelPoints
 
     rng = np.random.default_rng(5)
     made = rng.random((6, 3))

@@ -10,11 +10,11 @@ from PIL import Image
 import baker
 from assets.gltf_builder import quat_axis_angle
 from assets.make_scenes import cornell_box
-from baker.geometry import build_world
-from baker.load import load
+from baker.geometry.world import build_world
+from baker.gltf.load import load
 from baker.preview import View, primary_rays, render
-from baker.surface import LUMINANCE
-from cli.main import main
+from baker.geometry.surface import LUMINANCE
+from baker.cli.main import main
 from tests.bakehelp import REAL_SCENES, saved
 
 SIZE = (200, 150)

@@ -3,10 +3,10 @@
 import numpy as np
 
 from assets.make_scenes import open_plane, slivers_and_tiny, three_instances
-from baker.geometry import build_world
-from baker.rasterise import INSET, _baked_triangles, rasterise
+from baker.geometry.world import build_world
+from baker.atlas.rasterise import INSET, _baked_triangles, rasterise
 from baker.settings import Settings, resolve
-from baker.unwrap import unwrap
+from baker.atlas.unwrap import unwrap
 from tests.bakehelp import loaded
 
 
@@ -97,7 +97,7 @@ def test_texel_size_follows_texel_density(tmp_path):
 def test_coverage_does_not_depend_on_how_many_candidates_are_taken_at_once(tmp_path, monkeypatch):
     """Triangles' texel boxes are cut into bands of rows and taken in chunks (memory): tiny
     bands and chunks, cutting every triangle, give the same owners and counts."""
-    from baker import rasterise as rasterise_module
+    from baker.atlas import rasterise as rasterise_module
 
     scene, world, atlas, texels = _raster(three_instances(), tmp_path, 48.0)
     whole = rasterise_module.cover(atlas, world)

@@ -2,9 +2,7 @@
 
 import numpy as np
 
-from baker.sampling import (cap_boxes, cosine_hemisphere, fill_points, hash_u32, owen_scramble,
-                            net_solve, sample_2d, sobol_cell_sample, tangent_frames,
-                            texel_scrambles)
+from baker.rays.sampling import cap_boxes, cosine_hemisphere, fill_points, hash_u32, net_solve, owen_scramble, sample_2d, sobol_cell_sample, tangent_frames, texel_scrambles
 
 
 def test_same_arguments_same_numbers_however_split():

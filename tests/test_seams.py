@@ -6,10 +6,10 @@ import pytest
 
 from assets.artifact_scenes import cylinder_on_floor, sphere_on_floor, tiled_floor
 from assets.make_scenes import cornell_box
-from baker.compose import Lightmaps, compose
-from baker.postprocess import postprocess
-from baker.seams import find_seams, seam_steps
-from baker.validity import Validity
+from baker.image.compose import Lightmaps, compose
+from baker.image.postprocess import postprocess
+from baker.image.seams import find_seams, seam_steps
+from baker.atlas.validity import Validity
 from tests.bakehelp import computed
 
 MIP_LEVELS = 1  # clean lookups on mip levels 0 and 1 (at padding 2, level 2 reads ~1000 empty)

@@ -9,9 +9,9 @@ import zipfile
 import numpy as np
 import pytest
 
-from baker import storedzip
-from baker.spill import Column
-from baker.storedzip import StoredZip
+from baker.rebake import storedzip as storedzip
+from baker.run.spill import Column
+from baker.rebake.storedzip import StoredZip
 
 
 def _archive(members: dict[str, np.ndarray | bytes]) -> bytes:

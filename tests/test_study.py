@@ -56,8 +56,8 @@ def test_error_maps_show_where_the_lightmap_is_noisy(tmp_path):
     from PIL import Image
 
     from assets.make_scenes import cornell_box as room
-    from baker.errormap import error_pages, texel_errors
-    from cli.main import main
+    from baker.image.errormap import error_pages, texel_errors
+    from baker.cli.main import main
 
     done = computed(room(), tmp_path, page_size=48, rays=32)
     errors = texel_errors(done)

@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 
 from assets.artifact_scenes import obscurance_edge
-from baker.integrate import hemisphere_rays, integrate
-from baker.supersample import sub_positions
-from baker.trace import Tracer, ray_lift
+from baker.light.hemisphere import hemisphere_rays
+from baker.light.integrate import integrate
+from baker.atlas.supersample import sub_positions
+from baker.rays.trace import Tracer, ray_lift
 from tests.bakehelp import computed
 
 # Obscurance only (no light): the floor under a slab 1 cm above it is dark, beside it open.

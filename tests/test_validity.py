@@ -6,11 +6,10 @@ import numpy as np
 import pytest
 
 from assets.artifact_scenes import leak_room
-from baker.postprocess import fill_invalid
-from baker.rasterise import rasterise
-from baker.trace import Tracer
-from baker.validity import (ENCLOSED, INVALID, MOVED, PROBE_RADIUS, PUSH, TANGENT_ROUNDS,
-                            VALID, Validity, check_texels)
+from baker.image.postprocess import fill_invalid
+from baker.atlas.rasterise import rasterise
+from baker.rays.trace import Tracer
+from baker.atlas.validity import ENCLOSED, INVALID, MOVED, PROBE_RADIUS, PUSH, TANGENT_ROUNDS, VALID, Validity, check_texels
 from tests.bakehelp import computed
 
 DENSITY = 10.0  # texels per metre: texel 0.1 m
@@ -131,7 +130,7 @@ def test_no_floor_texel_leaks_light_into_a_closed_room(room, tmp_path, monkeypat
     assert corner <= 2 and read_leaking <= 4, (corner, read_leaking)
     assert counts["moved"] > 50 and counts["enclosed"] > 50  # walls, wall box, box
     # The same bake with every sample point left where it was leaks along the thin walls.
-    monkeypatch.setattr(importlib.import_module("baker.bake"), "check_texels",
+    monkeypatch.setattr(importlib.import_module("baker.pipeline.full"), "check_texels",
                         lambda scene, world, tracer, texels, d_max, **_: (texels, Validity(
                             np.zeros(len(texels), np.int8), np.zeros(len(texels)),
                             np.zeros(len(texels)), np.zeros(len(texels), bool))))
@@ -241,7 +240,7 @@ def test_probe_frames_are_numpys_cross_products_to_the_bit():
     """The probes' tangent frames (compiled) are the cross products numpy gives, bit for bit
     (the probes' directions, so the bakes, do not depend on which computes them), and
     orthonormal; at the x axis the helper switches to y."""
-    from baker.validity import _frames
+    from baker.atlas.validity import _frames
 
     rng = np.random.default_rng(3)
     normal = rng.normal(size=(20_000, 3))

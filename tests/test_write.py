@@ -1,4 +1,4 @@
-"""baker.write: lightmap UVs, images and materials added to the input glTF, nothing else changed.
+"""baker.output.write: lightmap UVs, images and materials added to the input glTF, nothing else changed.
 
 The scenes are built by hand (a small glTF document, its ``Scene``, a hand-made ``Atlas`` with two
 pages and PNG pages from pillow), so these tests do not depend on the loader or the unwrapper.
@@ -19,12 +19,12 @@ import pygltflib
 import pytest
 from PIL import Image as PILImage
 
-from baker import write as write_module
-from baker.atlas import Atlas, InstanceUV
-from baker.encode import EncodedPage
+from baker.output import write as write_module
+from baker.atlas.layout import Atlas, InstanceUV
+from baker.image.encode import EncodedPage
 from baker.errors import OutputError
-from baker.scene import Instance, Material, Primitive, Scene
-from baker.write import WriteOptions, write
+from baker.gltf.scene import Instance, Material, Primitive, Scene
+from baker.output.write import WriteOptions, write
 
 import gltf_validator
 
@@ -532,7 +532,7 @@ def test_permission_error_becomes_output_error(tmp_path, baked, monkeypatch):
 def test_png_bytes_decode_to_the_image(height, width):
     """encode.png_bytes' own PNG (Up filter, bands deflated apart and joined) decodes with PIL
     to the very pixels, at band-sized, smaller and ragged heights, the same bytes every time."""
-    from baker.encode import png_bytes
+    from baker.image.encode import png_bytes
 
     rng = np.random.default_rng(height * 1000 + width)
     pixels = np.cumsum(rng.integers(0, 4, (height, width, 3)), axis=0).astype(np.uint8)
@@ -547,7 +547,7 @@ def test_compiled_quantiser_gives_quantise_bytes():
     """``encode._quantise_linear`` (one pass over a page) gives ``quantise``'s bytes: on the
     values either side of every code's rounding edge, out of range, and at random, for a few
     page scales."""
-    from baker.encode import _quantise_linear, quantise
+    from baker.image.encode import _quantise_linear, quantise
 
     rng = np.random.default_rng(7)
     edges = ((np.arange(256)[:, None] + np.array([-0.5, 0.5])) / 255).ravel()

@@ -1,0 +1,264 @@
+"""The bake a user asks for: check the paths, load, bake or rebake, write, report."""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+import time
+from concurrent.futures import ThreadPoolExecutor
+from contextlib import closing
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from baker.errors import BakerError, InputError, OutputError
+from baker.gltf.files import inside
+from baker.gltf.load import load
+from baker.gltf.scene import Scene
+from baker.image.encode import encode
+from baker.image.errormap import write_error_maps
+from baker.image.hdr import check_format, page_file
+from baker.output.write import WriteOptions, image_file_name, write
+from baker.pipeline.full import compute, timed
+from baker.pipeline.input_warnings import input_warnings
+from baker.pipeline.plan import Plan
+from baker.rebake.incremental import (
+    FullBake,
+    details,
+    rebake,
+    record_full_bake,
+    summary,
+)
+from baker.rebake.staging import StateStaging
+from baker.rebake.state import default_path as default_state_path
+from baker.run.atomic import write_atomically
+from baker.settings import Resolved, Settings
+
+
+@dataclass(frozen=True)
+class BakeResult:
+    """What a bake did. ``report`` is the JSON-able dict that ``--report`` writes."""
+
+    output: Path
+    settings: Resolved
+    plan: Plan
+    texels: int
+    rays: int
+    pages: int
+    seconds: float
+    rmse_estimate: float
+    report: dict = field(repr=False)
+    rebake: dict | None = field(default=None, repr=False)  # incremental.summary: what changed
+
+
+def check_output(input_path: Path, output: Path, overwrite: bool = False,
+                 report_path: Path | None = None) -> None:
+    """Refuse, before any work, an output that cannot be written or would replace the input.
+
+    The output ends in .glb or .gltf; its folder (and the report's) exists and can be written
+    to; it is the input itself only with ``overwrite`` (the input is then replaced atomically).
+    """
+    if output.suffix.lower() not in (".glb", ".gltf"):
+        raise OutputError(f"the output must end in .glb or .gltf, not {output.suffix or '(none)'}",
+                          file=str(output), fix="name the output e.g. scene_baked.glb")
+    if not overwrite and output.exists() and input_path.exists() and os.path.samefile(input_path, output):
+        raise OutputError("the output is the input file: baker replaces its input only when asked",
+                          file=str(output), fix="give another output path with -o, or add --overwrite "
+                                                "to replace the input with its bake")
+    if output.is_dir():
+        raise OutputError("the output path is a folder", file=str(output),
+                          fix="give a file name ending in .glb or .gltf")
+    for path in (output, report_path):
+        if path is not None and not path.parent.is_dir():
+            raise OutputError(f"the folder {path.parent} does not exist", file=str(path),
+                              fix=f"create {path.parent} first, or choose another path")
+        if path is not None:
+            _check_writable(path)
+
+
+def _check_writable(path: Path) -> None:
+    """Create and remove a file in ``path``'s folder: the one true test that it can be written."""
+    try:
+        handle, probe = tempfile.mkstemp(dir=path.parent, prefix=".baker-probe-", suffix=".tmp")
+    except PermissionError:
+        raise OutputError(f"no permission to write in the folder {path.parent}", file=str(path),
+                          fix=f"choose a folder you can write to, or change the permissions of "
+                              f"{path.parent}") from None
+    except OSError as error:
+        raise OutputError(f"cannot write in the folder {path.parent} ({error.strerror or error})",
+                          file=str(path), fix="choose a folder on a writable disk with free space") from None
+    os.close(handle)
+    os.unlink(probe)
+
+
+def check_input_kept(scene: Scene, output: Path, overwrite: bool = False) -> None:
+    """Refuse an output whose files would replace a file the input uses (its .bin, its images),
+    unless ``overwrite``.
+
+    A ``.gltf`` output writes ``<stem>.bin`` beside it, and any output in another folder than
+    the input's copies the images the input names by URI beside it (``write.image_file_name``).
+    """
+    if overwrite:
+        return
+    written = [output] + ([output.with_name(output.stem + ".bin")]
+                          if output.suffix.lower() == ".gltf" else [])
+    folder = scene.path.parent
+    if output.parent.resolve() != folder.resolve():
+        written += [output.with_name(image_file_name(output, i, image.uri))
+                    for i, image in enumerate(scene.document.images)
+                    if isinstance(image.uri, str) and not image.uri.startswith("data:")]
+    fix = "choose another output name or folder, or add --overwrite to replace it"
+    for kind, items in (("buffers", scene.document.buffers), ("images", scene.document.images)):
+        for i, item in enumerate(items):
+            uri = item.uri
+            if not isinstance(uri, str) or not uri or uri.startswith("data:"):
+                continue
+            source = inside(uri, folder, str(scene.path), f"{kind}[{i}]")
+            for target in written:
+                if target.exists() and source.exists() and os.path.samefile(source, target):
+                    raise OutputError(f"the output would replace {source}, which the input uses",
+                                      file=str(output), where=f"{kind}[{i}].uri", fix=fix)
+
+
+def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings = Settings(), *,
+         report_path: str | os.PathLike | None = None,
+         lightmaps_dir: str | os.PathLike | None = None, lightmaps_format: str = "png",
+         error_map_dir: str | os.PathLike | None = None,
+         quiet: bool = True, overwrite: bool = False, incremental: bool = False,
+         state: str | os.PathLike | bool | None = None, relight: bool = False) -> BakeResult:
+    """Bake the glTF scene at ``input`` into ``output`` (.glb or .gltf) with lightmaps.
+
+    ``report_path`` writes the JSON report; ``lightmaps_dir`` also writes each page as a file,
+    ``lightmaps_format`` "png" (the embedded image), "hdr" or "exr" (the float page, hdr.py);
+    ``error_map_dir`` writes each page's per-texel standard error (errormap.py);
+    ``quiet=False`` draws a progress bar when stderr is a terminal. ``overwrite`` lets
+    ``output`` be the input itself (or replace a file the input uses); it is replaced
+    atomically, only once the bake has succeeded.
+
+    ``state``: the bake state (docs/bake_state.md) written after the bake, ``<output>.bake`` by
+    default (None/True), another path, or False for none. ``incremental=True`` starts from that
+    state: only the texels the edit can reach are recomputed, bit-identical to a full bake; a
+    missing, damaged or mismatched state, or an edit that changes the atlas, falls back to a
+    full bake. ``BakeResult.rebake`` says which (``full_bake_reason``), what changed, and names
+    the recomputed texels (``dirty_keys``, ``dirty_reasons``). ``relight=True``: only light
+    colours and intensities may have changed; the lightmaps are recomposed from the state with
+    no ray cast, and anything else is an InputError (nothing written).
+    """
+    input_path, output = Path(input), Path(output)
+    check_output(input_path, output, overwrite,
+                 None if report_path is None else Path(report_path))
+    settings.check()
+    check_format(lightmaps_format)
+    started = time.perf_counter()
+    loading: dict[str, float] = {}
+    with timed(loading, "load"):
+        scene = load(input_path, settings.mirror_roughness)
+    check_input_kept(scene, output, overwrite)
+    state_path = None if state is False else (
+        default_state_path(output) if state is None or state is True else Path(state))
+    with ThreadPoolExecutor(1) as beside:
+        staging = None if state_path is None else StateStaging(beside, state_path, settings)
+        try:
+            try:
+                done, rebaked = bake_or_rebake(scene, settings, state_path, incremental, quiet,
+                                               relight, (state_path or output).parent, staging)
+            except BakerError as error:  # a setting this scene cannot meet: name the scene
+                error.file = error.file or str(input_path)
+                raise
+            times = dict(done.stage_seconds)
+            times["load"] += loading["load"]
+            resolved = done.settings
+            # closing(): the rows the state is written from (parts.py), if on disk, are
+            # removed once the state is written.
+            with closing(done.per_texel), timed(times, "write"):
+                pages = encode(done.lightmaps, resolved.encoding, resolved.occlusion != "none",
+                               resolved.clip_percentile)
+                info = write(scene, done.atlas, pages, output,
+                             WriteOptions(encoding=resolved.encoding, occlusion=resolved.occlusion,
+                                          clip_percentile=resolved.clip_percentile))
+                if lightmaps_dir is not None:
+                    write_page_files(Path(lightmaps_dir), output.stem, pages,
+                                     done.lightmaps.light, lightmaps_format)
+                if error_map_dir is not None:  # per-texel standard error pages (errormap.py)
+                    write_error_maps(Path(error_map_dir), output.stem, done, write_atomically)
+                if staging is not None:
+                    staging.put_in_place()
+                    record_full_bake(state_path, rebaked, time.perf_counter() - started)
+        except BaseException:
+            if staging is not None:
+                staging.discard()
+            raise
+    seconds = time.perf_counter() - started
+    rmse = done.rmse_estimate()
+    ambient, atlas = done.ambient, done.atlas
+    report = {
+        "input": str(input_path), "output": str(output),
+        "settings": resolved.as_dict(),
+        "plan": done.plan.as_dict(),
+        "ambient": {"r_ave": ambient.r_ave.tolist(), "intensity": ambient.intensity.tolist(),
+                    "source": ambient.source, "series_truncated": ambient.truncated},
+        "atlas": {"pages": atlas.page_count, "width": atlas.width, "height": atlas.height,
+                  "texel_density": atlas.texel_density},
+        "texels": done.tally.texels, "rays": done.tally.rays,
+        "shadow_rays": done.tally.shadow_rays,
+        "rays_per_second": done.tally.rays / times["trace"] if times["trace"] > 0 else 0.0,
+        "stage_seconds": times, "seconds": seconds,
+        "rmse_estimate": rmse,
+        "validity": done.tally.states,
+        "denoise": done.denoised.as_dict() if done.denoised is not None else {"denoised": False},
+        "notes": list(info.notes) + clipping_notes(pages),
+        "warnings": input_warnings(done.scene, done.world),  # dropped or changed, counted
+        "lightmap_pages": [{"intensity": page.intensity, "peak": page.peak,
+                            "clipped_fraction": page.clipped} for page in pages],
+        "rebake": summary(rebaked, state_path, incremental, seconds),
+    }
+    if report_path is not None:
+        write_atomically(Path(report_path), json.dumps(report, indent=2).encode())
+    return BakeResult(output=output, settings=resolved, plan=done.plan, texels=done.tally.texels,
+                      rays=done.tally.rays, pages=atlas.page_count, seconds=seconds,
+                      rmse_estimate=rmse, report=report,
+                      rebake=details(report["rebake"], rebaked))
+
+
+def clipping_notes(pages) -> list[str]:
+    """One report note per page whose intensity (a percentile, encode.py) clips texels."""
+    return [f"lightmap page {p}: {page.clipped:.2%} of its texels are brighter than its "
+            f"MOZ_lightmap intensity {page.intensity:.4g} (peak {page.peak:.4g}) and clip to it; "
+            "--clip-percentile 100 scales to the peak, --lightmaps DIR --format exr keeps floats"
+            for p, page in enumerate(pages) if page.clipped > 0]
+
+
+def write_page_files(folder: Path, stem: str, pages, light=None, format: str = "png") -> list[Path]:
+    """Write each lightmap page as ``<stem>_lightmap_<p>.<format>`` in ``folder`` (made if
+    needed): the embedded PNG, or with ``light`` (P, H, W, 3) the float page as .hdr or .exr."""
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for p, page in enumerate(pages):
+        path = folder / f"{stem}_lightmap_{p}.{format}"
+        write_atomically(path, page_file(None if light is None else light[p], page.png, format))
+        paths.append(path)
+    return paths
+
+
+def bake_or_rebake(scene: Scene, settings: Settings, state_path, incremental: bool,
+                   quiet: bool = True, relight: bool = False, spill_folder=None, staging=None):
+    """(``pipeline.full.Computed``, Rebaked | str | None): a rebake from the state at ``state_path`` when
+    ``incremental`` and it can follow, else a full bake and the one-line reason (a str), or None
+    when no rebake was asked for. ``relight``: only a recomposition (light colours and
+    intensities) may follow; anything else raises InputError before any ray is cast.
+    ``spill_folder``: where a full bake keeps its texels' results until the state is written
+    (``pipeline.full.compute``); ``staging``: where the bake state is written (``rebake.staging.StateStaging``)."""
+    if not incremental and not relight:
+        return compute(scene, settings, quiet, spill_folder, staging), None
+    if state_path is None:
+        reason = "no bake state (state=False)"
+    else:
+        try:
+            rebaked = rebake(scene, settings, state_path, quiet, relight, staging)
+            return rebaked.computed, rebaked
+        except FullBake as why:
+            reason = str(why)
+    if relight:
+        raise InputError(f"cannot relight without tracing: {reason}", file=str(scene.path),
+                         fix="use `baker bake` (it rebakes only what changed)")
+    return compute(scene, settings, quiet, spill_folder, staging), reason

@@ -1,0 +1,1 @@
+"""The lightmap atlas and its texels: unwrap, rasterise, validity of sample points, supersampling."""

@@ -1,0 +1,302 @@
+"""Lay every baked instance out in lightmap pages with xatlas.
+
+All baked instances go into one xatlas run, so that one texel covers about 1 / texel_density
+world units everywhere and every instance of a shared mesh gets its own area. Each instance goes
+in its own rigid-free frame (``frame_positions``: local positions × the stretch part of its world
+matrix), so moving or turning a node leaves the atlas bit for bit as it was (incremental rebake).
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+import xatlas
+
+from baker.atlas.layout import Atlas, InstanceUV
+from baker.errors import SettingsError
+from baker.geometry.world import World
+from baker.gltf.scene import Scene
+from baker.run.forked import call_forked
+from baker.settings import Resolved
+
+_NO_PAGE = np.uint32(0xFFFFFFFF)  # xatlas's page index for vertices of faces it could not place
+_SHRUNK = 0.95  # a chart whose texels are this much larger than asked was shrunk to fit a page
+# How long an xatlas run may take before it is taken for hung (``forked.call_forked``): 5 s and
+# 1 ms a triangle. The 60-crate room's 7,000 triangles take 0.03 s and are given 12 s.
+_SECONDS, _SECONDS_PER_TRIANGLE = 5.0, 1e-3
+
+
+class PageTooSmall(SettingsError):
+    """A chart does not fit in one page at the texel density asked for. ``texel_density`` is the
+    highest density at which it fits (xatlas would otherwise shrink it without a word)."""
+
+    def __init__(self, message: str, *, texel_density: float, fix: str):
+        super().__init__(message, fix=fix)
+        self.texel_density = texel_density
+
+
+def baked_instances(scene: Scene) -> list[int]:
+    """Indices of the instances that get lightmap texels, in scene order."""
+    return [i for i, inst in enumerate(scene.instances) if inst.baked]
+
+
+def _pack_options(settings: Resolved, resolution: int) -> xatlas.PackOptions:
+    """Packing settings; positions reach xatlas in texel units, so one texel per unit."""
+    options = xatlas.PackOptions()
+    options.texels_per_unit = 1.0
+    options.padding = int(settings.padding)
+    options.bilinear = True
+    options.resolution = int(resolution)
+    options.create_image = False
+    return options
+
+
+def stretch(linear: np.ndarray) -> np.ndarray:
+    """The part of a (3, 3) world matrix that a rigid move of its node leaves alone.
+
+    Polar decomposition ``linear = R · S`` (S symmetric, |det R| = 1), with the signs chosen so
+    that det R = +1 (S is negated for a mirroring matrix): ``local @ S.T`` is then congruent to
+    the world shape by a proper rotation, winding included. S is rounded to 2^-30 of its
+    largest singular value, so that the rounding noise of a rotated matrix's SVD (~1e-16) does
+    not change it: a node moved or turned keeps bit-identical unwrap input (docs/design.md §5).
+    """
+    return _stretch_of(np.ascontiguousarray(linear, np.float64).tobytes())
+
+
+@functools.lru_cache(maxsize=1 << 16)
+def _stretch_of(raw: bytes) -> np.ndarray:
+    """``stretch`` of the (3, 3) float64 matrix whose bytes are ``raw``, computed once per
+    matrix (a scene's many instances each ask for theirs several times); read-only."""
+    linear = np.frombuffer(raw, np.float64).reshape(3, 3)
+    _u, sigma, vt = np.linalg.svd(linear)
+    s = (vt.T * sigma) @ vt
+    if np.linalg.det(linear) < 0:
+        s = -s
+    top = float(sigma.max()) if len(sigma) else 0.0
+    if np.isfinite(top) and top > 0:
+        quantum = 2.0 ** (np.round(np.log2(top)) - 30)
+        s = np.round(s / quantum) * quantum
+    s.flags.writeable = False
+    return s
+
+
+def frame_positions(scene: Scene, instance: int) -> np.ndarray:
+    """(n, 3) float64 positions of an instance's primitive in its rigid-free frame.
+
+    The mesh's local positions times the stretch part of the world matrix (``stretch``),
+    recentred on their bounds' middle: what xatlas sees, and the same bits before and after a
+    rigid move of the node, so the atlas and every texel's (page, x, y, key, barycentric) stay.
+    """
+    inst = scene.instances[instance]
+    positions = scene.primitives[inst.primitive].positions @ stretch(inst.world[:3, :3]).T
+    if not len(positions):
+        return positions
+    return positions - (positions.min(0) + positions.max(0)) / 2
+
+
+def frame_area(scene: Scene, world: World, instances: list[int] | None = None) -> float:
+    """Summed area (scene units²) of the baked instances' triangles, in their rigid-free frames
+    (a rigid move of a node leaves it bit-identical, and with it the derived texel density)."""
+    total = 0.0
+    for i in baked_instances(scene) if instances is None else instances:
+        local = world.triangles[world.instance_triangles(i)] - world.vertex_start[i]
+        p = frame_positions(scene, i)
+        if len(local):
+            a, b, c = p[local[:, 0]], p[local[:, 1]], p[local[:, 2]]
+            total += float(0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum())
+    return total
+
+
+@dataclass(frozen=True)
+class _Packed:
+    """What an xatlas run gave: its page size, page and chart counts, and per mesh (one per
+    instance, in the order added) xatlas's (vertices, triangles, uv) and the pages and charts of
+    its vertices (``xatlas.Atlas.get_mesh_vertex_assignment``)."""
+
+    width: int
+    height: int
+    atlas_count: int
+    chart_count: int
+    meshes: tuple[tuple[np.ndarray, ...], ...]
+
+
+def _generate(scene: Scene, world: World, instances: list[int], settings: Resolved,
+              resolution: int) -> _Packed:
+    """One xatlas run over the instances' triangles in their rigid-free frames
+    (``frame_positions``), scaled to texel units, in a forked child (``forked.py``: xatlas's
+    threads can crash it, and a crashed run is run again).
+
+    xatlas takes float32 and ignores faces with an area under about 1e-7 of its units; in texel
+    units only faces far below a texel's size fall under that, not merely small ones.
+    """
+    meshes = []
+    for i in instances:
+        positions = frame_positions(scene, i) * settings.texel_density
+        local = world.triangles[world.instance_triangles(i)] - world.vertex_start[i]
+        meshes.append((positions.astype(np.float32), local.astype(np.uint32)))
+
+    def run() -> _Packed:
+        atlas = xatlas.Atlas()
+        for positions, triangles in meshes:
+            atlas.add_mesh(positions, triangles)
+        atlas.generate(xatlas.ChartOptions(), _pack_options(settings, resolution))
+        return _Packed(width=int(atlas.width), height=int(atlas.height),
+                       atlas_count=int(atlas.atlas_count), chart_count=int(atlas.chart_count),
+                       meshes=tuple(tuple(atlas[m]) + tuple(atlas.get_mesh_vertex_assignment(m))
+                                    for m in range(len(meshes))))
+
+    triangles = sum(len(t) for _, t in meshes)
+    return call_forked(run, "the unwrapper (xatlas)", _SECONDS + triangles * _SECONDS_PER_TRIANGLE)
+
+
+def unwrap(scene: Scene, world: World, settings: Resolved) -> Atlas:
+    """Unwrap the baked instances into pages of at most ``settings.page_size`` texels a side.
+
+    One page of the size xatlas needs is tried first; if it would exceed the page size, the
+    charts are packed into as many ``page_size``² pages as they need.
+    """
+    instances = baked_instances(scene)
+    if not instances:
+        return Atlas(width=0, height=0, page_count=0, texel_density=settings.texel_density,
+                     padding=settings.padding, instances=())
+    area = frame_area(scene, world, instances)
+    expected = area * settings.texel_density ** 2
+    resolution = settings.page_size if expected > 0.5 * settings.page_size ** 2 else 0
+    _check_triangles_fit(world, scene, instances, settings)
+    atlas = _generate(scene, world, instances, settings, resolution)
+    if max(atlas.width, atlas.height) > settings.page_size:
+        atlas = _generate(scene, world, instances, settings, settings.page_size)
+    if atlas.width == 0 or atlas.height == 0:
+        raise SettingsError("no surface got any lightmap texels at this texel density",
+                            fix="raise --texel-density, or check that the meshes have area")
+    _check_not_shrunk(atlas, world, scene, instances, settings)
+    result = []
+    for mesh, i in enumerate(instances):
+        vertices, triangles, uv, page_of_vertex, _chart = atlas.meshes[mesh]
+        vertices, triangles = vertices.astype(np.int64), triangles.astype(np.int64)
+        uv, page = _snap_unplaced(frame_positions(scene, i), vertices, uv.astype(np.float64),
+                                  page_of_vertex.astype(np.int64), int(_NO_PAGE))
+        result.append(InstanceUV(instance=i, vertices=vertices, triangles=triangles, uv=uv,
+                                 pages=page[triangles[:, 0]]))
+    return Atlas(width=int(atlas.width), height=int(atlas.height),
+                 page_count=int(atlas.atlas_count), texel_density=float(settings.texel_density),
+                 padding=int(settings.padding), instances=tuple(result))
+
+
+def _snap_unplaced(frame: np.ndarray, vertices: np.ndarray, uv: np.ndarray,
+                   page: np.ndarray, no_page: int) -> tuple[np.ndarray, np.ndarray]:
+    """Give vertices xatlas left unplaced the UV and page of the nearest placed vertex.
+
+    xatlas leaves out faces it finds degenerate; collapsing them onto the closest placed point
+    (in the instance's rigid-free frame, ``frame`` (n, 3)) of the same instance gives them a real texel to read, so no face of the
+    output samples outside the lightmap. Returns uv (k, 2) and page (k,), -1 where the instance
+    has no placed vertex at all.
+    """
+    lost = page == no_page
+    if not lost.any():
+        return uv, page
+    placed = np.flatnonzero(~lost)
+    page = np.where(lost, -1, page)
+    if placed.size == 0:
+        return uv, page
+    where = frame[vertices]
+    uv, page = uv.copy(), page.copy()
+    for chunk in np.array_split(np.flatnonzero(lost), max(1, int(np.flatnonzero(lost).size // 256))):
+        distance = np.linalg.norm(where[chunk, None] - where[None, placed], axis=-1)
+        nearest = placed[np.argmin(distance, axis=1)]
+        uv[chunk], page[chunk] = uv[nearest], page[nearest]
+    return uv, page
+
+
+def _check_not_shrunk(atlas: _Packed, world: World, scene: Scene, instances: list[int],
+                      settings: Resolved) -> None:
+    """Raise PageTooSmall when xatlas shrank a chart to fit it in a page.
+
+    xatlas scales down, silently, a chart larger than a page: its texels then stand for more than
+    1 / texel_density world units. A chart's scale is the summed length of its edges in texels
+    over their world length × density (≈ 1 for a chart that was not shrunk, thin or not); one
+    below ``_SHRUNK`` whose bounds fill the page was shrunk.
+    """
+    uv_length, world_length, extent, label = [], [], [], []
+    for mesh, i in enumerate(instances):
+        _vertices, triangles, uv, _page, chart = atlas.meshes[mesh]
+        corners = uv.astype(np.float64)[triangles.astype(np.int64)] * [atlas.width, atlas.height]
+        charts = chart.astype(np.int64)[triangles[:, 0].astype(np.int64)]
+        placed = (charts >= 0) & (charts < atlas.chart_count)
+        if not placed.any() or len(placed) != len(world.instance_triangles(i)):
+            continue
+        corners = corners[placed]
+        a, b, c = world.corners(world.instance_triangles(i)[placed])
+        ids, inverse = np.unique(charts[placed], return_inverse=True)
+        texels = sum(np.linalg.norm(corners[:, j] - corners[:, k], axis=1) for j, k in ((0, 1), (1, 2), (2, 0)))
+        metres = sum(np.linalg.norm(p - q, axis=1) for p, q in ((a, b), (b, c), (c, a)))
+        uv_length.append(np.bincount(inverse, texels, len(ids)))
+        world_length.append(np.bincount(inverse, metres, len(ids)))
+        low = np.full((len(ids), 2), np.inf)
+        high = np.full((len(ids), 2), -np.inf)
+        np.minimum.at(low, inverse, corners.min(axis=1))
+        np.maximum.at(high, inverse, corners.max(axis=1))
+        extent.append((high - low).max(axis=1))
+        label += [i] * len(ids)
+    if not uv_length:
+        return
+    uv_length, world_length, extent = (np.concatenate(v) for v in (uv_length, world_length, extent))
+    wanted = world_length * settings.texel_density
+    scale = np.divide(uv_length, wanted, out=np.ones_like(uv_length), where=wanted > 0)
+    room = settings.page_size - 2 * settings.padding
+    shrunk = (scale < _SHRUNK) & (extent > 0.75 * room)
+    if not shrunk.any():
+        return
+    worst = int(np.argmin(np.where(shrunk, scale, np.inf)))
+    need = extent[worst] / scale[worst]
+    fits = _round_down(settings.texel_density * scale[worst] * 0.98)
+    page = int(2 ** np.ceil(np.log2(need + 2 * settings.padding + 2)))
+    inst = scene.instances[label[worst]]
+    prim = scene.primitives[inst.primitive]
+    where = f"nodes[{inst.node}] meshes[{prim.mesh}].primitives[{prim.index}]"
+    bigger = f", or --page-size {page} or more" if page <= 16384 else ""
+    raise PageTooSmall(
+        f"at texel density {settings.texel_density:g} a chart of {where} needs about "
+        f"{need:.0f} texels a side, more than a page of {settings.page_size} holds",
+        texel_density=fits, fix=f"use --texel-density {fits:g} or less{bigger}")
+
+
+def _check_triangles_fit(world: World, scene: Scene, instances: list[int], settings: Resolved) -> None:
+    """Raise PageTooSmall, before xatlas runs, when one triangle is longer than a page holds.
+
+    A chart holds at least one whole triangle, so such a triangle means a chart xatlas would
+    have to shrink; and xatlas, given triangles of 10⁷ texels next to ones of 10⁻⁷ in float32,
+    can spin for ever instead. Checked on the longest edge of every baked triangle.
+    """
+    room = settings.page_size - 2 * settings.padding - 2
+    longest, owner = 0.0, -1
+    for i in instances:
+        a, b, c = world.corners(world.instance_triangles(i))
+        if not len(a):
+            continue
+        edge = max(float(np.linalg.norm(p - q, axis=1).max()) for p, q in ((a, b), (b, c), (c, a)))
+        if edge > longest:
+            longest, owner = edge, i
+    if longest * settings.texel_density <= room:
+        return
+    fits = _round_down(room / longest * 0.98)
+    page = int(2 ** np.ceil(np.log2(longest * settings.texel_density + 2 * settings.padding + 2)))
+    bigger = f", or --page-size {page} or more" if page <= 16384 else ""
+    inst = scene.instances[owner]
+    prim = scene.primitives[inst.primitive]
+    where = f"nodes[{inst.node}] meshes[{prim.mesh}].primitives[{prim.index}]"
+    raise PageTooSmall(
+        f"at texel density {settings.texel_density:g} a triangle of {where} is "
+        f"{longest * settings.texel_density:.3g} texels long, more than a page of "
+        f"{settings.page_size} holds", texel_density=fits,
+        fix=f"use --texel-density {fits:g} or less{bigger}, or look for stray vertices")
+
+
+def _round_down(value: float, digits: int = 3) -> float:
+    """``value`` cut (never rounded up) to ``digits`` significant digits."""
+    if value <= 0:
+        return value
+    step = 10.0 ** (np.floor(np.log10(value)) - digits + 1)
+    return float(np.floor(value / step) * step)

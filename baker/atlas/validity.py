@@ -1,0 +1,314 @@
+"""Texel validity: find sample points that lie inside or behind geometry, move or flag them.
+
+A texel's sample point is the centre of its square mapped onto its triangle. Where another
+surface cuts through that square — a floor running under a wall, a box standing on the floor —
+the centre may sit behind the wall or inside the box, while part of the square is in the open.
+Rays started there see the far side of the wall (light leaks through the corner) or only the
+inside of the box (a dark rim round a box that should have a contact shadow only).
+
+What the mature bakers do (Bakery, Godot's LightmapperRD, Unity's backface tolerance), here:
+
+0. Shadow terminator: a texel on a smooth-shaded curved facet is first pushed towards the smooth
+   surface (``Texels.terminator``, rasterise.py), unless a ray along the push (lifted like a ray
+   origin, ``RAISE_MARGIN`` texel sides longer) meets something: a sphere's underside resting on
+   a floor is never pushed through the floor.
+1. Tangent probes: from the sample point, lifted off the surface by the integrator's offset,
+   ``TANGENT_RAYS`` short rays in the texel's plane, ``PROBE_RADIUS`` texel sides long. A ray
+   that meets the *back* of a single-sided surface first means the sample is behind it: the
+   point moves along that ray past the nearest such face, ``PUSH`` texel sides into the open
+   (the point stays in the texel's plane, within about a texel of where it was). Repeated up to
+   ``TANGENT_ROUNDS`` times, so a point behind two walls (a corner) gets out too.
+2. Hemisphere probes from the final point: ``HEMISPHERE_RAYS`` fixed cosine-spread rays up to
+   d_max. The fraction that meets back faces of single-sided surfaces decides:
+   - at least ``ENCLOSED_FRACTION``: the point is shut inside a solid (a floor under a box or a
+     thick wall). No light reaches it: its lightmap value is 0 (dark), its own rays are unused.
+   - at least ``BACKFACE_TOLERANCE``: inside or behind geometry, and it could not be moved out:
+     *invalid*. Post-processing gives it the mean of its valid neighbours, never the value of
+     rays that started inside a wall.
+   - else valid.
+
+Double-sided materials have no back: their faces never count. Everything is vectorised over
+texels (one ray batch per probe step) and a pure function of the geometry, so the result does not
+depend on chunking or threads (docs/design.md §4).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from baker.atlas.rasterise import Texels, flat_pages
+from baker.geometry.world import World
+from baker.gltf.scene import Scene
+from baker.jit import jit
+from baker.rays.trace import Tracer, ray_lift
+from baker.run.parallel import run_chunks
+
+TANGENT_RAYS = 8
+TANGENT_ROUNDS = 3
+PROBE_RADIUS = 1.5  # texel sides: a texel centre up to one texel behind a wall, or diagonally (1.41) behind a corner
+PUSH = 0.1  # texel sides past the back face the point is moved to
+TIE = 0.25  # texel sides: back faces this close to the nearest count as equally near
+RAISE_MARGIN = 0.1  # texel sides: the terminator push is checked this much past its end
+HEMISPHERE_RAYS = 12
+TOUCH = 2.0  # ray lifts: a probe hit this close to its origin touches (see Validity.touching)
+ENCLOSED_FRACTION = 0.9
+BACKFACE_TOLERANCE = 0.6
+
+VALID, MOVED, INVALID, ENCLOSED = 0, 1, 2, 3
+STATE_NAMES = ("valid", "moved", "invalid", "enclosed")
+
+_CHUNK = 1 << 13  # texels per ray batch (one thread's work unit)
+
+
+@dataclass(frozen=True)
+class Validity:
+    """What the probes found for N texels (rows in ``Texels`` order).
+
+    state: (N,) int8, one of VALID, MOVED (sample moved past a back face, then valid), INVALID
+    (filled from neighbours later), ENCLOSED (inside a solid: value 0). moved_by: (N,) float64
+    world distance each sample point moved past back faces (0 for most; the terminator push is
+    not counted). back_fraction: (N,) float64 fraction of
+    the hemisphere probes that met a back face. touching: (N,) bool, some probe met a surface
+    within ``TOUCH`` ray lifts of its origin: the point touches other geometry, where which of
+    the triangles meeting there Embree reports first can depend on its whole BVH — so on every
+    object in the scene, near or not (an incremental rebake redoes these texels). Rare: sample
+    points keep off their triangle's edges (``rasterise.INSET``), so a room's corners and a
+    crate's foot do not touch (14 of 546,638 texels in ``benchmarks/bench_rebake.py``'s room).
+    """
+
+    state: np.ndarray
+    moved_by: np.ndarray
+    back_fraction: np.ndarray
+    touching: np.ndarray
+
+    def counts(self) -> dict[str, int]:
+        """How many texels are in each state, by name (for the report)."""
+        return {name: int((self.state == code).sum()) for code, name in enumerate(STATE_NAMES)}
+
+    def page_masks(self, texels: Texels, shape: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray]:
+        """(invalid, enclosed): (P, H, W) bool page masks of the INVALID and ENCLOSED texels."""
+        masks = np.zeros(shape, bool), np.zeros(shape, bool)
+        self.mark(texels, *masks)
+        return masks
+
+    def mark(self, texels: Texels, invalid: np.ndarray, enclosed: np.ndarray) -> None:
+        """Set the texels' pixels of the ``page_masks`` ``invalid`` and ``enclosed`` in place
+        (a bake made part by part marks each part)."""
+        invalid, enclosed = flat_pages(invalid), flat_pages(enclosed)  # (P·H·W,) views
+        for start in range(0, len(texels), _CHUNK):  # the pixels of a chunk at a time
+            rows = slice(start, start + _CHUNK)
+            where = texels.pixel_index(rows)
+            invalid[where] = self.state[rows] == INVALID
+            enclosed[where] = self.state[rows] == ENCLOSED
+
+
+def _frames(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit tangents (k, 3) each, orthogonal to the unit normals (k, 3) and to each other:
+    t1 = normal × helper, normalised, with helper the x axis (the y axis where the normal is
+    within 26° of x), and t2 = normal × t1."""
+    normal = np.ascontiguousarray(normal, np.float64)
+    t1, t2 = np.empty_like(normal), np.empty_like(normal)
+    _frames_kernel(normal, t1, t2)
+    return t1, t2
+
+
+@jit
+def _frames_kernel(normal: np.ndarray, t1: np.ndarray, t2: np.ndarray) -> None:
+    """``_frames`` into t1, t2, in one pass: the arithmetic of np.cross and np.linalg.norm
+    (the same bits), 18× faster than they are on (k, 3) rows."""
+    for i in range(len(normal)):
+        nx, ny, nz = normal[i, 0], normal[i, 1], normal[i, 2]
+        hx, hy = (1.0, 0.0) if abs(nx) < 0.9 else (0.0, 1.0)
+        ax, ay, az = ny * 0.0 - nz * hy, nz * hx - nx * 0.0, nx * hy - ny * hx
+        norm = np.sqrt(ax * ax + ay * ay + az * az)
+        ax, ay, az = ax / norm, ay / norm, az / norm
+        t1[i, 0], t1[i, 1], t1[i, 2] = ax, ay, az
+        t2[i, 0], t2[i, 1], t2[i, 2] = ny * az - nz * ay, nz * ax - nx * az, nx * ay - ny * ax
+
+
+def _hemisphere_directions(count: int) -> np.ndarray:
+    """(count, 3) fixed cosine-spread directions about +z (a Fibonacci spiral on the disc)."""
+    i = np.arange(count) + 0.5
+    r = np.sqrt(i / count)
+    phi = i * np.pi * (3.0 - np.sqrt(5.0))
+    return np.stack([r * np.cos(phi), r * np.sin(phi), np.sqrt(1.0 - r * r)], axis=1)
+
+
+class Faces:
+    """Which hits are back faces: geometric normals and single-sidedness of every triangle (made
+    once per bake and passed to ``check_texels`` for each part of the texels)."""
+
+    def __init__(self, scene: Scene, world: World):
+        self.normals = world.geometric_normals()
+        self.single = ~np.array([m.double_sided for m in scene.materials], bool)[world.tri_material]
+
+    def back(self, triangle: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        """(n,) bool: the ray met the back of a single-sided triangle (False for misses)."""
+        return _back_faces(triangle, directions, self.normals, self.single)
+
+
+@jit
+def _back_faces(triangle: np.ndarray, directions: np.ndarray, normals: np.ndarray,
+                single: np.ndarray) -> np.ndarray:
+    """(n,) bool: hit ``triangle`` (n,) (−1: none) is single-sided and faces along the ray's
+    direction (n, 3), i.e. the ray met its back."""
+    out = np.zeros(len(triangle), np.bool_)
+    for i in range(len(triangle)):
+        t = triangle[i]
+        if t >= 0 and single[t]:
+            out[i] = (normals[t, 0] * directions[i, 0] + normals[t, 1] * directions[i, 1]
+                      + normals[t, 2] * directions[i, 2]) > 0
+    return out
+
+
+def _tangent_step(tracer: Tracer, faces: Faces, position: np.ndarray, normal: np.ndarray,
+                  size: np.ndarray, home: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One round of tangent probes for k points: (new position (k, 3), moved (k,) bool,
+    touching (k,) bool: ``_touching``).
+
+    Of the back faces within ``TIE`` texel sides of the nearest, the point crosses the one
+    whose direction points most towards ``home`` (k, 3), the centroid of the texel's own
+    triangle: where the surface really is (a wall's corner texel poking past the ceiling and a
+    side wall moves back into the room, not over the ceiling)."""
+    k = len(position)
+    t1, t2 = _frames(normal)
+    angle = 2 * np.pi * np.arange(TANGENT_RAYS) / TANGENT_RAYS
+    in_plane = np.stack([np.cos(angle), np.sin(angle), np.zeros(TANGENT_RAYS)], axis=1)
+    lift = ray_lift(position, size, tracer.center)
+    origins, directions = _fan(position, normal, t1, t2, lift, in_plane)
+    length = np.repeat(PROBE_RADIUS * size, TANGENT_RAYS)
+    hits = tracer.cast(origins, directions, length)
+    back = faces.back(hits.triangle, directions)
+    distance = np.where(back, hits.distance, np.inf).reshape(k, TANGENT_RAYS)
+    towards = home - position
+    towards /= np.maximum(np.linalg.norm(towards, axis=1, keepdims=True), 1e-300)
+    alignment = np.einsum("krj,kj->kr", directions.reshape(k, TANGENT_RAYS, 3), towards)
+    close = distance <= distance.min(axis=1, keepdims=True) + TIE * size[:, None]
+    nearest = np.argmax(np.where(close, alignment, -np.inf), axis=1)
+    moved = np.isfinite(distance[np.arange(k), nearest])
+    step = distance[np.arange(k), nearest] + PUSH * size
+    direction = directions.reshape(k, TANGENT_RAYS, 3)[np.arange(k), nearest]
+    new = np.where(moved[:, None], position + np.where(moved, step, 0.0)[:, None] * direction,
+                   position)
+    return new, moved, _touching(hits.distance, lift)
+
+
+def _touching(distance: np.ndarray, lift: np.ndarray) -> np.ndarray:
+    """(k,) bool: some of each point's probes (k·m distances, point-major; inf for misses) met
+    a surface within ``TOUCH`` × its ray ``lift`` (k,) (none for no point: a part whose texels
+    are all degenerate probes none)."""
+    if not len(lift):
+        return np.zeros(0, bool)
+    return (distance.reshape(len(lift), -1) <= TOUCH * lift[:, None]).any(axis=1)
+
+
+def hemisphere_probes(position: np.ndarray, normal: np.ndarray, size: np.ndarray,
+                      center: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The fixed hemisphere probes of k points: origins and directions, each (k·HEMISPHERE_RAYS,
+    3) float64 world, point-major; origins lifted off the surface by ``trace.ray_lift``."""
+    t1, t2 = _frames(normal)
+    return _fan(position, normal, t1, t2, ray_lift(position, size, center),
+                _hemisphere_directions(HEMISPHERE_RAYS))
+
+
+@jit
+def _fan(position: np.ndarray, normal: np.ndarray, t1: np.ndarray, t2: np.ndarray,
+         lift: np.ndarray, local: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Origins and directions (k·m, 3), point-major, of the m ``local`` directions (m, 3) in
+    each point's frame (t1, t2, normal) (k, 3), from the point lifted by ``lift`` (k,)."""
+    k, m = len(position), len(local)
+    origins = np.empty((k * m, 3))
+    directions = np.empty((k * m, 3))
+    for i in range(k):
+        for j in range(m):
+            r = i * m + j
+            for c in range(3):
+                origins[r, c] = position[i, c] + lift[i] * normal[i, c]
+                directions[r, c] = (local[j, 0] * t1[i, c] + local[j, 1] * t2[i, c]
+                                    + local[j, 2] * normal[i, c])
+    return origins, directions
+
+
+def _back_fraction(tracer: Tracer, faces: Faces, position: np.ndarray, normal: np.ndarray,
+                   size: np.ndarray, d_max: float) -> tuple[np.ndarray, np.ndarray]:
+    """(k,) fraction of the fixed hemisphere probes from each point that meet a back face, and
+    (k,) bool whether one touches (``_touching``)."""
+    k = len(position)
+    origins, directions = hemisphere_probes(position, normal, size, tracer.center)
+    hits = tracer.cast(origins, directions, d_max)
+    fraction = faces.back(hits.triangle, directions).reshape(k, HEMISPHERE_RAYS).mean(axis=1)
+    return fraction, _touching(hits.distance, ray_lift(position, size, tracer.center))
+
+
+def _raise(tracer: Tracer, position: np.ndarray, normal: np.ndarray, size: np.ndarray,
+           push: np.ndarray) -> np.ndarray:
+    """(k, 3) points ``position`` moved by their terminator ``push`` (k, 3) where a ray along it,
+    from the point lifted off the surface along ``normal`` (k, 3), meets nothing within the
+    push's length + ``RAISE_MARGIN`` texel sides ``size`` (k,); the others stay."""
+    length = np.linalg.norm(push, axis=1)
+    pushing = np.flatnonzero(length > 0)
+    if not len(pushing):
+        return position
+    p = position[pushing]
+    lift = ray_lift(p, size[pushing], tracer.center)
+    blocked = tracer.occluded(p + lift[:, None] * normal[pushing],
+                              push[pushing] / length[pushing, None],
+                              length[pushing] + RAISE_MARGIN * size[pushing])
+    out = position.copy()
+    out[pushing[~blocked]] += push[pushing[~blocked]]
+    return out
+
+
+def check_texels(scene: Scene, world: World, tracer: Tracer, texels: Texels,
+                 d_max: float, threads: int = 0, faces: Faces | None = None
+                 ) -> tuple[Texels, Validity]:
+    """Probe every texel's sample point; return the texels with moved positions and their states.
+
+    ``d_max``: the hemisphere probes' length (the obscurance distance), world units.
+    ``threads``: 0 for one per core. ``faces``: ``Faces(scene, world)``, made here when not
+    given. Only ``Texels.position`` changes; normals, triangle and key
+    stay (the point is pushed off its facet by the terminator push, then moves parallel to the
+    facet). Chunks write only their own rows, so the
+    result does not depend on the chunking or the threads.
+    """
+    count = len(texels)
+    faces = Faces(scene, world) if faces is None else faces
+    position = texels.position.copy()
+    start = position.copy()  # after the terminator push
+    moved = np.zeros(count, bool)
+    touching = np.zeros(count, bool)
+    fraction = np.zeros(count)
+
+    def work(rows: slice) -> None:
+        normal, size = texels.geometric_normal(rows), texels.size(rows)
+        usable = np.flatnonzero((size > 0) & (np.linalg.norm(normal, axis=1) > 0.5))
+        p = position[rows]  # a view: the chunk's own rows
+        p[:] = _raise(tracer, p, normal, texels.size(rows), texels.terminator(rows))
+        start[rows] = p
+        home = np.mean(world.corners(texels.triangle[rows]), axis=0)  # (k, 3) centroids
+        step_moved, touched = moved[rows], touching[rows]  # views: the chunk's own rows
+        for _ in range(TANGENT_ROUNDS):
+            new, stepped, touch = _tangent_step(tracer, faces, p[usable], normal[usable],
+                                                size[usable], home[usable])
+            p[usable] = new
+            step_moved[usable] |= stepped
+            touched[usable] |= touch
+            usable = usable[stepped]
+            if not len(usable):
+                break
+        ok = np.flatnonzero(np.linalg.norm(normal, axis=1) > 0.5)
+        fraction[rows][ok], touch = _back_fraction(tracer, faces, p[ok], normal[ok], size[ok],
+                                                   d_max)
+        touched[ok] |= touch
+
+    run_chunks(work, [slice(start, min(start + _CHUNK, count))
+                      for start in range(0, count, _CHUNK)], threads)
+    state = np.where(moved, MOVED, VALID).astype(np.int8)
+    state[fraction >= BACKFACE_TOLERANCE] = INVALID
+    state[fraction >= ENCLOSED_FRACTION] = ENCLOSED
+    moved_by = np.linalg.norm(position - start, axis=1)
+    return (replace(texels, position=position),
+            Validity(state=state, moved_by=moved_by, back_fraction=fraction, touching=touching))

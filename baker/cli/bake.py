@@ -1,0 +1,204 @@
+"""``baker bake``: parse the bake's options into ``baker.Settings``, bake, print the summary."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+from pathlib import Path
+
+import baker
+from baker.cli.common import add_debug, positive_float
+from baker.cli.state import add_state_options, print_rebake, state_arguments
+
+EPILOG = """examples:
+  baker bake level.glb -o level_baked.glb
+  baker bake level.gltf -o out/level.gltf --rays 256 --texel-density 20 --report report.json
+  baker bake prop.glb -o prop_ao.glb --rho step          (classic ambient occlusion)
+
+The output is the same scene with a second UV set and the lightmaps embedded as PNG, referenced
+by the MOZ_lightmap material extension (three.js, Hubs, Spoke read it).
+"""
+
+
+def add_parser(commands) -> None:
+    """Register ``bake`` and its options on the ``baker`` command's subparsers."""
+    bake = commands.add_parser(
+        "bake", help="bake a glTF scene's lightmaps", epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description="Unwrap every static surface into lightmap pages, compute the light arriving "
+                    "at each texel, and write the scene back with the lightmaps embedded.")
+    bake.set_defaults(run=run)
+    bake.add_argument("scene", type=Path, help="the input scene, .glb or .gltf")
+    bake.add_argument("-o", "--output", type=Path, required=True,
+                      help="where to write the baked scene (.glb or .gltf); the input itself "
+                           "only with --overwrite")
+    bake.add_argument("--overwrite", action="store_true",
+                      help="allow the output to replace the input (or a file it uses); the "
+                           "replacement is atomic and happens only once the bake succeeded")
+    d = baker.Settings()
+    quality = bake.add_argument_group("lightmap layout")
+    quality.add_argument("--texel-density", type=positive_float, metavar="TEXELS_PER_UNIT",
+                         help="lightmap texels per scene unit (metre) along a surface "
+                              "(default: fill about half of one page)")
+    quality.add_argument("--page-size", type=int, default=d.page_size, metavar="TEXELS",
+                         help=f"largest lightmap page side; more pages when one is full (default {d.page_size})")
+    quality.add_argument("--padding", type=int, default=d.padding, metavar="TEXELS",
+                         help=f"free texels around each chart (default {d.padding})")
+    model = bake.add_argument_group("light model")
+    model.add_argument("--rays", type=int, default=d.rays,
+                       help=f"obscurance rays per texel: more is smoother and slower (default {d.rays})")
+    model.add_argument("--d-max", type=positive_float, metavar="DISTANCE",
+                       help="obscurance distance in scene units: farther surfaces count as open "
+                            f"(default {d.d_max_fraction:g} × the baked surfaces' bounds diagonal, rounded to "
+                            "a quarter octave)")
+    model.add_argument("--rho", choices=baker.settings.RHO_FUNCTIONS, default=d.rho,
+                       help="obscurance function ρ(d): sqrt (the paper's), linear, or step "
+                            "(classic ambient occlusion) (default sqrt)")
+    model.add_argument("--ambient", type=positive_float, metavar="I_A",
+                       help="ambient intensity I_A (default: from the scene's emissive surfaces, "
+                            "or 1 when it has none)")
+    model.add_argument("--seed", type=int, default=d.seed, help="sampler seed (default 0)")
+    model.add_argument("--sampling", choices=baker.rays.sampling.TECHNIQUES, default=d.sampling,
+                       help="how each texel's ray directions are drawn: sobol (Owen-scrambled, "
+                            "least noise per ray), stratified or random (default sobol)")
+    model.add_argument("--target-error", type=positive_float, metavar="E",
+                       help="adaptive sampling: rays in rounds (--rays, then doubling) until each "
+                            "texel's standard error is at most E in lightmap units, or it has "
+                            "--max-rays (default: every texel gets --rays)")
+    model.add_argument("--method", choices=baker.settings.METHODS, default=d.method,
+                       help="obscurance: direct light + I_A·W (fast, the default); gi: direct "
+                            "light + path-traced indirect light, --rays paths per texel (a "
+                            "reference to judge obscurances by; slower)")
+    model.add_argument("--specular", choices=baker.settings.SPECULAR_STRATEGIES,
+                       default=d.specular,
+                       help="at a mirror or glass: b follows the path, ρ of its summed length "
+                            "(default); a follows it, ρ of the first distance; c counts R_ave "
+                            "and ρ = 1 with no extra ray")
+    model.add_argument("--mirror-roughness", type=positive_float, default=d.mirror_roughness,
+                       metavar="R", help="metals smoother than this are mirrors "
+                                         f"(default {d.mirror_roughness:g})")
+    model.add_argument("--translucent", type=positive_float, default=d.translucent,
+                       metavar="F", help="a translucent neighbour reflects F × R_ave, with ρ = 1 "
+                                         f"(default {d.translucent:g})")
+    model.add_argument("--max-depth", type=int, default=d.max_depth, metavar="N",
+                       help="most mirror/glass bounces of one ray (default "
+                            f"{d.max_depth}; rays that reach it are counted)")
+    model.add_argument("--max-rays", type=int, default=d.max_rays, metavar="N",
+                       help=f"the most rays a texel gets with --target-error (default {d.max_rays})")
+    direct = bake.add_argument_group("direct light (KHR_lights_punctual, emissive surfaces, sky)")
+    direct.add_argument("--shadow-rays", type=int, default=d.shadow_rays, metavar="N",
+                        help="shadow rays per texel towards a light with a size (soft shadows); "
+                             f"a hard light casts 1 (default {d.shadow_rays})")
+    direct.add_argument("--light-radius", type=positive_float, default=d.light_radius,
+                        metavar="DISTANCE",
+                        help="sphere radius of point and spot lights without extras.radius, in "
+                             "scene units; 0: hard shadows (default 0)")
+    direct.add_argument("--light-angle", type=positive_float, default=d.light_angle,
+                        metavar="DEGREES",
+                        help="angular diameter of directional lights without "
+                             "extras.angular_diameter (the sun's is 0.53); 0: hard (default 0)")
+    direct.add_argument("--emissive-rays", type=int, default=d.emissive_rays, metavar="N",
+                        help="shadow rays per texel towards emissive surfaces "
+                             f"(default {d.emissive_rays})")
+    direct.add_argument("--sky", type=rgb, metavar="R,G,B",
+                        help="add a sky of this linear radiance at the zenith (an open floor "
+                             "under a uniform sky L gets π·L); default: no sky")
+    direct.add_argument("--sky-horizon", type=rgb, metavar="R,G,B",
+                        help="the sky's radiance at the horizon and below: a two-colour "
+                             "gradient (default: uniform)")
+    direct.add_argument("--sky-rays", type=int, default=d.sky_rays, metavar="N",
+                        help=f"rays per texel that look for the sky (default {d.sky_rays})")
+    direct.add_argument("--supersample", type=int, default=d.supersample, metavar="N",
+                        help="sub-texel positions the shadow, emissive, sky and obscurance "
+                             "rays of each texel start from (ray s from position s mod N): "
+                             "anti-aliased shadow edges and obscurance details; a hard light "
+                             f"casts N rays (default {d.supersample}: none)")
+    out = bake.add_argument_group("output")
+    out.add_argument("--encoding", choices=baker.settings.ENCODINGS, default=d.encoding,
+                     help="how PNG texels map to light: linear (three.js, Hubs) or srgb "
+                          "(the MOZ_lightmap proposal) (default linear)")
+    out.add_argument("--clip-percentile", type=float, default=d.clip_percentile, metavar="P",
+                     help="each page's MOZ_lightmap intensity is this percentile of its texels' "
+                          "brightness; the few brighter texels clip (reported), the rest keep "
+                          f"the 8 bits; 100 scales to the peak (default {d.clip_percentile:g})")
+    out.add_argument("--occlusion", choices=baker.settings.OCCLUSION_MODES, default=d.occlusion,
+                     help="also (or only) write the obscurance as the core occlusionTexture, "
+                          "which every viewer reads (default none)")
+    out.add_argument("--denoise", action="store_true",
+                     help="denoise each chart of the lightmap with Intel Open Image Denoise's "
+                          "lightmap filter before dilation (needs pip install \"baker[denoise]\"; "
+                          "RMSE at 16 rays 3-3.5x lower, see docs/denoise.md)")
+    out.add_argument("--lightmaps", type=Path, metavar="DIR",
+                     help="also write each lightmap page as a file in DIR (see --format)")
+    out.add_argument("--format", choices=baker.image.hdr.FORMATS, default="png", dest="lightmaps_format",
+                     help="the --lightmaps files: png (the embedded 8-bit image) or the float "
+                          "pages, unclipped: hdr (Radiance RGBE, 0.4%%) or exr (float32) "
+                          "(default png)")
+    out.add_argument("--error-map", type=Path, metavar="DIR",
+                     help="also write each page's per-texel standard error (lightmap units) "
+                          "as .hdr (values) and .png (scaled to the page's largest) in DIR")
+    out.add_argument("--report", type=Path, metavar="FILE",
+                     help="write a JSON report: settings used, plan, stage times, rays/s")
+    running = bake.add_argument_group("running")
+    running.add_argument("--threads", type=int, default=d.threads,
+                         help="ray-casting threads (default: one per core)")
+    running.add_argument("--quiet", action="store_true", help="print nothing but errors")
+    add_state_options(running)
+    add_debug(running)
+
+
+def settings_from(args: argparse.Namespace) -> baker.Settings:
+    """The ``baker.Settings`` that the command line asks for: every field of ``Settings`` that
+    the parser has an option for (``chunk_texels`` and ``d_max_fraction`` have none and keep
+    their defaults), so a new setting needs only its option."""
+    return baker.Settings(**{f.name: getattr(args, f.name) for f in dataclasses.fields(baker.Settings)
+                             if hasattr(args, f.name)})
+
+
+def rgb(text: str) -> tuple[float, float, float]:
+    """``R,G,B`` (or one number for grey) from the command line as three floats."""
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not R,G,B numbers: {text!r}") from None
+    if len(values) == 1:
+        values *= 3
+    if len(values) != 3:
+        raise argparse.ArgumentTypeError(f"give three numbers R,G,B (or one), not {text!r}")
+    return (values[0], values[1], values[2])
+
+
+def print_summary(result: baker.BakeResult) -> None:
+    """What was baked, the plan, notes, rays/s and stage times, on stdout."""
+    s = result.settings
+    times = result.report["stage_seconds"]
+    print(f"baked {result.output}")
+    print(f"  {result.texels:,} texels on {result.pages} page(s) of "
+          f"{result.report['atlas']['width']}×{result.report['atlas']['height']}, "
+          f"texel density {s.texel_density:.4g}/unit, d_max {s.d_max:.4g}, {s.rays} rays/texel")
+    print("\n".join(result.plan.lines()))
+    for note in result.report["notes"]:
+        print(f"  note: {note}")
+    for warning, count in result.report["warnings"].items():
+        print(f"  warning: {count} × {warning}")
+    rebake = result.rebake or {}
+    rays = (f"{rebake['rays']:,} rays cast (the lightmaps rest on {result.rays:,} obscurance "
+            f"and {result.report.get('shadow_rays', 0):,} shadow/sky rays)"
+            if rebake.get("incremental") else
+            f"{result.rays:,} obscurance rays, {result.report['rays_per_second'] / 1e6:.2f} M rays/s, "
+            f"{result.report.get('shadow_rays', 0):,} shadow/sky rays")
+    print(f"  {rays}; estimated RMSE {result.rmse_estimate:.3g}; {result.seconds:.1f} s "
+          f"({', '.join(f'{k} {v:.1f}' for k, v in times.items())})")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Bake; exit code 0."""
+    result = baker.bake(args.scene, args.output, settings_from(args), report_path=args.report,
+                        lightmaps_dir=args.lightmaps, lightmaps_format=args.lightmaps_format,
+                        error_map_dir=args.error_map,
+                        quiet=args.quiet, overwrite=args.overwrite,
+                        **state_arguments(args))
+    if not args.quiet:
+        print_rebake(result)
+        print_summary(result)
+    return 0

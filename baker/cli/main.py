@@ -1,0 +1,71 @@
+"""``baker`` — bake lightmaps into glTF scenes from the command line.
+
+Each subcommand is a module of this package with ``add_parser(commands)``, which registers its
+options and sets ``run``; ``main`` parses, runs it, and renders ``baker.BakerError`` as a short
+message (the traceback only with ``--debug``). Exit codes: 0 done, 1 bad input or settings
+(message printed), 2 bad command line (argparse), 3 internal error (a bug: please report it),
+130 interrupted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+
+import baker
+from baker.cli import bake, hook, preview, rebake, relight, study, watch
+
+SUBCOMMANDS = (bake, rebake, relight, watch, hook, preview, study)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``baker`` parser with every subcommand registered."""
+    parser = argparse.ArgumentParser(
+        prog="baker", description="Bake lightmaps (obscurances with colour bleeding) into glTF scenes.")
+    parser.add_argument("--version", action="version", version=f"baker {baker.__version__}")
+    parser.add_argument("--debug", action="store_true", help="show the traceback of an error")
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for module in SUBCOMMANDS:
+        module.add_parser(commands)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the command line; return the exit code."""
+    args = build_parser().parse_args(argv)
+    try:
+        return args.run(args)
+    except baker.BakerError as error:
+        if args.debug:
+            raise
+        print(f"baker: error: {error}", file=sys.stderr)
+        return 1
+    except BrokenPipeError:  # the reader of our output went away (e.g. `| head`): not an error
+        sys.stderr.close()
+        return 0
+    except KeyboardInterrupt:
+        print("baker: interrupted; no output was changed", file=sys.stderr)
+        return 130
+    except Exception as error:  # a bug, not bad input: say so in one line
+        if args.debug:
+            raise
+        print(f"baker: internal error ({type(error).__name__}: {error}); this is a bug in baker — "
+              "please report it with the output of the same command run with --debug",
+              file=sys.stderr)
+        return 3
+
+
+def entry() -> int:
+    """The ``baker`` command: ``main`` on the process's arguments. Once it has returned, a
+    second Ctrl-C (an impatient user presses it twice) has nothing left to stop: it is ignored
+    while Python waits for the worker threads to end their chunk, rather than printing a
+    traceback from the interpreter's shutdown."""
+    try:
+        return main()
+    finally:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+if __name__ == "__main__":
+    sys.exit(entry())

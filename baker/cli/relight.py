@@ -1,0 +1,37 @@
+"""``baker relight``: new light colours and intensities, recomposed from the bake state, no ray."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import baker
+from baker.cli.bake import print_summary
+from baker.cli.state import add_update_options, print_rebake
+from baker.rebake.incremental import asked_settings
+
+
+def add_parser(commands) -> None:
+    """Register ``relight`` on the ``baker`` command's subparsers."""
+    parser = commands.add_parser(
+        "relight", help="recompose the lightmaps for new light colours/intensities (no rays)",
+        description="The scene's lights changed only in colour or intensity (KHR_lights_punctual "
+                    "color/intensity, emissive strength): recompose the lightmaps from the bake "
+                    "state of the last bake, casting no ray. The result equals a full bake. "
+                    "Any other change is refused, and nothing is written: use `baker bake`.")
+    parser.set_defaults(run=run)
+    parser.add_argument("scene", type=Path, help="the scene with its new lights, .glb or .gltf")
+    parser.add_argument("-o", "--output", type=Path, required=True,
+                        help="the baked scene to update (.glb or .gltf)")
+    add_update_options(parser)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Relight; exit code 0 (1 with a message when more than the lights' colours changed)."""
+    state = args.state or baker.rebake.state.default_path(args.output)
+    result = baker.bake(args.scene, args.output, asked_settings(state), report_path=args.report,
+                        quiet=args.quiet, relight=True, state=state)
+    if not args.quiet:
+        print_rebake(result)
+        print_summary(result)
+    return 0

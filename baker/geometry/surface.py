@@ -1,0 +1,208 @@
+"""What a surface looks like at a point: diffuse albedo and emission, linear RGB.
+
+Albedo R(Q) = baseColorFactor × baseColorTexture(uv) × COLOR_0 × the material's diffuse weight
+(``materials.classify``: metal mirrors, glass and translucency take their share), the texture
+sRGB-decoded and sampled bilinearly with its sampler's wrap modes at the UVs its
+KHR_texture_transform maps the stored ones to (``texture_uv``). Emission = emissiveFactor × emissive strength ×
+emissiveTexture(uv). Work is vectorised over points, looping only over the scene's materials.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from baker.gltf.materials import BLEND, MASK, material_table
+from baker.gltf.scene import CLAMP_TO_EDGE, MIRRORED_REPEAT, Image, Scene, TextureRef
+
+if TYPE_CHECKING:  # world.build_world makes the AlphaTest below: a type, not an import
+    from baker.geometry.world import World
+
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])  # Rec. 709 weights of linear RGB
+
+# sRGB transfer function, decoded once for every 8-bit value.
+_levels = np.arange(256) / 255.0
+SRGB_TO_LINEAR = np.where(_levels <= 0.04045, _levels / 12.92, ((_levels + 0.055) / 1.055) ** 2.4)
+
+
+def _wrap(coord: np.ndarray, size: int, mode: int) -> np.ndarray:
+    """Integer texel coordinates wrapped into [0, size) by a glTF sampler wrap mode."""
+    if mode == CLAMP_TO_EDGE:
+        return np.clip(coord, 0, size - 1)
+    if mode == MIRRORED_REPEAT:
+        period = np.mod(coord, 2 * size)
+        return np.where(period < size, period, 2 * size - 1 - period)
+    return np.mod(coord, size)
+
+
+def sample_texture(image: Image, ref: TextureRef, uv: np.ndarray) -> np.ndarray:
+    """Bilinear lookup of an sRGB colour texture at glTF UVs (k, 2); returns linear RGB (k, 3).
+
+    UV (0, 0) is the top-left corner of the image; texel centres sit at half-integers.
+    """
+    pixels = image.pixels
+    h, w = pixels.shape[:2]
+    uv = np.clip(uv, -1e6, 1e6)  # past this, float UVs hold no sub-texel position; int64-safe
+    x = uv[:, 0] * w - 0.5
+    y = uv[:, 1] * h - 0.5
+    x0, y0 = np.floor(x), np.floor(y)
+    fx, fy = (x - x0)[:, None], (y - y0)[:, None]
+    x0, y0 = x0.astype(np.int64), y0.astype(np.int64)
+    xs = [_wrap(x0, w, ref.wrap_s), _wrap(x0 + 1, w, ref.wrap_s)]
+    ys = [_wrap(y0, h, ref.wrap_t), _wrap(y0 + 1, h, ref.wrap_t)]
+
+    def tap(yy: np.ndarray, xx: np.ndarray) -> np.ndarray:
+        return SRGB_TO_LINEAR[pixels[yy, xx, :3]]
+
+    top = tap(ys[0], xs[0]) * (1 - fx) + tap(ys[0], xs[1]) * fx
+    bottom = tap(ys[1], xs[0]) * (1 - fx) + tap(ys[1], xs[1]) * fx
+    return top * (1 - fy) + bottom * fy
+
+
+def _interpolate(values: np.ndarray, world: World, tris: np.ndarray, bary: np.ndarray) -> np.ndarray:
+    """Interpolate a per-vertex array (V, c) at barycentric points (k, 3) of triangles (k,)."""
+    return np.einsum("kv,kvc->kc", bary, values[world.triangles[tris]])
+
+
+def texture_uv(world: World, ref: TextureRef, tris: np.ndarray, bary: np.ndarray) -> np.ndarray:
+    """The UVs (k, 2) at which ``ref`` is sampled at barycentric points (k, 3) of world
+    triangles (k,): its UV set interpolated, then its KHR_texture_transform applied (an affine
+    map, so transforming the interpolated UVs equals interpolating transformed corners)."""
+    uv = _interpolate(world.texcoords[ref.texcoord], world, tris, bary)
+    if ref.transform is None:
+        return uv
+    a, b, c, d, e, f = ref.transform
+    return np.stack([a * uv[:, 0] + b * uv[:, 1] + c, d * uv[:, 0] + e * uv[:, 1] + f], axis=1)
+
+
+def _textured(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray,
+              factor: np.ndarray, texture_of) -> np.ndarray:
+    """factor[material] (k, 3) times each material's texture, looked up where it has one."""
+    materials = world.tri_material[tris]
+    result = factor[materials].copy()
+    for m, material in enumerate(scene.materials):
+        ref = texture_of(material)
+        if ref is None:
+            continue
+        mask = materials == m
+        if not mask.any():
+            continue
+        uv = texture_uv(world, ref, tris[mask], bary[mask])
+        result[mask] *= sample_texture(scene.images[ref.image], ref, uv)
+    return result
+
+
+def diffuse_factors(scene: Scene) -> np.ndarray:
+    """(M, 3) diffuse albedo factor of every material: baseColorFactor RGB × diffuse weight."""
+    table = material_table(scene)
+    return np.array([c.diffuse for c in table.classes], np.float64).reshape(-1, 3)
+
+
+def base_colour(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray) -> np.ndarray:
+    """Base colour (k, 3), linear RGB, at barycentric points (k, 3) of world triangles (k,):
+    factor × texture × COLOR_0, every branch's weight left out (tints of mirrors and glass)."""
+    factor = np.array([m.base_color[:3] for m in scene.materials], np.float64).reshape(-1, 3)
+    colour = _textured(scene, world, tris, bary, factor, lambda m: m.base_color_texture)
+    return colour * _interpolate(world.colors[:, :3], world, tris, bary)
+
+
+def albedo(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray) -> np.ndarray:
+    """Diffuse albedo (k, 3), linear RGB, at barycentric points (k, 3) of world triangles (k,)."""
+    colour = _textured(scene, world, tris, bary, diffuse_factors(scene),
+                       lambda m: m.base_color_texture)
+    return colour * _interpolate(world.colors[:, :3], world, tris, bary)
+
+
+def sample_alpha(image: Image, ref: TextureRef, uv: np.ndarray) -> np.ndarray:
+    """Bilinear lookup of a texture's alpha channel (linear, [0, 1]) at glTF UVs (k, 2): (k,)."""
+    pixels = image.pixels
+    h, w = pixels.shape[:2]
+    x, y = uv[:, 0] * w - 0.5, uv[:, 1] * h - 0.5
+    x0, y0 = np.floor(x), np.floor(y)
+    fx, fy = x - x0, y - y0
+    x0, y0 = x0.astype(np.int64), y0.astype(np.int64)
+    xs = [_wrap(x0, w, ref.wrap_s), _wrap(x0 + 1, w, ref.wrap_s)]
+    ys = [_wrap(y0, h, ref.wrap_t), _wrap(y0 + 1, h, ref.wrap_t)]
+    a = pixels[..., 3]
+    top = a[ys[0], xs[0]] * (1 - fx) + a[ys[0], xs[1]] * fx
+    bottom = a[ys[1], xs[0]] * (1 - fx) + a[ys[1], xs[1]] * fx
+    return (top * (1 - fy) + bottom * fy) / 255.0
+
+
+def alpha(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray) -> np.ndarray:
+    """Coverage alpha (k,) at barycentric points (k, 3) of world triangles (k,): base colour
+    factor alpha × base colour texture alpha × COLOR_0 alpha (what alphaMode tests)."""
+    materials = world.tri_material[tris]
+    out = np.array([m.base_color[3] for m in scene.materials], np.float64)[materials]
+    for m, material in enumerate(scene.materials):
+        ref = material.base_color_texture
+        mask = materials == m
+        if ref is None or not mask.any():
+            continue
+        uv = texture_uv(world, ref, tris[mask], bary[mask])
+        out[mask] *= sample_alpha(scene.images[ref.image], ref, uv)
+    return out * _interpolate(world.colors[:, 3:4], world, tris, bary)[:, 0]
+
+
+def triangle_albedo(scene: Scene, world: World) -> tuple[np.ndarray, np.ndarray]:
+    """Albedo per world triangle where it is constant over the triangle, for the ray kernels.
+
+    Returns ``table`` (T, 3) linear RGB and ``varying`` (T,) bool: True where the material has a
+    base colour texture or the corners' vertex colours differ, so ``albedo`` must be evaluated at
+    each hit (``table`` is then meaningless for that triangle).
+    """
+    corners = world.colors[world.triangles][..., :3]  # (T, 3 corners, 3)
+    uniform = np.all(corners == corners[:, :1], axis=(1, 2))
+    textured = np.array([m.base_color_texture is not None for m in scene.materials], bool)
+    table = diffuse_factors(scene)[world.tri_material] * corners[:, 0]
+    return table, textured[world.tri_material] | ~uniform
+
+
+def emission(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray) -> np.ndarray:
+    """Emitted radiance (k, 3), linear RGB, at barycentric points of world triangles."""
+    factor = np.array([m.emissive for m in scene.materials], np.float64)
+    return _textured(scene, world, tris, bary, factor, lambda m: m.emissive_texture)
+
+
+@dataclass(frozen=True)
+class AlphaTest:
+    """What the tracer needs to let rays through alpha-cut and blended surfaces.
+
+    mode: (T,) uint8 per world triangle: 0 opaque (never tested), MASK or BLEND. normals: (T, 3)
+    unit geometric normals (to step past a hit). cutoff: (M,) alphaCutoff per material.
+    step: world units a continued ray starts past its hit, besides 64 float32 ulps.
+    ``scene`` and ``world`` give the alpha at a hit (``surface.alpha``).
+    """
+
+    scene: object
+    world: object
+    mode: np.ndarray
+    normals: np.ndarray
+    cutoff: np.ndarray
+    step: float
+
+    def passes(self, tris: np.ndarray, bary: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """(k,) bool: does a ray through hit ``tris`` (k,) at ``bary`` (k, 3) go on? ``u`` (k,)
+        uniform in [0, 1) decides BLEND hits (through with probability 1 − alpha)."""
+        value = alpha(self.scene, self.world, tris, bary)
+        cut = self.cutoff[self.world.tri_material[tris]]
+        return np.where(self.mode[tris] == MASK, value < cut, u >= value)
+
+
+def alpha_test(scene, world) -> AlphaTest | None:
+    """The scene's ``AlphaTest``, or None when no triangle can let a ray through."""
+    classes = material_table(scene).classes
+    by_material = np.array([{"MASK": MASK, "BLEND": BLEND}.get(c.alpha_mode, 0) for c in classes],
+                           np.uint8)
+    tested = np.array([c.alpha_tested for c in classes], bool)
+    if not len(world.triangles) or not len(classes):
+        return None
+    mode = by_material[world.tri_material]
+    vertex_alpha = world.colors[world.triangles][..., 3].min(axis=1) < 1.0  # (T,)
+    mode = np.where(tested[world.tri_material] | vertex_alpha, mode, 0).astype(np.uint8)
+    if not mode.any():
+        return None
+    return AlphaTest(scene=scene, world=world, mode=mode, normals=world.geometric_normals(),
+                     cutoff=np.array([c.alpha_cutoff for c in classes]), step=world.scale * 1e-6)

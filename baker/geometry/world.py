@@ -1,0 +1,181 @@
+"""Every instance's triangles in world space, in one set of flat arrays.
+
+Built once per bake from the loaded ``Scene``; the unwrapper, the rasteriser, the tracer and the
+material lookups all index into it. Positions are float64 world coordinates; ``center`` is the
+middle of their bounds, which the tracer subtracts before going to float32, snapped to a grid of
+1/16 of ``scale`` (the bounds' diagonal rounded up to a power of two): moving a node a little, even
+at the edge of the scene, leaves the float32 frame — and with it every other ray — bit-identical,
+so an incremental rebake can follow (docs/design.md §5).
+
+Winding: glTF front faces are counter-clockwise, but a node whose world matrix has a negative
+determinant mirrors its mesh, and the spec says its front faces are then clockwise. Triangles of
+such instances are stored with two corners swapped, so that everywhere downstream the geometric
+normal ``cross(b - a, c - a)`` points out of the front face.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from baker.geometry.surface import alpha_test
+from baker.gltf.scene import Scene
+
+
+@dataclass(frozen=True)
+class World:
+    """All instances flattened. V world vertices, T world triangles, I instances.
+
+    positions: (V, 3) float64 world. normals: (V, 3) float64 unit shading normals in world space
+    (inverse-transpose transformed); rows of primitives without normals are the flat normal of one
+    of their triangles, and ``smooth`` is False there. texcoords: tuple of (V, 2) float64, one per
+    UV set used by any material texture (zeros where a primitive lacks the set). colors: (V, 4)
+    float64 linear RGBA (ones where absent). triangles: (T, 3) int64 into positions.
+    tri_instance / tri_local / tri_material: (T,) int64, the triangle's instance, its index inside
+    the primitive, its material. vertex_start / tri_start: (I + 1,) int64 offsets of each instance.
+    alpha: ``materials.AlphaTest`` when some triangle may let rays through (alphaMode MASK or
+    BLEND), else None; the tracer reads it.
+    """
+
+    positions: np.ndarray
+    normals: np.ndarray
+    smooth: np.ndarray
+    texcoords: tuple[np.ndarray, ...]
+    colors: np.ndarray
+    triangles: np.ndarray
+    tri_instance: np.ndarray
+    tri_local: np.ndarray
+    tri_material: np.ndarray
+    vertex_start: np.ndarray
+    tri_start: np.ndarray
+    center: np.ndarray
+    alpha: object = field(default=None, compare=False, repr=False)
+
+    def corners(self, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """World positions of the three corners of triangles ``tris`` (k,), each (k, 3)."""
+        v = self.triangles[tris]
+        return self.positions[v[:, 0]], self.positions[v[:, 1]], self.positions[v[:, 2]]
+
+    @property
+    def scale(self) -> float:
+        """The bounds' diagonal rounded up to a power of two (``bounds_scale``), world units: the
+        length that epsilons scale with, unchanged by small moves of a node."""
+        return bounds_scale(self.positions)
+
+    def geometric_normals(self, tris: np.ndarray | None = None) -> np.ndarray:
+        """Unit front-face normals (k, 3) of triangles ``tris`` (all when None); 0 for no area."""
+        tris = np.arange(len(self.triangles)) if tris is None else tris
+        a, b, c = self.corners(tris)
+        n = np.cross(b - a, c - a)
+        length = np.linalg.norm(n, axis=1, keepdims=True)
+        return np.divide(n, length, out=np.zeros_like(n), where=length > 0)
+
+    def areas(self, tris: np.ndarray | None = None) -> np.ndarray:
+        """World areas (k,) of triangles ``tris`` (all when None)."""
+        tris = np.arange(len(self.triangles)) if tris is None else tris
+        a, b, c = self.corners(tris)
+        return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+
+    def instance_triangles(self, instance: int) -> np.ndarray:
+        """The world triangle indices (k,) of one instance, in the primitive's order."""
+        return np.arange(self.tri_start[instance], self.tri_start[instance + 1])
+
+
+def _texcoord_sets(scene: Scene) -> int:
+    """How many UV sets material textures use (at least 1)."""
+    used = [ref.texcoord for m in scene.materials
+            for ref in (m.base_color_texture, m.emissive_texture) if ref is not None]
+    return max(used, default=0) + 1
+
+
+def _flat_normals(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Per-vertex normals for a primitive without NORMAL: each vertex takes the normal of the
+    last triangle that uses it (only used where ``smooth`` is False, i.e. never interpolated)."""
+    a, b, c = (positions[triangles[:, k]] for k in range(3))
+    n = np.cross(b - a, c - a)
+    normals = np.zeros_like(positions)
+    normals[triangles.reshape(-1)] = np.repeat(n, 3, axis=0)
+    return normals
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    length = np.linalg.norm(v, axis=1, keepdims=True)
+    return np.divide(v, length, out=np.zeros_like(v), where=length > 0)
+
+
+def bounds_scale(positions: np.ndarray) -> float:
+    """The diagonal of the bounds of ``positions`` (n, 3) rounded up to a power of two (1 for
+    none or a single point): a scene-size length that moving a node changes only when the
+    scene's size crosses a power of two."""
+    if not len(positions):
+        return 1.0
+    diagonal = float(np.linalg.norm(positions.max(0) - positions.min(0)))
+    if not (np.isfinite(diagonal) and diagonal > 0):
+        return 1.0
+    return float(2.0 ** np.ceil(np.log2(diagonal)))
+
+
+def build_world(scene: Scene) -> World:
+    """Transform every instance of ``scene`` to world space and concatenate them."""
+    sets = _texcoord_sets(scene)
+    parts: dict[str, list[np.ndarray]] = {k: [] for k in (
+        "positions", "normals", "smooth", "colors", "triangles", "tri_instance", "tri_local",
+        "tri_material")}
+    uv_parts: list[list[np.ndarray]] = [[] for _ in range(sets)]
+    vertex_start, tri_start = [0], [0]
+    for i, inst in enumerate(scene.instances):
+        prim = scene.primitives[inst.primitive]
+        linear, offset = inst.world[:3, :3], inst.world[:3, 3]
+        positions = prim.positions @ linear.T + offset
+        triangles = prim.triangles
+        if np.linalg.det(linear) < 0:
+            triangles = triangles[:, [0, 2, 1]]
+        if prim.normals is not None:
+            # (M^-T n) as row vectors, through the cofactor matrix det(M)·M^-T (sign kept), which
+            # exists for a singular M too: a zero scale flattens normals, never NaNs them.
+            cofactor = np.stack([np.cross(linear[:, 1], linear[:, 2]), np.cross(linear[:, 2], linear[:, 0]),
+                                 np.cross(linear[:, 0], linear[:, 1])])  # rows: det(M)·M^-1
+            normals = _unit(prim.normals @ (cofactor if np.linalg.det(linear) >= 0 else -cofactor))
+            smooth = np.ones(len(positions), bool)
+        else:
+            normals = _unit(_flat_normals(positions, triangles))
+            smooth = np.zeros(len(positions), bool)
+        n = len(positions)
+        parts["positions"].append(positions)
+        parts["normals"].append(normals)
+        parts["smooth"].append(smooth)
+        parts["colors"].append(prim.colors if prim.colors is not None else np.ones((n, 4)))
+        parts["triangles"].append(triangles + vertex_start[-1])
+        parts["tri_instance"].append(np.full(len(triangles), i, np.int64))
+        parts["tri_local"].append(np.arange(len(triangles), dtype=np.int64))
+        parts["tri_material"].append(np.full(len(triangles), prim.material, np.int64))
+        for k in range(sets):
+            has = k < len(prim.texcoords)
+            uv_parts[k].append(prim.texcoords[k] if has else np.zeros((n, 2)))
+        vertex_start.append(vertex_start[-1] + n)
+        tri_start.append(tri_start[-1] + len(triangles))
+
+    def cat(name: str, shape: tuple[int, ...], dtype) -> np.ndarray:
+        return np.concatenate(parts[name]) if parts[name] else np.zeros(shape, dtype)
+
+    positions = cat("positions", (0, 3), np.float64)
+    center = np.zeros(3)
+    if len(positions):
+        grid = bounds_scale(positions) / 16
+        center = np.round((positions.min(0) + positions.max(0)) / 2 / grid) * grid
+    world = World(
+        positions=positions,
+        normals=cat("normals", (0, 3), np.float64),
+        smooth=cat("smooth", (0,), bool),
+        texcoords=tuple(np.concatenate(p) if p else np.zeros((0, 2)) for p in uv_parts),
+        colors=cat("colors", (0, 4), np.float64),
+        triangles=cat("triangles", (0, 3), np.int64).astype(np.int64),
+        tri_instance=cat("tri_instance", (0,), np.int64),
+        tri_local=cat("tri_local", (0,), np.int64),
+        tri_material=cat("tri_material", (0,), np.int64),
+        vertex_start=np.asarray(vertex_start, np.int64),
+        tri_start=np.asarray(tri_start, np.int64),
+        center=center,
+    )
+    return replace(world, alpha=alpha_test(scene, world))

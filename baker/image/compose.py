@@ -1,0 +1,121 @@
+"""Compose the stored terms into lightmap pages: L(P) = D(P) + I_A · W(P).
+
+A recomposition needs no ray: it only combines the terms the integrator kept apart, so a change of
+R_ave or I_A costs a few array operations (docs/design.md §2). D, the direct light (direct.py), is kept
+per light at unit intensity, so a light's new colour or intensity is a recomposition too.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields, replace
+
+import numpy as np
+
+from baker.atlas.layout import Atlas
+from baker.atlas.rasterise import Texels, flat_pages
+from baker.jit import jit
+from baker.light.ambient import Ambient
+from baker.light.direct import Direct
+from baker.light.hemisphere import Terms, obscurance_at
+from baker.light.obscurance import UNIT_REFLECTIVITY
+from baker.run.spill import PER_SCENE
+
+
+@dataclass(frozen=True)
+class Lightmaps:
+    """Float lightmap pages, linear RGB.
+
+    light: (P, H, W, 3) float64, what arrives at the surface (the shader multiplies by albedo).
+    obscurance: (P, H, W, 3) float64, W itself, for the occlusion texture; (0, H, W, 3) when
+    not kept (a bake without ``occlusion`` does not need it: 400 MB at 4096²). covered: (P, H, W) bool, texels that were baked
+    (the rest are padding, filled by dilation).
+    """
+
+    light: np.ndarray
+    obscurance: np.ndarray
+    covered: np.ndarray
+
+
+def effective_r_ave(ambient: Ambient, rho: str) -> np.ndarray:
+    """R_ave as the estimator uses it: 1 for classic ambient occlusion (every surface white)."""
+    return np.ones(3) if rho in UNIT_REFLECTIVITY else ambient.r_ave
+
+
+def compose(atlas: Atlas, texels: Texels, terms: Terms, ambient: Ambient, rho: str,
+            direct: Direct | None = None, light_colours: np.ndarray | None = None,
+            indirect: np.ndarray | None = None, obscurance: bool = True) -> Lightmaps:
+    """Scatter the texels' light L = D + I_A·W and obscurance W into page images.
+
+    ``direct``: the texels' direct light (None: L = I_A·W); ``light_colours`` (L, 3) replaces the
+    baked colour × intensity of its punctual lights (relighting without rays). ``indirect``
+    (N, 3): path-traced indirect irradiance (``--method gi``) to use instead of I_A·W.
+    ``obscurance``: keep the pages of W too.
+    """
+    lightmaps = blank(atlas, obscurance)
+    compose_into(lightmaps, texels, terms, ambient, rho, direct, light_colours, indirect)
+    return lightmaps
+
+
+def blank(atlas: Atlas, obscurance: bool = True) -> Lightmaps:
+    """Lightmaps of zeros, no texel covered, the atlas's pages in size (``obscurance``: with
+    pages of W, else 0 of them)."""
+    shape = (atlas.page_count, atlas.height, atlas.width)
+    return Lightmaps(light=np.zeros(shape + (3,)),
+                     obscurance=np.zeros((shape[0] if obscurance else 0,) + shape[1:] + (3,)),
+                     covered=np.zeros(shape, bool))
+
+
+def compose_into(lightmaps: Lightmaps, texels: Texels, terms: Terms, ambient: Ambient, rho: str,
+                 direct: Direct | None = None, light_colours: np.ndarray | None = None,
+                 indirect: np.ndarray | None = None) -> None:
+    """``compose`` the texels into ``lightmaps``' pages, in place: a bake made part by part
+    composes each part as it is done. The pixels of other texels are left as they are.
+
+    A block of ``_TEXELS_AT_ONCE`` texels at a time: at once, the (N, 3) values and their
+    temporaries would be 200 MB each at 4096².
+    """
+    r_ave = effective_r_ave(ambient, rho)
+    count = len(texels)
+    pages, covered, obscurance = (flat_pages(lightmaps.light), flat_pages(lightmaps.covered),
+                                  flat_pages(lightmaps.obscurance))
+    none = np.zeros((0, 3))
+    for start in range(0, count, _TEXELS_AT_ONCE):
+        block = slice(start, start + _TEXELS_AT_ONCE)
+        _compose_kernel(texels.pixel_index(block), *_rows(terms, block, count).w_parts(),
+                        np.asarray(r_ave, np.float64), np.asarray(ambient.intensity, np.float64),
+                        none if indirect is None else indirect[block],
+                        none if direct is None else
+                        _rows(direct, block, count).irradiance(light_colours),
+                        pages, obscurance, covered)
+
+
+@jit
+def _compose_kernel(index, w_hit, escaped, through_hit, through_ave, r_ave, intensity,
+                    indirect, direct, pages, obscurance, covered):
+    """Scatter the texels' W (``obscurance_at``) and L = I_A·W + D, or the path-traced
+    ``indirect`` + D when it has rows (``direct`` D (k, 3), or (0, 3): none), into the flat
+    pages at ``index`` (k,) (``Texels.pixel_index``); W too when ``obscurance`` has rows. In
+    one pass: numpy's temporaries made it 3× slower."""
+    keep, traced, lit = len(obscurance) > 0, len(indirect) > 0, len(direct) > 0
+    for i in range(len(index)):
+        p = index[i]
+        covered[p] = True
+        w = obscurance_at(w_hit, escaped, through_hit, through_ave, r_ave, i)
+        for c in range(3):
+            if keep:
+                obscurance[p, c] = w[c]
+            light = indirect[i, c] if traced else w[c] * intensity[c]
+            pages[p, c] = light + direct[i, c] if lit else light
+
+
+_TEXELS_AT_ONCE = 1 << 16
+
+
+def _rows(per_texel, block: slice, count: int):
+    """``per_texel`` (Terms, Direct: a dataclass of (N, …) arrays) for the texels ``block``
+    only: every array field with ``count`` = N rows sliced (views), the others kept (empty
+    optional terms; ``Direct.light_colours``, (L, 3) per light, whatever L is)."""
+    return replace(per_texel, **{
+        f.name: value[block] for f in fields(per_texel)
+        if isinstance(value := getattr(per_texel, f.name), np.ndarray) and value.ndim
+        and len(value) == count and f.name not in PER_SCENE})

@@ -1,0 +1,246 @@
+"""Seams: make both sides of a UV seam show the same light.
+
+An edge that is one edge in 3D but two in the atlas (xatlas cut the surface there into two
+charts, or the mesh's own UV seam) is drawn twice, each side reading its own chart with bilinear
+filtering. Baked independently (and with noise), the two sides disagree and the seam shows as a
+line. This module finds those edges and solves, in the linear least squares sense, for texel
+values that make the bilinear lookups on both sides agree at samples along every seam edge,
+while staying close to the baked values ("Fixing texture seams with linear least squares",
+Sloan & al.; the ands/seamoptimizer approach):
+
+    minimise  Σ_samples (bilinear_A(x) − bilinear_B(x))²  +  Σ_texels λ_i (x_i − x0_i)²
+
+λ is ``DATA_WEIGHT`` for covered texels and ``PADDING_WEIGHT`` for the padding texels the
+lookups also read (their values are only dilated filler). The normal equations are solved by
+conjugate gradients, vectorised (np.bincount for the sparse products): no scipy needed.
+
+Only *smooth* seams are stitched: both sides must have the same shading normals at the edge's
+ends. At a crease (a box's edge) the light really differs on either side; blending it would
+blur a true edge. Seams are found within each instance (an object) and between instances that
+touch along a whole edge (two floor tiles side by side): an edge of one whose two end points
+are those of an edge of the other, smooth across, is a seam like any other. Objects that touch
+only partly (a T-junction: one long edge against two short ones) or where more than two
+triangles meet at an edge are left apart.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from baker.atlas.layout import Atlas
+from baker.geometry.world import World
+from baker.jit import jit
+
+DATA_WEIGHT = 0.02  # λ of a covered texel: how strongly it keeps its baked value
+PADDING_WEIGHT = 0.002  # λ of a padding texel the seam lookups read
+SAMPLES_PER_TEXEL = 2  # seam samples per texel of edge length (on the longer side)
+_SMOOTH_COS = 0.999  # shading normals this close count as the same (about 2.6°)
+_ITERATIONS = 200
+
+
+@dataclass(frozen=True)
+class Seams:
+    """S sample points along the seam edges of an atlas, each seen from both sides.
+
+    page_a, page_b: (S,) int64 page of each side. uv_a, uv_b: (S, 2) float64 glTF UVs of the
+    same 3D point in side A's and side B's chart. edges: how many seam edges were found.
+    """
+
+    page_a: np.ndarray
+    uv_a: np.ndarray
+    page_b: np.ndarray
+    uv_b: np.ndarray
+    edges: int
+
+    def __len__(self) -> int:
+        return len(self.page_a)
+
+
+def _empty() -> Seams:
+    z = np.zeros(0, np.int64)
+    return Seams(z, np.zeros((0, 2)), z, np.zeros((0, 2)), 0)
+
+
+def find_seams(atlas: Atlas, world: World) -> Seams:
+    """Every smooth seam edge of the baked instances, sampled ``SAMPLES_PER_TEXEL`` per texel:
+    within each instance, and between instances that touch along a whole edge."""
+    baked = [u for u in atlas.instances if len(world.instance_triangles(u.instance))]
+    if not baked:
+        return _empty()
+    tris = np.concatenate([world.instance_triangles(u.instance) for u in baked])
+    uv = np.concatenate([u.uv[u.triangles] for u in baked])  # (m, 3, 2), world corner order
+    page = np.concatenate([u.pages for u in baked])
+    ta, tb, lo_a, hi_a, lo_b, hi_b = _shared_edges(world, tris)
+    uv_a0, uv_a1 = uv[ta, lo_a], uv[ta, hi_a]
+    uv_b0, uv_b1 = uv[tb, lo_b], uv[tb, hi_b]
+    placed = (page[ta] >= 0) & (page[tb] >= 0)
+    split = (page[ta] != page[tb]) | (np.abs(uv_a0 - uv_b0).max(axis=1) > 1e-9) | (
+        np.abs(uv_a1 - uv_b1).max(axis=1) > 1e-9)
+    vertices = world.triangles[tris]  # (m, 3) world vertex ids
+    normal, smooth = world.normals[vertices], world.smooth[vertices]  # (m, 3, 3), (m, 3)
+    same_normals = ((np.einsum("ij,ij->i", normal[ta, lo_a], normal[tb, lo_b]) > _SMOOTH_COS)
+                    & (np.einsum("ij,ij->i", normal[ta, hi_a], normal[tb, hi_b]) > _SMOOTH_COS))
+    is_smooth = smooth[ta, lo_a] & smooth[ta, hi_a] & smooth[tb, lo_b] & smooth[tb, hi_b]
+    keep = placed & split & same_normals & is_smooth
+    if not keep.any():
+        return _empty()
+    uv_a0, uv_a1, uv_b0, uv_b1 = uv_a0[keep], uv_a1[keep], uv_b0[keep], uv_b1[keep]
+    ta, tb = ta[keep], tb[keep]
+    scale = np.array([atlas.width, atlas.height], np.float64)
+    length = np.maximum(np.linalg.norm((uv_a1 - uv_a0) * scale, axis=1),
+                        np.linalg.norm((uv_b1 - uv_b0) * scale, axis=1))
+    count = np.maximum(2, np.ceil(length * SAMPLES_PER_TEXEL)).astype(np.int64)
+    edge = np.repeat(np.arange(len(count)), count)
+    start = np.cumsum(count) - count
+    t = (((np.arange(count.sum()) - start[edge]) + 0.5) / count[edge])[:, None]
+    return Seams(page[ta][edge], uv_a0[edge] + t * (uv_a1 - uv_a0)[edge], page[tb][edge],
+                 uv_b0[edge] + t * (uv_b1 - uv_b0)[edge], len(count))
+
+
+def _shared_edges(world: World, tris: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The edges of triangles ``tris`` (m,) (world triangle ids) that exactly two of them share,
+    in 3D: same two end points, whichever instance each triangle belongs to.
+
+    Same 3D point ⇔ same position rounded to 1e-7 of the largest coordinate (meshes split
+    vertices at their own seams; touching objects have vertices of their own). An edge used by
+    three or more triangles (a fin, two objects overlapping) is left out. Returns, per edge, the
+    two triangles' positions in ``tris`` (first, second) and the corners (0–2) of its lower and
+    higher end point in each (lo_a, hi_a, lo_b, hi_b): ends matched, whatever the windings.
+    """
+    points = world.positions[world.triangles[tris].reshape(-1)]
+    extent = max(float(np.abs(points).max()), 1e-30)
+    _, point_id = np.unique(np.round(points / (extent * 1e-7)).astype(np.int64), axis=0,
+                            return_inverse=True)
+    point_id = point_id.reshape(-1, 3)
+    m = len(tris)
+    tri = np.repeat(np.arange(m), 3)
+    ca, cb = np.tile([0, 1, 2], m), np.tile([1, 2, 0], m)
+    ia, ib = point_id[tri, ca], point_id[tri, cb]
+    swap = ia > ib  # orient every edge from its lower point id to its higher
+    lo_c, hi_c = np.where(swap, cb, ca), np.where(swap, ca, cb)
+    key = np.minimum(ia, ib) * (point_id.max() + 1) + np.maximum(ia, ib)
+    order = np.argsort(key, kind="stable")
+    key_sorted = key[order]
+    pair = np.flatnonzero((key_sorted[1:] == key_sorted[:-1])
+                          & ((np.r_[key_sorted[2:], -1] != key_sorted[1:]))
+                          & ((np.r_[-1, key_sorted[:-2]] != key_sorted[:-1])))
+    one, two = order[pair], order[pair + 1]  # edges shared by exactly two triangles
+    return tri[one], tri[two], lo_c[one], hi_c[one], lo_c[two], hi_c[two]
+
+
+def _taps(page: np.ndarray, uv: np.ndarray, shape: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """Flat texel indices (S, 4) and weights (S, 4) of clamped bilinear lookups at ``uv``."""
+    _, h, w = shape
+    x = uv[:, 0] * w - 0.5
+    y = uv[:, 1] * h - 0.5
+    x0, y0 = np.floor(x), np.floor(y)
+    fx, fy = x - x0, y - y0
+    x0, y0 = x0.astype(np.int64), y0.astype(np.int64)
+    xs = np.stack([x0, x0 + 1, x0, x0 + 1], axis=1).clip(0, w - 1)
+    ys = np.stack([y0, y0, y0 + 1, y0 + 1], axis=1).clip(0, h - 1)
+    weights = np.stack([(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy], axis=1)
+    return (page[:, None] * h + ys) * w + xs, weights
+
+
+def seam_steps(values: np.ndarray, seams: Seams) -> np.ndarray:
+    """(S,) largest channel difference of bilinear lookups on side A and side B of each seam
+    sample, for pages ``values`` (P, H, W, C)."""
+    if not len(seams):
+        return np.zeros(0)
+    flat = values.reshape(-1, values.shape[-1])
+    ia, wa = _taps(seams.page_a, seams.uv_a, values.shape[:3])
+    ib, wb = _taps(seams.page_b, seams.uv_b, values.shape[:3])
+    a = np.einsum("sk,skc->sc", wa, flat[ia])
+    b = np.einsum("sk,skc->sc", wb, flat[ib])
+    return np.abs(a - b).max(axis=1)
+
+
+@jit
+def _normal_product(weight: np.ndarray, local: np.ndarray, lam: np.ndarray, x: np.ndarray,
+                    out: np.ndarray) -> np.ndarray:
+    """``out`` (n, C) = (MᵀM + diag(lam)) x: M the seam rows, row s having ``weight[s, k]`` at
+    column ``local[s, k]`` (S, K); one compiled pass over the rows, scattered in row order."""
+    out[:] = 0.0
+    for s in range(weight.shape[0]):
+        for c in range(x.shape[1]):
+            row = 0.0
+            for k in range(weight.shape[1]):
+                row += weight[s, k] * x[local[s, k], c]
+            for k in range(weight.shape[1]):
+                out[local[s, k], c] += weight[s, k] * row
+    for i in range(x.shape[0]):
+        for c in range(x.shape[1]):
+            out[i, c] += lam[i] * x[i, c]
+    return out
+
+
+@jit
+def _solve(weight: np.ndarray, local: np.ndarray, lam: np.ndarray, x0: np.ndarray,
+           iterations: int) -> np.ndarray:
+    """x (n, C) minimising |M x|² + Σ lam·|x − x0|² (M the seam rows, ``_normal_product``):
+    conjugate gradients on (MᵀM + Λ) x = Λ x0, every channel at once (they share the matrix),
+    until the residual's square falls under 1e-20 of |Λ x0|² or after ``iterations``."""
+    n, channels = x0.shape
+    x = x0.copy()
+    q = np.empty_like(x0)
+    _normal_product(weight, local, lam, x, q)
+    r = np.empty_like(x0)
+    rr = np.zeros(channels)
+    norm = 0.0
+    for i in range(n):
+        for c in range(channels):
+            b = lam[i] * x0[i, c]
+            r[i, c] = b - q[i, c]
+            rr[c] += r[i, c] * r[i, c]
+            norm += b * b
+    p = r.copy()
+    target = 1e-20 * max(norm, 1e-300)
+    alpha, beta, pq, rr_new = (np.empty(channels), np.empty(channels), np.empty(channels),
+                               np.empty(channels))
+    for _ in range(iterations):
+        if rr.sum() <= target:
+            break
+        _normal_product(weight, local, lam, p, q)
+        pq[:] = 0.0
+        for i in range(n):
+            for c in range(channels):
+                pq[c] += p[i, c] * q[i, c]
+        for c in range(channels):
+            alpha[c] = rr[c] / max(pq[c], 1e-300)
+        rr_new[:] = 0.0
+        for i in range(n):
+            for c in range(channels):
+                x[i, c] += alpha[c] * p[i, c]
+                r[i, c] -= alpha[c] * q[i, c]
+                rr_new[c] += r[i, c] * r[i, c]
+        for c in range(channels):
+            beta[c] = rr_new[c] / max(rr[c], 1e-300)
+        for i in range(n):
+            for c in range(channels):
+                p[i, c] = r[i, c] + beta[c] * p[i, c]
+        rr[:] = rr_new
+    return x
+
+
+def stitch(values: np.ndarray, covered: np.ndarray, seams: Seams) -> np.ndarray:
+    """``values`` (P, H, W, C) with the texels the seam lookups read re-solved so that both
+    sides of every seam agree (least squares, see the module's docstring); others unchanged.
+    In place when ``values`` is C-contiguous (a copy of a 4096² page pair would be 800 MB)."""
+    if not len(seams):
+        return values
+    shape = values.shape[:3]
+    ia, wa = _taps(seams.page_a, seams.uv_a, shape)
+    ib, wb = _taps(seams.page_b, seams.uv_b, shape)
+    index = np.concatenate([ia, ib], axis=1)  # (S, 8) flat texels of each seam row
+    weight = np.concatenate([wa, -wb], axis=1)  # row · x = lookup A − lookup B
+    used, local = np.unique(index, return_inverse=True)
+    local = local.reshape(index.shape)
+    flat = values.reshape(-1, values.shape[-1])
+    x0 = flat[used]
+    lam = np.where(covered.reshape(-1)[used], DATA_WEIGHT, PADDING_WEIGHT)
+    x = _solve(weight, local, lam, np.ascontiguousarray(x0), _ITERATIONS)
+    values = np.ascontiguousarray(values)
+    values.reshape(-1, values.shape[-1])[used] = x
+    return values

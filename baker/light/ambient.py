@@ -1,0 +1,99 @@
+"""The scene-wide terms of the obscurance model: average reflectivity and ambient intensity.
+
+Equations (4) and (3) of Méndez-Feliu & Sbert, "Obscurances in general environments":
+
+    R_ave = Σ A_i R_i / A_T            I_A = 1 / (1 − R_ave) · Σ A_i E_i / A_T
+
+over every triangle of the scene (baked or not), per RGB channel. R_i and E_i are the mean albedo
+and emission of triangle i, estimated at a few fixed points inside it (so textures count).
+
+1 / (1 − R_ave) is the sum of the geometric series Σ R_ave^k of light bouncing around the scene.
+As R_ave → 1 (a closed white room) it diverges — the model's stiff case. We sum the series only up
+to ``MAX_BOUNCES`` terms, (1 − R^K) / (1 − R): identical to the closed form to 4 significant
+digits for R ≤ 0.99, finite and continuous up to and including R = 1 (where it equals K), and
+flagged in the report whenever the truncation changes I_A by more than 0.1 %.
+
+With direct light baked apart (direct.py), the lightmap is L = D + I_A·W and I_A carries only
+the light that has bounced at least once: I_A = R_ave·Σ_{k<K} R_ave^k · Φ / A_T, where Φ is the
+power every source (punctual lights, emissive surfaces, sky) lays on the scene's surfaces, in
+irradiance × area (``direct.Power``). docs/direct_light.md derives it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from baker.geometry.surface import albedo, emission
+from baker.geometry.world import World
+from baker.gltf.scene import Scene
+
+if TYPE_CHECKING:
+    from baker.light.direct import Power
+
+MAX_BOUNCES = 1000
+
+# Barycentric points at which each triangle's albedo and emission are averaged.
+_POINTS = np.array([[1 / 3, 1 / 3, 1 / 3], [2 / 3, 1 / 6, 1 / 6],
+                    [1 / 6, 2 / 3, 1 / 6], [1 / 6, 1 / 6, 2 / 3]])
+
+
+@dataclass(frozen=True)
+class Ambient:
+    """R_ave (3,), the area-weighted mean emission (3,), I_A (3,), and how I_A was chosen."""
+
+    r_ave: np.ndarray
+    mean_emission: np.ndarray
+    intensity: np.ndarray
+    source: str  # "user", "none" (no light in the scene: I_A = 1), or the sources I_A comes
+    # from: "emission" (equation 3 alone), or "+"-joined "lights", "emission", "sky" (with power)
+    truncated: bool  # the bounce series was cut (R_ave close to 1)
+
+
+def bounce_factor(r_ave: np.ndarray) -> tuple[np.ndarray, bool]:
+    """Σ_{k<K} R^k per channel, and whether it differs from 1 / (1 − R) by more than 0.1 %."""
+    r = np.clip(np.asarray(r_ave, np.float64), 0.0, 1.0)
+    near_one = r > 1.0 - 1e-12
+    safe = np.where(near_one, 0.5, r)
+    series = np.where(near_one, float(MAX_BOUNCES), (1.0 - safe ** MAX_BOUNCES) / (1.0 - safe))
+    closed = np.divide(1.0, 1.0 - r, out=np.full_like(r, np.inf), where=~near_one)
+    return series, bool(np.any(series < 0.999 * closed))
+
+
+def _triangle_means(scene: Scene, world: World, lookup) -> np.ndarray:
+    """Mean of ``lookup`` (albedo or emission) over each triangle's sample points, (T, 3)."""
+    t = len(world.triangles)
+    tris = np.repeat(np.arange(t), len(_POINTS))
+    bary = np.tile(_POINTS, (t, 1))
+    return lookup(scene, world, tris, bary).reshape(t, len(_POINTS), 3).mean(axis=1)
+
+
+def ambient_terms(scene: Scene, world: World, user_intensity: float | None,
+                  power: Power | None = None) -> Ambient:
+    """R_ave and I_A of the scene; ``user_intensity`` overrides I_A (all channels).
+
+    ``power``: what the direct-light sources lay on the surfaces (direct.delivered_power); then
+    I_A = R_ave·series·Φ/A_T, the light after its first bounce (D holds the direct light). Without
+    it, equation (3) on the emissive surfaces alone, as when emission is not baked as direct light.
+    """
+    areas = world.areas()
+    total = areas.sum()
+    if total <= 0:
+        zero = np.zeros(3)
+        return Ambient(zero, zero, np.ones(3), "none", False)
+    r_ave = (areas[:, None] * _triangle_means(scene, world, albedo)).sum(axis=0) / total
+    mean_emission = (areas[:, None] * _triangle_means(scene, world, emission)).sum(axis=0) / total
+    series, truncated = bounce_factor(r_ave)
+    if user_intensity is not None:
+        return Ambient(r_ave, mean_emission, np.full(3, float(user_intensity)), "user", False)
+    if power is not None:
+        names = power.sources()
+        if not names:
+            return Ambient(r_ave, mean_emission, np.ones(3), "none", False)
+        bounced = r_ave * series * power.total() / total
+        return Ambient(r_ave, mean_emission, bounced, "+".join(names), truncated)
+    if not np.any(mean_emission > 0):
+        return Ambient(r_ave, mean_emission, np.ones(3), "none", False)
+    return Ambient(r_ave, mean_emission, series * mean_emission, "emission", truncated)

@@ -1,0 +1,701 @@
+"""Direct light D(P): punctual lights, emissive surfaces and the sky, with shadow rays.
+
+The lightmap holds what arrives at a surface, ``L(P) = D(P) + I_A · W(P)`` (docs/design.md §2), as
+irradiance: the shader multiplies by albedo / π (three.js, Blender). D is estimated per texel and
+kept apart per source so that changing a light's colour or intensity is a recomposition, with no
+ray cast:
+
+- KHR_lights_punctual lights, each at unit intensity and white colour: a directional light of
+  1 lux gives cosθ, a point light of 1 candela at distance r gives cosθ / r², times the spot cone
+  and range window the extension recommends, times visibility (one shadow ray; several for a
+  light with a size). ``Direct.light_colours`` (L, 3) holds colour × intensity as baked.
+- Emissive triangles (emissiveFactor × emissiveTexture × KHR_materials_emissive_strength, taken
+  as emitted radiance) as area lights, sampled in proportion to their power.
+- A uniform or two-colour gradient sky, through cosine-distributed rays that escape the scene.
+
+Soft shadows: a point/spot light with radius R is a sphere of uniform radiance I / (πR²); it is
+sampled by directions uniform in the cone it subtends, so an unoccluded receiver facing it gets
+exactly I·cosθ/r², as from the point. A directional light with angular diameter 2α is a disc of
+uniform radiance E / (π sin²α); its directions are sampled uniformly in the cone of half-angle α.
+
+The emissive surfaces' own texels: the lightmap holds only the light arriving at them (from other
+emitters, lights, sky and the ambient term), never their own emission, which stays in the
+material (emissiveFactor) where every viewer adds it: nothing is counted twice. An emitter does
+not light itself (a flat triangle's points see it at cosθ = 0).
+
+Supersampling (``settings.supersample`` = S > 1, ``supersample.py``): each texel's shadow, emissive
+and sky rays start from S sub-positions spread over its square, ray s from sub-position s mod S,
+so a shadow edge crossing a texel gives it a partial value; a hard light then casts S rays.
+
+Shadow terminator: texels on smooth-shaded curved facets are raised towards the smooth surface
+(``Texels.terminator``, applied by ``validity.check_texels``); from there rays may leave
+a little below their own facet's plane (above the shading normal's), so the light fades smoothly
+across the facets instead of stopping at each facet's edge.
+
+Randomness is a pure function of (seed, texel key, sample, dimension) through
+``sampling.sample_2d``; the dimensions are distinct from the obscurance's (0):
+``SKY_DIMENSION``, ``EMISSIVE_DIMENSION`` and ``light_dimension(l)`` = 16 + 2·l. Chunks of texels
+run on a thread pool and write only their own rows, so the result does not depend on chunking.
+
+``delivered_power`` estimates, for I_A, how much power each source lays on the scene's surfaces
+(docs/direct_light.md): the same estimators at points spread over every triangle by area.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from baker.atlas.rasterise import Texels
+from baker.atlas.supersample import sub_positions
+from baker.geometry.surface import LUMINANCE, emission
+from baker.geometry.world import World
+from baker.gltf.scene import Light, Scene
+from baker.jit import jit
+from baker.rays.sampling import cosine_hemisphere, sample_2d, tangent_frames
+from baker.rays.trace import Tracer, ray_lift
+from baker.run.parallel import run_chunks
+from baker.settings import Resolved
+
+SKY_DIMENSION = 12
+EMISSIVE_DIMENSION = 13
+POWER_DIMENSIONS = (10, 11)  # where the power-estimate points fall on the surfaces
+
+# Points over the scene's surfaces at which the power each source delivers is estimated.
+POWER_POINTS = 16384
+# Keys of the power-estimate points, apart from texel keys ((page·h + y)·w + x, far below 2^62).
+_POWER_KEY_BASE = np.uint64(1 << 62)
+
+# Shadow rays stop this fraction short of the point they aim at (a light sample on a surface).
+SHADOW_SHORTEN = 1e-3
+
+# Barycentric points at which each triangle's emission is averaged (as ambient.py does).
+_POINTS = np.array([[1 / 3, 1 / 3, 1 / 3], [2 / 3, 1 / 6, 1 / 6],
+                    [1 / 6, 2 / 3, 1 / 6], [1 / 6, 1 / 6, 2 / 3]])
+
+
+def light_dimension(light: int) -> int:
+    """The sampler dimension of light ``light``'s soft-shadow samples."""
+    return 16 + 2 * light
+
+
+# ------------------------------------------------------------------------------------------------
+# The scene's sources, resolved against the settings
+
+
+@dataclass(frozen=True)
+class Emitters:
+    """The emissive triangles, E of them, and how they are sampled.
+
+    triangles: (E,) int64 world triangles. probability: (E,) float64 chance of picking each one,
+    in proportion to its power (area × luminance of its mean emission × sides). cdf: (E,) float64
+    running sum of ``probability`` (last 1). areas: (E,) float64 world areas. normals: (E, 3)
+    float64 unit front-face normals. two_sided: (E,) bool, emits from both faces (doubleSided).
+    power: the emitted luminous power Σ sides·π·A·lum(e), scene units² × radiance.
+    corners: (E, 3, 3) float64 world corners. radiance: (E, 3) float64 emitted radiance of the
+    triangles whose material has no emissive texture (constant over them); textured: (E,) bool,
+    the others, whose radiance is looked up at each sample point.
+    """
+
+    triangles: np.ndarray
+    probability: np.ndarray
+    cdf: np.ndarray
+    areas: np.ndarray
+    normals: np.ndarray
+    two_sided: np.ndarray
+    power: float
+    corners: np.ndarray
+    radiance: np.ndarray
+    textured: np.ndarray
+
+
+@dataclass(frozen=True)
+class Sources:
+    """What lights the scene directly, as this bake treats it.
+
+    lights: the scene's punctual lights (order of ``Scene.lights``). spread: (L,) float64, a
+    point/spot light's sphere radius (scene units) or a directional light's cone half-angle
+    (radians), 0 for a hard light. samples: (L,) int64 shadow rays per texel (1 when hard, or
+    the supersample count when that is more: one ray from each sub-position).
+    emitters: the emissive triangles, None when nothing emits. emissive_rays: rays per texel
+    towards them. sky: (2, 3) float64 zenith and horizon radiance, None for no sky. sky_rays.
+    """
+
+    lights: tuple[Light, ...]
+    spread: np.ndarray
+    samples: np.ndarray
+    emitters: Emitters | None
+    emissive_rays: int
+    sky: np.ndarray | None
+    sky_rays: int
+
+    def light_colours(self) -> np.ndarray:
+        """(L, 3) colour × intensity of every light (lux or candela, linear RGB)."""
+        if not self.lights:
+            return np.zeros((0, 3))
+        return np.array([light.colour * light.intensity for light in self.lights], np.float64)
+
+    def rays_per_texel(self) -> int:
+        """Shadow and sky rays every texel casts."""
+        return (int(self.samples.sum()) + (self.emissive_rays if self.emitters is not None else 0)
+                + (self.sky_rays if self.sky is not None else 0))
+
+    def any(self) -> bool:
+        """Whether anything lights the scene directly."""
+        return bool(self.lights) or self.emitters is not None or self.sky is not None
+
+
+def _triangle_emission(scene: Scene, world: World) -> np.ndarray:
+    """Mean emitted radiance (T, 3) of every world triangle over a few fixed points."""
+    t = len(world.triangles)
+    if t == 0:
+        return np.zeros((0, 3))
+    tris = np.repeat(np.arange(t), len(_POINTS))
+    bary = np.tile(_POINTS, (t, 1))
+    return emission(scene, world, tris, bary).reshape(t, len(_POINTS), 3).mean(axis=1)
+
+
+def find_emitters(scene: Scene, world: World) -> Emitters | None:
+    """The triangles that emit (positive mean emission and area), None when there are none."""
+    if len(world.triangles) == 0:
+        return None
+    mean = _triangle_emission(scene, world)
+    areas = world.areas()
+    sides = np.where([m.double_sided for m in scene.materials], 2.0, 1.0)[world.tri_material]
+    weight = areas * np.maximum(mean @ LUMINANCE, 0.0) * sides
+    emitting = np.flatnonzero((weight > 0) & np.isfinite(weight))
+    if len(emitting) == 0:
+        return None
+    w = weight[emitting]
+    probability = w / w.sum()
+    cdf = np.cumsum(probability)
+    cdf[-1] = 1.0
+    textured = np.array([m.emissive_texture is not None for m in scene.materials], bool)
+    return Emitters(triangles=emitting, probability=probability, cdf=cdf, areas=areas[emitting],
+                    normals=world.geometric_normals(emitting), two_sided=sides[emitting] > 1,
+                    power=float(math.pi * w.sum()),
+                    corners=world.positions[world.triangles[emitting]],
+                    radiance=mean[emitting], textured=textured[world.tri_material[emitting]])
+
+
+def light_sources(scene: Scene, world: World, settings: Resolved) -> Sources:
+    """The scene's direct-light sources with the settings' fallbacks and ray counts applied."""
+    spread, samples = [], []
+    for light in scene.lights:
+        if light.kind == "directional":
+            diameter = (light.angular_diameter if light.angular_diameter is not None
+                        else math.radians(settings.light_angle))
+            size = min(diameter / 2, math.pi / 2 - 1e-6)
+        else:
+            size = light.radius if light.radius is not None else settings.light_radius
+        spread.append(size)
+        samples.append(max(settings.shadow_rays if size > 0 else 1, settings.supersample))
+    sky = None
+    if settings.sky is not None:
+        zenith = np.asarray(settings.sky, np.float64)
+        horizon = zenith if settings.sky_horizon is None else np.asarray(settings.sky_horizon, np.float64)
+        sky = np.stack([zenith, horizon])
+    return Sources(lights=tuple(scene.lights), spread=np.asarray(spread, np.float64).reshape(-1),
+                   samples=np.asarray(samples, np.int64).reshape(-1),
+                   emitters=find_emitters(scene, world), emissive_rays=settings.emissive_rays,
+                   sky=sky, sky_rays=settings.sky_rays)
+
+
+# ------------------------------------------------------------------------------------------------
+# Estimators at a batch of receiving points
+
+
+@dataclass(frozen=True)
+class Receivers:
+    """k surface points that receive light.
+
+    position: (k, 3) float64 world. normal: (k, 3) unit shading normal (for cosθ).
+    geometric: (k, 3) unit front-face normal (rays leave on this side). lift: (k,) float64 world
+    offset of ray origins along ``geometric``. key: (k,) uint64 sampler key.
+    sub: None, or (k, S, 3) float64 world sub-positions (supersampling): ray s of a point starts
+    from its sub-position s mod S instead of ``position``. raised: None, or (k,) bool, the
+    point has a shadow-terminator push (``Texels.terminator``): its rays may leave below its
+    facet's plane (only the shading normal's hemisphere counts). Where the push was blocked
+    (validity.py) such rays meet the object itself, as they would anyway.
+    """
+
+    position: np.ndarray
+    normal: np.ndarray
+    geometric: np.ndarray
+    lift: np.ndarray
+    key: np.ndarray
+    sub: np.ndarray | None = None
+    raised: np.ndarray | None = None
+
+    def starts(self, n: int) -> np.ndarray:
+        """(k, n, 3) where each point's rays 0 … n − 1 start on the surface (before the lift):
+        the point itself, or sub-position s mod S."""
+        if self.sub is None:
+            return np.broadcast_to(self.position[:, None, :], (len(self.position), n, 3))
+        return self.sub[:, np.arange(n) % self.sub.shape[1]]
+
+    def origins(self, n: int) -> np.ndarray:
+        """(k·n, 3) ray origins, lifted off the surface, point-major (ray s of point i at row
+        i·n + s)."""
+        if self.sub is None:
+            return np.repeat(self.position + self.lift[:, None] * self.geometric, n, axis=0)
+        return (self.starts(n) + (self.lift[:, None] * self.geometric)[:, None]).reshape(-1, 3)
+
+
+def _cone_directions(axis: np.ndarray, cos_max: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Directions (k, n, 3) uniform in solid angle within the cones around unit ``axis`` (k, 3)
+    of half-angle acos(``cos_max``) (k,), from points ``u`` (k, n, 2) of [0, 1)²."""
+    cos_t = 1.0 - u[..., 0] * (1.0 - cos_max[:, None])
+    sin_t = np.sqrt(np.clip(1.0 - cos_t * cos_t, 0.0, 1.0))
+    phi = 2.0 * np.pi * u[..., 1]
+    t1, t2 = tangent_frames(axis)
+    return ((sin_t * np.cos(phi))[..., None] * t1[:, None] + (sin_t * np.sin(phi))[..., None] * t2[:, None]
+            + cos_t[..., None] * axis[:, None])
+
+
+def _mean_and_variance(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean over the last axis of (k, n) samples, and the variance of that mean (0 when n = 1)."""
+    n = values.shape[1]
+    mean = values.mean(axis=1)
+    if n < 2:
+        return mean, np.zeros_like(mean)
+    return mean, values.var(axis=1, ddof=1) / n
+
+
+def _facing(receivers: Receivers, directions: np.ndarray) -> np.ndarray:
+    """cosθ (k, n) of directions (k, n, 3) against the shading normal, 0 where the direction is
+    below either the shading or the geometric surface (the ray could not leave there) — except
+    that a point raised off its facet (``Receivers.raised``, the shadow-terminator offset)
+    may send rays below its facet's plane: they start above the neighbouring facets."""
+    cos_n = np.einsum("kc,knc->kn", receivers.normal, directions)
+    above = np.einsum("kc,knc->kn", receivers.geometric, directions) > 0
+    if receivers.raised is not None:
+        above |= receivers.raised[:, None]
+    return np.where(above, np.maximum(cos_n, 0.0), 0.0)
+
+
+def spot_attenuation(light: Light, to_receiver: np.ndarray) -> np.ndarray:
+    """KHR_lights_punctual's spot cone falloff for unit directions (k, 3) from the light.
+
+    The extension's reference code: a linear ramp in cos between the outer and inner cone
+    angles, squared; 1 inside the inner cone, 0 outside the outer cone.
+    """
+    cos_outer, cos_inner = math.cos(light.outer_cone), math.cos(light.inner_cone)
+    scale = 1.0 / max(0.001, cos_inner - cos_outer)
+    cd = to_receiver @ light.direction
+    return np.clip(cd * scale - cos_outer * scale, 0.0, 1.0) ** 2
+
+
+def range_window(light: Light, distance: np.ndarray) -> np.ndarray:
+    """The extension's recommended range cutoff, clamp(1 − (d / range)⁴, 0, 1) (1 without range)."""
+    if not math.isfinite(light.range):
+        return np.ones_like(distance)
+    return np.clip(1.0 - (distance / light.range) ** 4, 0.0, 1.0)
+
+
+def punctual_irradiance(light: Light, spread: float, n: int, receivers: Receivers, tracer: Tracer,
+                        seed: int, dimension: int) -> tuple[np.ndarray, np.ndarray]:
+    """Irradiance (k,) from ``light`` at unit intensity, white, and the variance of its estimate.
+
+    Directional: cosθ (lux per lux). Point/spot: cosθ / r² × spot cone × range window (lux per
+    candela). ``spread`` > 0 makes the light a sphere of that radius (point/spot) or a disc of that
+    angular radius (directional), sampled with ``n`` shadow rays per receiver; otherwise one ray.
+    """
+    k = len(receivers.position)
+    if k == 0:
+        return np.zeros(0), np.zeros(0)
+    soft = spread > 0
+    n = n if soft or receivers.sub is not None else 1
+    u = sample_2d(seed, receivers.key[:, None], np.arange(n)[None, :], dimension)  # (k, n, 2)
+    if light.kind == "directional":
+        axis = np.broadcast_to(-light.direction, (k, 3)).copy()
+        if soft:
+            cos_max = np.full(k, math.cos(spread))
+            directions = _cone_directions(axis, cos_max, u)
+            scale = np.full((k, 1), 2.0 / (1.0 + math.cos(spread)))  # normal irradiance of the disc = 1
+        else:
+            directions = axis[:, None, :]
+            scale = np.ones((k, 1))
+        lengths = np.full(k * n, np.inf)
+    else:  # every ray from where it starts (a sub-position when supersampling): (k, n) values
+        offset = light.position - receivers.starts(n)  # (k, n, 3)
+        r = np.maximum(np.linalg.norm(offset, axis=2), receivers.lift[:, None])
+        axis = offset / r[..., None]
+        factor = range_window(light, r)
+        if light.kind == "spot":
+            factor = factor * spot_attenuation(light, -axis)
+        if soft:
+            sin_max = np.minimum(spread / r, 1.0)
+            cos_max = np.sqrt(1.0 - sin_max * sin_max)
+            directions = _cone_directions(axis.reshape(-1, 3), cos_max.reshape(-1),
+                                          u.reshape(-1, 1, 2)).reshape(k, n, 3)
+            # Radiance I / (πR²) times the cone's solid angle 2π(1 − cos α).
+            scale = factor * 2.0 * (1.0 - cos_max) / (spread * spread)
+            b = np.einsum("knc,knc->kn", directions, offset)
+            to_sphere = b - np.sqrt(np.maximum(b * b - (r * r - spread * spread), 0.0))
+            lengths = (np.maximum(to_sphere, 0.0) * (1.0 - SHADOW_SHORTEN)).reshape(-1)
+        else:
+            directions = axis
+            scale = factor / (r * r)
+            lengths = (r * (1.0 - SHADOW_SHORTEN)).reshape(-1)
+    directions = np.broadcast_to(directions, (k, n, 3))
+    cos = _facing(receivers, directions)
+    live = (cos > 0) & (scale > 0)
+    visible = np.zeros(k * n, bool)
+    flat = live.reshape(-1)
+    if flat.any():
+        origins = receivers.origins(n)[flat]
+        rays = directions.reshape(-1, 3)[flat]
+        visible[flat] = ~tracer.occluded(origins, rays, lengths[flat])
+    values = cos * visible.reshape(k, n) * scale
+    return _mean_and_variance(values)
+
+
+@jit
+def emitter_samples(u, n, cdf, probability, corners, normals, two_sided, areas, origins, lift,
+                     shading, geometric, raised):
+    """The geometry of the k·n emissive samples (``emissive_irradiance``), one compiled pass.
+
+    Sample j of receiver i = j // n: its first coordinate u[j, 0] picks the emitter triangle by
+    the power ``cdf`` (E,) (``probability`` (E,) each), then is stretched back to [0, 1)
+    within the triangle's slice to place a uniform point with u[j, 1] (one stratified 2D sample
+    does both). Returns chosen (k·n,) triangle, bary (k·n, 3) of the point, unit directions
+    (k·n, 3) from ``origins`` (k·n, 3) to it, distance (k·n,) (at least the receiver's ``lift``)
+    and weight (k·n,) = cosθ_p·cosθ_q / d² · A / p (0 where the point cannot see it: cosθ_p
+    as ``_facing`` gives it, with ``raised`` (k,) receivers free to look below their facet;
+    cosθ_q only from the front unless ``two_sided``).
+    """
+    count = len(u)
+    chosen = np.empty(count, np.int64)
+    bary = np.empty((count, 3))
+    directions = np.empty((count, 3))
+    distance = np.empty(count)
+    weight = np.zeros(count)
+    last = len(cdf) - 1
+    for j in range(count):
+        i = j // n
+        e = min(np.searchsorted(cdf, u[j, 0], side="right"), last)
+        chosen[j] = e
+        start = cdf[e] - probability[e]
+        root = np.sqrt(min(max((u[j, 0] - start) / probability[e], 0.0), 1.0))
+        b0, b1, b2 = 1.0 - root, u[j, 1] * root, (1.0 - u[j, 1]) * root
+        bary[j, 0], bary[j, 1], bary[j, 2] = b0, b1, b2
+        ox = b0 * corners[e, 0, 0] + b1 * corners[e, 1, 0] + b2 * corners[e, 2, 0] - origins[j, 0]
+        oy = b0 * corners[e, 0, 1] + b1 * corners[e, 1, 1] + b2 * corners[e, 2, 1] - origins[j, 1]
+        oz = b0 * corners[e, 0, 2] + b1 * corners[e, 1, 2] + b2 * corners[e, 2, 2] - origins[j, 2]
+        d = max(np.sqrt(ox * ox + oy * oy + oz * oz), lift[i])
+        dx, dy, dz = ox / d, oy / d, oz / d
+        directions[j, 0], directions[j, 1], directions[j, 2] = dx, dy, dz
+        distance[j] = d
+        above = raised[i] or dx * geometric[i, 0] + dy * geometric[i, 1] + dz * geometric[i, 2] > 0
+        cos_p = max(dx * shading[i, 0] + dy * shading[i, 1] + dz * shading[i, 2], 0.0) if above else 0.0
+        cos_q = -(normals[e, 0] * dx + normals[e, 1] * dy + normals[e, 2] * dz)
+        cos_q = abs(cos_q) if two_sided[e] else max(cos_q, 0.0)
+        weight[j] = cos_p * cos_q / (d * d) * areas[e] / probability[e]
+    return chosen, bary, directions, distance, weight
+
+
+def emissive_irradiance(scene: Scene, world: World, emitters: Emitters, n: int,
+                        receivers: Receivers, tracer: Tracer, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Irradiance (k, 3) from the emissive triangles, and the variance (k,) of its luminance.
+
+    Each of ``n`` samples picks a triangle in proportion to its power and a uniform point q on
+    it; the estimate is Le(q)·cosθ_p·cosθ_q / d² · V / (P_t / A_t), unbiased for the irradiance
+    of every emitter (a triangle whose mean emission is 0 at the fixed points is never picked).
+    """
+    k = len(receivers.position)
+    if k == 0:
+        return np.zeros((0, 3)), np.zeros(0)
+    u = sample_2d(seed, receivers.key[:, None], np.arange(n)[None, :], EMISSIVE_DIMENSION).reshape(-1, 2)
+    origins = receivers.origins(n)
+    raised = np.zeros(k, bool) if receivers.raised is None else receivers.raised
+    chosen, bary, directions, distance, weight = emitter_samples(
+        u, n, emitters.cdf, emitters.probability, emitters.corners, emitters.normals,
+        emitters.two_sided, emitters.areas, origins, receivers.lift, receivers.normal,
+        receivers.geometric, raised)
+    live = weight > 0
+    value = np.zeros((k * n, 3))
+    if live.any():
+        visible = ~tracer.occluded(origins[live], directions[live],
+                                   distance[live] * (1.0 - SHADOW_SHORTEN))
+        radiance = emitter_radiance(scene, world, emitters, chosen[live], bary[live])
+        value[live] = radiance * (weight[live] * visible)[:, None]
+    value = value.reshape(k, n, 3)
+    _, variance = _mean_and_variance(value @ LUMINANCE)
+    return value.mean(axis=1), variance
+
+
+def emitter_radiance(scene: Scene, world: World, emitters: Emitters, picked: np.ndarray,
+                     bary: np.ndarray) -> np.ndarray:
+    """Emitted radiance (k, 3) at points ``bary`` (k, 3) of the emitter triangles ``picked``
+    (k,): each triangle's constant radiance, or its emissive texture's where it has one."""
+    radiance = emitters.radiance[picked]
+    textured = emitters.textured[picked]
+    if textured.any():
+        radiance[textured] = emission(scene, world, emitters.triangles[picked[textured]],
+                                      bary[textured])
+    return radiance
+
+
+def sky_radiance(sky: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """Sky radiance (…, 3) in unit directions (…, 3): horizon + (zenith − horizon)·max(0, y)."""
+    up = np.maximum(directions[..., 1:2], 0.0)
+    return sky[1] + (sky[0] - sky[1]) * up
+
+
+def sky_irradiance(sky: np.ndarray, n: int, receivers: Receivers, tracer: Tracer,
+                   seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Irradiance (k, 3) from the sky about the geometric normal, and its luminance variance (k,).
+
+    Cosine-distributed rays (pdf cosθ/π); a ray that meets nothing at any distance sees the sky,
+    so the estimate is π · mean(L_sky(ω) · V(ω)).
+    """
+    k = len(receivers.position)
+    if k == 0:
+        return np.zeros((0, 3)), np.zeros(0)
+    local = cosine_hemisphere(sample_2d(seed, receivers.key[:, None], np.arange(n)[None, :],
+                                        SKY_DIMENSION))
+    normal = receivers.geometric
+    t1, t2 = tangent_frames(normal)
+    directions = (local[..., :1] * t1[:, None] + local[..., 1:2] * t2[:, None]
+                  + local[..., 2:] * normal[:, None]).reshape(-1, 3)
+    escaped = ~tracer.occluded(receivers.origins(n), directions, np.inf)
+    value = (np.pi * sky_radiance(sky, directions) * escaped[:, None]).reshape(k, n, 3)
+    _, variance = _mean_and_variance(value @ LUMINANCE)
+    return value.mean(axis=1), variance
+
+
+# ------------------------------------------------------------------------------------------------
+# Per texel
+
+
+def _all_sources(terms, light_colours: np.ndarray | None) -> np.ndarray:
+    """punctual @ colours + emission + sky of a ``Direct`` or ``Power``: the per-light terms at
+    unit intensity times the light colours × intensities (L, 3), by default the baked ones."""
+    colours = terms.light_colours if light_colours is None else np.asarray(light_colours, np.float64)
+    out = terms.punctual @ colours  # a new array: the sums go into it in place
+    for term in (terms.emission, terms.sky):  # empty when the scene has no such source
+        if len(term):
+            out += term
+    return out
+
+
+@dataclass(frozen=True)
+class Direct:
+    """Direct irradiance at N texels (rows in ``Texels`` order), kept apart per source.
+
+    punctual: (N, L) float64 irradiance from each light at unit intensity and white colour (lux
+    per lux, or per candela); punctual_var: (N, L) variance of those estimates (0 for hard lights).
+    light_colours: (L, 3) colour × intensity of each light as baked. emission: (N, 3) irradiance
+    from emissive surfaces; sky: (N, 3) from the sky; emission_var, sky_var: (N,) variances of
+    their luminance estimates — each empty (0 rows) when the scene has no such source (32 bytes
+    a texel not held: 270 MB on a 4096² page). rays_per_texel: shadow and sky rays cast from
+    each texel (``rays`` in all).
+    """
+
+    punctual: np.ndarray
+    punctual_var: np.ndarray
+    light_colours: np.ndarray
+    emission: np.ndarray
+    emission_var: np.ndarray
+    sky: np.ndarray
+    sky_var: np.ndarray
+    rays_per_texel: int
+
+    @property
+    def rays(self) -> int:
+        """Shadow and sky rays cast in all."""
+        return len(self.punctual) * self.rays_per_texel
+
+    def irradiance(self, light_colours: np.ndarray | None = None) -> np.ndarray:
+        """D (N, 3) for the given light colour × intensity (L, 3), by default the baked ones."""
+        return _all_sources(self, light_colours)
+
+    def variance(self, light_colours: np.ndarray | None = None) -> np.ndarray:
+        """(N,) variance of the luminance of D's estimate (the sources' estimates are independent)."""
+        colours = self.light_colours if light_colours is None else np.asarray(light_colours, np.float64)
+        out = self.punctual_var @ (colours @ LUMINANCE) ** 2  # a new array, summed in place
+        for term in (self.emission_var, self.sky_var):
+            if len(term):
+                out += term
+        return out
+
+
+def _source_terms(count: int, present: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Zeroed (count, 3) irradiance and (count,) variance of a source kind, or empty ones (0
+    rows) when the scene has no such source."""
+    rows = count if present else 0
+    return np.zeros((rows, 3)), np.zeros(rows)
+
+
+def no_direct(count: int) -> Direct:
+    """The direct term of ``count`` texels in a scene with no source: zeros, no ray."""
+    none = _source_terms(count, False)
+    return Direct(np.zeros((count, 0)), np.zeros((count, 0)), np.zeros((0, 3)), *none, *none, 0)
+
+
+def texel_receivers(texels: Texels, rows: slice, center: np.ndarray,
+                     tracer: Tracer | None = None, supersample: int = 1,
+                     seed: int = 0) -> Receivers:
+    """The texels ``rows`` as Receivers: their (moved, raised) sample points and, when
+    ``supersample`` > 1, their sub-positions (``supersample.sub_positions``, which need the
+    ``tracer`` and the ``seed``)."""
+    sub = None
+    if supersample > 1:
+        if tracer is None:
+            raise ValueError("supersampling needs the tracer (sub-positions are checked by rays)")
+        sub = sub_positions(tracer, texels, rows, supersample, seed)
+    return Receivers(position=texels.position[rows], normal=texels.normal[rows],
+                     geometric=texels.geometric_normal(rows),
+                     lift=ray_lift(texels.position[rows], texels.size(rows), center),
+                     key=texels.key[rows], sub=sub,
+                     raised=np.any(texels.terminator(rows) != 0.0, axis=1))
+
+
+def direct_at(scene: Scene, world: World, tracer: Tracer, sources: Sources,
+              receivers: Receivers, seed: int, samples: int | None = None) -> Direct:
+    """Direct irradiance at ``receivers`` from every source, kept apart per source.
+
+    ``samples``: shadow/sky rays per receiver for every source (None: each source's own count,
+    as a bake uses them; the full-GI reference takes 1 at each bounce).
+    """
+    k = len(receivers.position)
+    punctual, punctual_var = np.zeros((k, len(sources.lights))), np.zeros((k, len(sources.lights)))
+    emitted, emitted_var = _source_terms(k, sources.emitters is not None)
+    sky, sky_var = _source_terms(k, sources.sky is not None)
+    for l, light in enumerate(sources.lights):
+        punctual[:, l], punctual_var[:, l] = punctual_irradiance(
+            light, float(sources.spread[l]), samples or int(sources.samples[l]), receivers,
+            tracer, seed, light_dimension(l))
+    if sources.emitters is not None:
+        emitted, emitted_var = emissive_irradiance(
+            scene, world, sources.emitters, samples or sources.emissive_rays, receivers, tracer, seed)
+    if sources.sky is not None:
+        sky, sky_var = sky_irradiance(sources.sky, samples or sources.sky_rays, receivers,
+                                      tracer, seed)
+    return Direct(punctual=punctual, punctual_var=punctual_var,
+                  light_colours=sources.light_colours(), emission=emitted,
+                  emission_var=emitted_var, sky=sky, sky_var=sky_var,
+                  rays_per_texel=(sources.rays_per_texel() if samples is None else
+                                  samples * (len(sources.lights) + (sources.emitters is not None)
+                                             + (sources.sky is not None))))
+
+
+def direct_light(scene: Scene, world: World, tracer: Tracer, texels: Texels, sources: Sources,
+                 settings: Resolved, progress: Callable[[int], None] | None = None) -> Direct:
+    """Estimate every texel's direct irradiance from every source (no ray when there is none)."""
+    count = len(texels)
+    if not sources.any():
+        return no_direct(count)
+    lights = len(sources.lights)
+    punctual = np.zeros((count, lights))
+    punctual_var = np.zeros((count, lights))
+    emitted, emitted_var = _source_terms(count, sources.emitters is not None)
+    sky, sky_var = _source_terms(count, sources.sky is not None)
+    step = max(1, settings.chunk_texels)
+    chunks = [slice(start, min(start + step, count)) for start in range(0, count, step)]
+
+    def work(rows: slice) -> None:
+        receivers = texel_receivers(texels, rows, tracer.center, tracer, settings.supersample,
+                                     settings.seed)
+        part = direct_at(scene, world, tracer, sources, receivers, settings.seed)
+        punctual[rows], punctual_var[rows] = part.punctual, part.punctual_var
+        if len(emitted):
+            emitted[rows], emitted_var[rows] = part.emission, part.emission_var
+        if len(sky):
+            sky[rows], sky_var[rows] = part.sky, part.sky_var
+        if progress is not None:
+            progress(rows.stop - rows.start)
+
+    run_chunks(work, chunks, settings.threads)
+    return Direct(punctual=punctual, punctual_var=punctual_var,
+                  light_colours=sources.light_colours(), emission=emitted,
+                  emission_var=emitted_var, sky=sky, sky_var=sky_var,
+                  rays_per_texel=sources.rays_per_texel())
+
+
+# ------------------------------------------------------------------------------------------------
+# Power laid on the scene's surfaces, for the ambient intensity I_A
+
+
+@dataclass(frozen=True)
+class Power:
+    """The power each source lays on the scene's surfaces (irradiance integrated over area).
+
+    punctual: (L,) float64 per light at unit intensity and white colour; light_colours: (L, 3)
+    colour × intensity as baked; emission: (3,) from emissive surfaces; sky: (3,) from the sky.
+    area: A_T, the scene's total triangle area. Units: irradiance × scene units².
+    """
+
+    punctual: np.ndarray
+    light_colours: np.ndarray
+    emission: np.ndarray
+    sky: np.ndarray
+    area: float
+
+    def total(self, light_colours: np.ndarray | None = None) -> np.ndarray:
+        """(3,) power from every source, with light colours × intensities (L, 3) if given."""
+        return _all_sources(self, light_colours)
+
+    def sources(self) -> tuple[str, ...]:
+        """Which kinds of source the scene has: of "lights", "emission", "sky"."""
+        names = []
+        if len(self.punctual):
+            names.append("lights")
+        if np.any(self.emission > 0):
+            names.append("emission")
+        if np.any(self.sky > 0):
+            names.append("sky")
+        return tuple(names)
+
+
+def power_points(world: World, seed: int,
+                 count: int = POWER_POINTS) -> tuple[np.ndarray, np.ndarray, Receivers]:
+    """``count`` points spread over every triangle by area (systematic sampling): their
+    triangles (count,), barycentrics (count, 3) and the Receivers they make."""
+    areas = world.areas()
+    total = areas.sum()
+    keys = _POWER_KEY_BASE + np.arange(count, dtype=np.uint64)
+    u = sample_2d(seed, keys, 0, POWER_DIMENSIONS[0])
+    target = (np.arange(count) + u[:, 0]) / count * total
+    tris = np.minimum(np.searchsorted(np.cumsum(areas), target, side="right"), len(areas) - 1)
+    v = sample_2d(seed, keys, 0, POWER_DIMENSIONS[1])
+    root = np.sqrt(v[:, 0])
+    bary = np.stack([1.0 - root, v[:, 1] * root, (1.0 - v[:, 1]) * root], axis=1)
+    a, b, c = world.corners(tris)
+    position = bary[:, :1] * a + bary[:, 1:2] * b + bary[:, 2:] * c
+    normal = world.geometric_normals(tris)
+    size = np.sqrt(areas[tris])
+    return tris, bary, Receivers(position=position, normal=normal, geometric=normal,
+                                 lift=ray_lift(position, size, world.center), key=keys)
+
+
+def delivered_power(scene: Scene, world: World, tracer: Tracer, sources: Sources,
+                    settings: Resolved) -> Power:
+    """Estimate the power each source lays on all the scene's surfaces (baked or not).
+
+    Φ = ∫ D dA over every triangle's front face, estimated as A_T × the mean of D at
+    ``POWER_POINTS`` points spread by area, one sample per source at each point. The points and
+    their samples are deterministic (sampler keys of their own), so I_A is too.
+    """
+    lights = len(sources.lights)
+    area = float(world.areas().sum()) if len(world.triangles) else 0.0
+    punctual, emitted, sky = np.zeros(lights), np.zeros(3), np.zeros(3)
+    if area > 0 and sources.any():
+        _, _, receivers = power_points(world, settings.seed)
+        for l, light in enumerate(sources.lights):
+            mean, _ = punctual_irradiance(light, float(sources.spread[l]), 1, receivers, tracer,
+                                          settings.seed, light_dimension(l))
+            punctual[l] = area * mean.mean()
+        if sources.emitters is not None:
+            mean, _ = emissive_irradiance(scene, world, sources.emitters, 1, receivers, tracer,
+                                          settings.seed)
+            emitted = area * mean.mean(axis=0)
+        if sources.sky is not None:
+            mean, _ = sky_irradiance(sources.sky, 1, receivers, tracer, settings.seed)
+            sky = area * mean.mean(axis=0)
+    return Power(punctual=punctual, light_colours=sources.light_colours(), emission=emitted,
+                 sky=sky, area=area)

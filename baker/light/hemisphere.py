@@ -1,0 +1,782 @@
+"""Per-texel estimation of the obscurance with colour bleeding, equation (2) of the paper:
+
+    W(P) = 1/π ∫_Ω R(Q) ρ(d(P, ω)) cosθ dω
+
+With cosine-weighted directions (pdf cosθ / π) the estimator is the mean of R(Q)·ρ(d) over the
+texel's rays. The terms are kept apart (docs/design.md §2): ``w_hit`` is the hits' part (RGB) and
+``escaped`` the fraction of rays that met nothing closer than d_max, so W = w_hit + escaped·R_ave
+and a change of R_ave needs no new ray.
+
+Work is split into chunks of texels run on a thread pool (Embree releases the GIL). Every texel's
+rays depend only on its key and the seed (sampling.py), and every chunk writes only its own rows,
+so the result is the same bytes for any chunk size, thread count or order.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Callable
+
+import numpy as np
+
+from baker.atlas.rasterise import Texels
+from baker.atlas.supersample import sub_positions
+from baker.geometry.surface import (
+    LUMINANCE,
+    albedo,
+    base_colour,
+    diffuse_factors,
+    triangle_albedo,
+)
+from baker.geometry.world import World
+from baker.gltf.materials import (
+    DIFFUSE,
+    SPECULAR,
+    TRANSLUCENT,
+    TRANSPARENT,
+    MaterialTable,
+    material_table,
+)
+from baker.gltf.scene import Scene
+from baker.jit import inline, jit
+from baker.light.obscurance import RHO_KINDS, UNIT_REFLECTIVITY, rho
+from baker.rays.sampling import fill_cosine, fill_points, frame, hash_u32
+from baker.rays.trace import Tracer, ray_lift
+from baker.run.parallel import cores, even_slices, run_chunks, texels_per_chunk
+from baker.settings import TECHNIQUES, Resolved
+
+_SPLIT_MAX = 1e100  # |half/quarter differences| beyond this (garbage albedos) are clipped, so
+# that their mean square cannot overflow float64: such an estimate is meaningless anyway
+
+
+@dataclass(frozen=True)
+class Terms:
+    """The estimated terms of N texels (rows in ``Texels`` order, or of the rows asked for).
+
+    w_hit: (N, 3) mean of R(Q)·ρ(d) over the texel's rays (misses count 0).
+    escaped: (N,) fraction of rays with no hit closer than d_max.
+    hit_sq: (N,) mean over rays of the squared luminance of R(Q)·ρ(d) (0 for escaped rays),
+    for the sample variance. counts: (N,) int64 rays cast per texel (all equal unless adaptive).
+    half_split: (N, 2) mean over the first half of the texel's rays minus the mean over the
+    second half, in luminance of R·ρ and in escaped fraction; quarter_split: (N, 2) the same
+    within the first half (first quarter minus second quarter). See ``rmse``. chain_rays: (N,)
+    int64 rays cast beyond the texel's own, along mirror and glass chains (§3.1–3.2), and for
+    leaves and closed translucent objects their back-face and inner rays (§4); capped:
+    (N,) int64 of its rays whose chain the depth cap stopped (both empty when not counted).
+    With mirrors, glass or translucency, a ray's escaped weight may be a fraction (the mean
+    of its chain's RGB throughput), and ``escaped`` the mean of those weights.
+    through_hit, through_ave: (N, 3) light through translucent surfaces (§4, ``inner.py``): the
+    part of W independent of R_ave (a leaf's translucency × its back face's hits) and the RGB
+    weight of R_ave (× the back face's escaped fraction, + the inner obscurance); None when the
+    scene has no leaf or closed translucent material. The error estimates cover the front's
+    rays only.
+    """
+
+    w_hit: np.ndarray
+    escaped: np.ndarray
+    hit_sq: np.ndarray
+    counts: np.ndarray
+    half_split: np.ndarray
+    quarter_split: np.ndarray
+    chain_rays: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    capped: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    through_hit: np.ndarray | None = None
+    through_ave: np.ndarray | None = None
+
+    @property
+    def rays(self) -> int:
+        """How many obscurance rays were cast in all."""
+        return int(self.counts.sum())
+
+    def chain_ray_counts(self) -> np.ndarray:
+        """(N,) int64 ``chain_rays``, zeros when they were not counted (a new array)."""
+        return self.chain_rays.copy() if len(self.chain_rays) else np.zeros(len(self.counts), np.int64)
+
+    def obscurance(self, r_ave: np.ndarray) -> np.ndarray:
+        """W (N, 3) for average reflectivity ``r_ave`` (3,), with the light through
+        translucent surfaces (``through_hit``, ``through_ave``) when there is some
+        (``obscurance_at``)."""
+        out = np.empty((len(self.escaped), 3))
+        _obscurance_kernel(*self.w_parts(), np.asarray(r_ave, np.float64), out)
+        return out
+
+    def w_parts(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(w_hit, escaped, through_hit, through_ave) as ``obscurance_at`` takes them: the
+        light through translucent surfaces as (0, 3) arrays when there is none."""
+        none = np.zeros((0, 3))
+        return (self.w_hit, self.escaped,
+                none if self.through_hit is None else self.through_hit,
+                none if self.through_ave is None else self.through_ave)
+
+    def _front(self, r_ave: np.ndarray) -> np.ndarray:
+        """(N, 3) the part of W that the texel's own rays estimate."""
+        return self.w_hit + self.escaped[:, None] * r_ave
+
+    def standard_error(self, r_ave: np.ndarray) -> np.ndarray:
+        """(N,) standard error of the luminance of W, from the rays' sample variance."""
+        mean = self._front(r_ave) @ LUMINANCE
+        second = self.hit_sq + self.escaped * float(r_ave @ LUMINANCE) ** 2
+        n = np.maximum(self.counts, 1)
+        variance = np.maximum(second - mean * mean, 0.0) * n / np.maximum(n - 1, 1)
+        return np.sqrt(variance / n)
+
+    def rmse(self, r_ave: np.ndarray, technique: str) -> float:
+        """Estimated RMSE over the texels of W's luminance, from the rays alone.
+
+        The sample variance assumes independent samples, so it overstates the error of
+        stratified and low-discrepancy points (4–8× for Owen-scrambled Sobol at 64–1024 rays,
+        3–6× for stratified, measured by ``baker study``). Instead: e = half the difference of
+        the means of the two halves of each texel's rays. ``stratified`` lays its grid twice,
+        once per half (sampling.py), so the halves are independent estimates of equal variance
+        and E[e²] is the variance of the full mean. A scrambled Sobol net's halves are nets
+        themselves, but anti-correlated (correlation c): E[e²] = var·(1 − c)/(1 + c). The same
+        split one level down (quarters of the first half) measures the convergence: the ratio
+        r = E[e_half²] / E[e_quarter²] = 2^(−2α) for error ∝ N^(−α), and (1 + c)/2 = r, so
+        var = E[e²]·r/(1 − r) — exact for independent samples (r = ½), and measured within
+        1.5× of the true RMSE for Sobol at 64 rays and more. r is averaged over all texels
+        (one texel's is far too noisy) and kept within [0.05, 0.5].
+        """
+        return rmse_of(self.split_squares(r_ave), len(self.counts), technique)
+
+    def split_squares(self, r_ave: np.ndarray) -> np.ndarray:
+        """(2,) the sums over the texels of e² for the halves and for the quarters (see
+        ``rmse``), in luminance of W: what ``rmse_of`` needs, added up part by part when a
+        bake makes its texels a part at a time."""
+        escaped_lum = float(r_ave @ LUMINANCE)
+        return np.array([_split_square_sum(split, escaped_lum)
+                         for split in (self.half_split, self.quarter_split)])
+
+
+@jit
+def _split_square_sum(split, escaped_lum):
+    """Σ over rows of e², e = ½ (split[:, 0] + escaped_lum · split[:, 1]) clipped to
+    ±``_SPLIT_MAX`` (``Terms.split_squares``; split (N, 2))."""
+    total = 0.0
+    for i in range(len(split)):
+        e = min(max(0.5 * (split[i, 0] + escaped_lum * split[i, 1]), -_SPLIT_MAX), _SPLIT_MAX)
+        total += e * e
+    return total
+
+
+def rmse_of(squares: np.ndarray, count: int, technique: str) -> float:
+    """``Terms.rmse`` of ``count`` texels from their ``Terms.split_squares`` ``squares`` (2,)."""
+    if not count:
+        return 0.0
+    half, quarter = squares / count
+    if technique == "stratified":
+        return float(np.sqrt(half))
+    ratio = float(np.clip(half / quarter, 0.05, 0.5)) if quarter > 0 else 0.5
+    return float(np.sqrt(half * ratio / (1.0 - ratio)))
+
+
+@inline
+def obscurance_at(w_hit, escaped, through_hit, through_ave, r_ave, i):
+    """W (3 floats) of texel i: w_hit + escaped · R_ave, plus the light through translucent
+    surfaces, through_hit + through_ave · R_ave, when those have rows (``Terms.w_parts``).
+    Inlined where it is called: arrays passed to a call cost reference counts per texel."""
+    out = (w_hit[i, 0] + escaped[i] * r_ave[0], w_hit[i, 1] + escaped[i] * r_ave[1],
+           w_hit[i, 2] + escaped[i] * r_ave[2])
+    if not len(through_hit):
+        return out
+    return (out[0] + through_hit[i, 0] + through_ave[i, 0] * r_ave[0],
+            out[1] + through_hit[i, 1] + through_ave[i, 1] * r_ave[1],
+            out[2] + through_hit[i, 2] + through_ave[i, 2] * r_ave[2])
+
+
+@jit
+def _obscurance_kernel(w_hit, escaped, through_hit, through_ave, r_ave, out):
+    for i in range(len(out)):
+        out[i, 0], out[i, 1], out[i, 2] = obscurance_at(w_hit, escaped, through_hit,
+                                                        through_ave, r_ave, i)
+
+
+@jit
+def _to_world_kernel(rays, first, starts, normals, offsets, center, x, y, z, keep, origins,
+                     directions):
+    """Turn local cosine directions (x, y, z) (k·rays,) into Embree's float32 rays.
+
+    Each texel's directions go into the frame of its normal; ray s of texel i (its sample
+    ``first`` + s) starts from ``starts[i, (first + s) mod S]`` (starts: (k, S, 3) world points
+    on the texel's plane, S = 1 without supersampling), lifted off the surface by the texel's
+    offset along the normal and recentred on ``center``. keep: (k·rays,) bool, the rays to
+    write, in order, to consecutive rows of ``origins`` and ``directions``; empty: all of them.
+    """
+    count = starts.shape[1]
+    every = len(keep) == 0
+    q = 0
+    for i in range(len(starts)):
+        nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
+        f = frame(nx, ny, nz)
+        for r in range(i * rays, (i + 1) * rays):
+            if not every and not keep[r]:
+                continue
+            j = (first + r - i * rays) % count
+            origins[q, 0] = starts[i, j, 0] - center[0] + offsets[i] * nx
+            origins[q, 1] = starts[i, j, 1] - center[1] + offsets[i] * ny
+            origins[q, 2] = starts[i, j, 2] - center[2] + offsets[i] * nz
+            directions[q, 0] = x[r] * f[0] + y[r] * f[3] + z[r] * nx
+            directions[q, 1] = x[r] * f[1] + y[r] * f[4] + z[r] * ny
+            directions[q, 2] = x[r] * f[2] + y[r] * f[5] + z[r] * nz
+            q += 1
+
+
+def cosine_directions(keys: np.ndarray, rays: int, seed: int, technique: str = "sobol",
+                      first: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The local cosine-distributed directions x, y, z (k·rays,) float64 of samples ``first`` …
+    ``first + rays − 1`` of the texels ``keys`` (k,), texel-major, about +z (the normal)."""
+    k = len(keys)
+    u, v = np.empty(k * rays), np.empty(k * rays)
+    fill_points(TECHNIQUES.index(technique), np.uint64(seed), keys, first, rays, np.uint64(0),
+                u, v)
+    x, y, z = np.empty(k * rays), np.empty(k * rays), np.empty(k * rays)
+    fill_cosine(u, v, x, y, z)
+    return x, y, z
+
+
+def hemisphere_rays(texels: Texels, rows: np.ndarray | slice, rays: int, seed: int,
+                    center: np.ndarray, technique: str = "sobol", first: int = 0,
+                    sub: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Cosine-distributed rays about each texel's front-face normal, ready for Embree.
+
+    rows: the texels (indices or a slice); their samples ``first`` … ``first + rays − 1`` (one
+    stratified grid, ``sampling.fill_points``). sub: None (every ray starts at the texel's
+    sample point), or (k, S, 3) world sub-positions of the texels (``supersample.sub_positions``,
+    on the texel's plane, so the same normal and frame): sample j starts from sub-position
+    j mod S. Returns origins and directions,
+    each (k·rays, 3) float32 in the tracer's recentred frame (world − ``center``), texel-major
+    (texel i's rays are rows i·rays … i·rays + rays − 1). Computed in float64 (points, then
+    directions, in flat arrays that the compiler vectorises), rounded once at the end.
+    """
+    x, y, z = cosine_directions(texels.key[rows], rays, seed, technique, first)
+    return world_rays(texels, rows, rays, x, y, z, center, first=first, sub=sub)
+
+
+def world_rays(texels: Texels, rows: np.ndarray | slice, rays: int, x: np.ndarray,
+               y: np.ndarray, z: np.ndarray, center: np.ndarray, keep: np.ndarray | None = None,
+               first: int = 0, sub: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """``hemisphere_rays`` from the texels' local directions x, y, z (k·rays,) already drawn
+    (``cosine_directions``); keep: None, or (k·rays,) bool, the rays wanted (the others are
+    left out of the returned (m, 3) arrays, which keep their order). The same bits as
+    ``hemisphere_rays`` for the rays kept."""
+    k = len(x) // rays
+    m = k * rays if keep is None else int(np.count_nonzero(keep))
+    origins = np.empty((m, 3), np.float32)
+    directions = np.empty((m, 3), np.float32)
+    starts = texels.position[rows][:, None, :] if sub is None else sub
+    _to_world_kernel(rays, first, starts, texels.geometric_normal(rows),
+                     ray_lift(texels.position[rows], texels.size(rows), center), center, x, y, z,
+                     np.zeros(0, np.bool_) if keep is None else keep, origins, directions)
+    return origins, directions
+
+
+# Columns of the per-texel sums the kernel accumulates.
+_RGB, _ESCAPED, _SQUARE = slice(0, 3), 3, 4
+_HALF, _QUARTER = slice(5, 7), slice(7, 9)  # (hit luminance, escaped) over the first ½, ¼
+_COLUMNS = 9
+
+
+_CONSTANT, _VARYING, _SPECIAL = 0, 1, 2  # per-triangle kinds of ``_accumulate_kernel``
+
+# Each ray's values are rounded to multiples of 2^-40 before they are summed (``_on_grid``).
+# Sums of such values stay exact in float64 while below 2^13, so they do not depend on the
+# order of the rays, and a rebake can take a ray's old value out of a texel's sums and put its
+# new one in to get the very bits a full bake sums (``ray_changes``, incremental.py): with
+# every value in [0, 1] (``Surfaces.exact_sums``), for up to ``EXACT_RAYS`` rays a texel.
+# 2^-40 ≈ 10^-12 is far below float32's output precision.
+_SHIFT = 1.5 * 2.0 ** 12  # x + _SHIFT for x in [−2^11, 2^11) has float64 spacing 2^-40
+EXACT_RAYS = 1 << 11
+
+
+@inline
+def _on_grid(x):
+    """x rounded to the nearest multiple of 2^-40 (ties to even), for x in [−2^11, 2^11): the
+    same as rint(x · 2^40) · 2^-40, without its overflow for garbage albedos far beyond."""
+    return (x + _SHIFT) - _SHIFT
+
+
+# ``_accumulate_kernel``'s (target, sample) for rays laid out texel by texel.
+_TEXEL_MAJOR = (np.zeros(0, np.int64), np.zeros(0, np.int64))
+
+
+@jit
+def _accumulate_kernel(rays, primitive, distance, d_max, rho_kind, table, kind, ray_albedo,
+                       luminance, sums, target, sample, sign):
+    """Add each ray's values to its texel's sums (k, 9): R(Q)·ρ(d) (RGB), escaped weight (1 for
+    a miss), squared luminance of R·ρ; then, for the rays among the first ⌊rays/2⌋ and the
+    first ⌊rays/4⌋ of their texel, luminance of R·ρ and escaped weight (for the split error
+    estimate, see ``Terms.rmse``). Every value is rounded to the grid (``_on_grid``) first, so
+    the sums are exact: the same bits in any order.
+
+    primitive/distance: Embree's primID (−1: no hit within d_max) and tfar of the rays, laid
+    out texel by texel (k·rays,), ray r being sample r mod rays of texel r // rays, when
+    ``target`` and ``sample`` are empty (``_TEXEL_MAJOR``); else ray j is sample ``sample[j]``
+    of texel ``target[j]`` (m,) (a rebake's changed rays, added with ``sign`` −1 for their old
+    hits and +1 for their new ones: ``ray_changes``). ``sign``: 1.0 to add each ray's values.
+    table: ``surface.triangle_albedo``'s; kind: (T,) uint8 per triangle, ``_CONSTANT`` (albedo
+    from ``table``), ``_VARYING`` (ray_albedo[r, :3] is the albedo at the hit) or ``_SPECIAL``
+    (a mirror, glass or translucent material, ``_special_hits``: ray_albedo[r, :3] is the ray's
+    R·ρ itself and ray_albedo[r, 3] its escaped weight, R_ave·ρ = 1 counting that fraction).
+    ray_albedo: one row of 4 per ray, or (0, 4) when every kind is ``_CONSTANT``.
+    """
+    half, quarter = rays // 2, rays // 4
+    indexed = len(target) > 0
+    for r in range(len(primitive)):
+        i, s = (target[r], sample[r]) if indexed else (r // rays, r % rays)
+        t = primitive[r]
+        escape = 0.0
+        if t < 0:
+            escape = 1.0
+            cr = cg = cb = 0.0
+        else:
+            k = kind[t]
+            if k == 2:
+                escape = _on_grid(ray_albedo[r, 3])
+                weight = 1.0
+                cr, cg, cb = ray_albedo[r, 0], ray_albedo[r, 1], ray_albedo[r, 2]
+            else:
+                weight = rho(rho_kind, distance[r] / d_max)
+                if k == 1:
+                    cr, cg, cb = ray_albedo[r, 0], ray_albedo[r, 1], ray_albedo[r, 2]
+                else:
+                    cr, cg, cb = table[t, 0], table[t, 1], table[t, 2]
+            cr, cg, cb = _on_grid(cr * weight), _on_grid(cg * weight), _on_grid(cb * weight)
+        lum = _on_grid(cr * luminance[0] + cg * luminance[1] + cb * luminance[2])
+        sums[i, 0] += sign * cr
+        sums[i, 1] += sign * cg
+        sums[i, 2] += sign * cb
+        sums[i, 3] += sign * escape
+        sums[i, 4] += sign * _on_grid(lum * lum)
+        if s < half:
+            sums[i, 5] += sign * lum
+            sums[i, 6] += sign * escape
+        if s < quarter:
+            sums[i, 7] += sign * lum
+            sums[i, 8] += sign * escape
+
+
+@dataclass(frozen=True)
+class Surfaces:
+    """What the shading of obscurance hits needs, built once per bake (``surfaces_of``) and
+    passed to ``integrate`` for each part of the texels.
+
+    kind: (T,) uint8 per world triangle for ``_accumulate_kernel`` (``_CONSTANT``, ``_VARYING``,
+    ``_SPECIAL``); materials: the scene's ``materials.MaterialTable``; normals: (T, 3) unit
+    geometric normals, only when some triangle is ``_SPECIAL`` (else (0, 3)); step: world
+    units a continued ray starts off its surface, besides 64 float32 ulps.
+    """
+
+    scene: Scene
+    world: World
+    table: np.ndarray  # (T, 3) constant albedo per world triangle
+    varying: np.ndarray  # (T,) bool: albedo varies over the triangle (texture, vertex colours)
+    kind: np.ndarray
+    materials: MaterialTable
+    normals: np.ndarray
+    step: float
+
+    @property
+    def special(self) -> bool:
+        """Whether any triangle needs ``_special_hits`` (mirrors, glass, translucency)."""
+        return len(self.normals) > 0
+
+    @property
+    def exact_sums(self) -> bool:
+        """Whether every ray's values lie in [0, 1], so that the sums of up to ``EXACT_RAYS``
+        rays are exact (``_on_grid``): no special triangle, and albedos within [0, 1] (base
+        colours and vertex colours are; textures always are)."""
+        colours = self.world.colors[:, :3]
+        base = diffuse_factors(self.scene)
+        return (not self.special and bool(((base >= 0) & (base <= 1)).all())
+                and bool(((colours >= 0) & (colours <= 1)).all()))
+
+    def varying_albedo(self, primitive: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """(n, 4) albedo at the hits on varying triangles in columns 0–2 (other rows zero)."""
+        out = np.zeros((len(primitive), 4))
+        where = np.flatnonzero(primitive >= 0)
+        where = where[self.kind[primitive[where]] == _VARYING]
+        if len(where):
+            uu, vv = u[where].astype(np.float64), v[where].astype(np.float64)
+            bary = np.stack([1.0 - uu - vv, uu, vv], axis=1)
+            out[where, :3] = albedo(self.scene, self.world, primitive[where].astype(np.int64), bary)
+        return out
+
+
+def surfaces_of(scene: Scene, world: World) -> Surfaces:
+    """The shading tables of ``scene``: special triangles only where a material has a mirror,
+    glass or translucent branch (a scene of diffuse surfaces gets the diffuse kernel alone)."""
+    table, varying = triangle_albedo(scene, world)
+    materials = material_table(scene)
+    special = materials.special[world.tri_material] if len(world.triangles) else np.zeros(0, bool)
+    kind = np.where(special, _SPECIAL, np.where(varying, _VARYING, _CONSTANT)).astype(np.uint8)
+    normals = world.geometric_normals() if special.any() else np.zeros((0, 3))
+    return Surfaces(scene, world, table, varying, kind, materials, normals, world.scale * 1e-6)
+
+
+# Russian roulette starts at this bounce of a chain (tests may raise it to switch it off).
+_ROULETTE_FROM = 2
+_MATERIAL_DIMENSION = 60  # sampling dimensions 60, 61, 62 + 3·bounce: branch, Fresnel, roulette
+
+
+def _uniform(seed: int, keys: np.ndarray, samples: np.ndarray, dimension: int) -> np.ndarray:
+    """(n,) uniform in (0, 1): a pure function of (seed, texel key, sample, dimension)."""
+    h = hash_u32(np.uint64(seed), keys, samples, np.uint64(dimension))
+    return ((h >> np.uint32(8)) + 0.5) * 2.0 ** -24
+
+
+def _reflect(d: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """Mirror directions d (k, 3) about unit normals n (k, 3)."""
+    return d - 2.0 * np.einsum("ij,ij->i", d, n)[:, None] * n
+
+
+def _refract(d: np.ndarray, n: np.ndarray, ior: np.ndarray, thin: np.ndarray,
+             u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """One path through a dielectric surface, chosen by importance: reflect with the Fresnel
+    probability F (unpolarised, exact), else refract by Snell's law; total internal reflection
+    always reflects. d, n (k, 3) unit (n either side); ior (k,); thin (k,) bool: a thin wall
+    (no KHR_materials_volume thickness) lets the refracted ray go on unbent. Returns the new
+    directions (k, 3) and whether each ray was refracted (k,) (the tint applies)."""
+    cos_d = np.einsum("ij,ij->i", d, n)
+    inside = cos_d > 0.0  # leaving the object through its back face
+    facing = np.where(inside[:, None], -n, n)  # normal on the incoming side
+    eta = np.where(inside & ~thin, ior, 1.0 / ior)  # n1 / n2
+    cos_i = np.abs(cos_d)
+    k = 1.0 - eta * eta * (1.0 - cos_i * cos_i)
+    cos_t = np.sqrt(np.maximum(k, 0.0))
+    r_s = (eta * cos_i - cos_t) / np.maximum(eta * cos_i + cos_t, 1e-300)
+    r_p = (cos_i - eta * cos_t) / np.maximum(cos_i + eta * cos_t, 1e-300)
+    fresnel = np.where(k <= 0.0, 1.0, 0.5 * (r_s * r_s + r_p * r_p))
+    refracted = u >= fresnel
+    bent = eta[:, None] * d + (eta * cos_i - cos_t)[:, None] * facing
+    through = np.where(thin[:, None], d, bent)
+    out = np.where(refracted[:, None], through, _reflect(d, facing))
+    return out / np.linalg.norm(out, axis=1, keepdims=True), refracted
+
+
+@dataclass
+class _Chains:
+    """Counts from ``_special_hits`` per texel of a chunk: rays cast along chains (k,) and
+    chains stopped by the depth cap (k,)."""
+
+    rays: np.ndarray
+    capped: np.ndarray
+
+
+def _special_hits(surfaces: Surfaces, tracer: Tracer, origins: np.ndarray,
+                  directions: np.ndarray, hits: dict[str, np.ndarray], keys: np.ndarray,
+                  first: int, rays: int, settings: Resolved, out: np.ndarray,
+                  chains: _Chains) -> None:
+    """Shade the rays whose first hit is on a mirror, glass or translucent material (§3, §5).
+
+    Vectorised over those rays (only): at each hit one branch is chosen by importance from the
+    material's weights (``materials.classify``) — diffuse: R = base colour (the weight cancels),
+    ρ of the distance; translucent: R = ``settings.translucent``·R_ave, ρ = 1 (§3.3); specular:
+    reflect, tint by the base colour; transparent: Fresnel reflection or refraction (§3.2).
+    Reflected/refracted rays are cast from the hit (strategy "b": for what is left of d_max,
+    ρ of the summed length; "a": d_max each, ρ of the first distance; "c": none, R_ave and
+    ρ = 1). Chains end at a diffuse choice, a miss (escaped: weight R_ave·ρ), Russian roulette
+    from bounce ``_ROULETTE_FROM`` on (survival min(0.95, max throughput), throughput divided by
+    it: unbiased) or the hard cap ``settings.max_depth`` (nothing counted; ``chains.capped``).
+    Escaped weights are scalar: the mean of the RGB throughput.
+
+    origins, directions: (k·rays, 3) float32 as cast; hits: their embreex arrays; keys: (k,)
+    texel keys. Writes ``out`` (k·rays, 4): R·ρ (RGB) and escaped weight of each such ray.
+    """
+    m = surfaces.materials
+    world = surfaces.world
+    primitive = hits["primID"]
+    ray = np.flatnonzero(primitive >= 0)
+    ray = ray[surfaces.kind[primitive[ray]] == _SPECIAL]
+    if not len(ray):
+        return
+    unit = settings.rho in UNIT_REFLECTIVITY
+    rho_kind, d_max = RHO_KINDS[settings.rho], float(settings.d_max)
+    texel = ray // rays
+    key, sample = keys[texel], first + ray % rays
+    n = len(ray)
+    value, escape = np.zeros((n, 3)), np.zeros(n)
+    throughput = np.ones((n, 3))
+    start = origins[ray].astype(np.float64)
+    d = directions[ray].astype(np.float64)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    tri = primitive[ray].astype(np.int64)
+    dist = hits["tfar"][ray].astype(np.float64)
+    bu, bv = hits["u"][ray].astype(np.float64), hits["v"][ray].astype(np.float64)
+    first_dist = dist.copy()
+    total = np.zeros(n)
+    live = np.arange(n)
+    for depth in range(settings.max_depth + 1):
+        total[live] += dist[live]
+        mat = world.tri_material[tri[live]]
+        weights = m.weights[mat]
+        dim = _MATERIAL_DIMENSION + 3 * depth
+        u = _uniform(settings.seed, key[live], sample[live], dim)
+        branch = (u[:, None] >= np.cumsum(weights, axis=1)[:, :3]).sum(axis=1)
+        bary = np.stack([1.0 - bu[live] - bv[live], bu[live], bv[live]], axis=1)
+        colour = (np.ones((len(live), 3)) if unit else
+                  base_colour(surfaces.scene, world, tri[live], bary))
+        measured = first_dist[live] if settings.specular == "a" else total[live]
+        fade = _rho(rho_kind, measured / d_max)
+        diffuse = branch == DIFFUSE
+        value[live[diffuse]] = throughput[live[diffuse]] * colour[diffuse] * fade[diffuse, None]
+        translucent = branch == TRANSLUCENT
+        escape[live[translucent]] = throughput[live[translucent]].mean(axis=1) * settings.translucent
+        onward = (branch == SPECULAR) | (branch == TRANSPARENT)
+        if settings.specular == "c":  # R_ave, ρ = 1, no ray
+            escape[live[onward]] = throughput[live[onward]].mean(axis=1)
+            break
+        live, mat, colour, branch = live[onward], mat[onward], colour[onward], branch[onward]
+        if not len(live) or depth == settings.max_depth:
+            chains.capped += np.bincount(texel[live], minlength=len(chains.capped))
+            break
+        normal = surfaces.normals[tri[live]]
+        dirs = d[live]
+        hit_point = start[live] + dist[live, None] * dirs
+        specular = branch == SPECULAR
+        new = _reflect(dirs, normal)
+        tint = colour.copy()  # a mirror tints by its base colour (a metal's F0)
+        glass = ~specular
+        if glass.any():
+            thin = m.thin[mat[glass]]
+            bent, refracted = _refract(dirs[glass], normal[glass], m.ior[mat[glass]], thin,
+                                       _uniform(settings.seed, key[live[glass]],
+                                                sample[live[glass]], dim + 1))
+            new[glass] = bent
+            tint[glass] = np.where(refracted[:, None], colour[glass], 1.0)
+        throughput[live] *= tint
+        if depth + 1 >= _ROULETTE_FROM:
+            survive = np.minimum(0.95, throughput[live].max(axis=1))
+            kept = _uniform(settings.seed, key[live], sample[live], dim + 2) < survive
+            throughput[live[kept]] /= survive[kept, None]
+            live, hit_point, new, normal = live[kept], hit_point[kept], new[kept], normal[kept]
+        if not len(live):
+            break
+        side = np.where(np.einsum("ij,ij->i", new, normal) >= 0.0, 1.0, -1.0)
+        lift = np.maximum(surfaces.step, 64 * 2.0 ** -23 * np.abs(hit_point).max(axis=1))
+        start[live] = hit_point + (side * lift)[:, None] * normal
+        d[live] = new
+        length = d_max - total[live] if settings.specular == "b" else np.full(len(live), d_max)
+        going = length > 0
+        escape[live[~going]] = throughput[live[~going]].mean(axis=1)  # past d_max: ρ = 1
+        live = live[going]
+        if not len(live):
+            break
+        sub = tracer.cast_local(start[live].astype(np.float32), d[live].astype(np.float32),
+                                length[going].astype(np.float32))
+        chains.rays += np.bincount(texel[live], minlength=len(chains.rays))
+        hit = sub["primID"] >= 0
+        missed = live[~hit]
+        fade = (_rho(rho_kind, first_dist[missed] / d_max) if settings.specular == "a"
+                else np.ones(len(missed)))
+        escape[missed] = throughput[missed].mean(axis=1) * fade
+        live = live[hit]
+        tri[live] = sub["primID"][hit]
+        dist[live] = sub["tfar"][hit]
+        bu[live], bv[live] = sub["u"][hit], sub["v"][hit]
+    out[ray, :3] = value
+    out[ray, 3] = escape
+
+
+def _rho(kind: int, x: np.ndarray) -> np.ndarray:
+    """ρ (k,) at x = d / d_max (k,), as ``obscurance.rho``."""
+    x = np.clip(x, 0.0, 1.0)
+    if kind == 0:
+        return np.sqrt(x)
+    if kind == 1:
+        return x
+    return np.zeros_like(x)
+
+
+def _shading(surfaces: Surfaces, settings: Resolved, hits: dict[str, np.ndarray]
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """What ``_accumulate_kernel`` needs to shade the rays with embreex's ``hits``: the
+    triangles' kinds (T,) uint8 and ray_albedo, one row of 4 per ray (the albedo at hits on
+    varying triangles; rows that ``_special_hits`` fills for special ones), or (0, 4) when
+    neither occurs."""
+    primitive = hits["primID"]
+    varying = surfaces.varying.any() and settings.rho not in UNIT_REFLECTIVITY
+    if varying:
+        ray_albedo = surfaces.varying_albedo(primitive, hits["u"], hits["v"])
+    elif surfaces.special:
+        ray_albedo = np.zeros((len(primitive), 4))
+    else:
+        ray_albedo = np.zeros((0, 4))
+    kind = surfaces.kind if len(ray_albedo) else np.zeros_like(surfaces.kind)
+    if not varying and len(ray_albedo):
+        kind = np.where(kind == _VARYING, _CONSTANT, kind).astype(np.uint8)
+    return kind, ray_albedo
+
+
+def _chunk_sums(surfaces: Surfaces, tracer: Tracer, texels: Texels, rows: np.ndarray,
+                first: int, rays: int, settings: Resolved) -> tuple[np.ndarray, _Chains]:
+    """(k, 9) sums over samples ``first`` … ``first + rays − 1`` of the texels ``rows``, as
+    ``_accumulate_kernel`` lays them out, and the chunk's chain counts."""
+    sub = (sub_positions(tracer, texels, rows, settings.supersample, settings.seed)
+           if settings.supersample > 1 else None)
+    origins, directions = hemisphere_rays(texels, rows, rays, settings.seed, tracer.center,
+                                          settings.sampling, first, sub)
+    hits = tracer.cast_local(origins, directions, np.full(len(origins), settings.d_max, np.float32))
+    chains = _Chains(np.zeros(len(rows), np.int64), np.zeros(len(rows), np.int64))
+    kind, ray_albedo = _shading(surfaces, settings, hits)
+    if surfaces.special:
+        _special_hits(surfaces, tracer, origins, directions, hits, texels.key[rows], first, rays,
+                      settings, ray_albedo, chains)
+    sums = np.zeros((len(rows), _COLUMNS))
+    _accumulate_kernel(rays, hits["primID"], hits["tfar"], np.float32(settings.d_max),
+                       RHO_KINDS[settings.rho], surfaces.table, kind, ray_albedo, LUMINANCE,
+                       sums, *_TEXEL_MAJOR, 1.0)
+    return sums, chains
+
+
+def hemisphere_terms(scene: Scene, world: World, tracer: Tracer, texels: Texels,
+                     settings: Resolved, progress: Callable[[int], None] | None = None,
+                     rows: np.ndarray | None = None,
+                     error_scale: tuple[np.ndarray, float] | None = None,
+                     surfaces: Surfaces | None = None) -> Terms:
+    """Estimate the obscurance terms of the texels ``rows`` (default: all), in that order.
+
+    Without ``settings.target_error`` every texel gets ``settings.rays`` rays. With it, rays come
+    in rounds — ``rays``, then doubling each texel's count while it stays within ``max_rays``
+    (so counts are rays·2^k, and halves of a count are whole nets) — and a texel stops
+    once the standard error of its lightmap luminance, ``error_scale[1]`` × the standard error
+    of W's luminance with R_ave = ``error_scale[0]``, is at most ``target_error``. The rounds
+    are the same whatever the chunking, so the result is too. ``progress`` is told how many
+    texels each chunk of the first round finished. ``surfaces``: ``surfaces_of(scene, world)``,
+    made here when not given. Light through translucent surfaces is not in these terms:
+    ``light.integrate.integrate`` adds it (``inner.add_translucency``, §4).
+    """
+    rows = np.arange(len(texels)) if rows is None else np.asarray(rows, np.int64)
+    surfaces = surfaces_of(scene, world) if surfaces is None else surfaces
+    sums = np.zeros((len(rows), _COLUMNS))
+    chaining = surfaces.special  # else no chain is counted: the counts stay empty
+    chain_counts = np.zeros((len(rows) if chaining else 0, 2), np.int64)  # rays, capped chains
+    counts = np.zeros(len(rows), np.int64)
+    active = np.arange(len(rows))
+    first, batch = 0, settings.rays
+    while len(active):
+        if first:  # doubling: the samples so far become the first half, their half the quarter
+            sums[active, _QUARTER] = sums[active, _HALF]
+            sums[active, _HALF] = _luminance_and_escaped(sums[active])
+
+        def work(chunk: np.ndarray, first=first, batch=batch) -> None:
+            round_sums, chains = _chunk_sums(surfaces, tracer, texels, rows[chunk], first, batch,
+                                             settings)
+            if chaining:
+                chain_counts[chunk, 0] += chains.rays
+                chain_counts[chunk, 1] += chains.capped
+            if first:
+                round_sums[:, _HALF.start:] = 0.0
+            sums[chunk] += round_sums
+            if progress is not None and first == 0:
+                progress(len(chunk))
+
+        step = texels_per_chunk(settings.chunk_texels, batch)
+        run_chunks(work, [active[rows] for rows in even_slices(len(active), step, 2 * cores())],
+                   settings.threads)
+        counts[active] += batch
+        first += batch
+        if settings.target_error is None or 2 * first > settings.max_rays:
+            break
+        terms = _means(sums[active], counts[active])
+        r_ave, scale = error_scale if error_scale is not None else (np.ones(3), 1.0)
+        active = active[terms.standard_error(r_ave) * scale > settings.target_error]
+        batch = first
+    terms = _means(sums, counts)
+    if chaining:
+        terms = replace(terms, chain_rays=chain_counts[:, 0], capped=chain_counts[:, 1])
+    return terms
+
+
+def ray_changes(surfaces: Surfaces, settings: Resolved, target: np.ndarray,
+                sample: np.ndarray, before: dict[str, np.ndarray], after: dict[str, np.ndarray],
+                count: int) -> np.ndarray:
+    """(count, 9) what some rays' change adds to their texels' sums (``_accumulate_kernel``'s
+    columns, exact): rays of no mirror, glass or translucent surface (``Surfaces.special``),
+    ray j being sample ``sample[j]`` (m,) of texel ``target[j]`` (m,) (rows 0 … count − 1),
+    whose embreex hits went from ``before`` to ``after`` (within d_max)."""
+    changes = np.zeros((count, _COLUMNS))
+    for sign, hits in ((-1.0, before), (1.0, after)):
+        kind, ray_albedo = _shading(surfaces, settings, hits)
+        _accumulate_kernel(settings.rays, hits["primID"], hits["tfar"],
+                           np.float32(settings.d_max), RHO_KINDS[settings.rho], surfaces.table,
+                           kind, ray_albedo, LUMINANCE, changes, target, sample, sign)
+    return changes
+
+
+def _grid(x: np.ndarray) -> np.ndarray:
+    """x rounded to multiples of 2^-40, as ``_on_grid``."""
+    return (x + _SHIFT) - _SHIFT
+
+
+def _sums_of(terms: Terms) -> np.ndarray:
+    """(k, 9) the sums ``_means`` made ``terms`` from (of one round of rays), worked back from
+    the means: each is a multiple of 2^-40 far smaller than float64's precision can tell apart,
+    so rounding recovers it. ``changed_terms`` checks the result."""
+    n = terms.counts.astype(np.float64)
+    sums = np.zeros((len(n), _COLUMNS))
+    sums[:, _RGB] = _grid(terms.w_hit * n[:, None])
+    sums[:, _ESCAPED] = _grid(terms.escaped * n)
+    sums[:, _SQUARE] = _grid(terms.hit_sq * n)
+    half, quarter = terms.counts // 2, terms.counts // 4
+    sums[:, _HALF] = _part_sums(terms.half_split, half, _luminance_and_escaped(sums),
+                                terms.counts)
+    sums[:, _QUARTER] = _part_sums(terms.quarter_split, quarter, sums[:, _HALF], half)
+    return sums
+
+
+def _part_sums(split: np.ndarray, part: np.ndarray, whole: np.ndarray,
+               whole_count: np.ndarray) -> np.ndarray:
+    """(k, 2) the sums over the first ``part`` (k,) of ``whole_count`` (k,) rays, whose sums are
+    ``whole`` (k, 2), from ``_split``'s split = sum/p − (whole − sum)/(n − p), rounded to the
+    grid; 0 where ``_split`` gave 0 for want of rays."""
+    p = part.astype(np.float64)[:, None]
+    rest = (whole_count - part).astype(np.float64)[:, None]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        found = (split + whole / rest) * (p * rest) / (p + rest)
+    return np.where((p >= 1) & (rest >= 1), _grid(found), 0.0)
+
+
+def changed_terms(terms: Terms, changes: np.ndarray) -> tuple[Terms, np.ndarray]:
+    """The terms (k rows) of texels whose rays' values changed by ``changes`` (k, 9)
+    (``ray_changes``), and (k,) bool: the rows whose old sums were recovered exactly (the
+    others must be traced anew). ``terms``: the texels' terms from one round of rays (no
+    adaptive rounds, no light through translucent surfaces)."""
+    sums = _sums_of(terms)
+    again = _means(sums, terms.counts)
+    exact = np.ones(len(sums), bool)
+    for name in ("w_hit", "escaped", "hit_sq", "half_split", "quarter_split"):
+        mine, theirs = getattr(again, name), getattr(terms, name)
+        same = mine == theirs
+        exact &= same.all(axis=tuple(range(1, same.ndim)))
+    return _means(sums + changes, terms.counts), exact
+
+
+def _luminance_and_escaped(sums: np.ndarray) -> np.ndarray:
+    """(k, 2) summed luminance of R·ρ and escaped rays, from sums (k, 9)."""
+    return np.column_stack([sums[:, _RGB] @ LUMINANCE, sums[:, _ESCAPED]])
+
+
+def _split(part: np.ndarray, part_count: np.ndarray, whole: np.ndarray,
+           whole_count: np.ndarray) -> np.ndarray:
+    """(k, 2) mean over a first part of the rays minus the mean over the rest of ``whole``."""
+    rest = np.maximum(whole_count - part_count, 1)[:, None]
+    split = part / np.maximum(part_count, 1)[:, None] - (whole - part) / rest
+    return np.where((part_count >= 1)[:, None] & (whole_count > part_count)[:, None], split, 0.0)
+
+
+_MEAN_ROWS = 1 << 16  # texels ``_means`` works on at once
+
+
+def _means(sums: np.ndarray, counts: np.ndarray) -> Terms:
+    """Terms from per-texel sums (k, 9) over ``counts`` (k,) rays, ``_MEAN_ROWS`` rows at a time
+    (the splits' temporaries for every texel at once would be larger than the terms)."""
+    means = np.empty((len(counts), _HALF.start))
+    first_half, first_quarter = np.empty((len(counts), 2)), np.empty((len(counts), 2))
+    for start in range(0, len(counts), _MEAN_ROWS):
+        rows = slice(start, start + _MEAN_ROWS)
+        part, count = sums[rows], counts[rows]
+        means[rows] = part[:, :_HALF.start] / np.maximum(count, 1)[:, None]
+        half, quarter = count // 2, count // 4
+        first_half[rows] = _split(part[:, _HALF], half, _luminance_and_escaped(part), count)
+        first_quarter[rows] = _split(part[:, _QUARTER], quarter, part[:, _HALF], half)
+    return Terms(w_hit=means[:, _RGB], escaped=means[:, _ESCAPED], hit_sq=means[:, _SQUARE],
+                 counts=counts, half_split=first_half, quarter_split=first_quarter)

@@ -1,0 +1,32 @@
+"""Per-texel obscurance terms, everything included: the hemisphere's rays (``hemisphere``) and
+the light that comes through translucent surfaces (``inner``, paper §4)."""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import numpy as np
+
+from baker.atlas.rasterise import Texels
+from baker.geometry.world import World
+from baker.gltf.scene import Scene
+from baker.light.hemisphere import Surfaces, Terms, hemisphere_terms
+from baker.light.inner import add_translucency
+from baker.rays.trace import Tracer
+from baker.settings import Resolved
+
+
+def integrate(scene: Scene, world: World, tracer: Tracer, texels: Texels, settings: Resolved,
+              progress: Callable[[int], None] | None = None, rows: np.ndarray | None = None,
+              error_scale: tuple[np.ndarray, float] | None = None,
+              translucency: bool = True, surfaces: Surfaces | None = None) -> Terms:
+    """The obscurance terms of the texels ``rows`` (default: all), in that order
+    (``hemisphere.hemisphere_terms``: rays, rounds, ``progress``, ``error_scale``,
+    ``surfaces``). ``translucency``: add the leaves' back faces and the inner obscurances of
+    closed translucent objects (``inner.add_translucency``, §4)."""
+    terms = hemisphere_terms(scene, world, tracer, texels, settings, progress, rows, error_scale,
+                             surfaces)
+    if not translucency:
+        return terms
+    rows = np.arange(len(texels)) if rows is None else np.asarray(rows, np.int64)
+    return add_translucency(scene, world, tracer, texels, rows, settings, terms, error_scale)

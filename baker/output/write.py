@@ -1,0 +1,617 @@
+"""Write the baked scene back as glTF: the same asset, plus lightmap UVs, images and materials.
+
+Everything the bake does not add is carried over from ``Scene.document`` untouched (extensions,
+extras, animations, skins, cameras, names, samplers, GPU-instanced nodes). What is added:
+
+- every baked node gets its own mesh (a copy, unless no other node uses the mesh), because the
+  lightmap is bound through the material and each instance has its own area in the atlas;
+- every baked primitive is rewritten as one TRIANGLES primitive per lightmap page it lies on,
+  every vertex attribute (morph targets included) gathered through ``InstanceUV.vertices``, and
+  the lightmap UVs in the first free ``TEXCOORD_n`` (n ≥ 1; the set also goes to ``TEXCOORD_0``
+  when the primitive has none, since glTF forbids TEXCOORD_1 without TEXCOORD_0);
+- per (material, page, UV set) a copy of the material, named "<name> (lightmap page p)", with
+  ``extensions.MOZ_lightmap = {index, texCoord, intensity}`` and, on request, the baked
+  obscurance as its core ``occlusionTexture``; one PNG image (in a bufferView) per page;
+- ``asset.extras["baker"]`` records how the lightmap texels encode light.
+
+All buffers are merged into one (GLB BIN chunk, or ``<stem>.bin`` beside a ``.gltf``). Files are
+written to temporaries in the output folder and moved into place with ``os.replace``.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import os
+import re
+import secrets
+import struct
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path, PurePosixPath
+from urllib.parse import quote, unquote
+
+import numpy as np
+import pygltflib
+
+from baker.atlas.layout import Atlas, InstanceUV
+from baker.errors import OutputError, SettingsError
+from baker.gltf import document as gltf_document
+from baker.gltf.document import COMPONENT_DTYPES
+from baker.gltf.files import inside, read_inside
+from baker.gltf.load import MAX_IMAGE_FILE_BYTES, read_accessor, resolve_buffers
+from baker.gltf.scene import Scene
+from baker.image.encode import PNG_SIGNATURE, EncodedPage
+
+LIGHTMAP_EXTENSION = "MOZ_lightmap"
+ENCODINGS = ("linear", "srgb")
+OCCLUSION_MODES = ("none", "also", "only")
+
+_FLOAT = 5126
+_UNSIGNED_SHORT = 5123
+_UNSIGNED_INT = 5125
+_ARRAY_BUFFER = 34962
+_ELEMENT_ARRAY_BUFFER = 34963
+_TRIANGLES = 4
+_LINEAR = 9729
+_CLAMP_TO_EDGE = 33071
+
+_GLB_MAGIC, _GLB_JSON, _GLB_BIN = 0x46546C67, 0x4E4F534A, 0x004E4942
+
+
+@dataclass(frozen=True)
+class WriteOptions:
+    """How the lightmaps are stored in the output.
+
+    ``encoding``: how a PNG texel maps to linear light — ``linear`` (texel / 255 × intensity) or
+    ``srgb`` (sRGB-decoded texel × intensity); recorded in ``asset.extras["baker"]``.
+    ``occlusion``: ``none``; ``also`` writes ``EncodedPage.occlusion_png`` as the material's core
+    ``occlusionTexture`` on the lightmap UV set next to ``MOZ_lightmap``; ``only`` writes the
+    occlusion texture and no ``MOZ_lightmap``.
+    ``clip_percentile``: the percentile of each page's texels that its ``intensity`` is
+    (encode.py; 100: the page's peak), recorded in ``asset.extras["baker"]``.
+    """
+
+    encoding: str = "linear"
+    occlusion: str = "none"
+    clip_percentile: float = 100.0
+
+    def __post_init__(self) -> None:
+        if self.encoding not in ENCODINGS:
+            raise SettingsError(f"unknown lightmap encoding {self.encoding!r}",
+                                fix=f"use one of: {', '.join(ENCODINGS)}")
+        if self.occlusion not in OCCLUSION_MODES:
+            raise SettingsError(f"unknown occlusion mode {self.occlusion!r}",
+                                fix=f"use one of: {', '.join(OCCLUSION_MODES)}")
+
+
+@dataclass(frozen=True)
+class WriteInfo:
+    """What ``write`` did that the user should know.
+
+    ``lightmap_texcoord``: Scene.instances index → the TEXCOORD set holding its lightmap UVs.
+    ``notes``: one line each for the report (UV sets moved, textures replaced, …).
+    """
+
+    lightmap_texcoord: dict[int, int]
+    notes: tuple[str, ...]
+
+
+def write(scene: Scene, atlas: Atlas, pages: Sequence[EncodedPage], output: Path,
+          options: WriteOptions = WriteOptions()) -> WriteInfo:
+    """Write ``scene`` with the lightmaps of ``atlas``/``pages`` to ``output`` (.glb or .gltf).
+
+    ``pages[p]`` is atlas page p. Nothing is written unless everything succeeds: an existing
+    output is replaced atomically. Raises ``OutputError`` when the output cannot be written,
+    ``InputError`` when the input's buffers or images cannot be read.
+    """
+    output = Path(output)
+    kind = _output_kind(output)
+    if len(pages) != atlas.page_count:
+        raise ValueError(f"{len(pages)} encoded pages for an atlas of {atlas.page_count}")
+    builder = _Builder(scene, output, options)
+    builder.add_pages(pages)
+    for node, baked in _baked_by_node(scene, atlas).items():
+        builder.bake_node(node, baked)
+    builder.record_asset()
+    files = builder.finish(kind)
+    _commit(files, output)
+    return WriteInfo(lightmap_texcoord=dict(builder.texcoord), notes=tuple(builder.notes))
+
+
+# ---------------------------------------------------------------------------------------------
+# the document as plain JSON data
+
+
+def _document_data(document: pygltflib.GLTF2) -> dict:
+    """The document as glTF JSON data (a deep copy): None and empty properties dropped.
+
+    ``extensions`` and ``extras`` values are kept verbatim (an extension's empty object means
+    something); list items are never dropped, so indices stay valid.
+    """
+    data = gltf_document.data(document)
+    # pygltflib fills in byteOffset 0 and normalized false; on an accessor without bufferView
+    # (zeros or sparse only) byteOffset is an error, so drop these defaults everywhere.
+    for accessor in data.get("accessors", []):
+        if accessor.get("byteOffset") == 0:
+            del accessor["byteOffset"]
+        if accessor.get("normalized") is False:
+            del accessor["normalized"]
+        for part in ("indices", "values"):
+            sparse_part = accessor.get("sparse", {}).get(part, {})
+            if sparse_part.get("byteOffset") == 0:
+                del sparse_part["byteOffset"]
+    return data
+
+
+def _as_stored(values: np.ndarray, component_type: int, normalized: bool) -> np.ndarray:
+    """Numbers from ``load.read_accessor`` back in the accessor's component type.
+
+    Exact for floats and plain integers; normalized integers are rounded back from their [0, 1]
+    or [-1, 1] values (a signed minimum, e.g. -128, comes back as -127: the same -1.0).
+    """
+    dtype = COMPONENT_DTYPES[component_type]
+    if dtype.kind == "f":
+        return values.astype(dtype)
+    if normalized:
+        values = np.rint(values * float(np.iinfo(dtype).max))
+    return values.astype(dtype)
+
+
+# ---------------------------------------------------------------------------------------------
+# the bake's additions
+
+
+def _baked_by_node(scene: Scene, atlas: Atlas) -> dict[int, dict[int, InstanceUV]]:
+    """Baked instances grouped by node: node → {primitive index within its mesh: unwrap}."""
+    nodes: dict[int, dict[int, InstanceUV]] = {}
+    for unwrap in atlas.instances:
+        instance = scene.instances[unwrap.instance]
+        primitive = scene.primitives[instance.primitive]
+        if instance.gpu_instance is not None:
+            raise ValueError(f"instance {unwrap.instance} is GPU-instanced and cannot be baked")
+        per_node = nodes.setdefault(instance.node, {})
+        if primitive.index in per_node:
+            raise ValueError(f"node {instance.node} primitive {primitive.index} unwrapped twice")
+        per_node[primitive.index] = unwrap
+    return dict(sorted(nodes.items()))
+
+
+def _file_winding(scene: Scene, unwrap: InstanceUV) -> np.ndarray:
+    """``unwrap.triangles`` with each triangle's corners in the file's order (winding kept).
+
+    The unwrapper works on world triangles, which have two corners swapped where the instance's
+    matrix mirrors; the written indices must wind as the input did.
+    """
+    primitive = scene.primitives[scene.instances[unwrap.instance].primitive]
+    triangles = np.asarray(unwrap.triangles, np.int64)
+    vertices = np.asarray(unwrap.vertices, np.int64)
+    if triangles.shape != primitive.triangles.shape:
+        raise ValueError(f"instance {unwrap.instance}: {len(triangles)} unwrapped triangles for "
+                         f"{len(primitive.triangles)} in the primitive")
+    mapped = vertices[triangles]
+
+    def same_cycle(a: np.ndarray) -> np.ndarray:  # (corner orders by index: np.roll is slow)
+        return np.any([np.all(a[:, order] == primitive.triangles, axis=1)
+                       for order in ([0, 1, 2], [2, 0, 1], [1, 2, 0])], axis=0)
+
+    kept = same_cycle(mapped)
+    flipped = ~kept & same_cycle(mapped[:, [0, 2, 1]])
+    if not np.all(kept | flipped):
+        bad = int(np.flatnonzero(~(kept | flipped))[0])
+        raise ValueError(f"instance {unwrap.instance}: unwrapped triangle {bad} is not the "
+                         "primitive's triangle")
+    triangles = triangles.copy()
+    triangles[flipped] = triangles[flipped][:, [0, 2, 1]]
+    return triangles
+
+
+class _Builder:
+    """The output document under construction: JSON data plus one growing binary buffer."""
+
+    def __init__(self, scene: Scene, output: Path, options: WriteOptions):
+        self.scene = scene
+        self.output = output
+        self.options = options
+        self.base = Path(scene.path).parent
+        self.data = _document_data(scene.document)
+        self.source_buffers = resolve_buffers(scene.document, scene.path)
+        self.blob = bytearray()
+        self._merge_buffers()
+        self.source_cache: dict[int, np.ndarray] = {}
+        self.mesh_users: dict[int, int] = {}
+        for node in self.data.get("nodes", []):
+            if "mesh" in node:
+                self.mesh_users[node["mesh"]] = self.mesh_users.get(node["mesh"], 0) + 1
+        self.lightmap_textures: list[int] = []
+        self.occlusion_textures: list[int] = []
+        self.intensities: list[float] = []
+        self.material_copies: dict[tuple[int | None, int, int], int] = {}
+        self.texcoord: dict[int, int] = {}
+        self.notes: list[str] = []
+
+    # -- buffers ------------------------------------------------------------------------------
+
+    def _merge_buffers(self) -> None:
+        """Concatenate the input's buffers (4-byte aligned) and re-point their bufferViews."""
+        starts = []
+        for raw in self.source_buffers:
+            self._align()
+            starts.append(len(self.blob))
+            self.blob += raw
+        for view in self.data.get("bufferViews", []):
+            view["byteOffset"] = starts[view["buffer"]] + int(view.get("byteOffset", 0))
+            view["buffer"] = 0
+            if view["byteOffset"] == 0:
+                del view["byteOffset"]
+
+    def _align(self) -> None:
+        self.blob += b"\0" * (-len(self.blob) % 4)
+
+    def _add_view(self, payload: bytes, target: int | None = None,
+                  stride: int | None = None) -> int:
+        self._align()
+        view = {"buffer": 0, "byteLength": len(payload)}
+        if len(self.blob):
+            view["byteOffset"] = len(self.blob)
+        if stride is not None:
+            view["byteStride"] = stride
+        if target is not None:
+            view["target"] = target
+        self.blob += payload
+        views = self.data.setdefault("bufferViews", [])
+        views.append(view)
+        return len(views) - 1
+
+    def _add_accessor(self, values: np.ndarray, component_type: int, kind: str,
+                      normalized: bool = False, bounds: bool = False,
+                      target: int = _ARRAY_BUFFER) -> int:
+        """Append ``values`` ((count, components), already of ``component_type``) as an accessor.
+
+        Vertex attributes whose elements are not a multiple of 4 bytes are padded, with a
+        byteStride, as glTF requires; indices are tightly packed without byteStride.
+        """
+        dtype = COMPONENT_DTYPES[component_type]
+        values = np.ascontiguousarray(values, dtype)
+        count, components = values.shape
+        element = dtype.itemsize * components
+        stride = None
+        payload = values.tobytes()
+        if target == _ARRAY_BUFFER and element % 4:
+            stride = element + (-element % 4)
+            padded = np.zeros((count, stride), np.uint8)
+            padded[:, :element] = values.view(np.uint8).reshape(count, element)
+            payload = padded.tobytes()
+        accessor = {"bufferView": self._add_view(payload, target, stride),
+                    "componentType": component_type, "count": int(count), "type": kind}
+        if normalized:
+            accessor["normalized"] = True
+        if bounds:
+            convert = float if dtype.kind == "f" else int
+            accessor["min"] = [convert(v) for v in values.min(axis=0)]
+            accessor["max"] = [convert(v) for v in values.max(axis=0)]
+        accessors = self.data.setdefault("accessors", [])
+        accessors.append(accessor)
+        return len(accessors) - 1
+
+    def _gather(self, index: int, rows: np.ndarray, bounds: bool) -> int:
+        """A new accessor holding rows ``rows`` of accessor ``index`` (same type, normalized)."""
+        accessor = self.data["accessors"][index]
+        if index not in self.source_cache:
+            values = read_accessor(self.scene.document, self.source_buffers, index,
+                                   file=str(self.scene.path))
+            self.source_cache[index] = _as_stored(values, accessor["componentType"],
+                                                  bool(accessor.get("normalized", False)))
+        source = self.source_cache[index]
+        if len(rows) and rows.max() >= len(source):
+            raise ValueError(f"unwrap vertex {int(rows.max())} past accessors[{index}] "
+                             f"({len(source)} elements)")
+        return self._add_accessor(source[rows], accessor["componentType"], accessor["type"],
+                                  normalized=bool(accessor.get("normalized", False)),
+                                  bounds=bounds)
+
+    # -- images, textures, materials ------------------------------------------------------------
+
+    def add_pages(self, pages: Sequence[EncodedPage]) -> None:
+        """One lightmap (and occlusion) texture per page, sharing one clamped linear sampler."""
+        if not pages:
+            return
+        samplers = self.data.setdefault("samplers", [])
+        samplers.append({"magFilter": _LINEAR, "minFilter": _LINEAR, "wrapS": _CLAMP_TO_EDGE,
+                         "wrapT": _CLAMP_TO_EDGE, "name": "lightmap"})
+        sampler = len(samplers) - 1
+        for p, page in enumerate(pages):
+            intensity = float(page.intensity)
+            if not np.isfinite(intensity) or intensity < 0:
+                raise ValueError(f"lightmap page {p} has intensity {intensity}")
+            self.intensities.append(intensity)
+            if self.options.occlusion != "only":
+                self.lightmap_textures.append(
+                    self._add_texture(page.png, sampler, f"lightmap page {p}"))
+            if self.options.occlusion != "none":
+                if page.occlusion_png is None:
+                    raise SettingsError(f"occlusion output ({self.options.occlusion!r}) was asked "
+                                        f"but lightmap page {p} has no occlusion image",
+                                        fix="encode the pages with occlusion, or set occlusion "
+                                            "to 'none'")
+                self.occlusion_textures.append(
+                    self._add_texture(page.occlusion_png, sampler, f"occlusion page {p}"))
+
+    def _add_texture(self, png: bytes, sampler: int, name: str) -> int:
+        if not bytes(png[:8]) == PNG_SIGNATURE:
+            raise ValueError(f"{name} is not a PNG image")
+        images = self.data.setdefault("images", [])
+        images.append({"bufferView": self._add_view(bytes(png)), "mimeType": "image/png",
+                       "name": name})
+        textures = self.data.setdefault("textures", [])
+        textures.append({"sampler": sampler, "source": len(images) - 1, "name": name})
+        return len(textures) - 1
+
+    def _lightmap_material(self, material: int | None, page: int, texcoord: int) -> int:
+        """The copy of ``material`` (None: the default material) bound to lightmap ``page``."""
+        key = (material, page, texcoord)
+        if key in self.material_copies:
+            return self.material_copies[key]
+        materials = self.data.setdefault("materials", [])
+        if material is None:
+            copied = {"pbrMetallicRoughness": {}}
+            name = "default"
+        else:
+            copied = copy.deepcopy(materials[material])
+            name = copied.get("name") or f"material {material}"
+        copied["name"] = f"{name} (lightmap page {page})"
+        if self.options.occlusion != "only":
+            copied.setdefault("extensions", {})[LIGHTMAP_EXTENSION] = {
+                "index": self.lightmap_textures[page], "texCoord": texcoord,
+                "intensity": self.intensities[page]}
+        if self.options.occlusion != "none":
+            if "occlusionTexture" in copied:
+                note = (f"materials[{material}] has an occlusionTexture; its lightmap copies use "
+                        "the baked occlusion instead")
+                if note not in self.notes:
+                    self.notes.append(note)
+            copied["occlusionTexture"] = {"index": self.occlusion_textures[page],
+                                          "texCoord": texcoord}
+        materials.append(copied)
+        self.material_copies[key] = len(materials) - 1
+        return len(materials) - 1
+
+    # -- meshes -----------------------------------------------------------------------------
+
+    def bake_node(self, node_index: int, baked: dict[int, InstanceUV]) -> None:
+        """Give the node its own mesh with its baked primitives rewritten."""
+        node = self.data["nodes"][node_index]
+        mesh_index = node.get("mesh")
+        for unwrap in baked.values():
+            expected = self.scene.primitives[self.scene.instances[unwrap.instance].primitive].mesh
+            if mesh_index != expected:
+                raise ValueError(f"instance {unwrap.instance}: node {node_index} has mesh "
+                                 f"{mesh_index}, the scene says {expected}")
+        meshes = self.data["meshes"]
+        if self.mesh_users.get(mesh_index, 0) == 1:
+            mesh = meshes[mesh_index]
+        else:
+            mesh = copy.deepcopy(meshes[mesh_index])
+            meshes.append(mesh)
+            node["mesh"] = len(meshes) - 1
+        primitives = []
+        for i, primitive in enumerate(mesh["primitives"]):
+            if i in baked:
+                primitives.extend(self._bake_primitive(primitive, f"meshes[{mesh_index}]"
+                                                       f".primitives[{i}]", baked[i]))
+            else:
+                primitives.append(primitive)
+        mesh["primitives"] = primitives
+
+    def _bake_primitive(self, primitive: dict, where: str, unwrap: InstanceUV) -> list[dict]:
+        """The primitive split by page, its attributes gathered, the lightmap UVs added."""
+        attributes = primitive["attributes"]
+        used_sets = {int(name[9:]) for name in attributes
+                     if name.startswith("TEXCOORD_") and name[9:].isdigit()}
+        texcoord = 1
+        while texcoord in used_sets:
+            texcoord += 1
+        vertices = np.asarray(unwrap.vertices, np.int64)
+        uv = np.asarray(unwrap.uv, np.float64)
+        pages = np.asarray(unwrap.pages, np.int64)
+        triangles = _file_winding(self.scene, unwrap)
+        if uv.shape != (len(vertices), 2) or not np.all(np.isfinite(uv)):
+            raise ValueError(f"instance {unwrap.instance}: lightmap UVs are not (k, 2) finite")
+        on_pages = np.unique(pages[pages >= 0])
+        if on_pages.size == 0:
+            self.notes.append(f"{where}: no triangle got lightmap texels; left without lightmap")
+            return [primitive]
+        if on_pages.max() >= len(self.intensities):
+            raise ValueError(f"instance {unwrap.instance} lies on page {int(on_pages.max())}, "
+                             f"only {len(self.intensities)} pages were encoded")
+        self.texcoord[unwrap.instance] = texcoord
+        if 0 not in used_sets:
+            self._note(f"{where} has no TEXCOORD_0; the lightmap UVs are written as TEXCOORD_0 "
+                       f"too (glTF requires TEXCOORD_0 before TEXCOORD_{texcoord})")
+        if texcoord != 1:
+            taken = ", ".join(f"TEXCOORD_{n}" for n in sorted(used_sets) if n >= 1)
+            self._note(f"{where} already uses {taken} (kept as it is); lightmap UVs written as "
+                       f"TEXCOORD_{texcoord}")
+        page_of = np.where(pages < 0, on_pages[0], pages)
+        result = []
+        for page in on_pages:
+            used, inverse = np.unique(triangles[page_of == page], return_inverse=True)
+            indices = inverse.reshape(-1, 3)
+            rows = vertices[used]
+            new = {key: copy.deepcopy(value) for key, value in primitive.items()
+                   if key not in ("attributes", "indices", "mode", "targets", "material")}
+            extensions = new.get("extensions", {})
+            extensions.pop("KHR_draco_mesh_compression", None)  # the attributes are plain now
+            if not extensions:
+                new.pop("extensions", None)
+            new_attributes = {name: self._gather(accessor, rows, bounds=name == "POSITION")
+                              for name, accessor in attributes.items()}
+            lightmap_uv = self._add_accessor(uv[used].astype(np.float32), _FLOAT, "VEC2")
+            if 0 not in used_sets:
+                new_attributes["TEXCOORD_0"] = lightmap_uv
+            new_attributes[f"TEXCOORD_{texcoord}"] = lightmap_uv
+            new["attributes"] = new_attributes
+            if primitive.get("targets"):
+                new["targets"] = [{name: self._gather(accessor, rows, bounds=name == "POSITION")
+                                   for name, accessor in target.items()}
+                                  for target in primitive["targets"]]
+            wide = len(used) > 65535  # 65535 itself is reserved (primitive restart)
+            index_type = _UNSIGNED_INT if wide else _UNSIGNED_SHORT
+            new["indices"] = self._add_accessor(indices.reshape(-1, 1), index_type, "SCALAR",
+                                                target=_ELEMENT_ARRAY_BUFFER)
+            new["mode"] = _TRIANGLES
+            new["material"] = self._lightmap_material(primitive.get("material"), int(page),
+                                                       texcoord)
+            result.append(new)
+        return result
+
+    def _note(self, note: str) -> None:
+        if note not in self.notes:
+            self.notes.append(note)
+
+    # -- asset and output ---------------------------------------------------------------------
+
+    def record_asset(self) -> None:
+        """extensionsUsed (never extensionsRequired) and the encoding in asset.extras."""
+        lightmap = self.options.occlusion != "only" and bool(self.material_copies)
+        if lightmap:
+            used = self.data.setdefault("extensionsUsed", [])
+            if LIGHTMAP_EXTENSION not in used:
+                used.append(LIGHTMAP_EXTENSION)
+        required = self.data.get("extensionsRequired", [])
+        if LIGHTMAP_EXTENSION in required:
+            required.remove(LIGHTMAP_EXTENSION)
+            if not required:
+                del self.data["extensionsRequired"]
+        asset = self.data.setdefault("asset", {"version": "2.0"})
+        extras = asset.get("extras", {})
+        if not isinstance(extras, dict):
+            self._note("asset.extras was not an object; its value moved to asset.extras.value")
+            extras = {"value": extras}
+        extras["baker"] = {
+            "lightmap_encoding": self.options.encoding,
+            "lightmap_extension": LIGHTMAP_EXTENSION if self.options.occlusion != "only" else None,
+            "occlusion": self.options.occlusion,
+            "lightmap_intensity_percentile": self.options.clip_percentile,
+        }
+        asset["extras"] = extras
+
+    def finish(self, kind: str) -> list[tuple[Path, bytes]]:
+        """The files to write, in order: copied images, then .bin, then the .gltf or .glb."""
+        files = self._external_images()
+        self._align()
+        blob = bytes(self.blob)
+        if blob:
+            buffer = {"byteLength": len(blob)}
+            if kind == "gltf":
+                bin_name = self.output.stem + ".bin"
+                buffer["uri"] = quote(bin_name)
+                files.append((self.output.with_name(bin_name), blob))
+            self.data["buffers"] = [buffer]
+        else:
+            self.data.pop("buffers", None)
+        if kind == "gltf":
+            text = json.dumps(self.data, indent=2, allow_nan=False) + "\n"
+            files.append((self.output, text.encode("utf-8")))
+        else:
+            files.append((self.output, _glb(self.data, blob)))
+        return files
+
+    def _external_images(self) -> list[tuple[Path, bytes]]:
+        """Images the input names by a relative URI, each a file inside the input's folder
+        (``scene_files``; anything else is an ``InputError``): referred to as they are when the
+        output goes to the input's folder, else copied beside the output under a name baker
+        makes (``image_file_name``), never at a path taken from the input."""
+        target = self.output.parent
+        same_folder = target.resolve() == self.base.resolve()
+        files: list[tuple[Path, bytes]] = []
+        for i, image in enumerate(self.data.get("images", [])):
+            uri = image.get("uri")
+            if uri is None or (isinstance(uri, str) and uri.startswith("data:")):
+                continue
+            where = f"images[{i}]"
+            if same_folder:
+                inside(uri, self.base, str(self.scene.path), where)
+                continue
+            data = read_inside(uri, self.base, MAX_IMAGE_FILE_BYTES, str(self.scene.path), where)
+            name = image_file_name(self.output, i, uri)
+            image["uri"] = quote(name)
+            files.append((target / name, data))
+        return files
+
+
+def image_file_name(output: Path, index: int, uri: str) -> str:
+    """The name of the copy of ``images[index]`` (file ``uri``) beside ``output`` when the output
+    goes to another folder than the input: ``<stem>_image<index>`` and the URI's suffix when it
+    is a short alphanumeric one (``.png``, ``.jpg``)."""
+    suffix = PurePosixPath(unquote(uri)).suffix.lower()
+    if not re.fullmatch(r"\.[a-z0-9]{1,5}", suffix):
+        suffix = ""
+    return f"{output.stem}_image{index}{suffix}"
+
+
+def _glb(data: dict, blob: bytes) -> bytes:
+    text = json.dumps(data, separators=(",", ":"), allow_nan=False).encode("utf-8")
+    text += b" " * (-len(text) % 4)
+    chunks = struct.pack("<II", len(text), _GLB_JSON) + text
+    if blob:
+        blob += b"\0" * (-len(blob) % 4)
+        chunks += struct.pack("<II", len(blob), _GLB_BIN) + blob
+    return struct.pack("<III", _GLB_MAGIC, 2, 12 + len(chunks)) + chunks
+
+
+# ---------------------------------------------------------------------------------------------
+# atomic output
+
+
+def _output_kind(output: Path) -> str:
+    suffix = output.suffix.lower()
+    if suffix not in (".glb", ".gltf"):
+        raise OutputError("the output must be a .glb or .gltf file", file=str(output),
+                          fix="name the output <name>.glb or <name>.gltf")
+    folder = output.parent
+    if not folder.is_dir():
+        raise OutputError(f"the output folder {folder} does not exist", file=str(output),
+                          fix=f"create {folder} first, or write to an existing folder")
+    if output.is_dir():
+        raise OutputError("the output path is a folder", file=str(output),
+                          fix="give a file name ending in .glb or .gltf")
+    return suffix[1:]
+
+
+def _commit(files: list[tuple[Path, bytes]], output: Path) -> None:
+    """Write every file to a temporary beside it, then move them into place in order.
+
+    ``files`` pairs a destination with its bytes. On any failure
+    the temporaries are removed and the existing files are left as they were.
+    """
+    temporaries: list[tuple[Path, Path]] = []
+    current = output
+    try:
+        for destination, content in files:
+            current = destination
+            temporary = destination.with_name(f".{destination.name}.{secrets.token_hex(4)}.tmp")
+            temporaries.append((temporary, destination))
+            descriptor = os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+            with os.fdopen(descriptor, "wb") as stream:
+                stream.write(content)
+                stream.flush()
+                os.fsync(stream.fileno())
+        for temporary, destination in temporaries:
+            current = destination
+            os.replace(temporary, destination)
+    except PermissionError as error:
+        raise OutputError(f"no permission to write {current}", file=str(output),
+                          fix=f"choose a folder you can write to, or change the permissions of "
+                              f"{current.parent}") from error
+    except OSError as error:
+        raise OutputError(f"cannot write {current}: {error.strerror or error}", file=str(output),
+                          fix="check the disk space and the output folder") from error
+    finally:
+        for temporary, _ in temporaries:
+            try:
+                temporary.unlink()
+            except FileNotFoundError:
+                pass
+            except OSError:
+                pass

@@ -1,0 +1,326 @@
+"""The whole bake, stage by stage (docs/design.md §3):
+
+    load → plan → unwrap → rasterise → trace/integrate → compose → post-process → write
+
+Each stage is one module with one entry function; this module only runs them in order, times
+them, and gathers the report.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass, replace
+from typing import Callable, Iterator, Protocol
+
+import numpy as np
+
+from baker.atlas.layout import Atlas
+from baker.atlas.rasterise import (
+    Coverage,
+    Owners,
+    Texels,
+    cover,
+    owners,
+    texels_of,
+)
+from baker.atlas.unwrap import PageTooSmall, baked_instances, frame_area, unwrap
+from baker.atlas.validity import Faces, Validity, check_texels
+from baker.geometry.surface import LUMINANCE
+from baker.geometry.world import World, build_world
+from baker.gltf.scene import Scene
+from baker.image.compose import Lightmaps, blank, compose_into, effective_r_ave
+from baker.image.denoise import DenoiseInfo, denoise
+from baker.image.postprocess import postprocess
+from baker.image.seams import find_seams
+from baker.light.ambient import Ambient, ambient_terms
+from baker.light.direct import (
+    Direct,
+    Power,
+    Sources,
+    delivered_power,
+    direct_light,
+    light_sources,
+)
+from baker.light.gi import indirect_light
+from baker.light.hemisphere import Surfaces, Terms, surfaces_of
+from baker.light.integrate import integrate
+from baker.pipeline.parts import PerTexel, Tally, TexelPoints, part_slices
+from baker.pipeline.plan import Plan, make_plan
+from baker.rays.trace import Tracer
+from baker.run.progress import bar, wanted
+from baker.run.spill import Spill
+from baker.settings import Resolved, Settings, resolve
+
+
+@contextmanager
+def timed(times: dict[str, float], name: str) -> Iterator[None]:
+    """Add the wall time of the block to ``times[name]``, in seconds."""
+    start = time.perf_counter()
+    yield
+    times[name] = times.get(name, 0.0) + time.perf_counter() - start
+
+
+def bounds_of_baked(world, scene) -> tuple[float, float]:
+    """Area and world bounds diagonal of the baked instances (for default settings).
+
+    The area is summed in each instance's rigid-free frame (``unwrap.frame_area``), so a rigid
+    move of a node leaves the derived texel density bit-identical (incremental rebake)."""
+    tris = np.concatenate([world.instance_triangles(i) for i in baked_instances(scene)] or
+                          [np.zeros(0, np.int64)])
+    if len(tris) == 0:
+        return 0.0, 0.0
+    points = world.positions[world.triangles[tris].reshape(-1)]
+    return frame_area(scene, world), float(np.linalg.norm(points.max(0) - points.min(0)))
+
+
+@dataclass(frozen=True)
+class Computed:
+    """Everything a bake computed before encoding, for the report, tests and benchmarks.
+
+    ``per_texel`` holds the texels and their results, in memory or on disk (``parts.py``);
+    ``texels``, ``validity``, ``terms`` and ``direct`` load them whole on first use. ``tally``
+    has what the report needs of them without loading them.
+    """
+
+    scene: Scene
+    world: World
+    settings: Resolved
+    ambient: Ambient
+    plan: Plan
+    atlas: Atlas
+    per_texel: PerTexel
+    tally: Tally
+    lightmaps: Lightmaps
+    stage_seconds: dict[str, float]
+    sources: Sources | None = None  # what lights the scene directly (direct.py)
+    power: Power | None = None  # what each source lays on the surfaces, for I_A
+    denoised: DenoiseInfo | None = None  # what --denoise did (denoise.py); None: not denoised
+
+    @property
+    def texels(self) -> Texels:
+        return self.per_texel.texels
+
+    @property
+    def validity(self) -> Validity:
+        """Which sample points were moved or flagged (validity.py)."""
+        return self.per_texel.validity
+
+    @property
+    def terms(self) -> Terms:
+        return self.per_texel.terms
+
+    @property
+    def direct(self) -> Direct | None:
+        """The texels' direct light, per source."""
+        return self.per_texel.direct
+
+    def obscurance_rmse(self) -> float:
+        """RMSE of the luminance of I_A·W estimated from the rays (``Terms.rmse``)."""
+        return self.tally.obscurance_rmse(self.settings.sampling) * float(
+            self.ambient.intensity @ LUMINANCE)
+
+    def rmse_estimate(self) -> float:
+        """RMSE of the lightmap's luminance estimated from the rays: I_A·W's and D's."""
+        if not self.tally.texels:
+            return 0.0
+        direct = self.tally.direct_variance / self.tally.texels
+        return float(np.sqrt(self.obscurance_rmse() ** 2 + direct))
+
+
+def lighting(scene: Scene, world: World, resolved: Resolved, times: dict[str, float]):
+    """Embree's scene, the light sources, the power they deliver, I_A and R_ave, and the plan:
+    what a bake and a rebake both need before any texel. Returns (tracer, sources, power,
+    ambient, plan); adds the stages "lights" and "plan" to ``times``."""
+    with timed(times, "lights"):
+        tracer = Tracer(world)
+        sources = light_sources(scene, world, resolved)
+        power = delivered_power(scene, world, tracer, sources, resolved)
+    with timed(times, "plan"):
+        ambient = ambient_terms(scene, world, resolved.ambient, power)
+        plan = make_plan(scene, ambient, resolved.rho, sources)
+    return tracer, sources, power, ambient, plan
+
+
+@dataclass(frozen=True)
+class Baking:
+    """What every part of a bake needs (``compute``)."""
+
+    scene: Scene
+    world: World
+    settings: Resolved
+    tracer: Tracer
+    sources: Sources
+    ambient: Ambient
+    atlas: Atlas
+    coverage: Coverage | None = None  # which triangle owns each texel (rasterise.cover)
+    owned: Owners | None = None  # what the texels take from their triangles (rasterise.owners)
+    faces: Faces | None = None  # back faces, for the validity probes
+    surfaces: Surfaces | None = None  # shading of obscurance hits (integrate.surfaces_of)
+
+
+class StateSink(Protocol):
+    """Where a bake's state goes once its texels are final (``rebake.staging.StateStaging``):
+    ``start`` is called with what every part needed and the texels' results, before the pages
+    are post-processed, so that the state can be written beside that work."""
+
+    def start(self, baking: Baking, per_texel: PerTexel, fingerprint: dict | None = None
+              ) -> None: ...
+
+
+def compute(scene: Scene, settings: Settings, quiet: bool = True,
+            spill_folder: str | os.PathLike | None = None,
+            staging: StateSink | None = None) -> Computed:
+    """Run every stage from the loaded scene up to the post-processed float lightmaps.
+
+    The texels are made, traced and composed a part at a time (``parts.py``); when there are
+    several parts, each part's results go to a temporary folder in ``spill_folder`` (None: the
+    system's) until the bake state is written (``Computed.per_texel``). ``staging``: where the
+    bake state starts to be written once the texels are done.
+    """
+    times: dict[str, float] = {}
+    with timed(times, "load"):
+        world = build_world(scene)
+    area, diagonal = bounds_of_baked(world, scene)
+    resolved = resolve(settings, area, diagonal)
+    tracer, sources, power, ambient, plan = lighting(scene, world, resolved, times)
+    with timed(times, "unwrap"):
+        try:
+            atlas = unwrap(scene, world, resolved)
+        except PageTooSmall as error:
+            if settings.texel_density is not None:  # the user's density: say what fits
+                raise
+            resolved = replace(resolved, texel_density=error.texel_density)  # derived: shrink it
+            atlas = unwrap(scene, world, resolved)
+    with timed(times, "rasterise"):
+        coverage = cover(atlas, world)
+        owned = owners(atlas, world, coverage)
+    count = len(coverage.key)
+    spill = Spill(spill_folder) if len(part_slices(count)) > 1 else None
+    baking = Baking(scene, world, resolved, tracer, sources, ambient, atlas, coverage, owned,
+                     Faces(scene, world), surfaces_of(scene, world))
+    try:
+        pages, held = _bake_parts(baking, spill, times, quiet)
+        per_texel = (PerTexel.spilled(spill, atlas, world) if spill is not None
+                     else PerTexel.held(*held))
+        return _finish_pages(baking, power, plan, per_texel, pages, times, staging)
+    except BaseException:  # an error or Ctrl-C: no spilled rows left behind
+        if spill is not None:
+            spill.close()
+        raise
+
+
+def _bake_parts(baking: Baking, spill: Spill | None, times: dict[str, float], quiet: bool):
+    """Bake the texels a part at a time, each composed into the pages as it is done and, with
+    a ``spill``, its rows appended to it. Returns the composed ``_Pages``, and the last part's
+    (texels, validity, terms, direct) — all the texels' when there is one part."""
+    count = len(baking.coverage.key)
+    pages = _Pages.blank(baking)
+    with bar(count * (1 + baking.sources.any()), "baking", wanted(quiet)) as advance:
+        for rows in part_slices(count):
+            texels, points, validity, terms, direct, indirect = _bake_part(baking, rows, times,
+                                                                           advance)
+            with timed(times, "compose"):
+                pages.add(baking, texels, validity, terms, direct, indirect)
+            if spill is not None:
+                with timed(times, "spill"):
+                    for name, group in (("texels", points), ("validity", validity),
+                                        ("terms", terms), ("direct", direct)):
+                        spill.append(name, group)
+    return pages, (texels, points, validity, terms, direct)
+
+
+def _bake_part(baking: Baking, rows: slice, times: dict[str, float],
+               advance: Callable[[int], None]):
+    """Make, probe, trace and light the texels ``rows``: (texels with their sample points moved
+    by the probes, what the state keeps of them (``TexelPoints``), validity, obscurance terms,
+    direct light, and the full-GI indirect irradiance (k, 3) with ``--method gi``, else
+    None)."""
+    s, ambient, scene, world, tracer = (baking.settings, baking.ambient, baking.scene,
+                                        baking.world, baking.tracer)
+    with timed(times, "rasterise"):
+        made = texels_of(baking.atlas, world, baking.coverage, rows, baking.owned)
+    with timed(times, "validity"):  # sample points inside/behind geometry: moved or flagged
+        texels, validity = check_texels(scene, world, tracer, made, s.d_max, faces=baking.faces)
+        points = TexelPoints.of(texels, made.position)
+    with timed(times, "trace"):
+        error_scale = (effective_r_ave(ambient, s.rho), float(ambient.intensity @ LUMINANCE))
+        terms = integrate(scene, world, tracer, texels, s, advance, error_scale=error_scale,
+                          surfaces=baking.surfaces)
+    with timed(times, "direct"):
+        direct = direct_light(scene, world, tracer, texels, baking.sources, s, advance)
+    indirect = None
+    if s.method == "gi":  # the full-GI reference instead of I_A·W (gi.py)
+        with timed(times, "gi"):
+            indirect = indirect_light(scene, world, tracer, baking.sources, texels, s,
+                                      s.rays).irradiance
+    return texels, points, validity, terms, direct, indirect
+
+
+def finish(scene: Scene, world: World, resolved: Resolved, tracer: Tracer, sources: Sources,
+           power: Power, ambient: Ambient, plan: Plan, atlas: Atlas, texels: Texels,
+           points: TexelPoints, validity: Validity, terms: Terms, direct: Direct,
+           times: dict[str, float], staging: StateSink | None = None,
+           fingerprint: dict | None = None) -> Computed:
+    """From the texels' terms, all held in memory, to the post-processed float lightmaps: an
+    incremental rebake (incremental.py) ends as a full bake does, so both give the same bytes
+    (``staging`` and the scene's ``fingerprint``: the bake state, as in ``compute``).
+    """
+    baking = Baking(scene, world, resolved, tracer, sources, ambient, atlas)
+    with timed(times, "compose"):
+        pages = _Pages.blank(baking)
+        pages.add(baking, texels, validity, terms, direct)
+    return _finish_pages(baking, power, plan,
+                         PerTexel.held(texels, points, validity, terms, direct), pages, times,
+                         staging, fingerprint)
+
+
+@dataclass
+class _Pages:
+    """What the texels are composed into, part by part: the lightmaps, the validity's page
+    masks (invalid, enclosed) and the report's ``Tally``."""
+
+    lightmaps: Lightmaps
+    masks: tuple[np.ndarray, np.ndarray]
+    tally: Tally
+
+    @classmethod
+    def blank(cls, baking: Baking) -> "_Pages":
+        """Nothing composed yet (pages of W only for the occlusion texture)."""
+        lightmaps = blank(baking.atlas, obscurance=baking.settings.occlusion != "none")
+        return cls(lightmaps, (np.zeros_like(lightmaps.covered),
+                               np.zeros_like(lightmaps.covered)), Tally())
+
+    def add(self, baking: Baking, texels: Texels, validity: Validity, terms: Terms,
+            direct: Direct, indirect: np.ndarray | None = None) -> None:
+        """Compose the texels' light, mark their validity and count them."""
+        rho, ambient = baking.settings.rho, baking.ambient
+        compose_into(self.lightmaps, texels, terms, ambient, rho, direct, indirect=indirect)
+        validity.mark(texels, *self.masks)
+        self.tally.add(terms, direct, validity, effective_r_ave(ambient, rho))
+
+
+def _finish_pages(baking: Baking, power: Power, plan: Plan, per_texel: PerTexel, pages: _Pages,
+                  times: dict[str, float], staging: StateSink | None = None,
+                  fingerprint: dict | None = None) -> Computed:
+    """Start writing the bake state (``staging``, if any: the texels are final), then denoise
+    (if asked) and post-process the composed pages."""
+    if staging is not None:
+        staging.start(baking, per_texel, fingerprint)
+    resolved, lightmaps, masks = baking.settings, pages.lightmaps, pages.masks
+    denoised = None
+    if resolved.denoise:  # per chart, before the fill of invalid texels and dilation (denoise.py)
+        with timed(times, "denoise"):
+            lightmaps, denoised = denoise(lightmaps, per_texel.texels, *masks,
+                                          threads=resolved.threads,
+                                          obscurance=resolved.occlusion != "none")
+    with timed(times, "compose"):
+        lightmaps = postprocess(lightmaps, resolved.padding, *masks,
+                                seams=find_seams(baking.atlas, baking.world))
+    return Computed(scene=baking.scene, world=baking.world, settings=resolved,
+                    ambient=baking.ambient, plan=plan, atlas=baking.atlas, per_texel=per_texel,
+                    tally=pages.tally, lightmaps=lightmaps, stage_seconds=times,
+                    sources=baking.sources, power=power, denoised=denoised)
+
+

@@ -1,0 +1,1 @@
+"""Rays: deterministic sample points (``sampling``) and the only module that talks to Embree (``trace``)."""

@@ -1,0 +1,195 @@
+"""The only module that talks to Embree (through embreex).
+
+The scene is built once from every world triangle, recentred on the world's centre so that
+float32 keeps its precision far from the origin; callers pass float64 world coordinates and get
+float64 back. Embree releases the GIL while it traces, so the integrator runs several ``cast``
+calls at once from a thread pool.
+
+Alpha: when the world has alpha-tested triangles (``World.alpha``, materials.py), every query
+lets rays through the hits whose alpha is below the cutoff (MASK) or, with probability
+1 − alpha, through BLEND surfaces: the rays that hit such triangles — and only those — are cast
+again from just past the hit, up to ``MAX_CONTINUATIONS`` times, and their hits merged back
+(distances measured from the first origin). The BLEND coin is a hash of the ray's own float32
+bits and the continuation number: a pure function of what made the ray (seed, texel key,
+sample), so the result does not depend on chunking or threads.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from embreex import rtcore_scene
+from embreex.mesh_construction import TriangleMesh
+
+from baker.geometry.world import World
+from baker.rays.sampling import hash_u32
+
+# Smallest ray offset, in texel sizes and in float32 units of the position's magnitude.
+_OFFSET_TEXELS = 1e-3
+_OFFSET_ULPS = 64 * 2.0 ** -23
+
+
+MAX_CONTINUATIONS = 16
+"""Most alpha-tested surfaces one ray passes through; the next one then stops it."""
+_ALPHA_DIMENSION = 60  # the hash dimension of the BLEND coin (sampling: 60+ are materials')
+
+
+def _coin(origins: np.ndarray, directions: np.ndarray, step: int) -> np.ndarray:
+    """(n,) uniform in [0, 1): a hash of each ray's float32 origin and direction bits and the
+    continuation ``step``."""
+    bits = np.concatenate([np.ascontiguousarray(origins, np.float32).view(np.uint32),
+                           np.ascontiguousarray(directions, np.float32).view(np.uint32)], axis=1)
+    h = hash_u32(bits[:, 0], bits[:, 1], bits[:, 2], bits[:, 3])
+    h = hash_u32(h, bits[:, 4], bits[:, 5], np.uint64(_ALPHA_DIMENSION + (step << 8)))
+    return ((h >> np.uint32(8)) + 0.5) * 2.0 ** -24
+
+
+def pass_alpha(run, alpha, origins: np.ndarray, directions: np.ndarray, limit: np.ndarray,
+               result: dict[str, np.ndarray]) -> int:
+    """Let the rays of ``result`` (embreex arrays, changed in place) through alpha-tested hits.
+
+    run(origins, directions, lengths) casts float32 rays in the tracer's frame; origins and
+    directions: (n, 3) float32 the rays as first cast; limit: (n,) float64 their lengths. Only
+    rays whose hit is on a triangle of ``alpha.mode`` are looked at; those that pass are cast
+    again from just past the hit (stepped off the plane along the geometric normal, on the far
+    side) for what length remains. Returns how many continuation rays were cast.
+    """
+    primitive, tfar, u, v = result["primID"], result["tfar"], result["u"], result["v"]
+    live = np.flatnonzero(primitive >= 0)
+    live = live[alpha.mode[primitive[live]] > 0]
+    cast = 0
+    for step in range(MAX_CONTINUATIONS):
+        if not len(live):
+            break
+        tris = primitive[live].astype(np.int64)
+        uu, vv = u[live].astype(np.float64), v[live].astype(np.float64)
+        bary = np.stack([1.0 - uu - vv, uu, vv], axis=1)
+        through = alpha.passes(tris, bary, _coin(origins[live], directions[live], step))
+        live, tris = live[through], tris[through]
+        if not len(live):
+            break
+        d = directions[live].astype(np.float64)
+        t = tfar[live].astype(np.float64)
+        point = origins[live].astype(np.float64) + t[:, None] * d
+        normal = alpha.normals[tris]
+        side = np.where(np.einsum("ij,ij->i", d, normal) >= 0.0, 1.0, -1.0)
+        lift = np.maximum(alpha.step, 64 * 2.0 ** -23 * np.abs(point).max(axis=1))
+        start = point + (side * lift)[:, None] * normal
+        remaining = np.maximum(limit[live] - t, 0.0)
+        sub = run(start.astype(np.float32), directions[live], remaining.astype(np.float32))
+        cast += len(live)
+        hit = sub["primID"] >= 0
+        primitive[live] = sub["primID"]
+        tfar[live] = np.where(hit, t + sub["tfar"], limit[live])
+        u[live], v[live] = sub["u"], sub["v"]
+        live = live[hit]
+        live = live[alpha.mode[primitive[live]] > 0]
+    return cast
+
+
+def ray_lift(position: np.ndarray, size: np.ndarray, center: np.ndarray) -> np.ndarray:
+    """How far (k,) to lift ray origins at ``position`` (k, 3) off their surface, world units.
+
+    The larger of 10⁻³ of the texel's world size ``size`` (k,) and 64 float32 ulps of the
+    position's distance from the tracer's ``center``: neither big texels nor scenes far from the
+    origin self-intersect inside Embree's float32.
+    """
+    offset = np.abs(position - center)
+    magnitude = np.maximum(np.maximum(offset[:, 0], offset[:, 1]), offset[:, 2])  # 7× max(axis=1)
+    return np.maximum(_OFFSET_TEXELS * size, _OFFSET_ULPS * np.maximum(magnitude, 1e-30))
+
+
+@dataclass(frozen=True)
+class Hits:
+    """Nearest hits of n rays. triangle: (n,) int64 world triangle, -1 for a miss; distance:
+    (n,) float64 along the (unit) direction, inf for a miss; u, v: (n,) float64 barycentric
+    weights of the triangle's second and third corners at the hit."""
+
+    triangle: np.ndarray
+    distance: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+
+    def barycentric(self) -> np.ndarray:
+        """(n, 3) barycentric coordinates of the hit points (meaningless for misses)."""
+        return np.stack([1.0 - self.u - self.v, self.u, self.v], axis=1)
+
+
+class Tracer:
+    """Casts rays against all of a ``World``'s triangles."""
+
+    def __init__(self, world: World):
+        self.center = world.center
+        self.triangle_count = len(world.triangles)
+        self.alpha = world.alpha  # materials.AlphaTest or None (nothing to let through)
+        self._scene = rtcore_scene.EmbreeScene()
+        if self.triangle_count:
+            corners = world.positions[world.triangles] - self.center  # (T, 3, 3)
+            TriangleMesh(self._scene, corners.astype(np.float32))
+            # The first run commits the scene; do it here, not from several threads at once.
+            self._scene.run(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32),
+                            dists=np.zeros(1, np.float32))
+
+    def cast(self, origins: np.ndarray, directions: np.ndarray, length: np.ndarray | float) -> Hits:
+        """Nearest hit of each ray within ``length``.
+
+        origins: (n, 3) float64 world; directions: (n, 3) unit; length: scalar or (n,) float64.
+        """
+        n = len(origins)
+        if n == 0 or self.triangle_count == 0:
+            return Hits(np.full(n, -1, np.int64), np.full(n, np.inf), np.zeros(n), np.zeros(n))
+        local = (origins - self.center).astype(np.float32)
+        dists = np.empty(n, np.float32)
+        dists[:] = length
+        result = self.cast_local(local, directions.astype(np.float32), dists)
+        triangle = result["primID"].astype(np.int64)
+        hit = triangle >= 0
+        distance = np.where(hit, result["tfar"].astype(np.float64), np.inf)
+        return Hits(np.where(hit, triangle, -1), distance, result["u"].astype(np.float64),
+                    result["v"].astype(np.float64))
+
+    def cast_local(self, origins: np.ndarray, directions: np.ndarray,
+                   lengths: np.ndarray) -> dict[str, np.ndarray]:
+        """Nearest hits of rays already in the tracer's recentred float32 frame (hot path).
+
+        origins: (n, 3) float32 world position − ``center``; directions: (n, 3) float32 unit;
+        lengths: (n,) float32, overwritten. Returns embreex's arrays: ``primID`` (n,) int32 world
+        triangle or −1, ``tfar`` (n,) float32 distance, ``u``/``v`` (n,) float32 barycentrics.
+        """
+        if self.triangle_count == 0:
+            n = len(origins)
+            return {"primID": np.full(n, -1, np.int32), "tfar": lengths,
+                    "u": np.zeros(n, np.float32), "v": np.zeros(n, np.float32)}
+        if self.alpha is None:
+            return self._scene.run(origins, directions, dists=lengths, output=1)
+        limit = lengths.astype(np.float64)
+        result = self._scene.run(origins, directions, dists=lengths, output=1)
+        pass_alpha(self._run, self.alpha, origins, directions, limit, result)
+        return result
+
+    def _run(self, origins: np.ndarray, directions: np.ndarray,
+             lengths: np.ndarray) -> dict[str, np.ndarray]:
+        """Embree's nearest hits of float32 rays in the recentred frame, no alpha test."""
+        return self._scene.run(np.ascontiguousarray(origins), np.ascontiguousarray(directions),
+                               dists=lengths, output=1)
+
+    def occluded(self, origins: np.ndarray, directions: np.ndarray,
+                 length: np.ndarray | float) -> np.ndarray:
+        """(n,) bool: whether anything lies along each ray within ``length`` (shadow rays)."""
+        n = len(origins)
+        if n == 0 or self.triangle_count == 0:
+            return np.zeros(n, bool)
+        local = (origins - self.center).astype(np.float32)
+        dists = np.empty(n, np.float32)
+        dists[:] = length
+        directions = directions.astype(np.float32)
+        limit = dists.astype(np.float64)
+        result = self._scene.run(local, directions, dists=dists, query="OCCLUDED")
+        blocked = result >= 0
+        if self.alpha is not None and blocked.any():  # blocked maybe only by see-through hits
+            rows = np.flatnonzero(blocked)
+            again = self._run(local[rows], directions[rows], limit[rows].astype(np.float32))
+            pass_alpha(self._run, self.alpha, local[rows], directions[rows], limit[rows], again)
+            blocked[rows] = again["primID"] >= 0
+        return blocked

@@ -1,0 +1,1 @@
+"""Incremental rebakes: the bake state, what changed since it, and the texels recomputed."""

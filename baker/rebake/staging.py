@@ -1,0 +1,48 @@
+"""The bake state written beside the rest of a bake, and put in place only once the output is."""
+
+from __future__ import annotations
+
+from concurrent.futures import Future, ThreadPoolExecutor
+from pathlib import Path
+
+from baker.pipeline.full import Baking
+from baker.pipeline.parts import PerTexel
+from baker.rebake.incremental import bake_state_writer
+from baker.run.atomic import discard_staged, rename_staged, stage_atomically
+from baker.run.spill import remove_later, set_aside
+from baker.settings import Settings
+
+
+class StateStaging:
+    """The bake state (docs/bake_state.md), written on a thread of its own into a temporary file
+    beside ``path`` from the moment the texels' results are final (``start``), so that it is
+    written while the pages are denoised, post-processed and encoded and the output written
+    (its CRCs and file writes release the GIL, as numba's kernels and zlib do); put in place
+    only once the output is (``put_in_place``), removed if anything fails (``discard``)."""
+
+    def __init__(self, executor: ThreadPoolExecutor, path: Path, settings: Settings):
+        self._executor, self._path, self._settings = executor, path, settings
+        self._future: Future | None = None
+
+    def start(self, baking: "Baking", per_texel: PerTexel, fingerprint: dict | None = None
+              ) -> None:
+        """Begin writing the state of ``baking``'s texels ``per_texel`` (``fingerprint``: the
+        scene's, if made already)."""
+        writer = bake_state_writer(baking.scene, baking.world, baking.settings, baking.atlas,
+                                   per_texel, self._settings, fingerprint)
+        self._future = self._executor.submit(stage_atomically, self._path, writer)
+
+    def put_in_place(self) -> None:
+        """Wait for the state to be written and rename it to its path. The state it replaces
+        is freed on a thread of its own (``spill.set_aside``)."""
+        temp = self._future.result()
+        old = set_aside(self._path)
+        try:
+            rename_staged(temp, self._path)
+        finally:
+            if old is not None:
+                remove_later(old)
+
+    def discard(self) -> None:
+        """Wait for the state being written, if any, and remove it."""
+        discard_staged(self._future)

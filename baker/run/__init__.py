@@ -1,0 +1,1 @@
+"""Running work: threads, forked children, progress bars, rows spilled to disk, atomic files."""
