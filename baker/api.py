@@ -10,6 +10,7 @@ from concurrent.futures import ThreadPoolExecutor
 from contextlib import closing
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Callable
 
 from baker.errors import BakerError, InputError, OutputError
 from baker.gltf.files import inside
@@ -31,7 +32,7 @@ from baker.rebake.incremental import (
 )
 from baker.rebake.staging import StateStaging
 from baker.rebake.state import default_path as default_state_path
-from baker.run.atomic import write_atomically
+from baker.run.atomic import Outputs, write_atomically
 from baker.settings import Resolved, Settings
 
 
@@ -52,11 +53,14 @@ class BakeResult:
 
 
 def check_output(input_path: Path, output: Path, overwrite: bool = False,
-                 report_path: Path | None = None) -> None:
+                 report_path: Path | None = None, state_path: Path | None = None,
+                 folders: tuple[Path | None, ...] = ()) -> None:
     """Refuse, before any work, an output that cannot be written or would replace the input.
 
-    The output ends in .glb or .gltf; its folder (and the report's) exists and can be written
-    to; it is the input itself only with ``overwrite`` (the input is then replaced atomically).
+    The output ends in .glb or .gltf; it, the report and the bake state are files (not
+    folders) in folders that exist and can be written to; ``folders`` (``--lightmaps``,
+    ``--error-map``) are not files; the output is the input itself only with ``overwrite``
+    (the input is then replaced atomically).
     """
     if output.suffix.lower() not in (".glb", ".gltf"):
         raise OutputError(f"the output must end in .glb or .gltf, not {output.suffix or '(none)'}",
@@ -65,15 +69,20 @@ def check_output(input_path: Path, output: Path, overwrite: bool = False,
         raise OutputError("the output is the input file: baker replaces its input only when asked",
                           file=str(output), fix="give another output path with -o, or add --overwrite "
                                                 "to replace the input with its bake")
-    if output.is_dir():
-        raise OutputError("the output path is a folder", file=str(output),
-                          fix="give a file name ending in .glb or .gltf")
-    for path in (output, report_path):
-        if path is not None and not path.parent.is_dir():
+    for path in (output, report_path, state_path):
+        if path is None:
+            continue
+        if path.is_dir():
+            raise OutputError("the path is a folder, not a file", file=str(path),
+                              fix="give a file name, or move the folder away")
+        if not path.parent.is_dir():
             raise OutputError(f"the folder {path.parent} does not exist", file=str(path),
                               fix=f"create {path.parent} first, or choose another path")
-        if path is not None:
-            _check_writable(path)
+        _check_writable(path)
+    for folder in folders:
+        if folder is not None and folder.exists() and not folder.is_dir():
+            raise OutputError("is a file, not a folder", file=str(folder),
+                              fix="give a folder (it is made if missing), or remove the file")
 
 
 def _check_writable(path: Path) -> None:
@@ -145,8 +154,11 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
     no ray cast, and anything else is an InputError (nothing written).
     """
     input_path, output = Path(input), Path(output)
-    check_output(input_path, output, overwrite,
-                 None if report_path is None else Path(report_path))
+    state_path = None if state is False else (
+        default_state_path(output) if state is None or state is True else Path(state))
+    check_output(input_path, output, overwrite, None if report_path is None else Path(report_path),
+                 state_path, tuple(None if f is None else Path(f)
+                                   for f in (lightmaps_dir, error_map_dir)))
     settings.check()
     check_format(lightmaps_format)
     started = time.perf_counter()
@@ -154,10 +166,9 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
     with timed(loading, "load"):
         scene = load(input_path, settings.mirror_roughness)
     check_input_kept(scene, output, overwrite)
-    state_path = None if state is False else (
-        default_state_path(output) if state is None or state is True else Path(state))
     with ThreadPoolExecutor(1) as beside:
         staging = None if state_path is None else StateStaging(beside, state_path, settings)
+        outputs = Outputs()  # every file of the bake, put in place together (run/atomic.py)
         try:
             try:
                 done, rebaked = bake_or_rebake(scene, settings, state_path, incremental, quiet,
@@ -175,25 +186,42 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
                                resolved.clip_percentile)
                 info = write(scene, done.atlas, pages, output,
                              WriteOptions(encoding=resolved.encoding, occlusion=resolved.occlusion,
-                                          clip_percentile=resolved.clip_percentile))
+                                          clip_percentile=resolved.clip_percentile), outputs)
                 if lightmaps_dir is not None:
-                    write_page_files(Path(lightmaps_dir), output.stem, pages,
-                                     done.lightmaps.light, lightmaps_format)
+                    write_page_files(outputs.folder(Path(lightmaps_dir)), output.stem, pages,
+                                     done.lightmaps.light, lightmaps_format, outputs.stage)
                 if error_map_dir is not None:  # per-texel standard error pages (errormap.py)
-                    write_error_maps(Path(error_map_dir), output.stem, done, write_atomically)
+                    write_error_maps(outputs.folder(Path(error_map_dir)), output.stem, done,
+                                     outputs.stage)
                 if staging is not None:
-                    staging.put_in_place()
-                    record_full_bake(state_path, rebaked, time.perf_counter() - started)
+                    staging.stage_into(outputs)
+                    record_full_bake(state_path, rebaked, time.perf_counter() - started,
+                                     outputs.stage)
+            seconds = time.perf_counter() - started
+            report = _report(input_path, output, done, info, pages, times, seconds,
+                             summary(rebaked, state_path, incremental, seconds))
+            if report_path is not None:
+                outputs.stage(Path(report_path), json.dumps(report, indent=2).encode())
+            outputs.commit()
         except BaseException:
+            outputs.discard()
             if staging is not None:
                 staging.discard()
             raise
-    seconds = time.perf_counter() - started
-    rmse = done.rmse_estimate()
+    return BakeResult(output=output, settings=resolved, plan=done.plan, texels=done.tally.texels,
+                      rays=done.tally.rays, pages=done.atlas.page_count, seconds=seconds,
+                      rmse_estimate=report["rmse_estimate"], report=report,
+                      rebake=details(report["rebake"], rebaked))
+
+
+def _report(input_path: Path, output: Path, done, info, pages, times: dict[str, float],
+            seconds: float, rebake: dict) -> dict:
+    """The JSON-able report of a bake (``--report``): settings, plan, atlas, texels, rays, times,
+    warnings and notes, each page's intensity, and the rebake's ``summary``."""
     ambient, atlas = done.ambient, done.atlas
-    report = {
+    return {
         "input": str(input_path), "output": str(output),
-        "settings": resolved.as_dict(),
+        "settings": done.settings.as_dict(),
         "plan": done.plan.as_dict(),
         "ambient": {"r_ave": ambient.r_ave.tolist(), "intensity": ambient.intensity.tolist(),
                     "source": ambient.source, "series_truncated": ambient.truncated},
@@ -203,21 +231,15 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
         "shadow_rays": done.tally.shadow_rays,
         "rays_per_second": done.tally.rays / times["trace"] if times["trace"] > 0 else 0.0,
         "stage_seconds": times, "seconds": seconds,
-        "rmse_estimate": rmse,
+        "rmse_estimate": done.rmse_estimate(),
         "validity": done.tally.states,
         "denoise": done.denoised.as_dict() if done.denoised is not None else {"denoised": False},
         "notes": list(info.notes) + clipping_notes(pages),
         "warnings": input_warnings(done.scene, done.world),  # dropped or changed, counted
         "lightmap_pages": [{"intensity": page.intensity, "peak": page.peak,
                             "clipped_fraction": page.clipped} for page in pages],
-        "rebake": summary(rebaked, state_path, incremental, seconds),
+        "rebake": rebake,
     }
-    if report_path is not None:
-        write_atomically(Path(report_path), json.dumps(report, indent=2).encode())
-    return BakeResult(output=output, settings=resolved, plan=done.plan, texels=done.tally.texels,
-                      rays=done.tally.rays, pages=atlas.page_count, seconds=seconds,
-                      rmse_estimate=rmse, report=report,
-                      rebake=details(report["rebake"], rebaked))
 
 
 def clipping_notes(pages) -> list[str]:
@@ -228,14 +250,15 @@ def clipping_notes(pages) -> list[str]:
             for p, page in enumerate(pages) if page.clipped > 0]
 
 
-def write_page_files(folder: Path, stem: str, pages, light=None, format: str = "png") -> list[Path]:
-    """Write each lightmap page as ``<stem>_lightmap_<p>.<format>`` in ``folder`` (made if
-    needed): the embedded PNG, or with ``light`` (P, H, W, 3) the float page as .hdr or .exr."""
-    folder.mkdir(parents=True, exist_ok=True)
+def write_page_files(folder: Path, stem: str, pages, light=None, format: str = "png",
+                     write: Callable[[Path, bytes], None] = write_atomically) -> list[Path]:
+    """Write each lightmap page as ``<stem>_lightmap_<p>.<format>`` in the existing ``folder``
+    with ``write(path, bytes)``: the embedded PNG, or with ``light`` (P, H, W, 3) the float page
+    as .hdr or .exr."""
     paths = []
     for p, page in enumerate(pages):
         path = folder / f"{stem}_lightmap_{p}.{format}"
-        write_atomically(path, page_file(None if light is None else light[p], page.png, format))
+        write(path, page_file(None if light is None else light[p], page.png, format))
         paths.append(path)
     return paths
 

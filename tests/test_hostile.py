@@ -11,10 +11,12 @@ output as it was.
 
 from __future__ import annotations
 
+import importlib
 import json
 import os
 import secrets
 import socket
+import threading
 from pathlib import Path
 
 import pytest
@@ -226,3 +228,127 @@ def test_image_files_are_copied_under_names_baker_makes(case, capsys):
         "baked.bin", "baked.glb", "baked.gltf", "baked_image0"]
     assert (case.out / "baked_image0").read_bytes() == case.png.read_bytes()
     assert json.loads(output.read_text())["images"][0]["uri"] == "baked_image0"
+
+
+# ------------------------------------------------------------------------------------------------
+# writing: every output staged, put in place together or not at all
+
+
+ALL_OUTPUTS = ("--report", "out/report.json", "--lightmaps", "out/pages", "--error-map",
+               "out/errors", "--full")
+
+
+def _previous_bake(case: Case, capsys) -> dict[str, bytes]:
+    """Bake the case with every output (report, page files, error maps, state and its .json),
+    then make the floor red, so that the next bake changes every file; return the root's files."""
+    args = [str(case.root / a) if a.startswith("out/") else a for a in ALL_OUTPUTS]
+    code, err = case.bake(capsys, *args)
+    assert code == 0, err
+    case.json["materials"][0]["pbrMetallicRoughness"]["baseColorFactor"] = [0.9, 0.1, 0.1, 1.0]
+    return snapshot(case.root)
+
+
+def snapshot(folder: Path) -> dict[str, bytes]:
+    """Every file under ``folder`` but the scene's own (hidden temporaries and set-aside files
+    included), once the previous bake's replaced files are deleted (``spill.remove_later``)."""
+    for thread in threading.enumerate():
+        if thread.name == "baker-remove-later":
+            thread.join()
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*"))
+            if p.is_file() and not p.is_symlink() and p.parent.name != "scene"}
+
+
+def _counting_stage(monkeypatch, fail_at: int | None, count: list[int]) -> None:
+    """Wrap ``stage_atomically`` (the bake's files and its state) so that the ``fail_at``-th
+    file staged runs out of disk space while it is written."""
+    staging = importlib.import_module("baker.run.atomic")
+    real = staging.stage_atomically
+
+    def stage(path, data, durable=False):
+        count.append(path)
+        if len(count) - 1 != fail_at:
+            return real(path, data, durable)
+
+        def full(stream):
+            stream.write(b"half a file")
+            raise OSError(28, "No space left on device")
+        return real(path, full, durable)
+
+    monkeypatch.setattr(staging, "stage_atomically", stage)
+    monkeypatch.setattr(importlib.import_module("baker.rebake.staging"), "stage_atomically", stage)
+
+
+def test_a_full_disk_at_any_file_leaves_every_previous_file(case, capsys, monkeypatch):
+    """The disk fills up while the k-th file of the bake is written (the output, a page file,
+    an error map, the state, its .json, the report): exit 1 naming that file, and every file
+    of the previous bake as it was, no temporary left."""
+    _previous_bake(case, capsys)
+    args = [str(case.root / a) if a.startswith("out/") else a for a in ALL_OUTPUTS]
+    staged: list[Path] = []
+    with monkeypatch.context() as patch:
+        _counting_stage(patch, None, staged)
+        code, err = case.bake(capsys, *args)
+    assert code == 0, err
+    names = {p.name for p in staged}
+    assert {"baked.glb", "baked.glb.bake", "baked.glb.bake.json", "report.json"} <= names
+    assert any("lightmap" in n for n in names) and any("error" in n for n in names)
+    before = snapshot(case.root)
+    case.json["materials"][0]["pbrMetallicRoughness"]["baseColorFactor"] = [0.1, 0.9, 0.1, 1.0]
+    for fail_at in range(len(staged)):
+        with monkeypatch.context() as patch:
+            _counting_stage(patch, fail_at, [])
+            code, err = case.bake(capsys, *args)
+        assert code == 1, (fail_at, err)
+        assert "No space left on device" in err and staged[fail_at].name in err, err
+        assert snapshot(case.root) == before, staged[fail_at]
+
+
+@pytest.mark.parametrize("error", [OSError(28, "No space left on device"), KeyboardInterrupt()])
+def test_a_failure_while_the_files_are_put_in_place_puts_the_previous_ones_back(
+        case, capsys, monkeypatch, error):
+    """The k-th rename fails (or Ctrl-C comes then): the files already renamed get their
+    previous contents back; exit 1 (130)."""
+    staging = importlib.import_module("baker.run.atomic")
+    before = _previous_bake(case, capsys)
+    args = [str(case.root / a) if a.startswith("out/") else a for a in ALL_OUTPUTS]
+    replace, calls = os.replace, []
+    for fail_at in range(7):
+        def failing(source, destination):
+            calls.append(destination)
+            if len(calls) - 1 == fail_at:
+                raise error
+            replace(source, destination)
+
+        calls.clear()
+        with monkeypatch.context() as patch:
+            patch.setattr(staging.os, "replace", failing)
+            code, err = case.bake(capsys, *args)
+        assert code == (130 if isinstance(error, KeyboardInterrupt) else 1), err
+        assert snapshot(case.root) == before, fail_at
+
+
+@pytest.mark.parametrize("option, value, message", [
+    ("--state", "nodir/x.bake", "does not exist"),
+    ("--report", "out", "is a folder"),
+    ("--lightmaps", "out/baked.glb", "is a file"),
+    ("--error-map", "secret.txt", "is a file"),
+    ("--state", "out/folder.bake", "is a folder"),
+])
+def test_an_output_path_that_cannot_be_written_is_refused_before_baking(case, capsys, option,
+                                                                       value, message):
+    before = _previous_bake(case, capsys)
+    (case.out / "folder.bake").mkdir()
+    code, err = case.bake(capsys, option, str(case.root / value))
+    assert code == 1, err
+    assert message in err and err.startswith("baker: error: ") and "fix:" in err, err
+    assert snapshot(case.root) == before
+
+
+def test_the_default_state_path_being_a_folder_is_refused_before_baking(case, capsys):
+    before = _previous_bake(case, capsys)
+    (case.out / "baked.glb.bake").unlink()
+    (case.out / "baked.glb.bake").mkdir()
+    del before["out/baked.glb.bake"]
+    code, err = case.bake(capsys)
+    assert code == 1 and "baked.glb.bake" in err and "is a folder" in err, err
+    assert snapshot(case.root) == before

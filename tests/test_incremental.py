@@ -362,31 +362,32 @@ def test_a_failed_write_leaves_the_old_state_and_no_temporary(base, tmp_path, mo
 
 def test_the_state_a_rebake_replaces_is_freed_beside_it_and_leaves_nothing(base, tmp_path,
                                                                            monkeypatch):
-    """The old state is given a second name before the new one replaces it, and deleted on a
-    thread of its own (``spill.set_aside``, ``remove_later``); once that thread is done, the
-    folder holds the output and the state only."""
+    """The old state (as every file a bake replaces) is given a second name before the new one
+    replaces it, and deleted on a thread of its own (``spill.set_aside``, ``remove_later``);
+    once those threads are done, the folder holds the output and the state only."""
     import importlib
     import threading
 
-    bake_module = importlib.import_module("baker.rebake.staging")
+    staging = importlib.import_module("baker.run.atomic")
     output = _baked_copy(base, tmp_path / "out")
     folder = output.parent
     old = default_path(output).read_bytes()
-    later = []
+    later, threads = [], []
 
     def remove_later(path):
         later.append((path, Path(path).read_bytes() == old))
-        threads = set(threading.enumerate())
+        before = set(threading.enumerate())
         real_remove_later(path)
-        later.extend(t for t in threading.enumerate() if t not in threads)
+        threads.extend(t for t in threading.enumerate() if t not in before)
 
-    real_remove_later = bake_module.remove_later
-    monkeypatch.setattr(bake_module, "remove_later", remove_later)
+    real_remove_later = staging.remove_later
+    monkeypatch.setattr(staging, "remove_later", remove_later)
     edited = _room(moved(BOXES, "box0", at=(-1.0, 1.3))).save(tmp_path / "edited.glb")
     assert baker.bake(edited, output, SETTINGS, incremental=True).rebake["incremental"]
-    (path, was_the_old_state), thread = later
-    assert was_the_old_state and Path(path).parent == folder
-    thread.join()
+    assert [was_the_old_state for _, was_the_old_state in later].count(True) == 1
+    assert all(Path(path).parent == folder for path, _ in later)
+    for thread in threads:
+        thread.join()
     assert sorted(p.name for p in folder.iterdir()) == sorted(
         [output.name, default_path(output).name])
     assert default_path(output).read_bytes() != old

@@ -19,7 +19,7 @@ import pygltflib
 import pytest
 from PIL import Image as PILImage
 
-from baker.output import write as write_module
+from baker.run import atomic as staging
 from baker.atlas.layout import Atlas, InstanceUV
 from baker.image.encode import EncodedPage
 from baker.errors import OutputError
@@ -480,15 +480,21 @@ def test_failure_midway_leaves_existing_output_intact(tmp_path, baked, monkeypat
     bin_path.write_bytes(b"old bin")
     before = set(tmp_path.iterdir())
 
-    def failing_replace(src, dst):
-        raise OSError(28, "No space left on device")
+    replace, calls = os.replace, []
 
-    monkeypatch.setattr(write_module.os, "replace", failing_replace)
+    def failing_replace(src, dst):  # the .bin goes into place, then the .gltf fails
+        calls.append(dst)
+        if len(calls) == 2:
+            raise OSError(28, "No space left on device")
+        replace(src, dst)
+
+    monkeypatch.setattr(staging.os, "replace", failing_replace)
     with pytest.raises(OutputError):
         write(_scene(source), _atlas(), _pages(), output, WriteOptions())
     assert output.read_text() == "old gltf"
     assert bin_path.read_bytes() == b"old bin"
     assert set(tmp_path.iterdir()) == before  # no temporary left behind
+    assert calls[:2] == [bin_path, output]  # the .bin was put back
 
 
 def test_existing_output_is_replaced(tmp_path, baked):
@@ -521,7 +527,7 @@ def test_permission_error_becomes_output_error(tmp_path, baked, monkeypatch):
     def refused(*args, **kwargs):
         raise PermissionError(13, "Permission denied")
 
-    monkeypatch.setattr(write_module.os, "open", refused)
+    monkeypatch.setattr(staging.os, "open", refused)
     with pytest.raises(OutputError) as raised:
         write(_scene(source), _atlas(), _pages(), output, WriteOptions())
     assert "permission" in str(raised.value) and str(output.parent) in raised.value.fix

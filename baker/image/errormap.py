@@ -45,9 +45,8 @@ def error_pages(done) -> np.ndarray:
 
 
 def write_error_maps(folder: Path, stem: str, done, write) -> list[Path]:
-    """Write every page's error map into ``folder`` (made if needed) with ``write(path, bytes)``
-    (an atomic writer); return the paths written."""
-    folder.mkdir(parents=True, exist_ok=True)
+    """Write every page's error map into the existing ``folder`` with ``write(path, bytes)``
+    (an atomic writer, or ``run.atomic.Outputs.stage``); return the paths written."""
     paths = []
     for p, page in enumerate(error_pages(done)):
         grey = np.repeat(page[..., None], 3, axis=-1)

@@ -15,16 +15,14 @@ extras, animations, skins, cameras, names, samplers, GPU-instanced nodes). What 
 - ``asset.extras["baker"]`` records how the lightmap texels encode light.
 
 All buffers are merged into one (GLB BIN chunk, or ``<stem>.bin`` beside a ``.gltf``). Files are
-written to temporaries in the output folder and moved into place with ``os.replace``.
+staged beside their places and moved into place together (``staging.Outputs``).
 """
 
 from __future__ import annotations
 
 import copy
 import json
-import os
 import re
-import secrets
 import struct
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -42,6 +40,7 @@ from baker.gltf.files import inside, read_inside
 from baker.gltf.load import MAX_IMAGE_FILE_BYTES, read_accessor, resolve_buffers
 from baker.gltf.scene import Scene
 from baker.image.encode import PNG_SIGNATURE, EncodedPage
+from baker.run.atomic import Outputs
 
 LIGHTMAP_EXTENSION = "MOZ_lightmap"
 ENCODINGS = ("linear", "srgb")
@@ -98,12 +97,14 @@ class WriteInfo:
 
 
 def write(scene: Scene, atlas: Atlas, pages: Sequence[EncodedPage], output: Path,
-          options: WriteOptions = WriteOptions()) -> WriteInfo:
+          options: WriteOptions = WriteOptions(), outputs: Outputs | None = None) -> WriteInfo:
     """Write ``scene`` with the lightmaps of ``atlas``/``pages`` to ``output`` (.glb or .gltf).
 
     ``pages[p]`` is atlas page p. Nothing is written unless everything succeeds: an existing
-    output is replaced atomically. Raises ``OutputError`` when the output cannot be written,
-    ``InputError`` when the input's buffers or images cannot be read.
+    output is replaced atomically. ``outputs``: stage the files there, for the caller to put in
+    place with its other files (``staging.Outputs.commit``); None: put them in place now.
+    Raises ``OutputError`` when the output cannot be written, ``InputError`` when the input's
+    buffers or images cannot be read.
     """
     output = Path(output)
     kind = _output_kind(output)
@@ -115,7 +116,16 @@ def write(scene: Scene, atlas: Atlas, pages: Sequence[EncodedPage], output: Path
         builder.bake_node(node, baked)
     builder.record_asset()
     files = builder.finish(kind)
-    _commit(files, output)
+    staged = Outputs() if outputs is None else outputs
+    try:
+        for destination, content in files:
+            staged.stage(destination, content, durable=True)
+        if outputs is None:
+            staged.commit()
+    except BaseException:
+        if outputs is None:
+            staged.discard()
+        raise
     return WriteInfo(lightmap_texcoord=dict(builder.texcoord), notes=tuple(builder.notes))
 
 
@@ -519,7 +529,7 @@ class _Builder:
 
     def _external_images(self) -> list[tuple[Path, bytes]]:
         """Images the input names by a relative URI, each a file inside the input's folder
-        (``scene_files``; anything else is an ``InputError``): referred to as they are when the
+        (``gltf.files``; anything else is an ``InputError``): referred to as they are when the
         output goes to the input's folder, else copied beside the output under a name baker
         makes (``image_file_name``), never at a path taken from the input."""
         target = self.output.parent
@@ -577,41 +587,3 @@ def _output_kind(output: Path) -> str:
         raise OutputError("the output path is a folder", file=str(output),
                           fix="give a file name ending in .glb or .gltf")
     return suffix[1:]
-
-
-def _commit(files: list[tuple[Path, bytes]], output: Path) -> None:
-    """Write every file to a temporary beside it, then move them into place in order.
-
-    ``files`` pairs a destination with its bytes. On any failure
-    the temporaries are removed and the existing files are left as they were.
-    """
-    temporaries: list[tuple[Path, Path]] = []
-    current = output
-    try:
-        for destination, content in files:
-            current = destination
-            temporary = destination.with_name(f".{destination.name}.{secrets.token_hex(4)}.tmp")
-            temporaries.append((temporary, destination))
-            descriptor = os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
-            with os.fdopen(descriptor, "wb") as stream:
-                stream.write(content)
-                stream.flush()
-                os.fsync(stream.fileno())
-        for temporary, destination in temporaries:
-            current = destination
-            os.replace(temporary, destination)
-    except PermissionError as error:
-        raise OutputError(f"no permission to write {current}", file=str(output),
-                          fix=f"choose a folder you can write to, or change the permissions of "
-                              f"{current.parent}") from error
-    except OSError as error:
-        raise OutputError(f"cannot write {current}: {error.strerror or error}", file=str(output),
-                          fix="check the disk space and the output folder") from error
-    finally:
-        for temporary, _ in temporaries:
-            try:
-                temporary.unlink()
-            except FileNotFoundError:
-                pass
-            except OSError:
-                pass

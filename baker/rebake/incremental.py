@@ -1125,11 +1125,12 @@ def bake_state_writer(scene: Scene, world: World, resolved, atlas, per_texel,
     return lambda file: state_file.write_state(file, state)
 
 
-def record_full_bake(path, rebaked, seconds: float) -> None:
+def record_full_bake(path, rebaked, seconds: float, write) -> None:
     """After a full bake, record beside its state at ``path`` the ``seconds`` it took
-    (``state.timing_path``), which the reports of the rebakes that follow compare with."""
+    (``state.timing_path``), which the reports of the rebakes that follow compare with;
+    ``write(path, bytes)`` writes it (``run.atomic.Outputs.stage``)."""
     if not isinstance(rebaked, Rebaked):
-        state_file.save_full_bake_seconds(path, seconds)
+        state_file.save_full_bake_seconds(path, seconds, write)
 
 
 def summary(rebaked, state_path, incremental: bool, seconds: float | None = None) -> dict:

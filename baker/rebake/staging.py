@@ -1,4 +1,4 @@
-"""The bake state written beside the rest of a bake, and put in place only once the output is."""
+"""The bake state written beside the rest of a bake, and put in place with the bake's other files."""
 
 from __future__ import annotations
 
@@ -8,8 +8,7 @@ from pathlib import Path
 from baker.pipeline.full import Baking
 from baker.pipeline.parts import PerTexel
 from baker.rebake.incremental import bake_state_writer
-from baker.run.atomic import discard_staged, rename_staged, stage_atomically
-from baker.run.spill import remove_later, set_aside
+from baker.run.atomic import Outputs, remove_temporary, stage_atomically
 from baker.settings import Settings
 
 
@@ -18,7 +17,8 @@ class StateStaging:
     beside ``path`` from the moment the texels' results are final (``start``), so that it is
     written while the pages are denoised, post-processed and encoded and the output written
     (its CRCs and file writes release the GIL, as numba's kernels and zlib do); put in place
-    only once the output is (``put_in_place``), removed if anything fails (``discard``)."""
+    only with the output and every other file of the bake (``stage_into``, ``run.atomic.Outputs``),
+    removed if anything fails (``discard``)."""
 
     def __init__(self, executor: ThreadPoolExecutor, path: Path, settings: Settings):
         self._executor, self._path, self._settings = executor, path, settings
@@ -32,17 +32,15 @@ class StateStaging:
                                    per_texel, self._settings, fingerprint)
         self._future = self._executor.submit(stage_atomically, self._path, writer)
 
-    def put_in_place(self) -> None:
-        """Wait for the state to be written and rename it to its path. The state it replaces
-        is freed on a thread of its own (``spill.set_aside``)."""
-        temp = self._future.result()
-        old = set_aside(self._path)
-        try:
-            rename_staged(temp, self._path)
-        finally:
-            if old is not None:
-                remove_later(old)
+    def stage_into(self, outputs: Outputs) -> None:
+        """Wait for the state to be written and add it to the files ``outputs`` puts in place."""
+        outputs.adopt(self._future.result(), self._path)
 
     def discard(self) -> None:
         """Wait for the state being written, if any, and remove it."""
-        discard_staged(self._future)
+        if self._future is None:
+            return
+        try:
+            remove_temporary(self._future.result())
+        except Exception:
+            pass  # it failed too; the bake's own error is the one to report

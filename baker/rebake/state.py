@@ -30,7 +30,7 @@ import struct
 import zipfile
 from dataclasses import dataclass, fields, is_dataclass
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import Any, BinaryIO, Callable
 
 import numpy as np
 from isal import isal_zlib
@@ -63,11 +63,12 @@ def timing_path(state_path: str | Path) -> Path:
     return state_path.with_name(state_path.name + ".json")
 
 
-def save_full_bake_seconds(state_path: str | Path, seconds: float) -> None:
-    """Record, atomically, that a full bake for this state took ``seconds``."""
-
-    write_atomically(timing_path(state_path),
-                     json.dumps({"full_bake_seconds": round(float(seconds), 3)}).encode())
+def save_full_bake_seconds(state_path: str | Path, seconds: float,
+                           write: Callable[[Path, bytes], None] = write_atomically) -> None:
+    """Record that a full bake for this state took ``seconds``, with ``write(path, bytes)``
+    (an atomic writer, or ``run.atomic.Outputs.stage``)."""
+    write(timing_path(state_path),
+          json.dumps({"full_bake_seconds": round(float(seconds), 3)}).encode())
 
 
 def last_full_bake_seconds(state_path: str | Path) -> float | None:
