@@ -502,7 +502,7 @@ def _nan_position(tmp_path):
 
 def _unsupported_required(tmp_path):
     path = _valid(tmp_path, "datauri")
-    change = lambda d: d.update(extensionsRequired=["KHR_draco_mesh_compression"])  # noqa: E731
+    change = lambda d: d.update(extensionsRequired=["ACME_materials_glitter"])  # noqa: E731
     return _edit_json(path, change), "extensionsRequired"
 
 

@@ -9,7 +9,8 @@ bake to it and leaves everything else as it was.
 In order, ``load`` does:
 1. read the file (``.gltf`` JSON or ``.glb``, told apart by the magic bytes, not the suffix) and
    check ``asset.version`` and ``extensionsRequired``;
-2. resolve every buffer to bytes (GLB binary chunk, data URI, or a file beside the ``.gltf``);
+2. resolve every buffer to bytes (GLB binary chunk, data URI, or a file beside the ``.gltf``),
+   and decode Draco and meshopt compressed geometry into plain accessors (``decompress``);
 3. read the materials, then the default material glTF prescribes (appended last), and decode the
    images their base colour and emissive textures use; check that every other image file is
    there, so that nothing the output carries is found missing after the bake;
@@ -57,6 +58,7 @@ from PIL import Image as PILImage
 from baker.errors import InputError
 from baker.gltf import document as gltf_document
 from baker.gltf.document import COMPONENT_DTYPES
+from baker.gltf.decompress import COMPRESSION_EXTENSIONS, compressed, decompressed, is_meshopt_fallback
 from baker.gltf.files import read_inside
 from baker.gltf.materials import (
     MIRROR_ROUGHNESS,
@@ -92,7 +94,7 @@ VIEW_ONLY_EXTENSIONS = frozenset(
 the default of several material variants, emission's scale, which is read): the diffuse light a
 lightmap stores is baked the same with or without them, so they need nothing from baker."""
 
-SUPPORTED_EXTENSIONS = VIEW_ONLY_EXTENSIONS | frozenset(
+SUPPORTED_EXTENSIONS = VIEW_ONLY_EXTENSIONS | COMPRESSION_EXTENSIONS | frozenset(
     {
         "KHR_materials_unlit",
         "KHR_texture_transform",
@@ -155,6 +157,8 @@ MAX_IMAGE_PIXELS = 16384 * 8192
 """Largest colour texture decoded (512 MiB as RGBA); larger ones are refused from their header."""
 MAX_IMAGE_FILE_BYTES = 1 << 30
 """Most bytes read of an image file (a PNG of ``MAX_IMAGE_PIXELS`` is at most about 512 MiB)."""
+MAX_FALLBACK_BYTES = 1 << 30
+"""Largest meshopt fallback buffer without data that baker decodes views into (zeros first)."""
 MAX_ACCESSOR_COMPONENTS = 1 << 28
 """Largest accessor without a bufferView (all zeros: nothing in the file bounds its count)."""
 _GPU_REASON = "GPU-instanced (EXT_mesh_gpu_instancing): occluder only"
@@ -196,7 +200,12 @@ def load(path: str | Path, mirror_roughness: float = MIRROR_ROUGHNESS) -> Scene:
     """
     path = Path(path)
     document = read_document(path)
-    ctx = _Context(document, resolve_buffers(document, path), str(path), path.parent)
+    buffers = resolve_buffers(document, path)
+    kept = None
+    if compressed(document):
+        document, buffers = decompressed(document, buffers, str(path))
+        kept = tuple(buffers)
+    ctx = _Context(document, buffers, str(path), path.parent)
     materials = _read_materials(ctx)
     placements = _walk_nodes(ctx)
     images = _images(ctx)
@@ -214,6 +223,7 @@ def load(path: str | Path, mirror_roughness: float = MIRROR_ROUGHNESS) -> Scene:
         skipped=tuple(ctx.skipped),
         lights=lights,
         mirror_roughness=float(mirror_roughness),
+        buffers=kept,
     )
 
 
@@ -462,6 +472,11 @@ def _buffer_bytes(buffer: pygltflib.Buffer, blob: bytes | None, path: Path, wher
     if not isinstance(length, int) or isinstance(length, bool) or length < 0:
         raise _invalid(f"byteLength {length!r} is not a byte count", file, where)
     if buffer.uri is None:
+        if blob is None and is_meshopt_fallback(buffer):
+            if length > MAX_FALLBACK_BYTES:
+                raise _invalid(f"meshopt fallback buffer of {length:,} bytes, more than baker "
+                               f"decodes ({MAX_FALLBACK_BYTES:,})", file, where)
+            return bytes(length)  # where decompress.decompressed puts the decoded views
         if blob is None:
             raise _invalid("buffer has no uri and the file has no GLB binary chunk for it", file, where)
         data = blob
@@ -992,11 +1007,6 @@ def _read_primitive(
     attributes = {k: v for k, v in (raw if isinstance(raw, dict) else vars(raw)).items() if v is not None}
     if "POSITION" not in attributes:
         ctx.skip(where, "no POSITION attribute: nothing to place")
-        return None
-    position = attributes["POSITION"]
-    accessor = _item(ctx.document.accessors, position, "accessors", ctx.file, f"{where}.attributes.POSITION")
-    if "KHR_draco_mesh_compression" in (primitive.extensions or {}) and accessor.bufferView is None:
-        ctx.skip(where, "Draco-compressed without uncompressed data (KHR_draco_mesh_compression): left out")
         return None
     positions = _attribute(ctx, attributes, "POSITION", (3,), None, where)
     n = len(positions)

@@ -175,3 +175,6 @@ class Scene:
     lights: tuple[Light, ...] = field(default=())  # KHR_lights_punctual lights, in node order
     # Metals smoother than this are mirrors (materials.py); a setting, carried with the scene.
     mirror_roughness: float = 0.1
+    # The buffers of a compressed file as decoded (decompress.py), for the writer, which reads
+    # the file's buffers again otherwise (a decoded document's cannot be read from the file).
+    buffers: tuple[bytes, ...] | None = None

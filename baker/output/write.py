@@ -225,7 +225,8 @@ class _Builder:
         self.options = options
         self.base = Path(scene.path).parent
         self.data = _document_data(scene.document)
-        self.source_buffers = resolve_buffers(scene.document, scene.path)
+        self.source_buffers = (list(scene.buffers) if scene.buffers is not None
+                               else resolve_buffers(scene.document, scene.path))
         self.blob = bytearray()
         self._merge_buffers()
         self.source_cache: dict[int, np.ndarray] = {}
@@ -450,10 +451,6 @@ class _Builder:
             rows = vertices[used]
             new = {key: copy.deepcopy(value) for key, value in primitive.items()
                    if key not in ("attributes", "indices", "mode", "targets", "material")}
-            extensions = new.get("extensions", {})
-            extensions.pop("KHR_draco_mesh_compression", None)  # the attributes are plain now
-            if not extensions:
-                new.pop("extensions", None)
             new_attributes = {name: self._gather(accessor, rows, bounds=name == "POSITION")
                               for name, accessor in attributes.items()}
             lightmap_uv = self._add_accessor(uv[used].astype(np.float32), _FLOAT, "VEC2")
