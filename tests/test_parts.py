@@ -23,14 +23,15 @@ def _bake(path, out, **settings):
 @pytest.mark.parametrize("name", sorted(SCENES))
 def test_parts_on_disk_give_the_bytes_of_one_part(name, tmp_path, monkeypatch):
     path, page = SCENES[name]
-    whole = _bake(path, tmp_path / "whole.glb", page_size=page)
+    # The same file name in two folders: the output names its images after itself.
+    (tmp_path / "whole").mkdir()
+    whole = _bake(path, tmp_path / "whole" / "baked.glb", page_size=page)
     monkeypatch.setattr(parts, "PART_TEXELS", 997)  # several parts, cut anywhere
     (tmp_path / "parts").mkdir()
-    split = _bake(path, tmp_path / "parts" / "split.glb", page_size=page)
+    split = _bake(path, tmp_path / "parts" / "baked.glb", page_size=page)
     assert split.texels == whole.texels > 3 * 997
-    assert (tmp_path / "parts" / "split.glb").read_bytes() == (tmp_path / "whole.glb").read_bytes()
-    assert (tmp_path / "parts" / "split.glb.bake").read_bytes() == \
-        (tmp_path / "whole.glb.bake").read_bytes()
+    for name in ("baked.glb", "baked.glb.bake"):
+        assert (tmp_path / "parts" / name).read_bytes() == (tmp_path / "whole" / name).read_bytes()
     for key in ("rays", "shadow_rays", "validity", "rmse_estimate"):
         assert split.report[key] == pytest.approx(whole.report[key], rel=1e-12), key
     assert not [p for p in (tmp_path / "parts").iterdir()

@@ -129,10 +129,21 @@ class Computed:
         return float(np.sqrt(self.obscurance_rmse() ** 2 + direct))
 
 
-def lighting(scene: Scene, world: World, resolved: Resolved, times: dict[str, float]):
-    """Embree's scene, the light sources, the power they deliver, I_A and R_ave, and the plan:
-    what a bake and a rebake both need before any texel. Returns (tracer, sources, power,
-    ambient, plan); adds the stages "lights" and "plan" to ``times``."""
+@dataclass(frozen=True)
+class Lighting:
+    """What a bake and a rebake both need before any texel (``lighting``): Embree's scene, the
+    light sources, the power they deliver, I_A and R_ave, and the plan."""
+
+    tracer: Tracer
+    sources: Sources
+    power: Power
+    ambient: Ambient
+    plan: Plan
+
+
+def lighting(scene: Scene, world: World, resolved: Resolved, times: dict[str, float]
+             ) -> Lighting:
+    """The scene's ``Lighting``; adds the stages "lights" and "plan" to ``times``."""
     with timed(times, "lights"):
         tracer = Tracer(world)
         sources = light_sources(scene, world, resolved)
@@ -140,7 +151,7 @@ def lighting(scene: Scene, world: World, resolved: Resolved, times: dict[str, fl
     with timed(times, "plan"):
         ambient = ambient_terms(scene, world, resolved.ambient, power)
         plan = make_plan(scene, ambient, resolved.rho, sources)
-    return tracer, sources, power, ambient, plan
+    return Lighting(tracer, sources, power, ambient, plan)
 
 
 @dataclass(frozen=True)
@@ -150,14 +161,42 @@ class Baking:
     scene: Scene
     world: World
     settings: Resolved
-    tracer: Tracer
-    sources: Sources
-    ambient: Ambient
+    lit: Lighting
     atlas: Atlas
     coverage: Coverage | None = None  # which triangle owns each texel (rasterise.cover)
     owned: Owners | None = None  # what the texels take from their triangles (rasterise.owners)
     faces: Faces | None = None  # back faces, for the validity probes
     surfaces: Surfaces | None = None  # shading of obscurance hits (integrate.surfaces_of)
+
+    @property
+    def tracer(self) -> Tracer:
+        return self.lit.tracer
+
+    @property
+    def sources(self) -> Sources:
+        return self.lit.sources
+
+    @property
+    def ambient(self) -> Ambient:
+        return self.lit.ambient
+
+
+@dataclass(frozen=True)
+class BakedPart:
+    """One part's texels and what was computed for them (``_bake_part``): the texels with their
+    sample points moved by the probes, what the state keeps of them, validity, obscurance terms,
+    direct light, and the full-GI indirect irradiance (k, 3) with ``--method gi``, else None."""
+
+    texels: Texels
+    points: TexelPoints
+    validity: Validity
+    terms: Terms
+    direct: Direct
+    indirect: np.ndarray | None = None
+
+    def held(self) -> PerTexel:
+        """The part's results as a bake's ``PerTexel`` (a bake of one part)."""
+        return PerTexel.held(self.texels, self.points, self.validity, self.terms, self.direct)
 
 
 class StateSink(Protocol):
@@ -184,7 +223,7 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True,
         world = build_world(scene)
     area, diagonal = bounds_of_baked(world, scene)
     resolved = resolve(settings, area, diagonal)
-    tracer, sources, power, ambient, plan = lighting(scene, world, resolved, times)
+    lit = lighting(scene, world, resolved, times)
     with timed(times, "unwrap"):
         try:
             atlas = unwrap(scene, world, resolved)
@@ -198,45 +237,43 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True,
         owned = owners(atlas, world, coverage)
     count = len(coverage.key)
     spill = Spill(spill_folder) if len(part_slices(count)) > 1 else None
-    baking = Baking(scene, world, resolved, tracer, sources, ambient, atlas, coverage, owned,
-                     Faces(scene, world), surfaces_of(scene, world))
+    baking = Baking(scene, world, resolved, lit, atlas, coverage, owned, Faces(scene, world),
+                    surfaces_of(scene, world))
     try:
-        pages, held = _bake_parts(baking, spill, times, quiet)
+        pages, last = _bake_parts(baking, spill, times, quiet)
         per_texel = (PerTexel.spilled(spill, atlas, world) if spill is not None
-                     else PerTexel.held(*held))
-        return _finish_pages(baking, power, plan, per_texel, pages, times, staging)
+                     else last.held())
+        return _finish_pages(baking, per_texel, pages, times, staging)
     except BaseException:  # an error or Ctrl-C: no spilled rows left behind
         if spill is not None:
             spill.close()
         raise
 
 
-def _bake_parts(baking: Baking, spill: Spill | None, times: dict[str, float], quiet: bool):
+def _bake_parts(baking: Baking, spill: Spill | None, times: dict[str, float], quiet: bool
+                ) -> tuple["_Pages", BakedPart]:
     """Bake the texels a part at a time, each composed into the pages as it is done and, with
-    a ``spill``, its rows appended to it. Returns the composed ``_Pages``, and the last part's
-    (texels, validity, terms, direct) — all the texels' when there is one part."""
+    a ``spill``, its rows appended to it. Returns the composed ``_Pages``, and the last
+    ``BakedPart`` — all the texels' when there is one part."""
     count = len(baking.coverage.key)
     pages = _Pages.blank(baking)
     with bar(count * (1 + baking.sources.any()), "baking", wanted(quiet)) as advance:
         for rows in part_slices(count):
-            texels, points, validity, terms, direct, indirect = _bake_part(baking, rows, times,
-                                                                           advance)
+            part = _bake_part(baking, rows, times, advance)
             with timed(times, "compose"):
-                pages.add(baking, texels, validity, terms, direct, indirect)
+                pages.add(baking, part.texels, part.validity, part.terms, part.direct,
+                          part.indirect)
             if spill is not None:
                 with timed(times, "spill"):
-                    for name, group in (("texels", points), ("validity", validity),
-                                        ("terms", terms), ("direct", direct)):
+                    for name, group in (("texels", part.points), ("validity", part.validity),
+                                        ("terms", part.terms), ("direct", part.direct)):
                         spill.append(name, group)
-    return pages, (texels, points, validity, terms, direct)
+    return pages, part
 
 
 def _bake_part(baking: Baking, rows: slice, times: dict[str, float],
-               advance: Callable[[int], None]):
-    """Make, probe, trace and light the texels ``rows``: (texels with their sample points moved
-    by the probes, what the state keeps of them (``TexelPoints``), validity, obscurance terms,
-    direct light, and the full-GI indirect irradiance (k, 3) with ``--method gi``, else
-    None)."""
+               advance: Callable[[int], None]) -> BakedPart:
+    """Make, probe, trace and light the texels ``rows``."""
     s, ambient, scene, world, tracer = (baking.settings, baking.ambient, baking.scene,
                                         baking.world, baking.tracer)
     with timed(times, "rasterise"):
@@ -255,25 +292,23 @@ def _bake_part(baking: Baking, rows: slice, times: dict[str, float],
         with timed(times, "gi"):
             indirect = indirect_light(scene, world, tracer, baking.sources, texels, s,
                                       s.rays).irradiance
-    return texels, points, validity, terms, direct, indirect
+    return BakedPart(texels, points, validity, terms, direct, indirect)
 
 
-def finish(scene: Scene, world: World, resolved: Resolved, tracer: Tracer, sources: Sources,
-           power: Power, ambient: Ambient, plan: Plan, atlas: Atlas, texels: Texels,
-           points: TexelPoints, validity: Validity, terms: Terms, direct: Direct,
-           times: dict[str, float], staging: StateSink | None = None,
+def finish(scene: Scene, world: World, resolved: Resolved, lit: Lighting, atlas: Atlas,
+           per_texel: PerTexel, times: dict[str, float], staging: StateSink | None = None,
            fingerprint: dict | None = None) -> Computed:
-    """From the texels' terms, all held in memory, to the post-processed float lightmaps: an
-    incremental rebake (incremental.py) ends as a full bake does, so both give the same bytes
-    (``staging`` and the scene's ``fingerprint``: the bake state, as in ``compute``).
+    """From the texels' results, all held in memory (``PerTexel.held``), to the post-processed
+    float lightmaps: an incremental rebake (``rebake.incremental``) ends as a full bake does, so
+    both give the same bytes (``staging`` and the scene's ``fingerprint``: the bake state, as in
+    ``compute``).
     """
-    baking = Baking(scene, world, resolved, tracer, sources, ambient, atlas)
+    baking = Baking(scene, world, resolved, lit, atlas)
     with timed(times, "compose"):
         pages = _Pages.blank(baking)
-        pages.add(baking, texels, validity, terms, direct)
-    return _finish_pages(baking, power, plan,
-                         PerTexel.held(texels, points, validity, terms, direct), pages, times,
-                         staging, fingerprint)
+        pages.add(baking, per_texel.texels, per_texel.validity, per_texel.terms,
+                  per_texel.direct)
+    return _finish_pages(baking, per_texel, pages, times, staging, fingerprint)
 
 
 @dataclass
@@ -301,9 +336,9 @@ class _Pages:
         self.tally.add(terms, direct, validity, effective_r_ave(ambient, rho))
 
 
-def _finish_pages(baking: Baking, power: Power, plan: Plan, per_texel: PerTexel, pages: _Pages,
-                  times: dict[str, float], staging: StateSink | None = None,
-                  fingerprint: dict | None = None) -> Computed:
+def _finish_pages(baking: Baking, per_texel: PerTexel, pages: _Pages, times: dict[str, float],
+                  staging: StateSink | None = None, fingerprint: dict | None = None
+                  ) -> Computed:
     """Start writing the bake state (``staging``, if any: the texels are final), then denoise
     (if asked) and post-process the composed pages."""
     if staging is not None:
@@ -319,8 +354,9 @@ def _finish_pages(baking: Baking, power: Power, plan: Plan, per_texel: PerTexel,
         lightmaps = postprocess(lightmaps, resolved.padding, *masks,
                                 seams=find_seams(baking.atlas, baking.world))
     return Computed(scene=baking.scene, world=baking.world, settings=resolved,
-                    ambient=baking.ambient, plan=plan, atlas=baking.atlas, per_texel=per_texel,
-                    tally=pages.tally, lightmaps=lightmaps, stage_seconds=times,
-                    sources=baking.sources, power=power, denoised=denoised)
+                    ambient=baking.ambient, plan=baking.lit.plan, atlas=baking.atlas,
+                    per_texel=per_texel, tally=pages.tally, lightmaps=lightmaps,
+                    stage_seconds=times, sources=baking.sources, power=baking.lit.power,
+                    denoised=denoised)
 
 

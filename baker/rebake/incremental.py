@@ -43,6 +43,7 @@ from typing import BinaryIO, Callable
 import numpy as np
 
 from baker.atlas import validity as validity_module
+from baker.atlas.layout import Atlas
 from baker.atlas.rasterise import Coverage, Texels, texels_of
 from baker.atlas.validity import Faces, Validity, check_texels
 from baker.errors import SettingsError
@@ -62,6 +63,7 @@ from baker.light.direct import (
 )
 from baker.light.hemisphere import (
     EXACT_RAYS,
+    Surfaces,
     Terms,
     changed_terms,
     ray_changes,
@@ -70,8 +72,15 @@ from baker.light.hemisphere import (
 )
 from baker.light.inner import other_side_rays, translucent
 from baker.light.integrate import integrate
-from baker.pipeline.full import bounds_of_baked, finish, lighting, timed
-from baker.pipeline.parts import TexelPoints, part_slices
+from baker.pipeline.full import (
+    Computed,
+    Lighting,
+    bounds_of_baked,
+    finish,
+    lighting,
+    timed,
+)
+from baker.pipeline.parts import PerTexel, TexelPoints, part_slices
 from baker.rays.sampling import (
     cap_boxes,
     concentric_hemisphere,
@@ -87,7 +96,7 @@ from baker.rays.trace import Hits, Tracer, ray_lift
 from baker.rebake import state as state_file
 from baker.rebake.diff import Diff, diff, fingerprints
 from baker.run.parallel import cores, even_slices, run_chunks
-from baker.settings import TECHNIQUES, Settings, resolve
+from baker.settings import TECHNIQUES, Resolved, Settings, resolve
 
 # Extra reach (in texel sides of each texel) beyond d_max: the validity probes move a sample
 # point by up to rounds × (probe radius + push) sides, then probe a radius further; plus one.
@@ -131,10 +140,10 @@ class Dirty:
 
 @dataclass(frozen=True)
 class Rebaked:
-    """What an incremental rebake computed: the same ``bake.Computed`` a full bake makes, plus
+    """What an incremental rebake computed: the same ``Computed`` a full bake makes, plus
     what changed (``diff``), the dirty texels, and the rays it cast (obscurance + direct)."""
 
-    computed: object
+    computed: Computed
     diff: Diff
     dirty: Dirty
     fingerprints: dict
@@ -946,13 +955,52 @@ def _by_ray(stored: Terms, judge: _HitsCompared, surfaces, settings
 def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
            relight: bool = False, staging=None) -> Rebaked:
     """Recompute the scene's lightmaps from the bake state at ``path``; only what changed
-    (``staging``: where the new bake state starts to be written, as in ``bake.compute``).
+    (``staging``: where the new bake state starts to be written, as in ``pipeline.full.compute``).
 
     Raises FullBake (with the reason) when the state is unusable or the change needs a new
     atlas, new rays for every texel, or a new float32 frame.
     """
-
     times: dict[str, float] = {}
+    start = _compared(scene, settings, path, relight, times)
+    lit = lighting(scene, start.world, start.resolved, times)
+    stored = _stored_texels(scene, start, lit, times)
+    search = _dirty_search(scene, start, lit, stored, times)
+    with timed(times, "trace"):
+        terms, obscurance_rays = _traced_again(scene, start, lit, stored, search)
+    with timed(times, "direct"):
+        direct, direct_rays = _lit_again(scene, start, lit, stored, search)
+    per_texel = PerTexel.held(search.texels, stored.texels, search.validity, terms, direct)
+    done = finish(scene, start.world, start.resolved, lit, stored.atlas, per_texel, times,
+                  staging, start.fingerprint)  # exactly as a full bake goes on
+    rows = np.flatnonzero(search.reason >= 0)
+    dirty = Dirty(rows=rows, reason=search.reason, tested_rays=search.tested,
+                  relit=tuple(start.change.lights_placed))
+    return Rebaked(computed=done, diff=start.change, dirty=dirty, fingerprints=start.fingerprint,
+                   rays=obscurance_rays + direct_rays)
+
+
+@dataclass(frozen=True)
+class _Compared:
+    """The bake state read and compared with the scene (``_compared``): the state, the world,
+    the settings resolved as the last bake resolved them, the scene's fingerprints and the
+    change since the state."""
+
+    stored: state_file.BakeState
+    world: World
+    resolved: Resolved
+    fingerprint: dict
+    change: Diff
+
+    @property
+    def moved(self) -> np.ndarray:
+        """(m,) int64 the instances that moved."""
+        return np.asarray(self.change.moved, np.int64)
+
+
+def _compared(scene: Scene, settings: Settings, path, relight: bool, times: dict[str, float]
+              ) -> _Compared:
+    """Read the state at ``path`` and compare it with ``scene``; FullBake where the change or
+    the settings need every texel anew."""
     with timed(times, "load"):
         try:
             stored = state_file.load(path, state_classes())
@@ -964,9 +1012,10 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
     stored_density = stored.fingerprints["settings"]["values"].get("texel_density")
     if settings.texel_density is None and stored_density is not None and (
             stored_density < resolved.texel_density):
-        # The full bake lowered its derived density until the charts fit a page (bake.compute);
-        # the same scene derives the same density, so take the value it ended with. Were the
-        # geometry different, the unwrap fingerprint below would still call for a full bake.
+        # The full bake lowered its derived density until the charts fit a page
+        # (``pipeline.full.compute``); the same scene derives the same density, so take the
+        # value it ended with. Were the geometry different, the unwrap fingerprint below
+        # would still call for a full bake.
         resolved = replace(resolved, texel_density=stored_density)
     fingerprint = fingerprints(scene, world, resolved, settings)
     change = diff(stored.fingerprints, fingerprint)
@@ -981,130 +1030,192 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
     if getattr(resolved, "supersample", 1) > 1:
         raise FullBake("supersampled shadow and obscurance rays start from sub-texel points "
                        "the rebake does not track yet")
-    old_texels, old_validity = stored.groups["texels"], stored.groups["validity"]
-    old_terms, old_direct = stored.groups["terms"], stored.groups["direct"]
+    return _Compared(stored, world, resolved, fingerprint, change)
+
+
+@dataclass(frozen=True)
+class _Stored:
+    """The last bake's texels as the state keeps them, checked against the scene
+    (``_stored_texels``): ``raw`` the texels remade from the stored coverage (sample points
+    before the validity probes), ``texels`` what the state keeps of their points, and their
+    validity, terms and direct light."""
+
+    atlas: Atlas
+    raw: Texels
+    texels: TexelPoints
+    validity: Validity
+    terms: Terms
+    direct: Direct
+
+
+def _stored_texels(scene: Scene, start: _Compared, lit: Lighting, times: dict[str, float]
+                   ) -> _Stored:
+    """The state's texels and results, remade on the scene's world; FullBake where they do not
+    belong to it (other triangles, other lights) or every texel must sample anew (an emitter
+    moved)."""
+    world, groups = start.world, start.stored.groups
+    old_texels, old_validity = groups["texels"], groups["validity"]
+    old_terms, old_direct = groups["terms"], groups["direct"]
     if old_texels is None or old_validity is None or old_terms is None:
         raise FullBake("the bake state lacks the texels' terms")
-    tracer, sources, power, ambient, plan = lighting(scene, world, resolved, times)
-    atlas = stored.atlas
     if len(old_texels.triangle_texels) != len(world.triangles):
         raise FullBake("the stored texels belong to other triangles")
     with timed(times, "rasterise"):  # the stored coverage: no rasterising again
-        raw = texels_of(atlas, world, Coverage(old_texels.key, old_texels.triangle,
-                                               old_texels.triangle_texels))
-    count = len(raw)
-    if old_direct is None or len(old_direct.punctual) != count or (
+        raw = texels_of(start.stored.atlas, world, Coverage(old_texels.key, old_texels.triangle,
+                                                            old_texels.triangle_texels))
+    sources = lit.sources
+    if old_direct is None or len(old_direct.punctual) != len(raw) or (
             old_direct.punctual.shape[1] != len(sources.lights)):
         raise FullBake("the bake state's direct light does not match the scene's lights")
-    moved = np.asarray(change.moved, np.int64)
-    if sources.emitters is not None and len(moved) and np.isin(
-            world.tri_instance[sources.emitters.triangles], moved).any():
+    if sources.emitters is not None and len(start.moved) and np.isin(
+            world.tri_instance[sources.emitters.triangles], start.moved).any():
         raise FullBake("an emissive node moved: every texel samples the emitters anew")
+    return _Stored(start.stored.atlas, raw, old_texels, old_validity, old_terms, old_direct)
 
-    reason = np.full(count, -1, np.int8)
-    tested = 0
+
+@dataclass
+class _Search:
+    """What the dirty search found (``_dirty_search``), the one mutable record of a rebake:
+    ``reason`` (N,) int8 index into ``REASONS`` per texel (−1: clean), the texels with their
+    sample points as the probes leave them now, their validity, the rays cast to find them,
+    the judge of which rays a move changed (``_HitsCompared``, None without a move) and whether
+    dirty texels take only those rays' change (``by_ray``)."""
+
+    reason: np.ndarray
+    texels: Texels
+    validity: Validity
+    surfaces: Surfaces
+    by_ray: bool
+    judge: "_HitsCompared | None" = None
+    tested: int = 0
+
+
+def _dirty_search(scene: Scene, start: _Compared, lit: Lighting, stored: _Stored,
+                  times: dict[str, float]) -> _Search:
+    """Which texels the change can reach, and why (``REASONS``)."""
+    world, resolved, change, moved = start.world, start.resolved, start.change, start.moved
     surfaces = surfaces_of(scene, world)
     # Texels whose rays changed take only those rays' change (``_by_ray``) when each ray's part
     # of its texel's terms stands alone and their sums are exact: no chains, no other side, no
     # adaptive rounds, albedos within [0, 1].
     by_ray = (surfaces.exact_sums and resolved.rays <= EXACT_RAYS and not translucent(scene).any
               and resolved.target_error is None and not change.recoloured)
-    judge = None
-    texels = replace(raw, position=old_texels.positions(raw.position))  # changed in place below
-    validity = old_validity
+    raw = stored.raw
+    texels = replace(raw, position=stored.texels.positions(raw.position))  # changed in place below
+    search = _Search(np.full(len(raw), -1, np.int8), texels, stored.validity, surfaces, by_ray)
     with timed(times, "dirty"):
         if len(moved):
-            own = np.isin(raw.instance(), moved)
-            reason[own] = REASONS.index("own")
-            old_corners = [_placed_corners(scene, world, i, stored.instance_world[i]) for i in moved]
-            new_corners = [_placed_corners(scene, world, i, scene.instances[i].world) for i in moved]
-            boxes = [(c.reshape(-1, 3).min(0), c.reshape(-1, 3).max(0))
-                     for c in old_corners + new_corners if len(c)]
-            small = _Changed(old_corners + new_corners, world.center)
-            before = _world_before(scene, world, moved, stored.instance_world)
-            tracer_before, faces = Tracer(before), Faces(scene, world)
-            near = _near(raw, boxes, resolved.d_max)
-            # Validity: tangent probes reach a few texel sides; hemisphere probes d_max.
-            close = own | _near(raw, boxes, 0.0)
-            far = np.flatnonzero(near & ~close)
-            meets, n = _probes_meet(small, texels, far, resolved.d_max, resolved.threads,
-                                    _ProbesCompared((tracer, faces),
-                                                    (tracer_before, Faces(scene, before))))
-            tested += n
-            # Texels touching other geometry: which coincident triangle a probe or ray meets
-            # there depends on Embree's BVH, which the move changed (``Validity.touching``).
-            redo = np.union1d(np.union1d(np.flatnonzero(close), far[meets]),
-                              np.flatnonzero(old_validity.touching))
-            checked, fresh = check_texels(scene, world, tracer, take(raw, redo), resolved.d_max,
-                                          faces=faces)
-            tested += len(redo) * (validity_module.HEMISPHERE_RAYS + validity_module.TANGENT_RAYS
-                                   * validity_module.TANGENT_ROUNDS)
-            # Probes that met the moved object mostly find what they found before: such a
-            # texel is dirty only if its rays meet it (below). Touching texels are redone.
-            same = (_same_rows(old_validity, fresh, redo) & ~old_validity.touching[redo]
-                    & (texels.position[redo] == checked.position).all(axis=1))
-            texels.position[redo] = checked.position
-            old_texels.record(redo, checked.position, raw.position[redo])
-            validity = merge(old_validity, fresh, redo)
-            changed = redo[~same]
-            reason[changed[reason[changed] < 0]] = REASONS.index("validity")
-            judge = _HitsCompared(tracer, tracer_before, resolved.d_max, keep=by_ray)
-            tested += _mark_seen(scene, world, small, boxes, texels, reason, "obscurance",
-                                 resolved, judge)
-            rest = np.flatnonzero(reason < 0)
-            shadow, n = _shadow_dirty(scene, world, small, texels, rest, sources, resolved)
-            tested += n
-            reason[rest[shadow]] = REASONS.index("shadow")
+            _moved_reach(scene, start, lit, stored, search)
         if change.recoloured:
             tris = np.flatnonzero(np.isin(world.tri_material, change.recoloured))
             a, b, c = world.corners(tris)
             corners = np.stack([a, b, c], axis=1)
             box = [(corners.reshape(-1, 3).min(0), corners.reshape(-1, 3).max(0))] if len(tris) else []
-            tested += _mark_seen(scene, world, _Changed([corners], world.center), box,
-                                 texels, reason, "colour", resolved,
-                                 _NotStopped(tracer, np.isin(world.tri_material,
-                                                             change.recoloured)))
+            search.tested += _mark_seen(scene, world, _Changed([corners], world.center), box,
+                                        search.texels, search.reason, "colour", resolved,
+                                        _NotStopped(lit.tracer, np.isin(world.tri_material,
+                                                                        change.recoloured)))
         chains = _chain_corners(scene, world)
         if (len(moved) or change.recoloured) and len(chains):
             # A ray that meets a mirror or glass goes on where the searches above do not follow:
             # every texel whose rays meet one is recomputed.
             box = [(chains.reshape(-1, 3).min(0), chains.reshape(-1, 3).max(0))]
-            tested += _mark_seen(scene, world, _Changed([chains], world.center), box,
-                                 texels, reason, "chain", resolved)
+            search.tested += _mark_seen(scene, world, _Changed([chains], world.center), box,
+                                        search.texels, search.reason, "chain", resolved)
+    return search
+
+
+def _moved_reach(scene: Scene, start: _Compared, lit: Lighting, stored: _Stored,
+                 search: _Search) -> None:
+    """Mark in ``search`` the texels moved nodes can reach: their own, those whose validity
+    probes, obscurance rays or shadow rays meet them at their old or new place."""
+    world, resolved, moved, tracer = start.world, start.resolved, start.moved, lit.tracer
+    raw, texels, reason, old_validity = stored.raw, search.texels, search.reason, stored.validity
+    own = np.isin(raw.instance(), moved)
+    reason[own] = REASONS.index("own")
+    instance_world = start.stored.instance_world
+    old_corners = [_placed_corners(scene, world, i, instance_world[i]) for i in moved]
+    new_corners = [_placed_corners(scene, world, i, scene.instances[i].world) for i in moved]
+    boxes = [(c.reshape(-1, 3).min(0), c.reshape(-1, 3).max(0))
+             for c in old_corners + new_corners if len(c)]
+    small = _Changed(old_corners + new_corners, world.center)
+    before = _world_before(scene, world, moved, instance_world)
+    tracer_before, faces = Tracer(before), Faces(scene, world)
+    near = _near(raw, boxes, resolved.d_max)
+    # Validity: tangent probes reach a few texel sides; hemisphere probes d_max.
+    close = own | _near(raw, boxes, 0.0)
+    far = np.flatnonzero(near & ~close)
+    meets, n = _probes_meet(small, texels, far, resolved.d_max, resolved.threads,
+                            _ProbesCompared((tracer, faces),
+                                            (tracer_before, Faces(scene, before))))
+    search.tested += n
+    # Texels touching other geometry: which coincident triangle a probe or ray meets there
+    # depends on Embree's BVH, which the move changed (``Validity.touching``).
+    redo = np.union1d(np.union1d(np.flatnonzero(close), far[meets]),
+                      np.flatnonzero(old_validity.touching))
+    checked, fresh = check_texels(scene, world, tracer, take(raw, redo), resolved.d_max,
+                                  faces=faces)
+    search.tested += len(redo) * (validity_module.HEMISPHERE_RAYS + validity_module.TANGENT_RAYS
+                                  * validity_module.TANGENT_ROUNDS)
+    # Probes that met the moved object mostly find what they found before: such a texel is
+    # dirty only if its rays meet it (below). Touching texels are redone.
+    same = (_same_rows(old_validity, fresh, redo) & ~old_validity.touching[redo]
+            & (texels.position[redo] == checked.position).all(axis=1))
+    texels.position[redo] = checked.position
+    stored.texels.record(redo, checked.position, raw.position[redo])
+    search.validity = merge(old_validity, fresh, redo)
+    changed = redo[~same]
+    reason[changed[reason[changed] < 0]] = REASONS.index("validity")
+    search.judge = _HitsCompared(tracer, tracer_before, resolved.d_max, keep=search.by_ray)
+    search.tested += _mark_seen(scene, world, small, boxes, texels, reason, "obscurance",
+                                resolved, search.judge)
+    rest = np.flatnonzero(reason < 0)
+    shadow, n = _shadow_dirty(scene, world, small, texels, rest, lit.sources, resolved)
+    search.tested += n
+    reason[rest[shadow]] = REASONS.index("shadow")
+
+
+def _traced_again(scene: Scene, start: _Compared, lit: Lighting, stored: _Stored,
+                  search: _Search) -> tuple[Terms, int]:
+    """The terms of every texel after the change, and the obscurance rays cast for them: the
+    dirty texels' changed rays only (``_by_ray``) where that is exact, the rest traced whole."""
+    resolved, ambient, reason = start.resolved, lit.ambient, search.reason
     rows = np.flatnonzero(reason >= 0)
-    with timed(times, "trace"):
-        traced, updated, by_ray_rays = rows, None, 0
-        if by_ray and judge is not None:
-            updated, retrace = _by_ray(old_terms, judge, surfaces, resolved)
-            # Shadow-dirty texels' obscurance rays met nothing that changed.
-            kept = np.isin(reason[rows], [REASONS.index("obscurance"), REASONS.index("shadow")])
-            traced = np.union1d(rows[~kept], retrace)
-            by_ray_rays = judge.cast
-        error_scale = (effective_r_ave(ambient, resolved.rho), float(ambient.intensity @ LUMINANCE))
-        fresh_terms = integrate(scene, world, tracer, texels, resolved, None, rows=traced,
-                                error_scale=error_scale, surfaces=surfaces)
-        terms = merge(old_terms, fresh_terms, traced)
-        if updated is not None:
-            terms = merge(terms, *updated)
-    with timed(times, "direct"):
-        fresh_direct = direct_light(scene, world, tracer, take(texels, rows), sources, resolved)
-        direct = merge(old_direct, fresh_direct, rows, light_colours=sources.light_colours(),
-                       rays_per_texel=sources.rays_per_texel())
-        clean = np.flatnonzero(reason < 0)
-        relit_rays = 0
-        if change.lights_placed and len(clean):
-            punctual, punctual_var = direct.punctual.copy(), direct.punctual_var.copy()
-            for light in change.lights_placed:
-                punctual[clean, light], punctual_var[clean, light] = _relight(
-                    texels, tracer, sources, resolved, light, clean)
-                relit_rays += len(clean) * int(sources.samples[light])
-            direct = replace(direct, punctual=punctual, punctual_var=punctual_var)
-    done = finish(scene, world, resolved, tracer, sources, power, ambient, plan, atlas, texels,
-                  old_texels, validity, terms, direct,
-                  times, staging, fingerprint)  # exactly as a full bake goes on
-    dirty = Dirty(rows=rows, reason=reason, tested_rays=tested, relit=tuple(change.lights_placed))
-    return Rebaked(computed=done, diff=change, dirty=dirty, fingerprints=fingerprint,
-                   rays=fresh_terms.rays + by_ray_rays + fresh_direct.rays + relit_rays)
+    traced, updated, by_ray_rays = rows, None, 0
+    if search.by_ray and search.judge is not None:
+        updated, retrace = _by_ray(stored.terms, search.judge, search.surfaces, resolved)
+        # Shadow-dirty texels' obscurance rays met nothing that changed.
+        kept = np.isin(reason[rows], [REASONS.index("obscurance"), REASONS.index("shadow")])
+        traced = np.union1d(rows[~kept], retrace)
+        by_ray_rays = search.judge.cast
+    error_scale = (effective_r_ave(ambient, resolved.rho), float(ambient.intensity @ LUMINANCE))
+    fresh = integrate(scene, start.world, lit.tracer, search.texels, resolved, None, rows=traced,
+                      error_scale=error_scale, surfaces=search.surfaces)
+    terms = merge(stored.terms, fresh, traced)
+    if updated is not None:
+        terms = merge(terms, *updated)
+    return terms, fresh.rays + by_ray_rays
+
+
+def _lit_again(scene: Scene, start: _Compared, lit: Lighting, stored: _Stored,
+               search: _Search) -> tuple[Direct, int]:
+    """The direct light of every texel after the change, and the shadow rays cast: the dirty
+    texels' anew, and every texel's for each light that was placed anew."""
+    resolved, sources, tracer, texels = start.resolved, lit.sources, lit.tracer, search.texels
+    rows = np.flatnonzero(search.reason >= 0)
+    fresh = direct_light(scene, start.world, tracer, take(texels, rows), sources, resolved)
+    direct = merge(stored.direct, fresh, rows, light_colours=sources.light_colours(),
+                   rays_per_texel=sources.rays_per_texel())
+    clean = np.flatnonzero(search.reason < 0)
+    relit_rays = 0
+    if start.change.lights_placed and len(clean):
+        punctual, punctual_var = direct.punctual.copy(), direct.punctual_var.copy()
+        for light in start.change.lights_placed:
+            punctual[clean, light], punctual_var[clean, light] = _relight(
+                texels, tracer, sources, resolved, light, clean)
+            relit_rays += len(clean) * int(sources.samples[light])
+        direct = replace(direct, punctual=punctual, punctual_var=punctual_var)
+    return direct, fresh.rays + relit_rays
 
 
 def bake_state_writer(scene: Scene, world: World, resolved, atlas, per_texel,
