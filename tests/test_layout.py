@@ -164,3 +164,4 @@ def test_imports_are_read_at_any_depth_but_type_checking(tmp_path):
         assert imports_of(source, modules) == {"baker.light", "baker.light.direct"}
     finally:
         PACKAGE = saved
+

@@ -433,14 +433,14 @@ def test_other_side_rays_are_what_a_rebake_must_test(tmp_path):
     np.testing.assert_array_equal(lengths[per_texel == b.info["leaf"]], np.float32(s.d_max))
     np.testing.assert_allclose(lengths[per_texel == 3], 0.25, rtol=1e-6)  # WAX's d_in
     hits = tracer.cast_local(origins, directions, lengths.copy())
-    hit_node = np.where(hits["primID"] >= 0, done.world.tri_instance[hits["primID"]], -1)
+    hit_node = np.where(hits.triangle >= 0, done.world.tri_instance[hits.triangle], -1)
     leaf_rays = per_texel == b.info["leaf"]
     assert (hit_node[leaf_rays] == 2).any()  # the back face sees the crate
     assert (hit_node[per_texel == 3] == 3).mean() > 0.5  # inner rays leave through the wax
     front_o, front_d = hemisphere_rays(tx, rows[which][owner == b.info["leaf"]], s.rays, s.seed,
                                        tracer.center, s.sampling)
     front = tracer.cast_local(front_o, front_d, np.full(len(front_o), s.d_max, np.float32))
-    assert not (done.world.tri_instance[front["primID"][front["primID"] >= 0]] == 2).any()
+    assert not (done.world.tri_instance[front.triangle[front.triangle >= 0]] == 2).any()
 
 
 def test_leaves_and_wax_survive_the_bake_state(tmp_path):

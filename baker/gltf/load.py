@@ -57,8 +57,13 @@ from PIL import Image as PILImage
 
 from baker.errors import InputError
 from baker.gltf import document as gltf_document
+from baker.gltf.decompress import (
+    COMPRESSION_EXTENSIONS,
+    compressed,
+    decompressed,
+    is_meshopt_fallback,
+)
 from baker.gltf.document import COMPONENT_DTYPES
-from baker.gltf.decompress import COMPRESSION_EXTENSIONS, compressed, decompressed, is_meshopt_fallback
 from baker.gltf.files import read_inside
 from baker.gltf.materials import (
     MIRROR_ROUGHNESS,

@@ -41,7 +41,7 @@ from baker.gltf.scene import Scene
 from baker.jit import inline, jit
 from baker.light.obscurance import RHO_KINDS, UNIT_REFLECTIVITY, rho
 from baker.rays.sampling import fill_cosine, fill_points, frame, hash_u32
-from baker.rays.trace import Tracer, ray_lift
+from baker.rays.trace import LocalHits, Tracer, ray_lift
 from baker.run.parallel import cores, even_slices, run_chunks, texels_per_chunk
 from baker.settings import TECHNIQUES, Resolved
 
@@ -307,7 +307,7 @@ def _accumulate_kernel(rays, primitive, distance, d_max, rho_kind, table, kind, 
     estimate, see ``Terms.rmse``). Every value is rounded to the grid (``_on_grid``) first, so
     the sums are exact: the same bits in any order.
 
-    primitive/distance: Embree's primID (−1: no hit within d_max) and tfar of the rays, laid
+    primitive/distance: the rays' hit triangle (−1: no hit within d_max) and distance (``LocalHits``), laid
     out texel by texel (k·rays,), ray r being sample r mod rays of texel r // rays, when
     ``target`` and ``sample`` are empty (``_TEXEL_MAJOR``); else ray j is sample ``sample[j]``
     of texel ``target[j]`` (m,) (a rebake's changed rays, added with ``sign`` −1 for their old
@@ -462,7 +462,7 @@ class _Chains:
 
 
 def _special_hits(surfaces: Surfaces, tracer: Tracer, origins: np.ndarray,
-                  directions: np.ndarray, hits: dict[str, np.ndarray], keys: np.ndarray,
+                  directions: np.ndarray, hits: LocalHits, keys: np.ndarray,
                   first: int, rays: int, settings: Resolved, out: np.ndarray,
                   chains: _Chains) -> None:
     """Shade the rays whose first hit is on a mirror, glass or translucent material (§3, §5).
@@ -478,12 +478,12 @@ def _special_hits(surfaces: Surfaces, tracer: Tracer, origins: np.ndarray,
     it: unbiased) or the hard cap ``settings.max_depth`` (nothing counted; ``chains.capped``).
     Escaped weights are scalar: the mean of the RGB throughput.
 
-    origins, directions: (k·rays, 3) float32 as cast; hits: their embreex arrays; keys: (k,)
+    origins, directions: (k·rays, 3) float32 as cast; hits: their ``LocalHits``; keys: (k,)
     texel keys. Writes ``out`` (k·rays, 4): R·ρ (RGB) and escaped weight of each such ray.
     """
     m = surfaces.materials
     world = surfaces.world
-    primitive = hits["primID"]
+    primitive = hits.triangle
     ray = np.flatnonzero(primitive >= 0)
     ray = ray[surfaces.kind[primitive[ray]] == _SPECIAL]
     if not len(ray):
@@ -499,8 +499,8 @@ def _special_hits(surfaces: Surfaces, tracer: Tracer, origins: np.ndarray,
     d = directions[ray].astype(np.float64)
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     tri = primitive[ray].astype(np.int64)
-    dist = hits["tfar"][ray].astype(np.float64)
-    bu, bv = hits["u"][ray].astype(np.float64), hits["v"][ray].astype(np.float64)
+    dist = hits.distance[ray].astype(np.float64)
+    bu, bv = hits.u[ray].astype(np.float64), hits.v[ray].astype(np.float64)
     first_dist = dist.copy()
     total = np.zeros(n)
     live = np.arange(n)
@@ -563,15 +563,15 @@ def _special_hits(surfaces: Surfaces, tracer: Tracer, origins: np.ndarray,
         sub = tracer.cast_local(start[live].astype(np.float32), d[live].astype(np.float32),
                                 length[going].astype(np.float32))
         chains.rays += np.bincount(texel[live], minlength=len(chains.rays))
-        hit = sub["primID"] >= 0
+        hit = sub.triangle >= 0
         missed = live[~hit]
         fade = (_rho(rho_kind, first_dist[missed] / d_max) if settings.specular == "a"
                 else np.ones(len(missed)))
         escape[missed] = throughput[missed].mean(axis=1) * fade
         live = live[hit]
-        tri[live] = sub["primID"][hit]
-        dist[live] = sub["tfar"][hit]
-        bu[live], bv[live] = sub["u"][hit], sub["v"][hit]
+        tri[live] = sub.triangle[hit]
+        dist[live] = sub.distance[hit]
+        bu[live], bv[live] = sub.u[hit], sub.v[hit]
     out[ray, :3] = value
     out[ray, 3] = escape
 
@@ -586,16 +586,16 @@ def _rho(kind: int, x: np.ndarray) -> np.ndarray:
     return np.zeros_like(x)
 
 
-def _shading(surfaces: Surfaces, settings: Resolved, hits: dict[str, np.ndarray]
+def _shading(surfaces: Surfaces, settings: Resolved, hits: LocalHits
              ) -> tuple[np.ndarray, np.ndarray]:
-    """What ``_accumulate_kernel`` needs to shade the rays with embreex's ``hits``: the
+    """What ``_accumulate_kernel`` needs to shade the rays with ``hits``: the
     triangles' kinds (T,) uint8 and ray_albedo, one row of 4 per ray (the albedo at hits on
     varying triangles; rows that ``_special_hits`` fills for special ones), or (0, 4) when
     neither occurs."""
-    primitive = hits["primID"]
+    primitive = hits.triangle
     varying = surfaces.varying.any() and settings.rho not in UNIT_REFLECTIVITY
     if varying:
-        ray_albedo = surfaces.varying_albedo(primitive, hits["u"], hits["v"])
+        ray_albedo = surfaces.varying_albedo(primitive, hits.u, hits.v)
     elif surfaces.special:
         ray_albedo = np.zeros((len(primitive), 4))
     else:
@@ -621,7 +621,7 @@ def _chunk_sums(surfaces: Surfaces, tracer: Tracer, texels: Texels, rows: np.nda
         _special_hits(surfaces, tracer, origins, directions, hits, texels.key[rows], first, rays,
                       settings, ray_albedo, chains)
     sums = np.zeros((len(rows), _COLUMNS))
-    _accumulate_kernel(rays, hits["primID"], hits["tfar"], np.float32(settings.d_max),
+    _accumulate_kernel(rays, hits.triangle, hits.distance, np.float32(settings.d_max),
                        RHO_KINDS[settings.rho], surfaces.table, kind, ray_albedo, LUMINANCE,
                        sums, *_TEXEL_MAJOR, 1.0)
     return sums, chains
@@ -687,16 +687,16 @@ def hemisphere_terms(scene: Scene, world: World, tracer: Tracer, texels: Texels,
 
 
 def ray_changes(surfaces: Surfaces, settings: Resolved, target: np.ndarray,
-                sample: np.ndarray, before: dict[str, np.ndarray], after: dict[str, np.ndarray],
+                sample: np.ndarray, before: LocalHits, after: LocalHits,
                 count: int) -> np.ndarray:
     """(count, 9) what some rays' change adds to their texels' sums (``_accumulate_kernel``'s
     columns, exact): rays of no mirror, glass or translucent surface (``Surfaces.special``),
     ray j being sample ``sample[j]`` (m,) of texel ``target[j]`` (m,) (rows 0 … count − 1),
-    whose embreex hits went from ``before`` to ``after`` (within d_max)."""
+    whose hits went from ``before`` to ``after`` (within d_max)."""
     changes = np.zeros((count, _COLUMNS))
     for sign, hits in ((-1.0, before), (1.0, after)):
         kind, ray_albedo = _shading(surfaces, settings, hits)
-        _accumulate_kernel(settings.rays, hits["primID"], hits["tfar"],
+        _accumulate_kernel(settings.rays, hits.triangle, hits.distance,
                            np.float32(settings.d_max), RHO_KINDS[settings.rho], surfaces.table,
                            kind, ray_albedo, LUMINANCE, changes, target, sample, sign)
     return changes

@@ -187,9 +187,9 @@ def inner_obscurance(tracer: Tracer, texels: Texels, rows: np.ndarray, reach: np
         origins, directions, length = _inner_rays(texels, rows[chunk], reach[chunk], settings,
                                                   tracer.center)
         hits = tracer.cast_local(origins, directions, length)
-        d = hits["tfar"].astype(np.float64)
+        d = hits.distance.astype(np.float64)
         x = np.minimum(d / np.maximum(np.repeat(reach[chunk], rays), 1e-300), 1.0)
-        gamma = np.where(hits["primID"] >= 0, 1.0 - np.sqrt(x), 0.0)
+        gamma = np.where(hits.triangle >= 0, 1.0 - np.sqrt(x), 0.0)
         absorbed = np.exp(-np.repeat(sigma[chunk], rays, axis=0) * d[:, None])
         out[chunk] = (gamma[:, None] * absorbed).reshape(len(chunk), rays, 3).mean(axis=1)
 

@@ -17,6 +17,7 @@ sample), so the result does not depend on chunking or threads.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 from embreex import rtcore_scene
@@ -116,6 +117,66 @@ class Hits:
         return np.stack([1.0 - self.u - self.v, self.u, self.v], axis=1)
 
 
+@dataclass(frozen=True)
+class LocalHits:
+    """Nearest hits of float32 rays in a tracer's recentred frame (``cast_local``, the hot
+    path), as Embree gives them. triangle: (n,) int32 world triangle, −1 for a miss; distance:
+    (n,) float32 along the ray (its length for a miss); u, v: (n,) float32 barycentric weights
+    of the triangle's second and third corners (0 where a caster does not compute them)."""
+
+    triangle: np.ndarray
+    distance: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+
+    @classmethod
+    def of_embree(cls, result: dict[str, np.ndarray]) -> "LocalHits":
+        """From embreex's result arrays (``primID``, ``tfar``, ``u``, ``v``)."""
+        return cls(result["primID"], result["tfar"], result["u"], result["v"])
+
+    @classmethod
+    def missed(cls, lengths: np.ndarray) -> "LocalHits":
+        """Rays of ``lengths`` (n,) float32 that meet nothing."""
+        n = len(lengths)
+        return cls(np.full(n, -1, np.int32), lengths, np.zeros(n, np.float32),
+                   np.zeros(n, np.float32))
+
+    def take(self, rows: np.ndarray) -> "LocalHits":
+        """The hits of rays ``rows`` (index array or mask)."""
+        return LocalHits(self.triangle[rows], self.distance[rows], self.u[rows], self.v[rows])
+
+    @staticmethod
+    def concatenate(parts: "list[LocalHits]") -> "LocalHits":
+        """The hits of several batches of rays, in order (at least one batch)."""
+        return LocalHits(*(np.concatenate([getattr(p, f) for p in parts])
+                           for f in ("triangle", "distance", "u", "v")))
+
+
+@runtime_checkable
+class Occluder(Protocol):
+    """What shadow rays ask of a tracer (``light.direct``'s estimators): whether anything lies
+    along each ray. ``Tracer`` answers for the whole world; the rebake's ``_Recorder`` for the
+    changed triangles, remembering which rays met them."""
+
+    center: np.ndarray
+
+    def occluded(self, origins: np.ndarray, directions: np.ndarray,
+                 length: np.ndarray | float) -> np.ndarray: ...
+
+
+@runtime_checkable
+class RayCaster(Occluder, Protocol):
+    """What the estimators and searches ask of a tracer: nearest hits in world space (``cast``)
+    or in the recentred float32 frame (``cast_local``), and shadow rays. ``Tracer`` casts
+    against the whole world; the rebake's ``_Changed`` against the changed triangles only."""
+
+    def cast(self, origins: np.ndarray, directions: np.ndarray,
+             length: np.ndarray | float) -> Hits: ...
+
+    def cast_local(self, origins: np.ndarray, directions: np.ndarray,
+                   lengths: np.ndarray) -> LocalHits: ...
+
+
 class Tracer:
     """Casts rays against all of a ``World``'s triangles."""
 
@@ -143,30 +204,26 @@ class Tracer:
         dists = np.empty(n, np.float32)
         dists[:] = length
         result = self.cast_local(local, directions.astype(np.float32), dists)
-        triangle = result["primID"].astype(np.int64)
+        triangle = result.triangle.astype(np.int64)
         hit = triangle >= 0
-        distance = np.where(hit, result["tfar"].astype(np.float64), np.inf)
-        return Hits(np.where(hit, triangle, -1), distance, result["u"].astype(np.float64),
-                    result["v"].astype(np.float64))
+        distance = np.where(hit, result.distance.astype(np.float64), np.inf)
+        return Hits(np.where(hit, triangle, -1), distance, result.u.astype(np.float64),
+                    result.v.astype(np.float64))
 
     def cast_local(self, origins: np.ndarray, directions: np.ndarray,
-                   lengths: np.ndarray) -> dict[str, np.ndarray]:
+                   lengths: np.ndarray) -> LocalHits:
         """Nearest hits of rays already in the tracer's recentred float32 frame (hot path).
 
         origins: (n, 3) float32 world position − ``center``; directions: (n, 3) float32 unit;
-        lengths: (n,) float32, overwritten. Returns embreex's arrays: ``primID`` (n,) int32 world
-        triangle or −1, ``tfar`` (n,) float32 distance, ``u``/``v`` (n,) float32 barycentrics.
+        lengths: (n,) float32, overwritten.
         """
         if self.triangle_count == 0:
-            n = len(origins)
-            return {"primID": np.full(n, -1, np.int32), "tfar": lengths,
-                    "u": np.zeros(n, np.float32), "v": np.zeros(n, np.float32)}
-        if self.alpha is None:
-            return self._scene.run(origins, directions, dists=lengths, output=1)
-        limit = lengths.astype(np.float64)
-        result = self._scene.run(origins, directions, dists=lengths, output=1)
-        pass_alpha(self._run, self.alpha, origins, directions, limit, result)
-        return result
+            return LocalHits.missed(lengths)
+        limit = None if self.alpha is None else lengths.astype(np.float64)  # before Embree
+        result = self._scene.run(origins, directions, dists=lengths, output=1)  # writes them
+        if self.alpha is not None:
+            pass_alpha(self._run, self.alpha, origins, directions, limit, result)
+        return LocalHits.of_embree(result)
 
     def _run(self, origins: np.ndarray, directions: np.ndarray,
              lengths: np.ndarray) -> dict[str, np.ndarray]:

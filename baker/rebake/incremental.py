@@ -92,7 +92,7 @@ from baker.rays.sampling import (
     tangent_frames,
     texel_scrambles,
 )
-from baker.rays.trace import Hits, Tracer, ray_lift
+from baker.rays.trace import Hits, LocalHits, RayCaster, Tracer, ray_lift
 from baker.rebake import state as state_file
 from baker.rebake.diff import Diff, diff, fingerprints
 from baker.run.parallel import cores, even_slices, run_chunks
@@ -475,7 +475,7 @@ def _lifted(center: np.ndarray, position, normal, size) -> np.ndarray:
     return position - center + ray_lift(position, size, center)[:, None] * normal
 
 
-def _starts(tracer: "_Changed", position, normal, size, length: float):
+def _starts(tracer: RayCaster, position, normal, size, length: float):
     """The rays' origins (k, 3) in the tracer's frame (``_lifted``) and the changed geometry's
     bounding-sphere radii padded for the float32 rays Embree gets (``_near_flags``)."""
     starts = _lifted(tracer.center, position, normal, size)
@@ -490,7 +490,7 @@ class _Changed:
 
     ``parts``: list of (t, 3, 3) world corners, one box each (a moved node's old and new
     place). The boxes, in the tracer's float32 frame, are padded far beyond float32 rounding.
-    Offers the Tracer methods the searches use: ``cast_local``, ``cast`` and ``occluded``.
+    A ``rays.trace.RayCaster``, as ``Tracer`` is: the searches cast through either.
     """
 
     def __init__(self, parts: list[np.ndarray], center: np.ndarray):
@@ -510,16 +510,17 @@ class _Changed:
         return np.flatnonzero(_crossing(local, directions, lengths * (1 + 1e-6),
                                         self._low, self._high))
 
-    def cast_local(self, origins, directions, lengths) -> dict[str, np.ndarray]:
-        """As ``Tracer.cast_local``, but only ``primID`` (−1 for rays that cross no box) and
-        ``tfar`` (their length for those)."""
+    def cast_local(self, origins, directions, lengths) -> LocalHits:
+        """As ``Tracer.cast_local``: −1 and the ray's length for rays that cross no box; the
+        barycentrics are not computed (0)."""
         primitive = np.full(len(origins), -1, np.int32)
         distance = np.array(lengths, np.float32)
         rows = self._maybe(origins, directions, lengths)
         if len(rows):
             met = self._tracer.cast_local(origins[rows], directions[rows], lengths[rows].copy())
-            primitive[rows], distance[rows] = met["primID"], met["tfar"]
-        return {"primID": primitive, "tfar": distance}
+            primitive[rows], distance[rows] = met.triangle, met.distance
+        return LocalHits(primitive, distance, np.zeros(len(origins), np.float32),
+                         np.zeros(len(origins), np.float32))
 
     def _local(self, origins, directions, length):
         lengths = np.empty(len(origins), np.float32)
@@ -529,7 +530,7 @@ class _Changed:
 
     def cast(self, origins, directions, length) -> Hits:
         """As ``Tracer.cast``; the triangle only (distances and barycentrics left empty)."""
-        triangle = self.cast_local(*self._local(origins, directions, length))["primID"]
+        triangle = self.cast_local(*self._local(origins, directions, length)).triangle
         n = len(origins)
         return Hits(triangle.astype(np.int64), np.full(n, np.inf), np.zeros(n), np.zeros(n))
 
@@ -633,10 +634,10 @@ def _rays_meet(changed: _Changed, texels: Texels, rows: np.ndarray, settings,
         origins, directions = world_rays(texels, chosen[texel], 1, x, y, z, changed.center)
         met = changed.cast_local(origins, directions,
                                  np.full(len(origins), settings.d_max, np.float32))
-        hit = np.flatnonzero(met["primID"] >= 0)
+        hit = np.flatnonzero(met.triangle >= 0)
         if judge is not None and len(hit):
             hit = hit[judge(chosen[texel[hit]], sample[hit], origins[hit], directions[hit],
-                            met["tfar"][hit])]
+                            met.distance[hit])]
         found = meets[part]
         found[texel[hit]] = True
         meets[part] = found
@@ -656,9 +657,6 @@ class _NotStopped:
 
     def __call__(self, rows, samples, origins, directions, distance) -> np.ndarray:
         return ~_stopped_before(self._tracer, self._changed, origins, directions, distance)
-
-
-_HIT_FIELDS = ("primID", "tfar", "u", "v")  # embreex's fields of a hit that shading reads
 
 
 class _HitsCompared:
@@ -682,27 +680,25 @@ class _HitsCompared:
         lengths = np.full(len(origins), self._d_max, np.float32)
         new = self._after.cast_local(origins, directions, lengths.copy())
         old = self._before.cast_local(origins, directions, lengths)
-        hit = new["primID"] >= 0
-        differ = (new["primID"] != old["primID"]) | (hit & (
-            (new["tfar"] != old["tfar"]) | (new["u"] != old["u"]) | (new["v"] != old["v"])))
+        hit = new.triangle >= 0
+        differ = (new.triangle != old.triangle) | (hit & (
+            (new.distance != old.distance) | (new.u != old.u) | (new.v != old.v)))
         if self._keep:  # what ``integrate.ray_changes`` reads of the hits
             self._pieces.append((rows[differ], samples[differ],
-                                 {k: old[k][differ] for k in _HIT_FIELDS},
-                                 {k: new[k][differ] for k in _HIT_FIELDS}))
+                                 old.take(differ), new.take(differ)))
         self._cast.append(2 * len(origins))
         return differ
 
-    def changed(self) -> tuple[np.ndarray, np.ndarray, dict, dict]:
-        """The changed rays kept: texel rows (m,), samples (m,), and embreex's hits before and
-        after (each field (m,))."""
+    def changed(self) -> tuple[np.ndarray, np.ndarray, LocalHits, LocalHits]:
+        """The changed rays kept: texel rows (m,), samples (m,), and their hits before and
+        after."""
         if not self._pieces:
             empty = np.zeros(0, np.int64)
-            hits = {k: np.zeros(0, np.int32 if k == "primID" else np.float32)
-                    for k in _HIT_FIELDS}
-            return empty, empty, hits, dict(hits)
+            missed = LocalHits.missed(np.zeros(0, np.float32))
+            return empty, empty, missed, missed
         rows, samples, old, new = zip(*self._pieces)
-        join = lambda hits: {k: np.concatenate([h[k] for h in hits]) for k in hits[0]}
-        return np.concatenate(rows), np.concatenate(samples), join(old), join(new)
+        return (np.concatenate(rows), np.concatenate(samples), LocalHits.concatenate(old),
+                LocalHits.concatenate(new))
 
 
 def _stopped_before(tracer: Tracer, changed_triangles: np.ndarray, origins: np.ndarray,
@@ -721,12 +717,12 @@ def _stopped_before(tracer: Tracer, changed_triangles: np.ndarray, origins: np.n
     stopped = np.zeros(len(origins), bool)
     if len(rows):
         met = tracer.cast_local(origins[rows], directions[rows], limit[rows].astype(np.float32))
-        hit = met["primID"]
+        hit = met.triangle
         stopped[rows] = (hit >= 0) & ~changed_triangles[np.maximum(hit, 0)]
     return stopped
 
 
-def _probes_meet(tracer: Tracer, texels: Texels, rows: np.ndarray, d_max: float,
+def _probes_meet(tracer: RayCaster, texels: Texels, rows: np.ndarray, d_max: float,
                  threads: int = 0, judge: "_ProbesCompared | None" = None
                  ) -> tuple[np.ndarray, int]:
     """(k,) bool: whether any of the validity module's fixed hemisphere probes from each texel's
@@ -799,7 +795,7 @@ def _mark_seen(scene: Scene, world: World, changed: _Changed, boxes: list, texel
             scene, world, take(texels, rows), np.arange(len(rows)), settings, changed.center)
         if not len(which):
             continue
-        hit = changed.cast_local(origins, directions, lengths.copy())["primID"] >= 0
+        hit = changed.cast_local(origins, directions, lengths.copy()).triangle >= 0
         reason[rows[which[hit.reshape(len(which), -1).any(axis=1)]]] = REASONS.index(why)
         tested += len(origins)
     return tested
@@ -818,9 +814,9 @@ def _chain_corners(scene: Scene, world: World) -> np.ndarray:
 class _Recorder:
     """A tracer for ``direct.py``'s estimators that casts against the changed geometry only and
     remembers the origins of the rays that met it (every ray of a texel starts at the same
-    lifted point, so the origins name the texels)."""
+    lifted point, so the origins name the texels). A ``rays.trace.Occluder``."""
 
-    def __init__(self, tracer: Tracer):
+    def __init__(self, tracer: RayCaster):
         self.center = tracer.center
         self._tracer = tracer
         self.origins: list[np.ndarray] = []
@@ -840,7 +836,7 @@ def _row_keys(points: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(points, np.float64).view(np.int64).view(kind).ravel()
 
 
-def _may_shadow(texels: Texels, rows: np.ndarray, changed: "_Changed", sources) -> np.ndarray:
+def _may_shadow(texels: Texels, rows: np.ndarray, changed: RayCaster, sources) -> np.ndarray:
     """(k,) bool, conservative: whether a shadow ray of the texels ``rows`` may pass through
     one of the ``changed`` geometry's bounding spheres. Exact on the geometry of the rays
     (``direct.punctual_irradiance``): a point or spot light's rays run from the lifted sample
@@ -899,7 +895,7 @@ def _shadow_may_pass(origin: np.ndarray, directional: np.ndarray, light_position
     return out
 
 
-def _shadow_dirty(scene, world, recorder_tracer: Tracer, texels: Texels, rows: np.ndarray,
+def _shadow_dirty(scene, world, recorder_tracer: RayCaster, texels: Texels, rows: np.ndarray,
                   sources, settings) -> tuple[np.ndarray, int]:
     """(k,) bool: whether any shadow, emissive or sky ray of the texels ``rows`` meets the
     changed geometry; and the rays cast. Runs ``direct.direct_light`` itself against it, a
