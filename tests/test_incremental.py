@@ -677,14 +677,14 @@ def test_a_state_with_zip64_members_reads_back_and_rebakes(tmp_path, monkeypatch
 @pytest.mark.parametrize("case", ["recovered", "not recovered", "albedo above 1"])
 def test_texels_whose_rays_the_move_changed_recast_only_those_rays(tmp_path, monkeypatch, case):
     """In a diffuse scene a texel whose rays meet the moved box takes the change of those rays
-    alone (``integrate.ray_changes``): far fewer rays than its own are cast. Where its stored
+    alone (``exact_sums.ray_changes``): far fewer rays than its own are cast. Where its stored
     sums are not recovered exactly (forced here), or an albedo above 1 could make sums inexact
     (``Surfaces.exact_sums``), it is traced anew. The bytes are the full bake's either way."""
-    from baker.light import hemisphere as integrate
+    from baker.rebake import exact_sums
     from baker.rebake import incremental as incremental
 
     if case == "not recovered":
-        exactness = integrate.changed_terms
+        exactness = exact_sums.changed_terms
         monkeypatch.setattr(incremental, "changed_terms", lambda terms, changes: (
             exactness(terms, changes)[0], np.zeros(len(changes), bool)))
     colours = {"accent": (3.0, 0.5, 0.9)} if case == "albedo above 1" else {}

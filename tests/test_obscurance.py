@@ -86,7 +86,8 @@ def test_texel_sums_are_exact_in_any_order_and_recovered_from_the_means():
     """Every ray's values are rounded to a grid fine enough to be exact when summed, so a
     texel's sums are the same bits whatever the order of its rays (what a rebake that swaps one
     ray's old value for its new one relies on), and the stored means give them back exactly."""
-    from baker.light.hemisphere import _COLUMNS, _TEXEL_MAJOR, _accumulate_kernel, _means, _sums_of
+    from baker.light.hemisphere import _COLUMNS, _TEXEL_MAJOR, _accumulate_kernel, _means
+    from baker.rebake.exact_sums import _sums_of
     from baker.geometry.surface import LUMINANCE
 
     texels, rays = 300, 64
@@ -109,7 +110,8 @@ def test_a_rays_change_replaces_its_value_in_the_sums_exactly():
     """The kernel's signed sums of changed rays (what ``ray_changes`` adds up) and
     ``changed_terms``: the terms of texels after some of their rays' hits changed are the bits
     of the terms of the new hits, summed afresh."""
-    from baker.light.hemisphere import _COLUMNS, _TEXEL_MAJOR, _accumulate_kernel, _means, changed_terms
+    from baker.light.hemisphere import _COLUMNS, _TEXEL_MAJOR, _accumulate_kernel, _means
+    from baker.rebake.exact_sums import changed_terms
     from baker.geometry.surface import LUMINANCE
 
     texels, rays = 200, 16

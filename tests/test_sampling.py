@@ -2,7 +2,9 @@
 
 import numpy as np
 
-from baker.rays.sampling import cap_boxes, cosine_hemisphere, fill_points, hash_u32, net_solve, owen_scramble, sample_2d, sobol_cell_sample, tangent_frames, texel_scrambles
+from baker.rays.sampling import (cosine_hemisphere, fill_points, hash_u32, owen_scramble, sample_2d,
+                                 tangent_frames, texel_scrambles)
+from baker.rebake.sobol_cells import cap_boxes, net_solve, sobol_cell_sample
 
 
 def test_same_arguments_same_numbers_however_split():

@@ -31,7 +31,7 @@ bit, the terms the last bake stored, and only the others need rays. The rebake:
    light that moved for every texel (its column of the direct term only), takes the new light
    colours, and composes, post-processes, encodes and writes like a full bake. In a scene of
    diffuse surfaces with albedos within [0, 1], an "obscurance" texel is not traced again: its
-   stored terms take the change of the rays whose hits changed (``integrate.ray_changes``),
+   stored terms take the change of the rays whose hits changed (``exact_sums.ray_changes``),
    exact because every ray's values are summed on a grid of 2^-40 (``integrate._on_grid``).
 """
 
@@ -65,8 +65,6 @@ from baker.light.hemisphere import (
     EXACT_RAYS,
     Surfaces,
     Terms,
-    changed_terms,
-    ray_changes,
     surfaces_of,
     world_rays,
 )
@@ -82,19 +80,18 @@ from baker.pipeline.full import (
 )
 from baker.pipeline.parts import PerTexel, TexelPoints, part_slices
 from baker.rays.sampling import (
-    cap_boxes,
     concentric_hemisphere,
     fill_cosine,
     fill_points,
-    net_solve,
     point,
-    sobol_cell_sample,
     tangent_frames,
     texel_scrambles,
 )
 from baker.rays.trace import Hits, LocalHits, RayCaster, Tracer, ray_lift
 from baker.rebake import state as state_file
 from baker.rebake.diff import Diff, diff, fingerprints
+from baker.rebake.exact_sums import changed_terms, ray_changes
+from baker.rebake.sobol_cells import cap_boxes, net_solve, sobol_cell_sample
 from baker.run.parallel import cores, even_slices, run_chunks
 from baker.settings import TECHNIQUES, Resolved, Settings, resolve
 
@@ -663,7 +660,7 @@ class _HitsCompared:
     """Judges a ray that meets a moved node (at its old or new place) changed when its nearest
     hit within d_max in the whole scene now (``after``) differs from its hit in the scene of the
     last bake (``before``, of ``_world_before``), which gave the stored terms. With ``keep``, the
-    changed rays are kept: ``changed`` gives them for ``integrate.ray_changes``. Called from
+    changed rays are kept: ``changed`` gives them for ``exact_sums.ray_changes``. Called from
     several threads at once (each call's rays are its own)."""
 
     def __init__(self, after: Tracer, before: Tracer, d_max: float, keep: bool):
@@ -683,7 +680,7 @@ class _HitsCompared:
         hit = new.triangle >= 0
         differ = (new.triangle != old.triangle) | (hit & (
             (new.distance != old.distance) | (new.u != old.u) | (new.v != old.v)))
-        if self._keep:  # what ``integrate.ray_changes`` reads of the hits
+        if self._keep:  # what ``exact_sums.ray_changes`` reads of the hits
             self._pieces.append((rows[differ], samples[differ],
                                  old.take(differ), new.take(differ)))
         self._cast.append(2 * len(origins))
@@ -938,7 +935,7 @@ def _relight(texels: Texels, tracer: Tracer, sources, settings, light: int,
 def _by_ray(stored: Terms, judge: _HitsCompared, surfaces, settings
             ) -> tuple[tuple[Terms, np.ndarray], np.ndarray]:
     """The new terms of the texels whose rays the move changed (``judge.changed``), from their
-    ``stored`` terms and those rays' change alone (``integrate.ray_changes``): ((their terms,
+    ``stored`` terms and those rays' change alone (``exact_sums.ray_changes``): ((their terms,
     their rows), the rows whose stored sums could not be recovered exactly, which must be
     traced anew)."""
     rows, samples, before, after = judge.changed()
