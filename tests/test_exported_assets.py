@@ -218,3 +218,126 @@ def test_a_missing_image_file_fails_at_load_whatever_uses_it(tmp_path, slot):
     assert error.value.where.endswith("images[1].uri")
     assert '"gone%20away.png" is not found' in error.value.message
     assert str(tmp_path / "gone away.png") in error.value.message
+
+
+# ------------------------------------------------------------------------------ image decoding
+
+def _texture_scene(folder, data: bytes, extension: str | None = None, name="albedo.png"):
+    """A floor whose base colour texture's image is the file ``name`` holding ``data``, named by
+    texture.source or, with ``extension``, by that extension's source."""
+    pixels = np.full((2, 2, 4), 255, np.uint8)
+    b = GltfBuilder()
+    b.node("floor", b.shape_mesh("floor", quad(1.0, 1.0), material=b.material(
+        "floor", (0.5, 0.5, 0.5), base_color_image=pixels)))
+    path = b.save(folder / "scene.gltf")
+    (folder / name).write_bytes(data)
+    document = json.loads(path.read_text())
+    document["images"] = [{"uri": name}]
+    if extension is not None:
+        document["textures"][0] = {"extensions": {extension: {"source": 0}}}
+        document["extensionsUsed"] = [extension]
+    path.write_text(json.dumps(document))
+    return path
+
+
+def _encoded(pixels: np.ndarray, format: str, **options) -> bytes:
+    from PIL import Image as PILImage
+    import io
+
+    out = io.BytesIO()
+    PILImage.fromarray(pixels).save(out, format, **options)
+    return out.getvalue()
+
+
+GRADIENT = np.stack(np.broadcast_arrays(np.arange(32)[None, :] * 8, np.arange(32)[:, None] * 8,
+                                        np.full((32, 32), 100), np.full((32, 32), 255)),
+                    -1).astype(np.uint8)
+
+
+@pytest.mark.parametrize("format, kind", [("TIFF", "a TIFF image"), ("BMP", "a BMP image"),
+                                          ("GIF", "a GIF image"), ("WEBP", "a WEBP image"),
+                                          (None, "an EPS image")])
+def test_an_image_glTF_does_not_allow_is_refused_by_its_real_kind(tmp_path, format, kind):
+    """A TIFF, BMP, GIF, EPS or WebP file named .png as a texture's core source: refused, naming
+    what it really is and what glTF allows; pillow never parses it."""
+    data = (b"%!PS-Adobe-3.0 EPSF-3.0\n%%BoundingBox: 0 0 8 8\n" if format is None
+            else _encoded(GRADIENT[..., :3], format))
+    with pytest.raises(InputError) as error:
+        load(_texture_scene(tmp_path, data))
+    assert error.value.where.endswith("images[0]")
+    assert f'"albedo.png" is {kind}' in error.value.message
+    assert "PNG or JPEG only" in error.value.message
+
+
+def test_webp_decodes_through_ext_texture_webp(tmp_path):
+    scene = load(_texture_scene(tmp_path, _encoded(GRADIENT, "WEBP", lossless=True),
+                                "EXT_texture_webp", "albedo.webp"))
+    np.testing.assert_array_equal(scene.images[0].pixels, GRADIENT)
+    assert scene.materials[0].base_color_texture is not None
+
+
+def test_ktx2_decodes_through_khr_texture_basisu(tmp_path):
+    """A UASTC KTX 2 texture (made with the alktx2 encoder, decoded with opengl-basisu): its
+    pixels within 1 level of 255 of the source's, on average."""
+    import alktx2
+
+    data = alktx2.encode_raw_rgba_to_ktx2(GRADIENT.tobytes(), 32, 32, False, codec="uastc")
+    scene = load(_texture_scene(tmp_path, data, "KHR_texture_basisu", "albedo.ktx2"))
+    assert scene.materials[0].base_color_texture is not None
+    error = np.abs(scene.images[0].pixels.astype(int) - GRADIENT).mean(axis=(0, 1))
+    assert (error < 1.0).all(), error
+
+
+def test_ktx2_without_its_decoder_uses_the_factor_with_a_warning(tmp_path, monkeypatch):
+    import sys
+
+    import alktx2
+
+    data = alktx2.encode_raw_rgba_to_ktx2(GRADIENT.tobytes(), 32, 32, False)
+    monkeypatch.setitem(sys.modules, "opengl_basisu", None)
+    scene = load(_texture_scene(tmp_path, data, "KHR_texture_basisu", "albedo.ktx2"))
+    assert scene.materials[0].base_color_texture is None
+    (warning,) = [s.reason for s in scene.skipped if s.where == "textures[0]"]
+    assert "opengl-basisu" in warning and 'pip install "baker[ktx2]"' in warning
+    assert "factor used" in warning
+
+
+def test_a_tiny_png_declaring_16384_by_8192_is_refused_before_decoding(tmp_path):
+    """Its header says 512 MiB of RGBA; its 95 bytes cannot hold it (deflate: at most 1032
+    bytes out per byte in): refused from the header, in milliseconds, nothing allocated."""
+    import time
+    import tracemalloc
+
+    from tests.test_bad_input import huge_png
+
+    data = huge_png(16384, 8192)
+    path = _texture_scene(tmp_path, data)
+    tracemalloc.start()
+    start = time.perf_counter()
+    with pytest.raises(InputError) as error:
+        load(path)
+    seconds = time.perf_counter() - start
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert "declares 16384×8192 pixels" in error.value.message
+    assert f"only {len(data)} bytes" in error.value.message
+    assert seconds < 1.0 and peak < 64 << 20, (seconds, peak)
+
+
+def test_textures_past_the_scene_budget_are_left_out_with_the_figure(tmp_path, monkeypatch):
+    """Two 32×32 textures and a budget of 1500 pixels: the first is decoded, the second (whose
+    1024 pixels would pass it) is left out with a warning that names it and the budget."""
+    import baker.gltf.images as images
+    import baker.gltf.load as loader
+
+    monkeypatch.setattr(loader, "MAX_SCENE_PIXELS", 1500)
+    monkeypatch.setattr(images, "MAX_SCENE_PIXELS", 1500)
+    b = GltfBuilder()
+    for k in range(2):
+        b.node(f"floor{k}", b.shape_mesh(f"floor{k}", quad(1.0, 1.0), material=b.material(
+            f"floor{k}", base_color_image=GRADIENT)), translation=(2.0 * k, 0, 0))
+    scene = load(b.save(tmp_path / "scene.glb"))
+    assert scene.materials[0].base_color_texture is not None
+    assert scene.materials[1].base_color_texture is None
+    (warning,) = [s.reason for s in scene.skipped if s.where == "textures[1]"]
+    assert "past 1,500 pixels" in warning and "(32×32)" in warning

@@ -39,13 +39,10 @@ from __future__ import annotations
 
 import base64
 import binascii
-import io
 import json
 import math
-import re
 import struct
 import urllib.parse
-import warnings
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -53,10 +50,10 @@ from typing import Any, Iterator, Sequence
 
 import numpy as np
 import pygltflib
-from PIL import Image as PILImage
 
 from baker.errors import InputError
 from baker.gltf import document as gltf_document
+from baker.gltf import images
 from baker.gltf.decompress import (
     COMPRESSION_EXTENSIONS,
     compressed,
@@ -65,6 +62,7 @@ from baker.gltf.decompress import (
 )
 from baker.gltf.document import COMPONENT_DTYPES
 from baker.gltf.files import read_inside
+from baker.gltf.images import MAX_SCENE_PIXELS
 from baker.gltf.materials import (
     MIRROR_ROUGHNESS,
     UNLIT_REASON,
@@ -158,10 +156,8 @@ _CHUNK_JSON = 0x4E4F534A
 _CHUNK_BIN = 0x004E4942
 
 _REEXPORT = "re-export the asset from your DCC tool; the Khronos glTF Validator shows what is wrong"
-MAX_IMAGE_PIXELS = 16384 * 8192
-"""Largest colour texture decoded (512 MiB as RGBA); larger ones are refused from their header."""
 MAX_IMAGE_FILE_BYTES = 1 << 30
-"""Most bytes read of an image file (a PNG of ``MAX_IMAGE_PIXELS`` is at most about 512 MiB)."""
+"""Most bytes read of an image file (a PNG of ``images.MAX_IMAGE_PIXELS`` is at most about 512 MiB)."""
 MAX_FALLBACK_BYTES = 1 << 30
 """Largest meshopt fallback buffer without data that baker decodes views into (zeros first)."""
 MAX_ACCESSOR_COMPONENTS = 1 << 28
@@ -840,8 +836,9 @@ def _factor(ctx: _Context, value: Any, default: list[float], where: str) -> np.n
 def _texture_ref(ctx: _Context, info: Any, where: str) -> TextureRef | None:
     """Resolve a textureInfo to (image, UV set, wrap modes), decoding the image; None if absent.
 
-    A texture whose image is only in an extension (``EXT_texture_webp``, ``KHR_texture_basisu``…)
-    is used when pillow decodes that image, else left out and recorded in ``ctx.skipped``.
+    A texture whose image is only in an extension (``EXT_texture_webp``, ``KHR_texture_basisu``)
+    is used when that image decodes (``images.decode``), else left out and recorded in
+    ``ctx.skipped``, as is one past the scene's pixel budget; the factor is used instead.
     ``KHR_texture_transform``: its texCoord override and its UV transform are honoured.
     """
     if info is None:
@@ -858,16 +855,16 @@ def _texture_ref(ctx: _Context, info: Any, where: str) -> TextureRef | None:
         ctx.skip(texture_where, "texture has no image source: left out")
         return None
     _item(ctx.document.images, source, "images", ctx.file, f"{texture_where}.source")
-    if extension is None:
+    try:
         with _referred(where):
-            _decode_image(ctx, source)
-    else:
-        try:
-            _decode_image(ctx, source)
-        except InputError as exc:
-            reason = f"image {source} ({extension}) cannot be decoded ({exc.message}): texture left out"
-            ctx.skip(texture_where, reason)
-            return None
+            _decode_image(ctx, source, extension)
+    except InputError as exc:
+        if extension is None and not isinstance(exc, images.OverBudget):
+            raise
+        named = f" ({extension})" if extension else ""
+        ctx.skip(texture_where, f"image {source}{named} not decoded ({exc.message}; {exc.fix}): "
+                                "texture left out, its material's factor used")
+        return None
     texcoord = int(_default(info.texCoord, 0))
     transform = (info.extensions or {}).get("KHR_texture_transform")
     affine = None
@@ -901,8 +898,10 @@ def _uv_transform(ctx: _Context, transform: dict, where: str) -> tuple[float, ..
     return None if affine == (1.0, 0.0, 0.0, 0.0, 1.0, 0.0) else tuple(float(x) for x in affine)
 
 
-def _decode_image(ctx: _Context, index: int) -> np.ndarray:
-    """Decode ``images[index]`` once into (h, w, 4) uint8 RGBA, row 0 at the top (sRGB as stored)."""
+def _decode_image(ctx: _Context, index: int, extension: str | None = None) -> np.ndarray:
+    """Decode ``images[index]`` once into (h, w, 4) uint8 RGBA, row 0 at the top (sRGB as stored),
+    in a format glTF allows for a source named by ``extension`` (None: the core texture.source;
+    ``images.FORMATS``), within what is left of the scene's pixel budget."""
     if index in ctx.decoded:
         return ctx.decoded[index]
     image = ctx.document.images[index]
@@ -915,51 +914,10 @@ def _decode_image(ctx: _Context, index: int) -> np.ndarray:
         label = "the embedded image" if image.uri.startswith("data:") else f'"{image.uri}"'
     else:
         raise _invalid("image has neither uri nor bufferView", ctx.file, where)
-    try:
-        with warnings.catch_warnings():  # baker has its own limit, MAX_IMAGE_PIXELS
-            warnings.simplefilter("ignore", PILImage.DecompressionBombWarning)
-            with PILImage.open(io.BytesIO(data)) as opened:
-                _check_image_size(ctx, opened.size, label, where)
-                opened.load()
-                pixels = _rgba(opened)
-    except PILImage.DecompressionBombError as exc:
-        pixels = re.search(r"\((\d+) pixels\)", str(exc))
-        size = f"{int(pixels.group(1)):,} pixels" if pixels else "too many pixels"
-        raise _too_large(ctx, f"{label} has {size}", where) from None
-    except (OSError, ValueError, SyntaxError, EOFError) as exc:
-        raise InputError(
-            f"cannot decode {label} ({exc})",
-            file=ctx.file,
-            where=where,
-            fix="re-save the image as PNG or JPEG and export again",
-        ) from None
+    budget = MAX_SCENE_PIXELS - sum(p.shape[0] * p.shape[1] for p in ctx.decoded.values())
+    pixels = images.decode(data, extension, label, budget, ctx.file, where)
     ctx.decoded[index] = pixels
     return pixels
-
-
-def _check_image_size(ctx: _Context, size: tuple[int, int], label: str, where: str) -> None:
-    """Refuse, from the header alone, an image with more than ``MAX_IMAGE_PIXELS`` pixels."""
-    width, height = size
-    if width * height > MAX_IMAGE_PIXELS:
-        raise _too_large(ctx, f"{label} is {width}×{height} = {width * height:,} pixels", where)
-
-
-def _too_large(ctx: _Context, what: str, where: str) -> InputError:
-    return InputError(
-        f"{what}, more than baker decodes (at most {MAX_IMAGE_PIXELS:,}, e.g. 16384×8192: "
-        f"{4 * MAX_IMAGE_PIXELS >> 20} MiB as RGBA)",
-        file=ctx.file,
-        where=where,
-        fix="downscale the texture (8192×8192 is plenty for a lightmap bake) and export again",
-    )
-
-
-def _rgba(image: PILImage.Image) -> np.ndarray:
-    """A pillow image as (h, w, 4) uint8 RGBA; 16-bit greyscale keeps its high byte."""
-    if image.mode.startswith("I"):
-        high = (np.asarray(image).astype(np.int64) >> 8).clip(0, 255).astype(np.uint8)
-        image = PILImage.fromarray(high, "L")
-    return np.array(image.convert("RGBA"), dtype=np.uint8)
 
 
 def _check_image_files(ctx: _Context) -> None:
