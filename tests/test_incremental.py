@@ -205,6 +205,28 @@ def test_a_state_of_another_build_of_baker_means_a_full_bake(base, tmp_path, mon
     assert "another build of baker" in result.rebake["full_bake_reason"]
 
 
+def test_the_code_fingerprint_covers_every_source_file_of_the_package(tmp_path):
+    """Every ``.py`` under baker/, in any subpackage, is in the build's fingerprint: an edit, a
+    new file or a file moved to another package changes it (states of two builds never mix)."""
+    from baker.rebake.diff import sources_digest
+
+    package = Path(baker.__file__).resolve().parent
+    copy = tmp_path / "baker"
+    shutil.copytree(package, copy, ignore=shutil.ignore_patterns("__pycache__"))
+    digest = sources_digest(copy)
+    assert sources_digest(package) == digest  # only the files and their paths count
+    deep = copy / "light" / "obscurance.py"
+    assert deep.exists()
+    changed = [lambda: deep.write_text(deep.read_text() + "\n"),
+               lambda: (copy / "rays" / "new_module.py").write_text(""),
+               lambda: (copy / "rays" / "new_module.py").rename(copy / "image" / "new_module.py")]
+    seen = {digest}
+    for change in changed:
+        change()
+        seen.add(sources_digest(copy))
+    assert len(seen) == 1 + len(changed)
+
+
 def test_unchanged_scene_recomputes_nothing(base, tmp_path):
     scene = _room().save(tmp_path / "same.glb")
     shutil.copy(default_path(base), default_path(tmp_path / "out.glb"))

@@ -98,18 +98,22 @@ def code_fingerprint() -> str:
     keeps terms this code computed, and an incremental rebake is byte-identical to a full bake
     only if the terms it keeps are what this build would compute (an upgrade that changed the
     sampler or a library's hits would otherwise mix two builds' texels). About 2 ms, once."""
-    package = Path(__file__).resolve().parents[1]  # baker/, every subpackage included
-    sources = sorted(package.rglob("*.py"), key=lambda path: path.relative_to(package).as_posix())
     versions = []
     for name in _LIBRARIES:
         try:
             versions.append(f"{name} {metadata.version(name)}")
         except metadata.PackageNotFoundError:
             versions.append(f"{name} (no metadata)")
+    return digest(sources_digest(Path(__file__).resolve().parents[1]), *versions)
+
+
+def sources_digest(package: Path) -> str:
+    """A hash of every ``.py`` file under ``package`` (subpackages included), each by its path
+    relative to ``package`` and its bytes: a file moved, added, removed or edited changes it."""
+    sources = sorted(package.rglob("*.py"), key=lambda path: path.relative_to(package).as_posix())
     return digest(*[part for path in sources
                     for part in (path.relative_to(package).as_posix(),
-                                 np.frombuffer(path.read_bytes(), np.uint8))],
-                  *versions)
+                                 np.frombuffer(path.read_bytes(), np.uint8))])
 
 
 def fingerprints(scene: Scene, world: World, settings: Resolved, asked=None) -> dict:
