@@ -19,7 +19,8 @@ The pipeline, stage by stage (docs/design.md §3); each stage hands a frozen dat
     image.denoise.denoise        optional (--denoise): Open Image Denoise per chart
     image.postprocess            invalid texels filled, seams stitched, dilation into the padding
     image.encode.encode          Lightmaps → 8-bit PNG pages, each scaled by a percentile
-    output.write.write           Scene + Atlas + pages → glTF file with MOZ_lightmap
+    image.carriers               optional (--carrier emissive): pages of outgoing radiance
+    output.write.write           Scene + Atlas + pages → glTF file carrying the bake
 
 ``pipeline.full.compute`` runs them from the scene to the lightmaps, from ``texels_of`` to
 ``compose`` a part of the texels at a time (``pipeline.parts``, ``run.spill``), so a large page

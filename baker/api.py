@@ -16,11 +16,13 @@ from baker.errors import BakerError, InputError, OutputError
 from baker.gltf.files import inside
 from baker.gltf.load import load
 from baker.gltf.scene import Scene
+from baker.image.carriers import emissive_lightmaps, viewer_notes
+from baker.image.compose import Lightmaps
 from baker.image.encode import encode
 from baker.image.errormap import write_error_maps
 from baker.image.hdr import check_format, page_file
 from baker.output.write import WriteOptions, image_file_name, write
-from baker.pipeline.full import compute, timed
+from baker.pipeline.full import compute, timed, writes_occlusion
 from baker.pipeline.input_warnings import input_warnings
 from baker.pipeline.plan import Plan
 from baker.rebake.incremental import (
@@ -182,11 +184,13 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
             # closing(): the rows the state is written from (parts.py), if on disk, are
             # removed once the state is written.
             with closing(done.per_texel), timed(times, "write"):
-                pages = encode(done.lightmaps, resolved.encoding, resolved.occlusion != "none",
+                pages = encode(carried(done), resolved.encoding, writes_occlusion(resolved),
                                resolved.clip_percentile)
                 info = write(scene, done.atlas, pages, output,
                              WriteOptions(encoding=resolved.encoding, occlusion=resolved.occlusion,
-                                          clip_percentile=resolved.clip_percentile), outputs)
+                                          clip_percentile=resolved.clip_percentile,
+                                          carrier=resolved.carrier,
+                                          baked_lights=resolved.baked_lights), outputs)
                 if lightmaps_dir is not None:
                     write_page_files(outputs.folder(Path(lightmaps_dir)), output.stem, pages,
                                      done.lightmaps.light, lightmaps_format, outputs.stage)
@@ -234,12 +238,30 @@ def _report(input_path: Path, output: Path, done, info, pages, times: dict[str, 
         "rmse_estimate": done.rmse_estimate(),
         "validity": done.tally.states,
         "denoise": done.denoised.as_dict() if done.denoised is not None else {"denoised": False},
-        "notes": list(info.notes) + clipping_notes(pages),
+        "carrier": done.settings.carrier, "baked_lights": done.settings.baked_lights,
+        "notes": list(info.notes) + clipping_notes(pages) + viewer_notes(
+            done.scene, baked_materials(done), done.settings.carrier),
         "warnings": input_warnings(done.scene, done.world),  # dropped or changed, counted
         "lightmap_pages": [{"intensity": page.intensity, "peak": page.peak,
                             "clipped_fraction": page.clipped} for page in pages],
         "rebake": rebake,
     }
+
+
+def carried(done) -> Lightmaps:
+    """The pages the carrier stores: the irradiance (moz, occlusion), or the radiance the lit
+    surfaces send out (emissive, ``image/carriers.py``)."""
+    if done.settings.carrier != "emissive":
+        return done.lightmaps
+    return emissive_lightmaps(done.scene, done.world, done.atlas, done.texels, done.lightmaps,
+                              done.settings.padding)
+
+
+def baked_materials(done) -> set[int]:
+    """Indices into ``scene.materials`` of the baked primitive instances' materials."""
+    scene = done.scene
+    return {scene.primitives[scene.instances[unwrap.instance].primitive].material
+            for unwrap in done.atlas.instances}
 
 
 def clipping_notes(pages) -> list[str]:

@@ -3,18 +3,23 @@
     baker preview level_baked.glb -o preview.png [--lightmap-only | --checker] [--size 800x600]
 
 Every pixel is one primary ray (all pixels in one batch, cast in chunks through
-``trace.Tracer``). Where a ray meets a lightmapped surface the pixel shows what a viewer that
-reads ``MOZ_lightmap`` shows there: diffuse albedo × lightmap + emission, the lightmap sampled
-bilinearly (clamped, as the writer's sampler says) at the hit's lightmap UV — the TEXCOORD set
-named by ``MOZ_lightmap.texCoord`` — decoded by ``asset.extras.baker.lightmap_encoding`` (linear
-when absent) and scaled by ``MOZ_lightmap.intensity``. Modes:
+``trace.Tracer``). Where a ray meets a lightmapped surface the pixel shows what a glTF viewer
+shows there (three.js, measured by tests/test_browser.py): diffuse colour × lightmap / π +
+emission, where the diffuse colour is the base colour × (1 − metallic) × (1 − transmission)
+(``surface.viewer_diffuse_weight``: viewers light only a material's diffuse part with a
+lightmap, so a metal shows black) and the lightmap is sampled bilinearly (clamped, as the
+writer's sampler says) at the hit's lightmap UV — the TEXCOORD set named by
+``MOZ_lightmap.texCoord`` — decoded by ``asset.extras.baker.lightmap_encoding`` (linear when
+absent) and scaled by ``MOZ_lightmap.intensity``. The emissive carrier's surfaces show their
+emission (the bake itself, base colour black); the occlusion carrier's visibility is shaded as a
+lightmap of intensity 1 (what a viewer's ambient light of 1 gives). Modes:
 
-- ``lit`` (default): albedo × lightmap + emission, auto-exposed.
+- ``lit`` (default): diffuse colour × lightmap / π + emission, auto-exposed.
 - ``lightmap``: the lightmap alone (as if every surface were white).
 - ``checker``: a checker of lightmap texels, tinted per page, to judge texel density: squares of
   one texel, or of 2, 4, 8… texels a side when single texels would be smaller than about four
   pixels in the picture (``Picture.checker_texels`` says which).
-- ``unlit``: albedo + emission with every lightmap left out (as if it were 1), the same view:
+- ``unlit``: diffuse colour + emission with every lightmap left out (as if it were π), the same view:
   what the lightmap adds is the difference from ``lit``.
 
 Single-sided materials are culled from behind, as glTF viewers do, so the default view from
@@ -35,7 +40,8 @@ from pathlib import Path
 import numpy as np
 
 from baker.errors import InputError, OutputError, SettingsError
-from baker.geometry.surface import LUMINANCE, SRGB_TO_LINEAR, albedo, emission
+from baker.geometry.surface import (LUMINANCE, SRGB_TO_LINEAR, albedo, base_colour, emission,
+                                    viewer_diffuse_weight)
 from baker.geometry.world import World, build_world
 from baker.gltf.load import _Context, _decode_image, load, resolve_buffers, trs_matrices
 from baker.gltf.scene import Scene
@@ -204,53 +210,73 @@ def primary_rays(view: View, width: int, height: int) -> tuple[np.ndarray, np.nd
 
 
 def read_lightmaps(scene: Scene, world: World) -> SceneLightmaps:
-    """Decode every MOZ_lightmap page the scene's materials use, and each triangle's lightmap UVs.
+    """Decode every page of the bake that the scene's materials carry, and each triangle's UVs.
 
-    Raises InputError when no material has a MOZ_lightmap and ``asset.extras.baker`` is absent
-    (the file was not baked); a file baker wrote in which nothing got a lightmap (e.g. only
-    GPU-instanced meshes) has no pages, and renders flat.
+    A material carries the bake as its ``MOZ_lightmap`` (decoded by
+    ``asset.extras.baker.lightmap_encoding``, × its intensity), or, in a file baker wrote with
+    the emissive carrier, as its emissiveTexture (sRGB × emissive factor and strength: the
+    radiance itself), or with the occlusion carrier as its occlusionTexture (the visibility,
+    linear, red channel). Raises InputError when nothing carries a bake and
+    ``asset.extras.baker`` is absent (the file was not baked); a file baker wrote in which
+    nothing got a lightmap (e.g. only GPU-instanced meshes) has no pages, and renders flat.
     """
     document = scene.document
     extras = (document.asset.extras or {}) if document.asset is not None else {}
-    encoding = ((extras.get("baker") or {}) if isinstance(extras, dict) else {}).get(
-        "lightmap_encoding") or "linear"
+    recorded = ((extras.get("baker") or {}) if isinstance(extras, dict) else {})
+    encoding = recorded.get("lightmap_encoding") or "linear"
+    carrier = recorded.get("carrier") or "moz"
     ctx = _Context(document, resolve_buffers(document, scene.path), str(scene.path),
                    Path(scene.path).parent)
     pages: list[np.ndarray] = []
-    page_of_key: dict[tuple[int, float], int] = {}
+    page_of_key: dict[tuple, int] = {}
     count = len(world.triangles)
     tri_page = np.full(count, -1, np.int64)
     tri_uv = np.zeros((count, 3, 2))
     for i, inst in enumerate(scene.instances):
         prim = scene.primitives[inst.primitive]
-        gltf_material = scene.materials[prim.material].index
-        if gltf_material is None:
+        found = _carried_texture(document, scene.materials[prim.material], carrier, encoding)
+        if found is None or found[1] >= len(prim.texcoords):
             continue
-        ext = (document.materials[gltf_material].extensions or {}).get("MOZ_lightmap")
-        if not isinstance(ext, dict) or ext.get("index") is None:
-            continue
-        texcoord = int(ext.get("texCoord", 0))
-        if texcoord >= len(prim.texcoords):
-            continue
-        intensity = float(ext.get("intensity", 1.0))
-        source = document.textures[ext["index"]].source
-        key = (source, intensity)
+        texture, texcoord, scale, curve, red = found
+        source = document.textures[texture].source
+        key = (source, scale, curve, red)
         if key not in page_of_key:
             texels = _decode_image(ctx, source)[..., :3]
-            decoded = SRGB_TO_LINEAR[texels] if encoding == "srgb" else texels / 255.0
-            pages.append(decoded * intensity)
+            if red:
+                texels = np.repeat(texels[..., :1], 3, axis=-1)
+            decoded = SRGB_TO_LINEAR[texels] if curve == "srgb" else texels / 255.0
+            pages.append(decoded * scale)
             page_of_key[key] = len(pages) - 1
         tris = world.instance_triangles(i)
         local = world.triangles[tris] - world.vertex_start[i]
         tri_page[tris] = page_of_key[key]
         tri_uv[tris] = prim.texcoords[texcoord][local]
-    baked_by_us = isinstance(extras, dict) and isinstance(extras.get("baker"), dict)
-    if not pages and not baked_by_us:
+    if not pages and not recorded:
         raise InputError("the scene has no lightmap: no material has a MOZ_lightmap extension",
                          file=str(scene.path),
                          fix="bake it first: baker bake SCENE -o SCENE_baked.glb, then preview "
                              "the baked file")
     return SceneLightmaps(pages=pages, page=tri_page, uv=tri_uv, encoding=encoding)
+
+
+def _carried_texture(document, material, carrier: str, encoding: str):
+    """(texture, texCoord, scale, curve, red channel only) of the bake that ``material``
+    (scene.Material) carries, or None: its MOZ_lightmap, else the emissive or occlusion
+    carrier's texture when the file says that carrier wrote it."""
+    if material.index is None:
+        return None
+    gltf = document.materials[material.index]
+    ext = (gltf.extensions or {}).get("MOZ_lightmap")
+    if isinstance(ext, dict) and ext.get("index") is not None:
+        return (ext["index"], int(ext.get("texCoord", 0)), float(ext.get("intensity", 1.0)),
+                encoding, False)
+    if carrier == "emissive" and gltf.emissiveTexture is not None:
+        return (gltf.emissiveTexture.index, int(gltf.emissiveTexture.texCoord or 0),
+                float(material.emissive[0]), "srgb", False)
+    if carrier == "occlusion" and gltf.occlusionTexture is not None:
+        return (gltf.occlusionTexture.index, int(gltf.occlusionTexture.texCoord or 0), 1.0,
+                "linear", True)
+    return None
 
 
 def sample_bilinear(page: np.ndarray, uv: np.ndarray) -> np.ndarray:
@@ -311,7 +337,8 @@ def render(scene: Scene, mode: str = "lit", size: tuple[int, int] | None = None,
 
     mode: one of MODES. size: (width, height) pixels; None takes 640 wide and the camera's
     aspect ratio (480 high without one). exposure: factor on linear values before the sRGB curve;
-    None picks one so the 99th percentile of the lightmapped pixels' luminance maps to 0.85 (lit,
+    None picks one so the 99th percentile of the lightmapped pixels' luminance (those above 0)
+    maps to 0.85 (lit,
     lightmap and unlit modes; checker shades are used as they are). view: None uses the scene's
     camera or the default view.
     """
@@ -341,9 +368,10 @@ def render(scene: Scene, mode: str = "lit", size: tuple[int, int] | None = None,
     radiance, lightmapped = _shade(scene, world, lightmaps, mode, triangle, bary, directions, cell)
     if exposure is None:
         exposure = 1.0
-        if mode != "checker" and lightmapped.any():
-            level = np.percentile(radiance[lightmapped] @ LUMINANCE, 99)
-            exposure = _WHITE / level if level > 0 else 1.0
+        shown = radiance[lightmapped] @ LUMINANCE
+        shown = shown[shown > 0]  # a metal shows black: it says nothing of the level
+        if mode != "checker" and len(shown):
+            exposure = _WHITE / np.percentile(shown, 99)
     shown = np.where((triangle >= 0)[:, None], radiance * exposure, _BACKGROUND)
     rgb = np.round(linear_to_srgb(shown) * 255).astype(np.uint8)
     return Picture(rgb=rgb.reshape(height, width, 3), radiance=radiance.reshape(height, width, 3),
@@ -423,9 +451,11 @@ def _shade(scene: Scene, world: World, lightmaps: SceneLightmaps, mode: str, tri
     if mode == "lightmap":
         radiance[hit] = np.where(baked[:, None], light, flat * 0.5)
     else:
-        colour = albedo(scene, world, tris, b)
-        lit = np.where(baked[:, None], 1.0 if mode == "unlit" else light, flat)
-        radiance[hit] = colour * lit + emission(scene, world, tris, b)
+        weight = viewer_diffuse_weight(scene)[world.tri_material[tris]]
+        diffuse = base_colour(scene, world, tris, b) * weight[:, None]
+        shaded = diffuse * (1.0 if mode == "unlit" else light / np.pi)
+        radiance[hit] = (np.where(baked[:, None], shaded, albedo(scene, world, tris, b) * flat)
+                         + emission(scene, world, tris, b))
     lightmapped = np.zeros(n, bool)
     lightmapped[hit[baked]] = True
     return radiance, lightmapped

@@ -14,7 +14,9 @@ from baker.errors import SettingsError
 
 RHO_FUNCTIONS = ("sqrt", "step", "linear")
 ENCODINGS = ("linear", "srgb")
-OCCLUSION_MODES = ("none", "also", "only")
+OCCLUSION_MODES = ("none", "also")
+CARRIERS = ("moz", "emissive", "occlusion")
+BAKED_LIGHTS = ("remove", "keep", "indirect")
 METHODS = ("obscurance", "gi")
 SPECULAR_STRATEGIES = ("b", "a", "c")
 TECHNIQUES = ("sobol", "stratified", "random")  # how ray directions are drawn: rays.sampling
@@ -47,10 +49,21 @@ class Settings:
     seed: the sampler's seed; the same seed gives the same bytes.
     threads: worker threads for ray casting (0: one per core).
     chunk_texels: texels per work unit; bounds memory, never changes the result.
-    encoding: how lightmap PNG texels map to light ("linear", as three.js and Hubs read them, or
-        "srgb", as the proposed MOZ_lightmap text says).
-    occlusion: also write the obscurance W as the core occlusionTexture ("also"), instead of the
-        lightmap ("only"), or not ("none").
+    carrier: how the bake reaches a viewer (docs/output.md): "moz" (MOZ_lightmap: three.js with
+        a plugin, Hubs, ``baker view``), "emissive" (the lit surface's radiance in the emission
+        of a copy of each material: every viewer, no plugin) or "occlusion" (visibility, 1 =
+        unoccluded, as the core occlusionTexture: every viewer, their own lights kept).
+    baked_lights: what becomes of the KHR_lights_punctual lights baked into the lightmap:
+        "remove" them from the output (so viewers do not light the baked surfaces again),
+        "keep" them (the lightmap holds their light: a viewer that lights with them doubles
+        it), or "indirect": keep them and bake only the indirect light, for viewers that light
+        with them; None: "keep" for the occlusion carrier, else "remove".
+    encoding: how lightmap PNG texels map to light, named for what reads them: "linear"
+        (texel/255: the three.js MOZ_lightmap plugin, Hubs, ``baker view``) or "srgb" (the
+        MOZ_lightmap extension text; the emissive carrier's texture, which glTF says is sRGB);
+        None: "srgb" for the emissive carrier, else "linear".
+    occlusion: also write the visibility (1 = unoccluded) as the core occlusionTexture next to
+        the MOZ_lightmap ("also"), or not ("none"); the occlusion carrier writes it alone.
     clip_percentile: each page's MOZ_lightmap intensity is this percentile (in (50, 100]) of its
         texels' brightest channel; brighter texels clip to it (encode.py). 100: the page's peak.
     shadow_rays: shadow rays per texel towards each light that has a size (radius or angular
@@ -97,7 +110,9 @@ class Settings:
     seed: int = 0
     threads: int = 0
     chunk_texels: int = 4096
-    encoding: str = "linear"
+    carrier: str = "moz"
+    baked_lights: str | None = None
+    encoding: str | None = None
     occlusion: str = "none"
     clip_percentile: float = 99.9
     shadow_rays: int = 16
@@ -153,14 +168,39 @@ class Settings:
         if self.page_size > 16384:
             raise SettingsError(f"page_size {self.page_size} is larger than 16384 texels",
                                 fix="use --page-size 16384 or less; large scenes get several pages")
+        self._check_output()
         for name, value, allowed in (("rho", self.rho, RHO_FUNCTIONS),
-                                     ("encoding", self.encoding, ENCODINGS),
                                      ("sampling", self.sampling, TECHNIQUES),
-                                     ("method", self.method, METHODS),
-                                     ("occlusion", self.occlusion, OCCLUSION_MODES)):
+                                     ("method", self.method, METHODS)):
             if value not in allowed:
                 raise SettingsError(f"{name} must be one of {', '.join(allowed)}, not {value!r}",
                                     fix=f"use --{name} {allowed[0]}")
+
+    def _check_output(self) -> None:
+        """Carrier, baked lights, encoding and occlusion: known values that fit together."""
+        if self.occlusion == "only":
+            raise SettingsError("occlusion 'only' is now the occlusion carrier",
+                                fix="use --carrier occlusion")
+        for name, value, allowed in (("carrier", self.carrier, CARRIERS),
+                                     ("baked_lights", self.baked_lights, BAKED_LIGHTS),
+                                     ("encoding", self.encoding, ENCODINGS),
+                                     ("occlusion", self.occlusion, OCCLUSION_MODES)):
+            if value not in allowed and not (value is None and name in ("baked_lights",
+                                                                          "encoding")):
+                raise SettingsError(f"{name} must be one of {', '.join(allowed)}, not {value!r}",
+                                    fix=f"use --{name.replace('_', '-')} {allowed[0]}")
+        if self.carrier == "emissive" and self.encoding == "linear":
+            raise SettingsError("the emissive carrier's texture is an emissiveTexture, which glTF "
+                                "defines as sRGB: it cannot be linear",
+                                fix="leave out --encoding (srgb), or use --carrier moz")
+        if self.carrier != "moz" and self.occlusion == "also":
+            raise SettingsError(f"occlusion 'also' adds an occlusionTexture to the MOZ_lightmap; "
+                                f"the {self.carrier} carrier has none",
+                                fix="use --carrier occlusion for visibility alone, or leave out "
+                                    "--occlusion")
+        if self.carrier == "occlusion" and self.baked_lights == "indirect":
+            raise SettingsError("the occlusion carrier holds no light, so it has no indirect "
+                                "light to bake", fix="leave out --baked-lights (keep)")
 
 
     def _check_materials(self) -> None:
@@ -259,6 +299,10 @@ def resolve(settings: Settings, surface_area: float, diagonal: float) -> Resolve
             f"{MAX_TEXELS:,} texels", fix=f"use --texel-density {_round_down(most):g} or less")
     if values["d_max"] is None:
         values["d_max"] = settings.d_max_fraction * quarter_octave(diagonal) if diagonal > 0 else 1.0
+    if values["baked_lights"] is None:
+        values["baked_lights"] = "keep" if settings.carrier == "occlusion" else "remove"
+    if values["encoding"] is None:
+        values["encoding"] = "srgb" if settings.carrier == "emissive" else "linear"
     return Resolved(**values)
 
 

@@ -54,7 +54,30 @@ def preview(out: Path = IMAGES / "preview.png") -> Path:
     return out
 
 
-IMAGE_FUNCTIONS = {"preview": preview, "study": study}
+def view(out: Path = IMAGES / "view.png") -> Path:
+    """``baker view``'s page in headless Chromium (tests/chromium.py: Debian's package, WebGL
+    through SwiftShader), 720 × 480, showing the demo Cornell box baked as for ``preview``."""
+    sys.path.insert(0, str(ROOT / "tests"))
+    from chromium import Browser, find_chromium
+
+    from baker.view import start
+
+    with tempfile.TemporaryDirectory() as folder:
+        scene = cornell_box().save(Path(folder) / "cornell_box.glb")
+        baked = Path(folder) / "cornell_box_baked.glb"
+        assert baker_main(["bake", str(scene), "-o", str(baked), "--rays", "256", "--quiet",
+                           "--no-state"]) == 0
+        server, url = start(baked)
+        try:
+            with Browser(find_chromium()) as browser:
+                out.write_bytes(browser.page_png(url, 720, 480))
+        finally:
+            server.shutdown()
+    print(f"{out.stat().st_size / 1024:.0f} KiB")
+    return out
+
+
+IMAGE_FUNCTIONS = {"preview": preview, "study": study, "view": view}
 
 
 def main(names: list[str]) -> None:

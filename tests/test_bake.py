@@ -170,7 +170,12 @@ def test_real_scene_facts_show_in_the_plan(tmp_path):
     assert "punctual lights" in lamp.plan.stages
     multi = baker.bake(REAL_SCENES["MultiUVTest"], tmp_path / "m.glb",
                        baker.Settings(page_size=128, rays=4))
-    assert any("TEXCOORD_2" in note for note in multi.report["notes"])
+    # its second UV set moves up so that the lightmap is TEXCOORD_1, where Hubs reads it
+    assert any("TEXCOORD_1 moved up" in note for note in multi.report["notes"])
+    document = pygltflib.GLTF2.load(str(tmp_path / "m.glb"))
+    for material in document.materials:
+        if "MOZ_lightmap" in (material.extensions or {}):
+            assert material.extensions["MOZ_lightmap"]["texCoord"] == 1
 
 
 def test_files_written_beside_the_output_get_the_usual_permissions(tmp_path):

@@ -57,7 +57,7 @@ def _two_charts(gap: int, same_instance: bool, seed: int = 0):
     _, y, x = np.nonzero(covered)
     instance = np.zeros(len(y), np.int64) if same_instance else np.where(dark[y, x], 0, 1)
     texels = _texels(np.zeros(len(y), np.int64), y, x, instance.astype(np.int64), shape)
-    return Lightmaps(light=light, obscurance=light.copy(), covered=covered), texels, dark, 0.005
+    return Lightmaps(light=light, visibility=light.copy(), covered=covered), texels, dark, 0.005
 
 
 @pytest.mark.parametrize("gap, same_instance", [(2, True), (0, False)])
@@ -82,7 +82,7 @@ def test_flagged_texels_feed_nothing():
     invalid[0, 20:23, 50:53] = True  # a patch inside the dark chart, its rays started in a wall
     light = lightmaps.light.copy()
     light[invalid] = 1000.0
-    out, info = denoise(Lightmaps(light, lightmaps.obscurance, lightmaps.covered), texels,
+    out, info = denoise(Lightmaps(light, lightmaps.visibility, lightmaps.covered), texels,
                         invalid=invalid)
     valid_dark = dark & ~invalid[0]
     assert np.abs(out.light[0][valid_dark] - 0.05).max() < 3 * sigma

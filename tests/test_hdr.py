@@ -51,7 +51,7 @@ DOCUMENTED = {"linear": {(0.1, 1.0): 0.020, (0.01, 0.1): 0.20},
 @pytest.mark.parametrize("encoding", ["linear", "srgb"])
 def test_embedded_encoding_round_trip_on_a_page_from_1e_minus_2_to_1e5(encoding):
     light = _hdr_page()
-    page = Lightmaps(light=light[None], obscurance=np.zeros((1,) + light.shape),
+    page = Lightmaps(light=light[None], visibility=np.zeros((1,) + light.shape),
                      covered=np.ones((1,) + light.shape[:2], bool))
     (encoded,) = encode(page, encoding, occlusion=False)
     s = encoded.intensity
@@ -82,7 +82,7 @@ def test_embedded_encoding_round_trip_on_a_page_from_1e_minus_2_to_1e5(encoding)
 
 def test_percentile_100_scales_each_page_to_its_peak():
     light = _hdr_page(shape=(64, 64), low=1.0, high=1e3)
-    page = Lightmaps(light=light[None], obscurance=np.zeros((1,) + light.shape),
+    page = Lightmaps(light=light[None], visibility=np.zeros((1,) + light.shape),
                      covered=np.ones((1, 64, 64), bool))
     (peak,) = encode(page, "linear", False, clip_percentile=100.0)
     (robust,) = encode(page, "linear", False)

@@ -28,7 +28,7 @@ LAYERS = (
     ("baker.output",),  # the glTF written back
     ("baker.pipeline",),  # the plan, the parts, the full bake
     ("baker.rebake",),  # the bake state, what changed, the incremental rebake
-    ("baker.api", "baker.preview", "baker.study"),  # what a user calls
+    ("baker.api", "baker.preview", "baker.study", "baker.view"),  # what a user calls
     ("baker",),  # the package's public names (its __init__)
     ("baker.cli",),  # the command line, a user of those names
 )

@@ -69,7 +69,7 @@ def test_blocks_give_the_same_values_as_one_block(done, monkeypatch):
     monkeypatch.setattr(integrate_module, "_MEAN_ROWS", 3)
     blocked = _composed(done)
     assert np.array_equal(blocked.light, whole.light)
-    assert np.array_equal(blocked.obscurance, whole.obscurance)
+    assert np.array_equal(blocked.visibility, whole.visibility)
     assert [(p.png, p.occlusion_png, p.intensity) for p in encode(done.lightmaps, "srgb", True)] \
         == [(p.png, p.occlusion_png, p.intensity) for p in pages]
     again = integrate_module._means(np.arange(9 * 1000.0).reshape(1000, 9) % 17,
@@ -109,7 +109,7 @@ def test_pages_of_w_are_kept_only_for_the_occlusion_texture(done, tmp_path):
     from baker.settings import Settings
 
     plain = compute(done.scene, Settings(page_size=384, rays=4))
-    assert plain.lightmaps.obscurance.shape[0] == 0 and done.lightmaps.obscurance.shape[0] == 1
+    assert plain.lightmaps.visibility.shape[0] == 0 and done.lightmaps.visibility.shape[0] == 1
     assert np.array_equal(plain.lightmaps.light, done.lightmaps.light)
     assert [p.png for p in encode(plain.lightmaps, "srgb", False)] == \
         [p.png for p in encode(done.lightmaps, "srgb", True)]

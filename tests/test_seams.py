@@ -67,15 +67,17 @@ def test_seams_agree_after_stitching(shape, request):
     charts = _chart_count(unwrap)
     assert charts >= (4 if shape == "sphere" else 5), charts  # several charts (cylinder: + 2 caps)
     assert seams.edges >= 3 and len(seams) > 200
-    before = seam_steps(_unstitched(done).obscurance, seams)
-    after = seam_steps(done.lightmaps.obscurance, seams)
+    before = seam_steps(_unstitched(done).light, seams)
+    after = seam_steps(done.lightmaps.light, seams)
     on_shape = node[done.texels.instance()] == builder.info["nodes"][shape]
+    # the scene has no light source: the lightmap is I_A·W with I_A = 1
+    assert np.array_equal(done.ambient.intensity, np.ones(3))
     noise = float(np.median(done.terms.standard_error(done.ambient.r_ave)[on_shape]))
     assert before.max() > 5 * noise  # the seams were visible
     assert after.max() < noise  # now within the noise level, everywhere
     assert after.max() < before.max() / 10 and np.median(after) < np.median(before) / 10
     # Stitching moves texel values only near seams, and on average hardly at all.
-    change = np.abs(done.lightmaps.obscurance - _unstitched(done).obscurance)[
+    change = np.abs(done.lightmaps.light - _unstitched(done).light)[
         done.lightmaps.covered]
     assert (change > 0).mean() < 0.5 and change.mean() < noise
 
@@ -93,8 +95,8 @@ def test_seams_between_touching_objects_agree(tmp_path):
     assert seams.edges == 1 and len(seams) > 30  # the joint (the sphere is not baked)
     # Side A and side B sample the same 3D points on different tiles' charts.
     assert np.abs(seams.uv_a - seams.uv_b).max(axis=1).min() > 1e-3
-    before = seam_steps(_unstitched(done).obscurance, seams)
-    after = seam_steps(done.lightmaps.obscurance, seams)
+    before = seam_steps(_unstitched(done).light, seams)
+    after = seam_steps(done.lightmaps.light, seams)
     noise = float(np.median(done.terms.standard_error(done.ambient.r_ave)))
     assert before.max() > 5 * noise
     assert after.max() < noise and after.max() < before.max() / 10
@@ -130,7 +132,7 @@ def test_no_lookup_on_any_triangle_reads_an_empty_texel(scene, sphere, tmp_path)
                                                         texel_density=8.0, rays=4)
     covered = done.lightmaps.covered
     # Mark what the bake filled: covered texels 1, then the real post-processing.
-    marked = Lightmaps(light=covered[..., None] * np.ones(3), obscurance=covered[..., None]
+    marked = Lightmaps(light=covered[..., None] * np.ones(3), visibility=covered[..., None]
                        * np.ones(3), covered=covered)
     no_flags = Validity(np.zeros(len(done.texels), np.int8), np.zeros(len(done.texels)),
                         np.zeros(len(done.texels)), np.zeros(len(done.texels), bool))

@@ -77,7 +77,7 @@ def test_supersampled_obscurance_does_not_depend_on_threads_or_chunks(edge_scene
     other = computed(edge_scene, tmp_path, supersample=8, threads=2, chunk_texels=37, **SETTINGS)
     np.testing.assert_array_equal(one.terms.w_hit, other.terms.w_hit)
     np.testing.assert_array_equal(one.terms.escaped, other.terms.escaped)
-    np.testing.assert_array_equal(one.lightmaps.obscurance, other.lightmaps.obscurance)
+    np.testing.assert_array_equal(one.lightmaps.visibility, other.lightmaps.visibility)
     t, tracer, n = one.texels, Tracer(one.world), 8
     rows = np.arange(0, len(t), 7)
     sub = sub_positions(tracer, t, rows, n, one.settings.seed)

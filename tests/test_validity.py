@@ -94,11 +94,11 @@ def _leaking_texels(done, builder):
                   & (np.abs(centre[:, 2] - bz) + r[:, 0] <= sz / 2))
     near = (overlap > 0) & ~inside_box
     t = done.texels
-    w = done.lightmaps.obscurance[t.pixels(floor)].max(axis=1)
+    w = done.lightmaps.visibility[t.pixels(floor)].max(axis=1)
     points = _interior_points(info, 0.25 / DENSITY)
     texels, weights = _floor_lookup_texels(done, info["nodes"]["floor"], points)
     read = np.unique(texels[weights > 0], axis=0)
-    w_read = done.lightmaps.obscurance[read[:, 0], read[:, 1], read[:, 2]].max(axis=1)
+    w_read = done.lightmaps.visibility[read[:, 0], read[:, 1], read[:, 2]].max(axis=1)
     assert near.sum() > 800
     lit = w > 1e-6
     corner = near & (overlap < 0.1)  # e.g. a square diagonally past a corner by 2 cm × 2 cm
@@ -153,7 +153,8 @@ def test_floor_under_the_box_and_the_thick_wall_is_dark(room, tmp_path):
     under_wall = _grid(-h - t + margin, -h - margin, -h + margin, h - margin, 0.5 / DENSITY)
     open_room = _interior_points(info, 1.0 / DENSITY)
     floor = info["nodes"]["floor"]
-    obscurance = done.lightmaps.obscurance
+    assert np.array_equal(done.ambient.intensity, np.ones(3))  # no light: the lightmap is W
+    obscurance = done.lightmaps.light
 
     def w_at(points):
         texels, weights = _floor_lookup_texels(done, floor, points)

@@ -123,11 +123,17 @@ def _input_doc() -> _Doc:
     morph = len(doc.json["accessors"]) - 1
     uv1 = a(TWO_UV1, FLOAT, "VEC2")
     bare = a(BARE_POSITIONS, FLOAT, "VEC3", bounds=True)
+    texture = doc.view(_png(50))
     doc.json.update({
+        "images": [{"bufferView": texture, "mimeType": "image/png"}],
+        "textures": [{"source": 0}],
+        "extensionsUsed": ["KHR_lights_punctual", "KHR_texture_transform"],
+        "extensions": {"KHR_lights_punctual": {"lights": [{"type": "point", "intensity": 5}]}},
         "scene": 0,
         "scenes": [{"nodes": [0, 1, 2, 3, 4], "name": "level"}],
         "nodes": [
-            {"mesh": 0, "name": "quad A", "extras": {"tag": "a"}},
+            {"mesh": 0, "name": "quad A", "extras": {"tag": "a"},
+             "extensions": {"KHR_lights_punctual": {"light": 0}}},
             {"mesh": 0, "name": "quad B", "translation": [2, 0, 0]},
             {"mesh": 1, "name": "two uv", "translation": [0, 2, 0]},
             {"mesh": 2, "name": "mirrored", "scale": [-1, 1, 1], "translation": [4, 0, 0]},
@@ -147,7 +153,11 @@ def _input_doc() -> _Doc:
         "materials": [
             {"name": "wall", "pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.7, 0.6, 1]},
              "extras": {"keep": True}},
-            {"name": "floor", "doubleSided": True},
+            {"name": "floor", "doubleSided": True,  # textures on both UV sets
+             "pbrMetallicRoughness": {"baseColorTexture": {"index": 0}},
+             "occlusionTexture": {"index": 0, "texCoord": 1},
+             "emissiveTexture": {"index": 0, "extensions": {
+                 "KHR_texture_transform": {"texCoord": 1, "scale": [2, 2]}}}},
         ],
         "cameras": [{"type": "perspective", "perspective": {"yfov": 0.8, "znear": 0.1}}],
     })
@@ -284,8 +294,8 @@ def test_output_validates_and_records_encoding(baked):
     assert document.asset.extras["author"] == "tests"
     assert document.asset.extras["baker"]["lightmap_encoding"] == "linear"
     assert document.asset.extras["baker"]["lightmap_extension"] == "MOZ_lightmap"
-    assert info.lightmap_texcoord == {0: 1, 1: 1, 2: 2, 3: 1}
-    assert any("TEXCOORD_2" in note for note in info.notes)
+    assert info.lightmap_texcoord == {0: 1, 1: 1, 2: 1, 3: 1}
+    assert any("TEXCOORD_1 moved up" in note for note in info.notes)
     assert len(document.buffers) == 1
 
 
@@ -386,28 +396,76 @@ def test_mirrored_instance_keeps_file_winding(baked):
     assert primitive.attributes.TEXCOORD_1 is not None
 
 
-def test_existing_texcoord_1_is_kept_and_lightmap_goes_to_2(baked):
+def test_existing_texcoord_1_moves_to_2_and_lightmap_goes_to_1(baked):
+    """Hubs reads lightmaps from TEXCOORD_1 whatever texCoord says: the input's second set
+    moves up, and every texture of the material copy that read it follows."""
     _, output, _ = baked
     document, blob = _load(output)
     primitive = document.meshes[document.nodes[2].mesh].primitives[0]
     material = document.materials[primitive.material]
-    assert material.extensions["MOZ_lightmap"]["texCoord"] == 2
+    assert material.extensions["MOZ_lightmap"]["texCoord"] == 1
     assert material.doubleSided
+    assert material.occlusionTexture.texCoord == 2
+    assert material.pbrMetallicRoughness.baseColorTexture.texCoord in (None, 0)
+    assert material.emissiveTexture.extensions["KHR_texture_transform"]["texCoord"] == 2
     positions = _read(document, blob, primitive.attributes.POSITION)
     order = [np.flatnonzero(np.all(QUAD_POSITIONS == p, 1))[0] for p in positions]
-    uv1 = _read(document, blob, primitive.attributes.TEXCOORD_1)
-    assert uv1.tobytes() == TWO_UV1[order].tobytes()
-    lightmap = _read(document, blob, primitive.attributes.TEXCOORD_2)
+    uv2 = _read(document, blob, primitive.attributes.TEXCOORD_2)
+    assert uv2.tobytes() == TWO_UV1[order].tobytes()
+    lightmap = _read(document, blob, primitive.attributes.TEXCOORD_1)
     np.testing.assert_array_equal(lightmap, _atlas().instances[2].uv[order].astype(np.float32))
+    # the input's material, which an unbaked primitive could still use, is unchanged
+    assert document.materials[1].occlusionTexture.texCoord == 1
 
 
-def test_occlusion_also_and_only(tmp_path):
+def test_texcoord_sets_stay_where_variants_would_break(tmp_path):
+    """A primitive with KHR_materials_variants keeps its sets (its variants' materials point at
+    them); the lightmap goes to the first free set and a note says Hubs will not read it."""
+    doc = _input_doc()
+    primitive = doc.json["meshes"][1]["primitives"][0]
+    primitive["extensions"] = {"KHR_materials_variants": {"mappings": [
+        {"material": 0, "variants": [0]}]}}
+    doc.json["extensions"]["KHR_materials_variants"] = {"variants": [{"name": "plain"}]}
+    doc.json["extensionsUsed"].append("KHR_materials_variants")
+    source = tmp_path / "level.glb"
+    doc.glb(source)
+    output = tmp_path / "out.glb"
+    info = write(_scene(source), _atlas(), _pages(), output, WriteOptions())
+    _assert_valid(output)
+    document, blob = _load(output)
+    primitive = document.meshes[document.nodes[2].mesh].primitives[0]
+    assert document.materials[primitive.material].extensions["MOZ_lightmap"]["texCoord"] == 2
+    assert _read(document, blob, primitive.attributes.TEXCOORD_1).tobytes() != b""
+    assert info.lightmap_texcoord[2] == 2
+    assert any("KHR_materials_variants" in note and "Hubs" in note for note in info.notes)
+
+
+@pytest.mark.parametrize("baked_lights", ["remove", "keep", "indirect"])
+def test_baked_lights_are_removed_or_kept(tmp_path, baked_lights):
+    source = tmp_path / "level.glb"
+    _input_glb(source)
+    output = tmp_path / "out.glb"
+    info = write(_scene(source), _atlas(), _pages(), output,
+                 WriteOptions(baked_lights=baked_lights))
+    _assert_valid(output)
+    document, _ = _load(output)
+    kept = baked_lights != "remove"
+    assert ("KHR_lights_punctual" in (document.extensions or {})) == kept
+    assert ("KHR_lights_punctual" in document.extensionsUsed) == kept
+    assert ("KHR_lights_punctual" in (document.nodes[0].extensions or {})) == kept
+    assert document.asset.extras["baker"]["baked_lights"] == baked_lights
+    assert any("light(s) removed" in note for note in info.notes) == (not kept)
+
+
+def test_occlusion_also_and_occlusion_carrier(tmp_path):
     source = tmp_path / "level.glb"
     _input_glb(source)
     scene = _scene(source)
     for mode in ("also", "only"):
         output = tmp_path / f"level_{mode}.glb"
-        write(scene, _atlas(), _pages(occlusion=True), output, WriteOptions(occlusion=mode))
+        options = (WriteOptions(occlusion="also") if mode == "also" else
+                   WriteOptions(carrier="occlusion", baked_lights="keep"))
+        write(scene, _atlas(), _pages(occlusion=True), output, options)
         _assert_valid(output)
         document, _ = _load(output)
         for node in document.nodes[:4]:

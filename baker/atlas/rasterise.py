@@ -237,6 +237,22 @@ def _chunks(counts: np.ndarray, limit: int) -> list[slice]:
     return [slice(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:]) if b > a]
 
 
+def texel_barycentrics(atlas: Atlas, world: World, texels: Texels) -> np.ndarray:
+    """(N, 3) barycentric coordinates of the texels' centres in their owning world triangles:
+    the points ``texels_of`` maps to world (before validity moves any), for what the texel's
+    surface looks like there (its albedo and emission, ``carriers.py``)."""
+    return _texel_barycentrics(texels.key & _KEY_BITS, texels.triangle,
+                               owners_uv(atlas, world), atlas.width, atlas.height)
+
+
+def owners_uv(atlas: Atlas, world: World) -> np.ndarray:
+    """(T, 3, 2) texel-space UV corners of every world triangle on a page (zeros for others)."""
+    corners, _, tris = _baked_triangles(atlas, world)
+    uv = np.zeros((len(world.triangles), 3, 2))
+    uv[tris] = corners
+    return uv
+
+
 INSET = 0.01  # texels: sample points keep at least this far inside their triangle's edges
 
 
@@ -387,10 +403,8 @@ class Owners:
 
 def owners(atlas: Atlas, world: World, coverage: Coverage) -> Owners:
     """The per-triangle terms of the triangles that own texels in ``coverage``."""
-    corners, _, tris = _baked_triangles(atlas, world)
     triangles = len(world.triangles)
-    uv = np.zeros((triangles, 3, 2))
-    uv[tris] = corners
+    uv = owners_uv(atlas, world)
     owning = np.flatnonzero(np.bincount(coverage.triangle, minlength=triangles))
     normal, size, axes = np.zeros((triangles, 3)), np.zeros(triangles), np.zeros((triangles, 2, 3))
     normal[owning], size[owning], axes[owning] = _triangle_terms(world, owning, uv[owning])

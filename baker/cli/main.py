@@ -14,9 +14,9 @@ import signal
 import sys
 
 import baker
-from baker.cli import bake, hook, preview, rebake, relight, study, watch
+from baker.cli import bake, hook, preview, rebake, relight, study, view, watch
 
-SUBCOMMANDS = (bake, rebake, relight, watch, hook, preview, study)
+SUBCOMMANDS = (bake, rebake, relight, watch, hook, preview, view, study)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -100,6 +100,16 @@ def diffuse_factors(scene: Scene) -> np.ndarray:
     return np.array([c.diffuse for c in table.classes], np.float64).reshape(-1, 3)
 
 
+def viewer_diffuse_weight(scene: Scene) -> np.ndarray:
+    """(M,) the share of every material's base colour that a glTF viewer shades as diffuse,
+    (1 − metallic) × (1 − transmission), factors only (three.js's MeshPhysicalMaterial, and
+    every viewer that follows glTF's BRDF): the part that a lightmap lights. A metal or glass
+    therefore shows little or nothing of a MOZ_lightmap, whatever the bake gave it."""
+    return np.array([(1.0 - float(np.clip(m.metallic, 0.0, 1.0)))
+                     * (1.0 - float(np.clip(m.transmission, 0.0, 1.0)))
+                     for m in scene.materials], np.float64)
+
+
 def base_colour(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray) -> np.ndarray:
     """Base colour (k, 3), linear RGB, at barycentric points (k, 3) of world triangles (k,):
     factor × texture × COLOR_0, every branch's weight left out (tints of mirrors and glass)."""

@@ -26,13 +26,15 @@ class Lightmaps:
     """Float lightmap pages, linear RGB.
 
     light: (P, H, W, 3) float64, what arrives at the surface (the shader multiplies by albedo).
-    obscurance: (P, H, W, 3) float64, W itself, for the occlusion texture; (0, H, W, 3) when
-    not kept (a bake without ``occlusion`` does not need it: 400 MB at 4096²). covered: (P, H, W) bool, texels that were baked
+    visibility: (P, H, W, 3) float64, for the occlusion texture: the fraction of the texel's
+    (cosine-weighted) rays that meet nothing within d_max, the same in each channel — 1 where
+    nothing occludes, as glTF's occlusion is (W is R-weighted: R_ave on an open surface); (0, H,
+    W, 3) when not kept (a bake without ``occlusion`` does not need it: 400 MB at 4096²). covered: (P, H, W) bool, texels that were baked
     (the rest are padding, filled by dilation).
     """
 
     light: np.ndarray
-    obscurance: np.ndarray
+    visibility: np.ndarray
     covered: np.ndarray
 
 
@@ -43,25 +45,25 @@ def effective_r_ave(ambient: Ambient, rho: str) -> np.ndarray:
 
 def compose(atlas: Atlas, texels: Texels, terms: Terms, ambient: Ambient, rho: str,
             direct: Direct | None = None, light_colours: np.ndarray | None = None,
-            indirect: np.ndarray | None = None, obscurance: bool = True) -> Lightmaps:
-    """Scatter the texels' light L = D + I_A·W and obscurance W into page images.
+            indirect: np.ndarray | None = None, visibility: bool = True) -> Lightmaps:
+    """Scatter the texels' light L = D + I_A·W and their visibility into page images.
 
     ``direct``: the texels' direct light (None: L = I_A·W); ``light_colours`` (L, 3) replaces the
     baked colour × intensity of its punctual lights (relighting without rays). ``indirect``
     (N, 3): path-traced indirect irradiance (``--method gi``) to use instead of I_A·W.
-    ``obscurance``: keep the pages of W too.
+    ``visibility``: keep the pages of the visibility too.
     """
-    lightmaps = blank(atlas, obscurance)
+    lightmaps = blank(atlas, visibility)
     compose_into(lightmaps, texels, terms, ambient, rho, direct, light_colours, indirect)
     return lightmaps
 
 
-def blank(atlas: Atlas, obscurance: bool = True) -> Lightmaps:
-    """Lightmaps of zeros, no texel covered, the atlas's pages in size (``obscurance``: with
-    pages of W, else 0 of them)."""
+def blank(atlas: Atlas, visibility: bool = True) -> Lightmaps:
+    """Lightmaps of zeros, no texel covered, the atlas's pages in size (``visibility``: with
+    pages of the visibility, else 0 of them)."""
     shape = (atlas.page_count, atlas.height, atlas.width)
     return Lightmaps(light=np.zeros(shape + (3,)),
-                     obscurance=np.zeros((shape[0] if obscurance else 0,) + shape[1:] + (3,)),
+                     visibility=np.zeros((shape[0] if visibility else 0,) + shape[1:] + (3,)),
                      covered=np.zeros(shape, bool))
 
 
@@ -76,8 +78,8 @@ def compose_into(lightmaps: Lightmaps, texels: Texels, terms: Terms, ambient: Am
     """
     r_ave = effective_r_ave(ambient, rho)
     count = len(texels)
-    pages, covered, obscurance = (flat_pages(lightmaps.light), flat_pages(lightmaps.covered),
-                                  flat_pages(lightmaps.obscurance))
+    pages, covered, visibility = (flat_pages(lightmaps.light), flat_pages(lightmaps.covered),
+                                  flat_pages(lightmaps.visibility))
     none = np.zeros((0, 3))
     for start in range(0, count, _TEXELS_AT_ONCE):
         block = slice(start, start + _TEXELS_AT_ONCE)
@@ -86,24 +88,25 @@ def compose_into(lightmaps: Lightmaps, texels: Texels, terms: Terms, ambient: Am
                         none if indirect is None else indirect[block],
                         none if direct is None else
                         _rows(direct, block, count).irradiance(light_colours),
-                        pages, obscurance, covered)
+                        pages, visibility, covered)
 
 
 @jit
 def _compose_kernel(index, w_hit, escaped, through_hit, through_ave, r_ave, intensity,
-                    indirect, direct, pages, obscurance, covered):
-    """Scatter the texels' W (``obscurance_at``) and L = I_A·W + D, or the path-traced
+                    indirect, direct, pages, visibility, covered):
+    """Scatter the texels' L = I_A·W + D (W: ``obscurance_at``), or the path-traced
     ``indirect`` + D when it has rows (``direct`` D (k, 3), or (0, 3): none), into the flat
-    pages at ``index`` (k,) (``Texels.pixel_index``); W too when ``obscurance`` has rows. In
+    pages at ``index`` (k,) (``Texels.pixel_index``); their visibility (``escaped``, at most 1)
+    too when ``visibility`` has rows. In
     one pass: numpy's temporaries made it 3× slower."""
-    keep, traced, lit = len(obscurance) > 0, len(indirect) > 0, len(direct) > 0
+    keep, traced, lit = len(visibility) > 0, len(indirect) > 0, len(direct) > 0
     for i in range(len(index)):
         p = index[i]
         covered[p] = True
         w = obscurance_at(w_hit, escaped, through_hit, through_ave, r_ave, i)
         for c in range(3):
             if keep:
-                obscurance[p, c] = w[c]
+                visibility[p, c] = min(escaped[i], 1.0)
             light = indirect[i, c] if traced else w[c] * intensity[c]
             pages[p, c] = light + direct[i, c] if lit else light
 

@@ -53,7 +53,7 @@ class DenoiseInfo:
 
     charts: charts denoised (each one OIDN run); texels: valid texels whose value the network
     set; seconds: wall time of the whole step; images: which page images ("light", and
-    "obscurance" when the occlusion texture is written).
+    "visibility" when the occlusion texture is written).
     """
 
     charts: int
@@ -170,13 +170,14 @@ def _chart_image(page: np.ndarray, ys: np.ndarray, xs: np.ndarray, valid: np.nda
 
 def denoise(lightmaps: Lightmaps, texels: Texels, invalid: np.ndarray | None = None,
             enclosed: np.ndarray | None = None, threads: int = 0,
-            obscurance: bool = False) -> tuple[Lightmaps, DenoiseInfo]:
+            visibility: bool = False) -> tuple[Lightmaps, DenoiseInfo]:
     """Denoise each chart of the composed pages on its own (see the module notes).
 
     lightmaps: straight from ``compose`` (before ``postprocess``); texels: the baked texels;
     invalid, enclosed: (P, H, W) bool masks from ``validity.Validity.page_masks`` (None: none),
     texels that neither feed the network nor take its output; threads: OIDN's CPU threads
-    (0: one per core); obscurance: also denoise W (when it is written as the occlusion texture).
+    (0: one per core); visibility: also denoise the visibility (when it is written as the occlusion
+    texture).
     Returns the new lightmaps (only valid covered texels changed) and what was done.
     """
     started = time.perf_counter()
@@ -190,7 +191,7 @@ def denoise(lightmaps: Lightmaps, texels: Texels, invalid: np.ndarray | None = N
     labels = chart_labels(texels, shape)
     order = np.argsort(labels, kind="stable")
     starts = np.flatnonzero(np.r_[True, np.diff(labels[order]) != 0]) if n else np.zeros(0, int)
-    names = ("light", "obscurance") if obscurance else ("light",)
+    names = ("light", "visibility") if visibility else ("light",)
     sources = {name: getattr(lightmaps, name) for name in names}
     results = {name: image.copy() for name, image in sources.items()}
     charts = changed = 0

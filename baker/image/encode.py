@@ -41,8 +41,9 @@ class EncodedPage:
 
     ``png`` holds the page; a viewer's linear value is ``decoded texel × intensity``, where
     "decoded" is the texel / 255 (encoding ``linear``) or the sRGB-decoded texel (encoding
-    ``srgb``). ``occlusion_png`` is the obscurance W as a greyscale-in-red PNG for the core
-    ``occlusionTexture``, or None when not asked for.
+    ``srgb``). ``occlusion_png`` is the visibility (1 = unoccluded, ``Lightmaps.visibility``) as
+    a grey PNG for the core ``occlusionTexture`` (read from its red channel), or None when not
+    asked for.
 
     ``peak``: the page's largest covered value (any channel, linear light units); ``clipped``:
     the fraction of covered texels whose brightest channel is above ``intensity`` (those texels
@@ -203,7 +204,7 @@ def page_scale(light: np.ndarray, covered: np.ndarray,
 
 def encode(lightmaps: Lightmaps, encoding: str, occlusion: bool,
            clip_percentile: float = CLIP_PERCENTILE) -> list[EncodedPage]:
-    """One EncodedPage per page; ``occlusion`` adds the obscurance W as a greyscale PNG.
+    """One EncodedPage per page; ``occlusion`` adds the visibility as a grey PNG.
 
     Each page's intensity is ``page_scale`` of its covered texels at ``clip_percentile``.
     """
@@ -212,7 +213,7 @@ def encode(lightmaps: Lightmaps, encoding: str, occlusion: bool,
         intensity, peak, clipped = page_scale(light, covered, clip_percentile)
         occlusion_png = None
         if occlusion:
-            occlusion_png = png_bytes(_page_texels(lightmaps.obscurance[p], lambda rows: quantise(
+            occlusion_png = png_bytes(_page_texels(lightmaps.visibility[p], lambda rows: quantise(
                 np.repeat((rows @ LUMINANCE)[..., None], 3, axis=-1), "linear")))
         if encoding == "linear":
             texels = np.empty(light.shape[:2] + (3,), np.uint8)

@@ -153,10 +153,10 @@ def postprocess(lightmaps: Lightmaps, padding: int, invalid: np.ndarray | None =
     """
     covered = lightmaps.covered
     pages = [np.ascontiguousarray(values, np.float64)
-             for values in (lightmaps.light, lightmaps.obscurance)]
+             for values in (lightmaps.light, lightmaps.visibility)]
     kept = tuple(values for values in pages if len(values))  # W's pages may not be kept
     if not kept:  # nothing baked
-        return Lightmaps(light=pages[0], obscurance=pages[1], covered=covered)
+        return Lightmaps(light=pages[0], visibility=pages[1], covered=covered)
     if enclosed is not None and enclosed.any():
         for values in kept:
             values[enclosed] = 0.0  # shut inside a solid: no light reaches it
@@ -165,4 +165,4 @@ def postprocess(lightmaps: Lightmaps, padding: int, invalid: np.ndarray | None =
     _dilate_in_place(kept, covered, max(2 * padding, 4))
     if seams is not None and len(seams):
         pages = [stitch(values, covered, seams) if len(values) else values for values in pages]
-    return Lightmaps(light=pages[0], obscurance=pages[1], covered=covered)
+    return Lightmaps(light=pages[0], visibility=pages[1], covered=covered)

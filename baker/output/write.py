@@ -7,12 +7,20 @@ extras, animations, skins, cameras, names, samplers, GPU-instanced nodes). What 
   lightmap is bound through the material and each instance has its own area in the atlas;
 - every baked primitive is rewritten as one TRIANGLES primitive per lightmap page it lies on,
   every vertex attribute (morph targets included) gathered through ``InstanceUV.vertices``, and
-  the lightmap UVs in the first free ``TEXCOORD_n`` (n ≥ 1; the set also goes to ``TEXCOORD_0``
-  when the primitive has none, since glTF forbids TEXCOORD_1 without TEXCOORD_0);
-- per (material, page, UV set) a copy of the material, named "<name> (lightmap page p)", with
-  ``extensions.MOZ_lightmap = {index, texCoord, intensity}`` and, on request, the baked
-  obscurance as its core ``occlusionTexture``; one PNG image (in a bufferView) per page;
-- ``asset.extras["baker"]`` records how the lightmap texels encode light.
+  the lightmap UVs as ``TEXCOORD_1``, where Hubs' loader and most engines look for them: sets
+  the input had from ``TEXCOORD_1`` on move up one, and the material copy's ``texCoord``s with
+  them (the set also goes to ``TEXCOORD_0`` when the primitive has none, since glTF forbids
+  TEXCOORD_1 without TEXCOORD_0). Only a primitive with ``KHR_materials_variants``, whose other
+  materials would keep pointing at the old sets, keeps them and gets the first free set, with a
+  note;
+- per (material, page, UV set) a copy of the material, named "<name> (lightmap page p)", that
+  carries the bake (``WriteOptions.carrier``): ``extensions.MOZ_lightmap = {index, texCoord,
+  intensity}`` (moz), the radiance as its emission on a black base (emissive) or the visibility
+  as its core ``occlusionTexture`` (occlusion, or moz with occlusion "also"); one PNG image (in
+  a bufferView) per page;
+- the ``KHR_lights_punctual`` lights removed when their light is in the lightmap
+  (``baked_lights`` "remove"), so that viewers do not light the baked surfaces a second time;
+- ``asset.extras["baker"]`` records the carrier, the lights and how the texels encode light.
 
 All buffers are merged into one (GLB BIN chunk, or ``<stem>.bin`` beside a ``.gltf``). Files are
 staged beside their places and moved into place together (``staging.Outputs``).
@@ -41,10 +49,25 @@ from baker.gltf.load import MAX_IMAGE_FILE_BYTES, read_accessor, resolve_buffers
 from baker.gltf.scene import Scene
 from baker.image.encode import PNG_SIGNATURE, EncodedPage
 from baker.run.atomic import Outputs
+from baker.settings import BAKED_LIGHTS, CARRIERS, ENCODINGS, OCCLUSION_MODES
 
 LIGHTMAP_EXTENSION = "MOZ_lightmap"
-ENCODINGS = ("linear", "srgb")
-OCCLUSION_MODES = ("none", "also", "only")
+LIGHTS_EXTENSION = "KHR_lights_punctual"
+VARIANTS_EXTENSION = "KHR_materials_variants"
+EMISSIVE_STRENGTH = "KHR_materials_emissive_strength"
+SPECULAR = "KHR_materials_specular"
+ENCODING_TARGETS = {
+    "linear": "texel/255 x intensity: the three.js MOZ_lightmap plugin, Hubs, baker view",
+    "srgb": "sRGB-decoded texel x intensity: the MOZ_lightmap extension text; glTF's "
+            "emissiveTexture",
+}
+"""What reads each encoding as it is meant (recorded in ``asset.extras.baker``)."""
+# Material extensions that would shade an emissive-carrier copy beyond its emission (a clear
+# coat, sheen or transmission over the black base): dropped from those copies.
+_SHADING_EXTENSIONS = ("KHR_materials_transmission", "KHR_materials_volume",
+                       "KHR_materials_clearcoat", "KHR_materials_sheen",
+                       "KHR_materials_iridescence", "KHR_materials_anisotropy",
+                       "KHR_materials_diffuse_transmission", "KHR_materials_dispersion")
 
 _FLOAT = 5126
 _UNSIGNED_SHORT = 5123
@@ -62,11 +85,17 @@ _GLB_MAGIC, _GLB_JSON, _GLB_BIN = 0x46546C67, 0x4E4F534A, 0x004E4942
 class WriteOptions:
     """How the lightmaps are stored in the output.
 
+    ``carrier``: ``moz`` (``EncodedPage.png`` as ``MOZ_lightmap``), ``emissive`` (the pages hold
+    outgoing radiance, ``carriers.py``: bound as the copy's ``emissiveTexture``, its base colour
+    black) or ``occlusion`` (``EncodedPage.occlusion_png`` as the core ``occlusionTexture``
+    alone).
+    ``baked_lights``: ``remove`` drops the KHR_lights_punctual lights from the output once
+    something carries the bake; ``keep`` and ``indirect`` (the bake left their direct light
+    out) keep them.
     ``encoding``: how a PNG texel maps to linear light — ``linear`` (texel / 255 × intensity) or
     ``srgb`` (sRGB-decoded texel × intensity); recorded in ``asset.extras["baker"]``.
-    ``occlusion``: ``none``; ``also`` writes ``EncodedPage.occlusion_png`` as the material's core
-    ``occlusionTexture`` on the lightmap UV set next to ``MOZ_lightmap``; ``only`` writes the
-    occlusion texture and no ``MOZ_lightmap``.
+    ``occlusion``: ``none``, or ``also``: the visibility as the core ``occlusionTexture`` on the
+    lightmap UV set next to ``MOZ_lightmap``.
     ``clip_percentile``: the percentile of each page's texels that its ``intensity`` is
     (encode.py; 100: the page's peak), recorded in ``asset.extras["baker"]``.
     """
@@ -74,8 +103,17 @@ class WriteOptions:
     encoding: str = "linear"
     occlusion: str = "none"
     clip_percentile: float = 100.0
+    carrier: str = "moz"
+    baked_lights: str = "remove"
 
     def __post_init__(self) -> None:
+        for name, allowed in (("carrier", CARRIERS), ("baked_lights", BAKED_LIGHTS)):
+            if getattr(self, name) not in allowed:
+                raise SettingsError(f"unknown {name} {getattr(self, name)!r}",
+                                    fix=f"use one of: {', '.join(allowed)}")
+        if self.carrier == "emissive" and self.encoding != "srgb":
+            raise SettingsError("the emissive carrier's pages are emissiveTextures, sRGB by glTF",
+                                fix="encode them with encoding 'srgb'")
         if self.encoding not in ENCODINGS:
             raise SettingsError(f"unknown lightmap encoding {self.encoding!r}",
                                 fix=f"use one of: {', '.join(ENCODINGS)}")
@@ -115,6 +153,8 @@ def write(scene: Scene, atlas: Atlas, pages: Sequence[EncodedPage], output: Path
     for node, baked in _baked_by_node(scene, atlas).items():
         builder.bake_node(node, baked)
     builder.record_asset()
+    if options.baked_lights == "remove" and builder.material_copies:
+        builder.remove_lights()
     files = builder.finish(kind)
     staged = Outputs() if outputs is None else outputs
     try:
@@ -336,17 +376,21 @@ class _Builder:
             if not np.isfinite(intensity) or intensity < 0:
                 raise ValueError(f"lightmap page {p} has intensity {intensity}")
             self.intensities.append(intensity)
-            if self.options.occlusion != "only":
+            if self.options.carrier != "occlusion":
+                kind = "emission" if self.options.carrier == "emissive" else "lightmap"
                 self.lightmap_textures.append(
-                    self._add_texture(page.png, sampler, f"lightmap page {p}"))
-            if self.options.occlusion != "none":
+                    self._add_texture(page.png, sampler, f"{kind} page {p}"))
+            if self._writes_occlusion():
                 if page.occlusion_png is None:
-                    raise SettingsError(f"occlusion output ({self.options.occlusion!r}) was asked "
-                                        f"but lightmap page {p} has no occlusion image",
+                    raise SettingsError(f"occlusion output was asked but lightmap page {p} has "
+                                        "no occlusion image",
                                         fix="encode the pages with occlusion, or set occlusion "
                                             "to 'none'")
                 self.occlusion_textures.append(
                     self._add_texture(page.occlusion_png, sampler, f"occlusion page {p}"))
+
+    def _writes_occlusion(self) -> bool:
+        return self.options.carrier == "occlusion" or self.options.occlusion == "also"
 
     def _add_texture(self, png: bytes, sampler: int, name: str) -> int:
         if not bytes(png[:8]) == PNG_SIGNATURE:
@@ -358,9 +402,12 @@ class _Builder:
         textures.append({"sampler": sampler, "source": len(images) - 1, "name": name})
         return len(textures) - 1
 
-    def _lightmap_material(self, material: int | None, page: int, texcoord: int) -> int:
-        """The copy of ``material`` (None: the default material) bound to lightmap ``page``."""
-        key = (material, page, texcoord)
+    def _lightmap_material(self, material: int | None, page: int, texcoord: int,
+                           shifted: bool = False) -> int:
+        """The copy of ``material`` (None: the default material) bound to lightmap ``page`` on
+        UV set ``texcoord``; ``shifted``: the primitive's sets from TEXCOORD_1 on moved up one,
+        so every texCoord of 1 or more in the copy moves with them."""
+        key = (material, page, texcoord, shifted)
         if key in self.material_copies:
             return self.material_copies[key]
         materials = self.data.setdefault("materials", [])
@@ -371,11 +418,16 @@ class _Builder:
             copied = copy.deepcopy(materials[material])
             name = copied.get("name") or f"material {material}"
         copied["name"] = f"{name} (lightmap page {page})"
-        if self.options.occlusion != "only":
+        if shifted:
+            _shift_texcoords(copied)
+        if self.options.carrier == "moz":
             copied.setdefault("extensions", {})[LIGHTMAP_EXTENSION] = {
                 "index": self.lightmap_textures[page], "texCoord": texcoord,
                 "intensity": self.intensities[page]}
-        if self.options.occlusion != "none":
+        elif self.options.carrier == "emissive":
+            _carry_as_emission(copied, self.lightmap_textures[page], texcoord,
+                               self.intensities[page])
+        if self._writes_occlusion():
             if "occlusionTexture" in copied:
                 note = (f"materials[{material}] has an occlusionTexture; its lightmap copies use "
                         "the baked occlusion instead")
@@ -419,9 +471,11 @@ class _Builder:
         attributes = primitive["attributes"]
         used_sets = {int(name[9:]) for name in attributes
                      if name.startswith("TEXCOORD_") and name[9:].isdigit()}
-        texcoord = 1
-        while texcoord in used_sets:
-            texcoord += 1
+        texcoord, shifted = 1, 1 in used_sets
+        if shifted and VARIANTS_EXTENSION in primitive.get("extensions", {}):
+            shifted = False  # its variants' materials would keep pointing at the old sets
+            while texcoord in used_sets:
+                texcoord += 1
         vertices = np.asarray(unwrap.vertices, np.int64)
         uv = np.asarray(unwrap.uv, np.float64)
         pages = np.asarray(unwrap.pages, np.int64)
@@ -439,10 +493,15 @@ class _Builder:
         if 0 not in used_sets:
             self._note(f"{where} has no TEXCOORD_0; the lightmap UVs are written as TEXCOORD_0 "
                        f"too (glTF requires TEXCOORD_0 before TEXCOORD_{texcoord})")
+        taken = ", ".join(f"TEXCOORD_{n}" for n in sorted(used_sets) if n >= 1)
         if texcoord != 1:
-            taken = ", ".join(f"TEXCOORD_{n}" for n in sorted(used_sets) if n >= 1)
-            self._note(f"{where} already uses {taken} (kept as it is); lightmap UVs written as "
-                       f"TEXCOORD_{texcoord}")
+            self._note(f"{where} uses {taken} and has {VARIANTS_EXTENSION}, whose materials "
+                       f"would keep pointing at them, so they stay; the lightmap UVs are "
+                       f"TEXCOORD_{texcoord}, which Hubs does not read (it reads TEXCOORD_1); "
+                       "remove the variants to have them moved")
+        elif shifted:
+            self._note(f"{where}: {taken} moved up one set (and the texCoords of its material "
+                       "copies with them) so that the lightmap UVs are TEXCOORD_1")
         page_of = np.where(pages < 0, on_pages[0], pages)
         result = []
         for page in on_pages:
@@ -451,7 +510,8 @@ class _Builder:
             rows = vertices[used]
             new = {key: copy.deepcopy(value) for key, value in primitive.items()
                    if key not in ("attributes", "indices", "mode", "targets", "material")}
-            new_attributes = {name: self._gather(accessor, rows, bounds=name == "POSITION")
+            new_attributes = {_moved(name, shifted): self._gather(accessor, rows,
+                                                                  bounds=name == "POSITION")
                               for name, accessor in attributes.items()}
             lightmap_uv = self._add_accessor(uv[used].astype(np.float32), _FLOAT, "VEC2")
             if 0 not in used_sets:
@@ -459,7 +519,8 @@ class _Builder:
             new_attributes[f"TEXCOORD_{texcoord}"] = lightmap_uv
             new["attributes"] = new_attributes
             if primitive.get("targets"):
-                new["targets"] = [{name: self._gather(accessor, rows, bounds=name == "POSITION")
+                new["targets"] = [{_moved(name, shifted):
+                                   self._gather(accessor, rows, bounds=name == "POSITION")
                                    for name, accessor in target.items()}
                                   for target in primitive["targets"]]
             wide = len(used) > 65535  # 65535 itself is reserved (primitive restart)
@@ -468,7 +529,7 @@ class _Builder:
                                                 target=_ELEMENT_ARRAY_BUFFER)
             new["mode"] = _TRIANGLES
             new["material"] = self._lightmap_material(primitive.get("material"), int(page),
-                                                       texcoord)
+                                                       texcoord, shifted)
             result.append(new)
         return result
 
@@ -479,12 +540,15 @@ class _Builder:
     # -- asset and output ---------------------------------------------------------------------
 
     def record_asset(self) -> None:
-        """extensionsUsed (never extensionsRequired) and the encoding in asset.extras."""
-        lightmap = self.options.occlusion != "only" and bool(self.material_copies)
-        if lightmap:
-            used = self.data.setdefault("extensionsUsed", [])
-            if LIGHTMAP_EXTENSION not in used:
-                used.append(LIGHTMAP_EXTENSION)
+        """extensionsUsed (never extensionsRequired) and the carrier and encoding in
+        asset.extras."""
+        used = self.data.setdefault("extensionsUsed", [])
+        for index in sorted(set(self.material_copies.values())):
+            for name in self.data["materials"][index].get("extensions", {}):
+                if name not in used:
+                    used.append(name)
+        if not used:
+            del self.data["extensionsUsed"]
         required = self.data.get("extensionsRequired", [])
         if LIGHTMAP_EXTENSION in required:
             required.remove(LIGHTMAP_EXTENSION)
@@ -495,13 +559,42 @@ class _Builder:
         if not isinstance(extras, dict):
             self._note("asset.extras was not an object; its value moved to asset.extras.value")
             extras = {"value": extras}
+        moz = self.options.carrier == "moz"
         extras["baker"] = {
+            "carrier": self.options.carrier,
+            "baked_lights": self.options.baked_lights,
             "lightmap_encoding": self.options.encoding,
-            "lightmap_extension": LIGHTMAP_EXTENSION if self.options.occlusion != "only" else None,
-            "occlusion": self.options.occlusion,
+            "lightmap_encoding_for": ENCODING_TARGETS[self.options.encoding],
+            "lightmap_extension": LIGHTMAP_EXTENSION if moz else None,
+            "occlusion": "visibility" if self._writes_occlusion() else "none",
             "lightmap_intensity_percentile": self.options.clip_percentile,
         }
         asset["extras"] = extras
+
+    def remove_lights(self) -> None:
+        """Drop every KHR_lights_punctual light (nodes' references, the root list, the
+        extension's name): the lightmap holds their light, and a viewer that also lit the
+        baked surfaces with them would show it twice."""
+        lights = (self.data.get("extensions") or {}).pop(LIGHTS_EXTENSION, None)
+        if lights is None:
+            return
+        if not self.data["extensions"]:
+            del self.data["extensions"]
+        for node in self.data.get("nodes", []):
+            extensions = node.get("extensions") or {}
+            if extensions.pop(LIGHTS_EXTENSION, None) is not None and not extensions:
+                del node["extensions"]
+        for key in ("extensionsUsed", "extensionsRequired"):
+            names = self.data.get(key, [])
+            if LIGHTS_EXTENSION in names:
+                names.remove(LIGHTS_EXTENSION)
+                if not names:
+                    del self.data[key]
+        count = len(lights.get("lights", [])) if isinstance(lights, dict) else 0
+        self._note(f"{count} KHR_lights_punctual light(s) removed: their light is in the bake, "
+                   "and a viewer would light the baked surfaces with them again (surfaces "
+                   "without a lightmap lose them too); --baked-lights indirect keeps them and "
+                   "bakes only the indirect light, --baked-lights keep keeps both")
 
     def finish(self, kind: str) -> list[tuple[Path, bytes]]:
         """The files to write, in order: copied images, then .bin, then the .gltf or .glb."""
@@ -555,6 +648,54 @@ def image_file_name(output: Path, index: int, uri: str) -> str:
     if not re.fullmatch(r"\.[a-z0-9]{1,5}", suffix):
         suffix = ""
     return f"{output.stem}_image{index}{suffix}"
+
+
+def _moved(attribute: str, shifted: bool) -> str:
+    """The attribute's name once the sets from TEXCOORD_1 on moved up one (when ``shifted``)."""
+    if shifted and attribute.startswith("TEXCOORD_") and attribute[9:].isdigit():
+        n = int(attribute[9:])
+        return f"TEXCOORD_{n + 1}" if n >= 1 else attribute
+    return attribute
+
+
+def _shift_texcoords(value) -> None:
+    """Every texture reference in a material's JSON (a dict with an integer ``index``: core
+    textureInfos and every extension's) that reads TEXCOORD_n, n ≥ 1, reads TEXCOORD_n+1 — its
+    ``texCoord``, and the ``texCoord`` of its KHR_texture_transform, which overrides it."""
+    items = value if isinstance(value, list) else value.values() if isinstance(value, dict) else ()
+    if isinstance(value, dict) and isinstance(value.get("index"), int):
+        transform = (value.get("extensions") or {}).get("KHR_texture_transform")
+        for holder in (value, transform):
+            if isinstance(holder, dict) and isinstance(holder.get("texCoord"), int) \
+                    and holder["texCoord"] >= 1:
+                holder["texCoord"] += 1
+        return
+    for item in items:
+        _shift_texcoords(item)
+
+
+def _carry_as_emission(material: dict, texture: int, texcoord: int, scale: float) -> None:
+    """Make the material copy show the emissive carrier's page (``texture`` on UV set
+    ``texcoord``, values ``texel × scale``) and nothing else: black base colour (its alpha and,
+    for MASK and BLEND, its texture kept for coverage), dielectric, fully rough and without
+    specular reflection (KHR_materials_specular 0), no occlusion or layered shading, and
+    the page as its emission (KHR_materials_emissive_strength above 1)."""
+    pbr = material.setdefault("pbrMetallicRoughness", {})
+    alpha = float((pbr.get("baseColorFactor") or [1.0, 1.0, 1.0, 1.0])[3])
+    pbr["baseColorFactor"] = [0.0, 0.0, 0.0, alpha]
+    if material.get("alphaMode", "OPAQUE") == "OPAQUE":
+        pbr.pop("baseColorTexture", None)
+    pbr["metallicFactor"], pbr["roughnessFactor"] = 0.0, 1.0
+    pbr.pop("metallicRoughnessTexture", None)
+    material.pop("occlusionTexture", None)
+    extensions = material.setdefault("extensions", {})
+    for name in _SHADING_EXTENSIONS + (EMISSIVE_STRENGTH,):
+        extensions.pop(name, None)
+    extensions[SPECULAR] = {"specularFactor": 0.0}
+    material["emissiveTexture"] = {"index": texture, "texCoord": texcoord}
+    material["emissiveFactor"] = [min(scale, 1.0)] * 3
+    if scale > 1.0:
+        extensions[EMISSIVE_STRENGTH] = {"emissiveStrength": scale}
 
 
 def _glb(data: dict, blob: bytes) -> bytes:

@@ -322,18 +322,27 @@ class _Pages:
 
     @classmethod
     def blank(cls, baking: Baking) -> "_Pages":
-        """Nothing composed yet (pages of W only for the occlusion texture)."""
-        lightmaps = blank(baking.atlas, obscurance=baking.settings.occlusion != "none")
+        """Nothing composed yet (pages of the visibility only for the occlusion texture)."""
+        lightmaps = blank(baking.atlas, visibility=writes_occlusion(baking.settings))
         return cls(lightmaps, (np.zeros_like(lightmaps.covered),
                                np.zeros_like(lightmaps.covered)), Tally())
 
     def add(self, baking: Baking, texels: Texels, validity: Validity, terms: Terms,
             direct: Direct, indirect: np.ndarray | None = None) -> None:
-        """Compose the texels' light, mark their validity and count them."""
+        """Compose the texels' light, mark their validity and count them. With baked lights
+        "indirect" the punctual lights' direct light is left out (the viewer's lights give
+        it); their power still sets I_A."""
         rho, ambient = baking.settings.rho, baking.ambient
-        compose_into(self.lightmaps, texels, terms, ambient, rho, direct, indirect=indirect)
+        colours = (np.zeros_like(direct.light_colours)
+                   if baking.settings.baked_lights == "indirect" else None)
+        compose_into(self.lightmaps, texels, terms, ambient, rho, direct, colours, indirect)
         validity.mark(texels, *self.masks)
         self.tally.add(terms, direct, validity, effective_r_ave(ambient, rho))
+
+
+def writes_occlusion(settings: Resolved) -> bool:
+    """Whether the output has an occlusion texture: the occlusion carrier, or occlusion 'also'."""
+    return settings.carrier == "occlusion" or settings.occlusion == "also"
 
 
 def _finish_pages(baking: Baking, per_texel: PerTexel, pages: _Pages, times: dict[str, float],
@@ -349,7 +358,7 @@ def _finish_pages(baking: Baking, per_texel: PerTexel, pages: _Pages, times: dic
         with timed(times, "denoise"):
             lightmaps, denoised = denoise(lightmaps, per_texel.texels, *masks,
                                           threads=resolved.threads,
-                                          obscurance=resolved.occlusion != "none")
+                                          visibility=writes_occlusion(resolved))
     with timed(times, "compose"):
         lightmaps = postprocess(lightmaps, resolved.padding, *masks,
                                 seams=find_seams(baking.atlas, baking.world))

@@ -11,7 +11,7 @@ follow, and what it must redo:
 - a light's colour or intensity changed: recompose only; its position, direction, cone, range
   or size changed: that light's shadow rays only;
 - settings that only the composition or the encoding read (ambient override, encoding,
-  occlusion): recompose only;
+  occlusion, carrier, baked lights): recompose only;
 - anything that changes the atlas (a node added or removed, a mesh edited, a node scaled, the
   texel density or page size), the rays (rays, seed, d_max, ρ, …), the tracer's float32 frame
   (the scene's bounds), lights added or removed, or a material beyond its base colour: a full
@@ -38,7 +38,7 @@ from baker.settings import Resolved
 # Settings that never change the result (how the work is split).
 _NO_EFFECT = ("threads", "chunk_texels")
 # Settings that only the composition, post-processing or encoding read: a recomposition.
-RECOMPOSE_SETTINGS = ("ambient", "encoding", "occlusion")
+RECOMPOSE_SETTINGS = ("ambient", "encoding", "occlusion", "carrier", "baked_lights")
 # Settings that change the atlas.
 ATLAS_SETTINGS = ("texel_density", "page_size", "padding")
 

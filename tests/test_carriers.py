@@ -1,0 +1,165 @@
+"""How the bake reaches a viewer (issue 20): carriers, baked lights, visibility, settings.
+
+- occlusion writes visibility: 1 where nothing occludes (glTF's meaning), not R-weighted W;
+- the emissive carrier's pages are R·E/π + emission, R the bake's own albedo at the texel;
+- baked lights "indirect" leaves exactly the punctual lights' direct light out;
+- every carrier's output passes the Khronos validator and previews as the moz one does;
+- settings that cannot fit together are clean errors, before any work.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pygltflib
+import pytest
+
+import baker
+from assets.light_scenes import lit_floor
+from assets.make_scenes import cornell_box, open_plane
+from baker.atlas.rasterise import flat_pages, texel_barycentrics
+from baker.cli.main import main
+from baker.errors import SettingsError
+from baker.geometry.surface import LUMINANCE, albedo, emission
+from baker.gltf.load import load
+from baker.image.carriers import emissive_lightmaps
+from baker.image.compose import compose
+from baker.light.inner import OTHER_SIDE
+from baker.preview import render
+from tests.bakehelp import REAL_SCENES, computed, saved
+
+import gltf_validator
+
+
+def test_visibility_is_one_where_nothing_occludes(tmp_path):
+    """An open plane: every ray escapes, so the visibility is exactly 1 while W is R_ave."""
+    done = computed(open_plane(albedo=0.6), tmp_path, texel_density=8, rays=16, occlusion="also")
+    covered = done.lightmaps.covered
+    assert covered.any()
+    np.testing.assert_array_equal(done.lightmaps.visibility[covered], 1.0)
+    w = done.terms.obscurance(done.ambient.r_ave)
+    np.testing.assert_allclose(w, 0.6)  # W is weighted by R: what a viewer must not darken by
+
+
+def test_visibility_is_the_escaped_fraction(tmp_path):
+    """In the Cornell box, each texel's visibility is its fraction of rays that escape d_max."""
+    done = computed(cornell_box(), tmp_path, texel_density=6, rays=16, occlusion="also")
+    texels = done.texels
+    front = (texels.key & OTHER_SIDE) == 0
+    page = flat_pages(done.lightmaps.visibility)[texels.pixel_index(np.flatnonzero(front))]
+    # the same, but where post-processing filled an invalid texel or stitched a seam
+    same = page[:, 0] == np.minimum(done.terms.escaped[front], 1.0)
+    assert same.mean() > 0.99 and np.all((page >= 0) & (page <= 1))
+    assert page[:, 0].min() < 0.9  # corners are occluded
+
+
+def test_emissive_pages_are_albedo_times_irradiance_over_pi(tmp_path):
+    done = computed(cornell_box(), tmp_path, texel_density=6, rays=16)
+    out = emissive_lightmaps(done.scene, done.world, done.atlas, done.texels, done.lightmaps,
+                             done.settings.padding)
+    texels = done.texels
+    rows = np.flatnonzero((texels.key & OTHER_SIDE) == 0)
+    index = texels.pixel_index(rows)
+    bary = texel_barycentrics(done.atlas, done.world, texels)[rows]
+    tris = texels.triangle[rows]
+    expected = (albedo(done.scene, done.world, tris, bary)
+                * flat_pages(done.lightmaps.light)[index] / np.pi
+                + emission(done.scene, done.world, tris, bary))
+    np.testing.assert_allclose(flat_pages(out.light)[index], expected)
+    assert emission(done.scene, done.world, tris, bary).max() > 0  # the lamp's own texels
+    # the barycentrics are the texels' sample points (validity moves some of those later)
+    corners = done.world.positions[done.world.triangles[tris]]
+    points = np.einsum("kc,kcj->kj", bary, corners)
+    unmoved = np.linalg.norm(points - texels.position[rows], axis=1) < 1e-9
+    assert unmoved.mean() > 0.9
+    # padding around the charts is filled, as the lightmap's is
+    assert np.count_nonzero(out.light.max(axis=-1) > 0) > len(rows)
+
+
+def test_indirect_leaves_out_exactly_the_punctual_direct_light(tmp_path):
+    scene = lit_floor("point", intensity=20.0)
+    removed = computed(scene, tmp_path / "a", texel_density=6, rays=16)
+    indirect = computed(scene, tmp_path / "b", texel_density=6, rays=16,
+                        baked_lights="indirect")
+    covered = removed.lightmaps.covered
+    direct_only = compose(removed.atlas, removed.texels, removed.terms, removed.ambient,
+                          removed.settings.rho, removed.direct, visibility=False)
+    no_direct = compose(removed.atlas, removed.texels, removed.terms, removed.ambient,
+                        removed.settings.rho, None, visibility=False)
+    assert np.array_equal(indirect.ambient.intensity, removed.ambient.intensity)  # I_A kept
+    # the composed pages (before post-processing) relate exactly; post-processing is the same
+    difference = (direct_only.light - no_direct.light)[covered]
+    assert difference.min() >= 0 and difference.max() > 1.0
+    np.testing.assert_allclose(indirect.lightmaps.light[covered],
+                               removed.lightmaps.light[covered] - difference, atol=1e-9)
+
+
+@pytest.mark.parametrize("carrier", ["moz", "emissive", "occlusion"])
+def test_each_carrier_validates_and_previews(tmp_path, carrier):
+    """Every carrier's file passes the validator; the moz and emissive ones preview alike
+    (both show R·E/π; emissive through 8-bit sRGB), occlusion shows albedo × visibility / π."""
+    source = saved(cornell_box(), tmp_path)
+    settings = dict(texel_density=6, rays=16)
+    out = tmp_path / f"{carrier}.glb"
+    result = baker.bake(source, out, baker.Settings(carrier=carrier, **settings), state=False)
+    report = gltf_validator.validate(out)
+    assert not gltf_validator.issue_codes(report, 0), gltf_validator.describe(report, 0)
+    assert not gltf_validator.issue_codes(report, 1), gltf_validator.describe(report, 1)
+    assert result.report["carrier"] == carrier
+    document = pygltflib.GLTF2.load(str(out))
+    recorded = document.asset.extras["baker"]
+    assert recorded["carrier"] == carrier
+    assert recorded["lightmap_encoding"] == ("srgb" if carrier == "emissive" else "linear")
+    copies = [m for m in document.materials if "(lightmap page" in (m.name or "")]
+    assert copies
+    for material in copies:
+        extensions = material.extensions or {}
+        assert ("MOZ_lightmap" in extensions) == (carrier == "moz")
+        assert (material.occlusionTexture is not None) == (carrier == "occlusion")
+        if carrier == "emissive":
+            assert material.pbrMetallicRoughness.baseColorFactor[:3] == [0, 0, 0]
+            assert material.emissiveTexture.texCoord == 1
+    if carrier == "occlusion":
+        return
+    moz = tmp_path / "reference.glb"
+    baker.bake(source, moz, baker.Settings(**settings), state=False)
+    size = (120, 90)
+    reference = render(load(moz), "lit", size, exposure=2.0)
+    picture = render(load(out), "lit", size, exposure=2.0)
+    both = reference.lightmapped & picture.lightmapped
+    assert both.mean() > 0.3
+    a, b = (p.radiance[both] @ LUMINANCE for p in (reference, picture))
+    ratio = np.median(b[a > 1e-3] / a[a > 1e-3])
+    assert abs(ratio - 1) < 0.03, ratio
+
+
+def test_metals_are_reported_for_moz_only(tmp_path):
+    settings = dict(texel_density=4.0, rays=8)
+    moz = baker.bake(REAL_SCENES["MultiUVTest"], tmp_path / "moz.glb", baker.Settings(**settings),
+                     state=False)
+    assert any("diffuse part" in note and "--carrier emissive" in note
+               for note in moz.report["notes"]), moz.report["notes"]
+    emissive = baker.bake(REAL_SCENES["MultiUVTest"], tmp_path / "e.glb",
+                          baker.Settings(carrier="emissive", **settings), state=False)
+    assert not any("diffuse part" in note for note in emissive.report["notes"])
+
+
+@pytest.mark.parametrize("settings, words", [
+    (dict(carrier="emissive", encoding="linear"), "sRGB"),
+    (dict(carrier="emissive", occlusion="also"), "occlusion"),
+    (dict(carrier="occlusion", baked_lights="indirect"), "indirect"),
+    (dict(occlusion="only"), "--carrier occlusion"),
+    (dict(carrier="lightmap"), "carrier"),
+])
+def test_settings_that_do_not_fit_are_clean_errors(settings, words):
+    with pytest.raises(SettingsError) as error:
+        baker.Settings(**settings).check()
+    assert words in str(error.value)
+
+
+def test_cli_carrier_error_writes_nothing(tmp_path, capsys):
+    source = saved(open_plane(), tmp_path)
+    out = tmp_path / "out.glb"
+    assert main(["bake", str(source), "-o", str(out), "--carrier", "emissive",
+                 "--encoding", "linear"]) == 1
+    assert "sRGB" in capsys.readouterr().err
+    assert not out.exists()
