@@ -1,4 +1,4 @@
-"""``baker preview``: render a baked glTF to a PNG picture (albedo × lightmap, Embree rays)."""
+"""``baker preview``: render a baked glTF to a PNG picture (as viewers shade it, Embree rays)."""
 
 from __future__ import annotations
 
@@ -32,7 +32,8 @@ def add_parser(commands) -> None:
         "preview", help="render a baked scene to a PNG picture", epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
         description="Render a baked glTF (one with MOZ_lightmap materials) as a viewer shows it: "
-                    "albedo × lightmap + emission, one Embree ray per pixel.")
+                    "diffuse colour × lightmap / π + emission, the diffuse colour being base "
+                    "colour × (1 − metallic) × (1 − transmission), one Embree ray per pixel.")
     parser.set_defaults(run=run)
     parser.add_argument("scene", type=Path, help="the baked scene, .glb or .gltf")
     parser.add_argument("-o", "--output", type=Path, required=True, help="the picture, .png")
@@ -43,7 +44,7 @@ def add_parser(commands) -> None:
                       help="show a checker of lightmap texels (texel density), tinted per page; "
                            "surfaces without a lightmap are magenta")
     what.add_argument("--unlit", dest="mode", action="store_const", const="unlit",
-                      help="show albedo + emission with the lightmaps left out, to compare")
+                      help="show diffuse colour + emission with the lightmaps left out, to compare")
     parser.set_defaults(mode=MODES[0])
     parser.add_argument("--size", type=_size, metavar="WxH",
                         help="picture size in pixels (default 640 wide, the camera's aspect "
