@@ -240,7 +240,7 @@ def _chunks(counts: np.ndarray, limit: int) -> list[slice]:
 def texel_barycentrics(atlas: Atlas, world: World, texels: Texels) -> np.ndarray:
     """(N, 3) barycentric coordinates of the texels' centres in their owning world triangles:
     the points ``texels_of`` maps to world (before validity moves any), for what the texel's
-    surface looks like there (its albedo and emission, ``carriers.py``)."""
+    surface looks like there (its albedo and emission, ``image/carriers.py``)."""
     return _texel_barycentrics(texels.key & _KEY_BITS, texels.triangle,
                                owners_uv(atlas, world), atlas.width, atlas.height)
 

@@ -86,7 +86,7 @@ class WriteOptions:
     """How the lightmaps are stored in the output.
 
     ``carrier``: ``moz`` (``EncodedPage.png`` as ``MOZ_lightmap``), ``emissive`` (the pages hold
-    outgoing radiance, ``carriers.py``: bound as the copy's ``emissiveTexture``, its base colour
+    outgoing radiance, ``image/carriers.py``: bound as the copy's ``emissiveTexture``, its base colour
     black) or ``occlusion`` (``EncodedPage.occlusion_png`` as the core ``occlusionTexture``
     alone).
     ``baked_lights``: ``remove`` drops the KHR_lights_punctual lights from the output once
