@@ -14,7 +14,7 @@ plane, so rays from them use the texel's normal and frame.
 Where they are: the texel's square in the atlas, mapped onto the owning triangle's plane by the
 UV→world Jacobian (``Texels.triangle_axes``), around the texel's sample point after the validity probes
 moved it (``validity.py``). The offsets inside the square are Owen-scrambled Sobol points of the
-texel's key (``SUB_DIMENSION``), so they are a pure function of (seed, key, sub-sample index):
+texel's key (``dimensions.SUPERSAMPLE``), so they are a pure function of (seed, key, sub-sample index):
 the bake stays the same bytes for any chunking or thread count.
 
 What keeps them out of walls: a sub-position is used only if the straight segment from the
@@ -30,10 +30,10 @@ from __future__ import annotations
 import numpy as np
 
 from baker.atlas.rasterise import Texels
+from baker.rays.dimensions import SUPERSAMPLE
 from baker.rays.sampling import sample_2d
 from baker.rays.trace import Tracer, ray_lift
 
-SUB_DIMENSION = 9  # the sampler dimension of the sub-positions (direct light uses 10–13, 16+)
 MARGIN = 0.1  # texel sides the segment to a sub-position is checked beyond it
 
 
@@ -44,7 +44,7 @@ def sub_offsets(texels: Texels, rows: slice | np.ndarray, count: int, seed: int)
     times the owning triangle's texel axes (``Texels.triangle_axes``, (2, 3) each): on its plane.
     """
     keys = texels.key[rows]
-    square = sample_2d(seed, keys[:, None], np.arange(count)[None, :], SUB_DIMENSION) - 0.5
+    square = sample_2d(seed, keys[:, None], np.arange(count)[None, :], SUPERSAMPLE) - 0.5
     return np.einsum("ksj,kjc->ksc", square, texels.axes(rows))
 
 

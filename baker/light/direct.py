@@ -33,8 +33,8 @@ a little below their own facet's plane (above the shading normal's), so the ligh
 across the facets instead of stopping at each facet's edge.
 
 Randomness is a pure function of (seed, texel key, sample, dimension) through
-``sampling.sample_2d``; the dimensions are distinct from the obscurance's (0):
-``SKY_DIMENSION``, ``EMISSIVE_DIMENSION`` and ``light_dimension(l)`` = 16 + 2·l. Chunks of texels
+``sampling.sample_2d``; each source has dimensions of its own
+(``baker/rays/dimensions.py``, the one table of them). Chunks of texels
 run on a thread pool and write only their own rows, so the result does not depend on chunking.
 
 ``delivered_power`` estimates, for I_A, how much power each source lays on the scene's surfaces
@@ -55,14 +55,11 @@ from baker.geometry.surface import LUMINANCE, emission
 from baker.geometry.world import World
 from baker.gltf.scene import Light, Scene
 from baker.jit import jit
+from baker.rays.dimensions import EMISSIVE, POWER, SKY, light_dimension
 from baker.rays.sampling import cosine_hemisphere, sample_2d, tangent_frames
 from baker.rays.trace import Tracer, ray_lift
 from baker.run.parallel import run_chunks
 from baker.settings import Resolved
-
-SKY_DIMENSION = 12
-EMISSIVE_DIMENSION = 13
-POWER_DIMENSIONS = (10, 11)  # where the power-estimate points fall on the surfaces
 
 # Points over the scene's surfaces at which the power each source delivers is estimated.
 POWER_POINTS = 16384
@@ -75,11 +72,6 @@ SHADOW_SHORTEN = 1e-3
 # Barycentric points at which each triangle's emission is averaged (as ambient.py does).
 _POINTS = np.array([[1 / 3, 1 / 3, 1 / 3], [2 / 3, 1 / 6, 1 / 6],
                     [1 / 6, 2 / 3, 1 / 6], [1 / 6, 1 / 6, 2 / 3]])
-
-
-def light_dimension(light: int) -> int:
-    """The sampler dimension of light ``light``'s soft-shadow samples."""
-    return 16 + 2 * light
 
 
 # ------------------------------------------------------------------------------------------------
@@ -409,7 +401,7 @@ def emissive_irradiance(scene: Scene, world: World, emitters: Emitters, n: int,
     k = len(receivers.position)
     if k == 0:
         return np.zeros((0, 3)), np.zeros(0)
-    u = sample_2d(seed, receivers.key[:, None], np.arange(n)[None, :], EMISSIVE_DIMENSION).reshape(-1, 2)
+    u = sample_2d(seed, receivers.key[:, None], np.arange(n)[None, :], EMISSIVE).reshape(-1, 2)
     origins = receivers.origins(n)
     raised = np.zeros(k, bool) if receivers.raised is None else receivers.raised
     chosen, bary, directions, distance, weight = emitter_samples(
@@ -457,7 +449,7 @@ def sky_irradiance(sky: np.ndarray, n: int, receivers: Receivers, tracer: Tracer
     if k == 0:
         return np.zeros((0, 3)), np.zeros(0)
     local = cosine_hemisphere(sample_2d(seed, receivers.key[:, None], np.arange(n)[None, :],
-                                        SKY_DIMENSION))
+                                        SKY))
     normal = receivers.geometric
     t1, t2 = tangent_frames(normal)
     directions = (local[..., :1] * t1[:, None] + local[..., 1:2] * t2[:, None]
@@ -659,10 +651,10 @@ def power_points(world: World, seed: int,
     areas = world.areas()
     total = areas.sum()
     keys = _POWER_KEY_BASE + np.arange(count, dtype=np.uint64)
-    u = sample_2d(seed, keys, 0, POWER_DIMENSIONS[0])
+    u = sample_2d(seed, keys, 0, POWER[0])
     target = (np.arange(count) + u[:, 0]) / count * total
     tris = np.minimum(np.searchsorted(np.cumsum(areas), target, side="right"), len(areas) - 1)
-    v = sample_2d(seed, keys, 0, POWER_DIMENSIONS[1])
+    v = sample_2d(seed, keys, 0, POWER[1])
     root = np.sqrt(v[:, 0])
     bary = np.stack([1.0 - root, v[:, 1] * root, (1.0 - v[:, 1]) * root], axis=1)
     a, b, c = world.corners(tris)

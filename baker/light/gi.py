@@ -44,15 +44,12 @@ from baker.light.direct import (
     emitter_radiance,
     emitter_samples,
 )
+from baker.rays.dimensions import GI_BOUNCE, GI_EMITTER, GI_FIRST, GI_ROULETTE
 from baker.rays.sampling import cosine_hemisphere, hash_u32, sample_2d, tangent_frames
 from baker.rays.trace import Tracer, ray_lift
 from baker.run.parallel import run_chunks
 from baker.settings import Resolved
 
-FIRST_DIMENSION = 40  # the texel's Sobol points for the first bounce
-BOUNCE_DIMENSION = 41  # per-path directions of later bounces
-ROULETTE_DIMENSION = 42
-EMITTER_DIMENSION = 43  # the next-event sample of an emitter point at each vertex
 _FAR = 1e30  # "no length limit" for Embree's float32 tfar
 
 
@@ -98,7 +95,7 @@ def _chunk(scene: Scene, world: World, tracer: Tracer, sources: Sources, texels:
     normal = np.repeat(texels.geometric_normal(rows), paths, axis=0)
     size = np.repeat(texels.size(rows), paths)
     points = sample_2d(settings.seed, keys[:, None], np.arange(paths)[None, :],
-                       FIRST_DIMENSION).reshape(-1, 2)
+                       GI_FIRST).reshape(-1, 2)
     throughput = np.ones((k * paths, 3))
     total = np.zeros((k * paths, 3))
     others = replace(sources, emitters=None)  # punctual lights and sky: next-event estimation
@@ -112,7 +109,7 @@ def _chunk(scene: Scene, world: World, tracer: Tracer, sources: Sources, texels:
             break
         if bounce:
             points = sample_2d(settings.seed, _bounce_keys(path_keys[alive], bounce), 0,
-                               BOUNCE_DIMENSION)
+                               GI_BOUNCE)
         directions = _cosine_directions(normal, points)
         cos_out = np.einsum("ij,ij->i", directions, normal)  # the direction's pdf × π
         origins = position + ray_lift(position, size, tracer.center)[:, None] * normal
@@ -155,7 +152,7 @@ def _chunk(scene: Scene, world: World, tracer: Tracer, sources: Sources, texels:
         if bounce >= 1:  # Russian roulette: survive with the throughput's largest channel
             survive = np.minimum(throughput.max(axis=1), 0.95)
             u = sample_2d(settings.seed, _bounce_keys(path_keys[alive], bounce), 0,
-                          ROULETTE_DIMENSION)[:, 0]
+                          GI_ROULETTE)[:, 0]
             keep = u < survive
             throughput = throughput[keep] / survive[keep, None]
             alive, position, normal, size = alive[keep], position[keep], normal[keep], size[keep]
@@ -197,7 +194,7 @@ def _emitter_light(scene: Scene, world: World, tracer: Tracer, emitters: Emitter
     m = len(position)
     origins = position + lift[:, None] * normal
     chosen, bary, directions, distance, weight = emitter_samples(
-        sample_2d(seed, keys, 0, EMITTER_DIMENSION), 1, emitters.cdf, emitters.probability,
+        sample_2d(seed, keys, 0, GI_EMITTER), 1, emitters.cdf, emitters.probability,
         emitters.corners, emitters.normals, emitters.two_sided, emitters.areas, origins, lift,
         normal, normal, np.zeros(m, bool))
     light = np.zeros((m, 3))

@@ -40,6 +40,7 @@ from baker.gltf.materials import (
 from baker.gltf.scene import Scene
 from baker.jit import inline, jit
 from baker.light.obscurance import RHO_KINDS, UNIT_REFLECTIVITY, rho
+from baker.rays.dimensions import OBSCURANCE, material_dimension
 from baker.rays.sampling import fill_cosine, fill_points, frame, hash_u32
 from baker.rays.trace import LocalHits, Tracer, ray_lift
 from baker.run.parallel import cores, even_slices, run_chunks, texels_per_chunk
@@ -226,8 +227,8 @@ def cosine_directions(keys: np.ndarray, rays: int, seed: int, technique: str = "
     ``first + rays − 1`` of the texels ``keys`` (k,), texel-major, about +z (the normal)."""
     k = len(keys)
     u, v = np.empty(k * rays), np.empty(k * rays)
-    fill_points(TECHNIQUES.index(technique), np.uint64(seed), keys, first, rays, np.uint64(0),
-                u, v)
+    fill_points(TECHNIQUES.index(technique), np.uint64(seed), keys, first, rays,
+                np.uint64(OBSCURANCE), u, v)
     x, y, z = np.empty(k * rays), np.empty(k * rays), np.empty(k * rays)
     fill_cosine(u, v, x, y, z)
     return x, y, z
@@ -414,7 +415,6 @@ def surfaces_of(scene: Scene, world: World) -> Surfaces:
 
 # Russian roulette starts at this bounce of a chain (tests may raise it to switch it off).
 _ROULETTE_FROM = 2
-_MATERIAL_DIMENSION = 60  # sampling dimensions 60, 61, 62 + 3·bounce: branch, Fresnel, roulette
 
 
 def _uniform(seed: int, keys: np.ndarray, samples: np.ndarray, dimension: int) -> np.ndarray:
@@ -508,7 +508,7 @@ def _special_hits(surfaces: Surfaces, tracer: Tracer, origins: np.ndarray,
         total[live] += dist[live]
         mat = world.tri_material[tri[live]]
         weights = m.weights[mat]
-        dim = _MATERIAL_DIMENSION + 3 * depth
+        dim = material_dimension(depth)  # + 0 branch, + 1 Fresnel, + 2 roulette
         u = _uniform(settings.seed, key[live], sample[live], dim)
         branch = (u[:, None] >= np.cumsum(weights, axis=1)[:, :3]).sum(axis=1)
         bary = np.stack([1.0 - bu[live] - bv[live], bu[live], bv[live]], axis=1)

@@ -24,6 +24,7 @@ from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
 from baker.geometry.world import World
+from baker.rays.dimensions import alpha_dimension
 from baker.rays.sampling import hash_u32
 
 # Smallest ray offset, in texel sizes and in float32 units of the position's magnitude.
@@ -33,7 +34,6 @@ _OFFSET_ULPS = 64 * 2.0 ** -23
 
 MAX_CONTINUATIONS = 16
 """Most alpha-tested surfaces one ray passes through; the next one then stops it."""
-_ALPHA_DIMENSION = 60  # the hash dimension of the BLEND coin (sampling: 60+ are materials')
 
 
 def _coin(origins: np.ndarray, directions: np.ndarray, step: int) -> np.ndarray:
@@ -42,7 +42,7 @@ def _coin(origins: np.ndarray, directions: np.ndarray, step: int) -> np.ndarray:
     bits = np.concatenate([np.ascontiguousarray(origins, np.float32).view(np.uint32),
                            np.ascontiguousarray(directions, np.float32).view(np.uint32)], axis=1)
     h = hash_u32(bits[:, 0], bits[:, 1], bits[:, 2], bits[:, 3])
-    h = hash_u32(h, bits[:, 4], bits[:, 5], np.uint64(_ALPHA_DIMENSION + (step << 8)))
+    h = hash_u32(h, bits[:, 4], bits[:, 5], np.uint64(alpha_dimension(step)))
     return ((h >> np.uint32(8)) + 0.5) * 2.0 ** -24
 
 

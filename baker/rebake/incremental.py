@@ -57,7 +57,6 @@ from baker.jit import inline, jit
 from baker.light.direct import (
     Direct,
     direct_light,
-    light_dimension,
     punctual_irradiance,
     texel_receivers,
 )
@@ -79,6 +78,7 @@ from baker.pipeline.full import (
     timed,
 )
 from baker.pipeline.parts import PerTexel, TexelPoints, part_slices
+from baker.rays.dimensions import OBSCURANCE, light_dimension
 from baker.rays.sampling import (
     concentric_hemisphere,
     fill_cosine,
@@ -447,7 +447,7 @@ def _drawn_near_rays(technique: int, seed, keys: np.ndarray, rays: int, starts: 
                     near[m, 0], near[m, 1], near[m, 2] = x[r], y[r], z[r]
                     m += 1
         drawn = count * rays
-        fill_points(technique, seed, todo_keys[:count], 0, rays, np.uint64(0), u[:drawn],
+        fill_points(technique, seed, todo_keys[:count], 0, rays, np.uint64(OBSCURANCE), u[:drawn],
                     v[:drawn])
         fill_cosine(u[:drawn], v[:drawn], x[:drawn], y[:drawn], z[:drawn])
         for c in range(count):

@@ -7,7 +7,7 @@ incremental rebake (``incremental.py``), which diffs the new scene against its f
 - a ZIP archive (stored, no compression; ``storedzip.py``) whose members have a fixed
   timestamp, so the same bake gives the same bytes (docs/design.md §4: an incremental rebake's
   state equals a full bake's);
-- ``header.json``: ``{"format": "baker-bake-state", "version": 5, "fingerprints": {...},
+- ``header.json``: ``{"format": "baker-bake-state", "version": 6, "fingerprints": {...},
   "groups": {name: {"class": ..., "fields": {...}, "scalars": {...}}}, "zeros": {...},
   "repeated": {...}, "sparse": {...}}``;
 - one ``<group>/<field>.npy`` member per array (numpy's .npy format), so ``numpy.load`` of the
@@ -41,7 +41,7 @@ from baker.run.atomic import write_atomically
 from baker.run.spill import Column, Group
 
 FORMAT = "baker-bake-state"
-VERSION = 5
+VERSION = 6
 SUFFIX = ".bake"
 _NPY_HEAD = 1 << 16  # bytes enough for any .npy header baker writes (version 1.0: < 64 KiB)
 
