@@ -32,6 +32,7 @@ writes the files and the report; ``baker.cli`` is the command line over it.
 from baker.api import BakeResult, bake
 from baker.errors import BakerError, InputError, OutputError, SettingsError
 from baker.settings import Settings
+from baker import gltf, preview  # after `import baker`: baker.preview.render(baker.gltf.load.load(...))
 
 __all__ = ["bake", "BakeResult", "Settings", "BakerError", "InputError", "OutputError",
            "SettingsError"]

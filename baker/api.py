@@ -60,7 +60,8 @@ def check_output(input_path: Path, output: Path, overwrite: bool = False,
     """Refuse, before any work, an output that cannot be written or would replace the input.
 
     The output ends in .glb or .gltf; it, the report and the bake state are files (not
-    folders) in folders that exist and can be written to; ``folders`` (``--lightmaps``,
+    folders) in folders that can be written to, or are missing below a folder that can (the
+    bake makes them, ``Outputs.folder``, as for ``-o out/level.gltf``); ``folders`` (``--lightmaps``,
     ``--error-map``) are not files; the output is the input itself only with ``overwrite``
     (the input is then replaced atomically).
     """
@@ -77,26 +78,36 @@ def check_output(input_path: Path, output: Path, overwrite: bool = False,
         if path.is_dir():
             raise OutputError("the path is a folder, not a file", file=str(path),
                               fix="give a file name, or move the folder away")
-        if not path.parent.is_dir():
-            raise OutputError(f"the folder {path.parent} does not exist", file=str(path),
-                              fix=f"create {path.parent} first, or choose another path")
-        _check_writable(path)
+        _check_writable(path, _existing_folder(path))
     for folder in folders:
         if folder is not None and folder.exists() and not folder.is_dir():
             raise OutputError("is a file, not a folder", file=str(folder),
                               fix="give a folder (it is made if missing), or remove the file")
 
 
-def _check_writable(path: Path) -> None:
-    """Create and remove a file in ``path``'s folder: the one true test that it can be written."""
+def _existing_folder(path: Path) -> Path:
+    """The deepest folder above ``path`` that exists: its own folder, or the one below which
+    the bake makes the missing ones. A file in the way is an OutputError."""
+    folder = path.parent
+    while not folder.exists():
+        folder = folder.parent
+    if not folder.is_dir():
+        raise OutputError(f"{folder} is a file, not a folder", file=str(path),
+                          fix=f"choose a path that is not below the file {folder}")
+    return folder
+
+
+def _check_writable(path: Path, folder: Path) -> None:
+    """Create and remove a file in ``folder`` (``path``'s, or the existing one above it): the
+    one true test that it can be written."""
     try:
-        handle, probe = tempfile.mkstemp(dir=path.parent, prefix=".baker-probe-", suffix=".tmp")
+        handle, probe = tempfile.mkstemp(dir=folder, prefix=".baker-probe-", suffix=".tmp")
     except PermissionError:
-        raise OutputError(f"no permission to write in the folder {path.parent}", file=str(path),
+        raise OutputError(f"no permission to write in the folder {folder}", file=str(path),
                           fix=f"choose a folder you can write to, or change the permissions of "
-                              f"{path.parent}") from None
+                              f"{folder}") from None
     except OSError as error:
-        raise OutputError(f"cannot write in the folder {path.parent} ({error.strerror or error})",
+        raise OutputError(f"cannot write in the folder {folder} ({error.strerror or error})",
                           file=str(path), fix="choose a folder on a writable disk with free space") from None
     os.close(handle)
     os.unlink(probe)
@@ -172,6 +183,9 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
         staging = None if state_path is None else StateStaging(beside, state_path, settings)
         outputs = Outputs()  # every file of the bake, put in place together (run/atomic.py)
         try:
+            for path in (output, report_path, state_path):  # made if missing, like mkdir -p
+                if path is not None:
+                    outputs.folder(Path(path).parent)
             try:
                 done, rebaked = bake_or_rebake(scene, settings, state_path, incremental, quiet,
                                                relight, (state_path or output).parent, staging)

@@ -321,20 +321,40 @@ def test_default_density_shrinks_to_what_fits_a_long_wall(tmp_path, capsys):
 # the output
 
 
-def test_output_in_a_missing_folder(tmp_path, capsys):
+def test_output_and_report_in_missing_folders_are_made(tmp_path, capsys):
+    """``-o out/level.gltf`` when out/ does not exist (the README's line): the folders of the
+    output and the report are made, as ``mkdir -p`` would, and the bake writes into them."""
     source = small_scene().save(tmp_path / "scene.glb")
-    output = tmp_path / "no" / "such" / "folder" / "baked.glb"
+    output = tmp_path / "no" / "such" / "folder" / "baked.gltf"
+    report = tmp_path / "reports" / "r.json"
+    code, _, err = bake_cli(capsys, "bake", str(source), "-o", str(output), *FAST,
+                            "--report", str(report))
+    assert code == 0, err
+    assert output.is_file() and output.with_suffix(".bin").is_file() and report.is_file()
+
+
+def test_a_failed_bake_takes_back_the_folders_it_made(tmp_path, capsys):
+    """A bake that fails after making the output's folders (a density no memory holds) leaves
+    nothing behind: not the folders either."""
+    source = small_scene().save(tmp_path / "scene.glb")
+    output = tmp_path / "no" / "such" / "baked.glb"
     before = snapshot(tmp_path)
-    code, _, err = bake_cli(capsys, "bake", str(source), "-o", str(output), *FAST)
+    code, _, err = bake_cli(capsys, "bake", str(source), "-o", str(output), *FAST,
+                            "--texel-density", "1e5")
     assert code == 1
-    assert_one_clean_message(err, str(output), "does not exist", "create")
+    assert_one_clean_message(err, "--texel-density")
     assert snapshot(tmp_path) == before and not (tmp_path / "no").exists()
 
 
-def test_report_in_a_missing_folder_is_refused_before_baking(tmp_path, capsys):
+def test_an_output_below_a_file_is_refused(tmp_path, capsys):
     source = small_scene().save(tmp_path / "scene.glb")
-    report = tmp_path / "reports" / "r.json"
-    refuses(tmp_path, capsys, source, str(report), "does not exist", args=("--report", str(report)))
+    (tmp_path / "notes.txt").write_text("a file, not a folder")
+    output = tmp_path / "notes.txt" / "sub" / "baked.glb"
+    before = snapshot(tmp_path)
+    code, _, err = bake_cli(capsys, "bake", str(source), "-o", str(output), *FAST)
+    assert code == 1
+    assert_one_clean_message(err, str(output), "is a file")
+    assert snapshot(tmp_path) == before
 
 
 def _without_file_permission_override() -> None:
@@ -482,6 +502,35 @@ def test_an_interrupted_run_chunks_starts_no_further_chunk():
         run_chunks(work, range(100), threads=2)
     time.sleep(0.1)  # nothing may start after run_chunks returned
     assert 4 <= len(ran) <= 6, ran
+
+
+@pytest.mark.parametrize("how,code", [(signal.SIGTERM, 143), (signal.SIGINT, 130)],
+                         ids=["SIGTERM", "SIGINT"])
+def test_a_terminated_bake_removes_its_spill_folder(tmp_path, how, code):
+    """A bake of 3 parts (533,196 texels: its rows spill to ``.baker-spill-*`` beside the
+    output) stopped by SIGTERM (``kill``, a CI timeout) after its first part cleans up as after
+    Ctrl-C: no spill folder, no temporary, no output; exit 143 (130 for Ctrl-C)."""
+    source = cornell_box().save(tmp_path / "cornell.glb")
+    script = ("import signal, sys\n"  # Ctrl-C as a terminal sends it (see _slow_bake_started)
+              "signal.signal(signal.SIGINT, signal.default_int_handler)\n"
+              "from baker.cli.main import main\nsys.exit(main(sys.argv[1:]))\n")
+    process = subprocess.Popen(
+        [sys.executable, "-c", script, "bake", str(source), "-o", str(tmp_path / "baked.glb"),
+         "--rays", "64", "--texel-density", "142.2"],
+        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 300
+    while not any(p.name.startswith(".baker-spill-") and any(p.iterdir())
+                  for p in tmp_path.iterdir() if p.is_dir()):
+        assert process.poll() is None, process.communicate()
+        assert time.monotonic() < deadline
+        time.sleep(0.05)
+    before = snapshot(tmp_path)
+    process.send_signal(how)
+    out, err = process.communicate(timeout=120)
+    assert process.returncode == code, err
+    assert "Traceback" not in err and err.strip().startswith("baker: ")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cornell.glb"]
+    assert before["cornell.glb"] == (tmp_path / "cornell.glb").read_bytes()
 
 
 def _slow_bake_started(tmp_path: Path, marker: Path, *args: str) -> subprocess.Popen:

@@ -103,3 +103,18 @@ def test_every_setting_has_its_option_and_the_same_default():
     assert settings_from(args) == baker.Settings()
     missing = {f.name for f in dataclasses.fields(baker.Settings) if not hasattr(args, f.name)}
     assert missing == {"chunk_texels", "d_max_fraction"}
+
+
+def test_a_bake_that_bakes_nothing_says_so_and_exits_4(tmp_path, capsys):
+    """SimpleInstancing's meshes are all GPU-instanced (occluders only): 0 texels. The bake
+    writes the scene without a lightmap, says on stderr that nothing was baked and why, and
+    exits 4 (README's exit codes), not 0 as a bake that baked something."""
+    from bakehelp import REAL_SCENES
+
+    out = tmp_path / "i.glb"
+    code = main(["bake", str(REAL_SCENES["SimpleInstancing"]), "-o", str(out), "--rays", "4",
+                 "--page-size", "64", "--quiet"])
+    captured = capsys.readouterr()
+    assert code == 4 and out.is_file() and captured.out == ""
+    assert captured.err.startswith("baker: nothing baked") and "0 texels" in captured.err
+    assert "125 × GPU-instanced" in captured.err

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import baker
+from assets.gltf_builder import GltfBuilder, quad
 from assets.light_scenes import blocked_floor, emissive_square, lit_floor, open_floor, penumbra
 from baker.light.direct import spot_attenuation
 from baker.geometry.surface import LUMINANCE
@@ -195,6 +196,20 @@ def test_no_light_no_shadow_rays(tmp_path):
     assert done.direct.rays == 0 and done.sources.any() is False
     assert done.plan.stages["punctual lights"] == "none: no shadow rays"
     assert done.ambient.source == "none" and np.all(done.ambient.intensity == 1.0)
+
+
+def test_an_emitter_that_lights_no_surface_is_not_called_no_light_source(tmp_path):
+    """A lone emissive quad lights nothing (the only surface is itself, in its own plane): the
+    plan says both that it is sampled as an area light and that the sources lay no light on the
+    surfaces (I_A = 1), never "no light source in the scene" (MultiUVTest printed both)."""
+    b = GltfBuilder()
+    b.node("glow", b.shape_mesh("glow", quad(1.0, 1.0),
+                                material=b.material("e", emissive=(1.0, 1.0, 1.0))))
+    done = computed(b, tmp_path, rays=4, page_size=32)
+    assert "emissive triangle" in done.plan.stages["emissive surfaces"]
+    assert "no light source" not in done.plan.stages["ambient"]
+    assert "lay no light" in done.plan.stages["ambient"]
+    assert np.all(done.ambient.intensity == 1.0)
 
 
 def test_new_light_intensity_is_a_recomposition(tmp_path):

@@ -7,7 +7,7 @@ import dataclasses
 from pathlib import Path
 
 import baker
-from baker.cli.common import add_debug, positive_float
+from baker.cli.common import add_debug, exit_code, positive_float
 from baker.cli.state import add_state_options, print_rebake, state_arguments
 
 EPILOG = """examples:
@@ -32,8 +32,8 @@ def add_parser(commands) -> None:
     bake.set_defaults(run=run)
     bake.add_argument("scene", type=Path, help="the input scene, .glb or .gltf")
     bake.add_argument("-o", "--output", type=Path, required=True,
-                      help="where to write the baked scene (.glb or .gltf); the input itself "
-                           "only with --overwrite")
+                      help="where to write the baked scene (.glb or .gltf; its folder is made if "
+                           "missing); the input itself only with --overwrite")
     bake.add_argument("--overwrite", action="store_true",
                       help="allow the output to replace the input (or a file it uses); the "
                            "replacement is atomic and happens only once the bake succeeded")
@@ -209,7 +209,7 @@ def print_summary(result: baker.BakeResult) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Bake; exit code 0."""
+    """Bake; exit code 0, or 4 when no surface got a lightmap (``common.exit_code``)."""
     result = baker.bake(args.scene, args.output, settings_from(args), report_path=args.report,
                         lightmaps_dir=args.lightmaps, lightmaps_format=args.lightmaps_format,
                         error_map_dir=args.error_map,
@@ -218,4 +218,4 @@ def run(args: argparse.Namespace) -> int:
     if not args.quiet:
         print_rebake(result)
         print_summary(result)
-    return 0
+    return exit_code(result)

@@ -4,7 +4,8 @@ Each subcommand is a module of this package with ``add_parser(commands)``, which
 options and sets ``run``; ``main`` parses, runs it, and renders ``baker.BakerError`` as a short
 message (the traceback only with ``--debug``). Exit codes: 0 done, 1 bad input or settings
 (message printed), 2 bad command line (argparse), 3 internal error (a bug: please report it),
-130 interrupted.
+4 nothing baked (``common.exit_code``), 130 interrupted (Ctrl-C), 143 terminated (SIGTERM:
+cleaned up as after Ctrl-C).
 """
 
 from __future__ import annotations
@@ -12,6 +13,9 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
+import threading
+from contextlib import contextmanager
+from typing import Iterator
 
 import baker
 from baker.cli import bake, hook, preview, rebake, relight, study, view, watch
@@ -31,11 +35,35 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class Terminated(BaseException):
+    """SIGTERM arrived: raised in the main thread, as Ctrl-C raises KeyboardInterrupt, so that a
+    bake stopped by ``kill`` or a CI timeout unwinds through the same clean-up (temporaries and
+    ``.baker-spill-*`` folders removed, the previous output kept)."""
+
+
+def _raise_terminated(signum, frame) -> None:
+    raise Terminated
+
+
+@contextmanager
+def _sigterm_raises() -> Iterator[None]:
+    """While the command runs, SIGTERM raises ``Terminated`` (the previous handler after)."""
+    if threading.current_thread() is not threading.main_thread():  # only it takes signals
+        yield
+        return
+    previous = signal.signal(signal.SIGTERM, _raise_terminated)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; return the exit code."""
     args = build_parser().parse_args(argv)
     try:
-        return args.run(args)
+        with _sigterm_raises():
+            return args.run(args)
     except baker.BakerError as error:
         if args.debug:
             raise
@@ -47,6 +75,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("baker: interrupted; no output was changed", file=sys.stderr)
         return 130
+    except Terminated:
+        print("baker: terminated; the bake under way, if any, changed no output", file=sys.stderr)
+        return 143
     except Exception as error:  # a bug, not bad input: say so in one line
         if args.debug:
             raise

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import baker
 from baker.cli.bake import print_summary
+from baker.cli.common import exit_code
 from baker.cli.state import add_update_options, print_rebake
 from baker.rebake.incremental import asked_settings
 
@@ -42,7 +43,8 @@ def add_parser(commands) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Rebake; exit code 0 (1 with a message when there is no usable state or scene)."""
+    """Rebake; exit code 0 (1 with a message when there is no usable state or scene, 4 when
+    no surface got a lightmap)."""
     state = args.state or baker.rebake.state.default_path(args.output)
     settings = asked_settings(state, threads=args.threads)
     result = baker.bake(args.scene, args.output, settings, report_path=args.report,
@@ -62,4 +64,4 @@ def run(args: argparse.Namespace) -> int:
             print(f"baker: note: --moved named {', '.join(sorted(named))}; the diff found "
                   f"{', '.join(sorted(found)) or 'no node'} moved (the rebake followed the diff)",
                   file=sys.stderr)
-    return 0
+    return exit_code(result)

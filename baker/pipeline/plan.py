@@ -29,11 +29,16 @@ class Plan:
         """The plan as short lines for a terminal."""
         out = [f"  {name}: {what}" for name, what in self.stages.items()]
         out.append(f"  baked: {len(self.baked)} primitive instance(s)")
+        out += [f"  left out: {count} × {reason}"
+                for reason, count in self.left_out_counts().items()]
+        return out
+
+    def left_out_counts(self) -> dict[str, int]:
+        """How many primitive instances were left out for each reason, by reason."""
         reasons: dict[str, int] = {}
         for _where, reason in self.left_out:
             reasons[reason] = reasons.get(reason, 0) + 1
-        out += [f"  left out: {count} × {reason}" for reason, count in sorted(reasons.items())]
-        return out
+        return dict(sorted(reasons.items()))
 
     def as_dict(self) -> dict:
         return {"stages": self.stages, "baked": list(self.baked),
@@ -62,6 +67,9 @@ def make_plan(scene: Scene, ambient: Ambient, rho: str, sources: Sources | None 
     }.get(ambient.source, f"I_A = {_rgb(ambient.intensity)}: the power of "
                           f"{ambient.source.replace('+', ', ')} after its first bounce "
                           "(docs/direct_light.md)")
+    if ambient.source == "none" and sources is not None and sources.any():
+        ambient_text = ("the scene's light sources lay no light on its surfaces (measured at "
+                        "their power points, direct.delivered_power): I_A = 1, as with no source")
     if ambient.source == "emission" and sources is not None:
         ambient_text = ambient_text.replace("(eq. 3)", "after their first bounce (docs/direct_light.md)")
     if ambient.truncated:

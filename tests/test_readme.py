@@ -1,0 +1,184 @@
+"""Every command in the README's fenced ``sh`` and ``python`` blocks runs, as written, in a fresh
+folder, in the order the README gives them: a new user who types them gets no error.
+
+The mapping from the README to this test, and nothing else, is:
+
+- ``pip install ".[test]" &&`` is dropped: the checkout is on PYTHONPATH and ``baker`` is the
+  console script pyproject.toml's ``[project.scripts]`` names (made here as pip makes it).
+- ``npm ci … && python -m pytest`` is not run: it is the command that runs this test.
+- The scene files the README names (``level.glb``, ``level.gltf``, ``prop.glb``) are the demo
+  Cornell box that the README's first line makes; ``draco.glb`` is it Draco-compressed by glTF
+  Transform (tests/gltf_transform.py), ``ktx2.glb`` the textured floor of assets/ with its
+  texture as KTX 2 (KHR_texture_basisu, encoded by alktx2).
+- Small settings, so the whole README runs in about a minute: ``--rays N`` becomes ``--rays 4``
+  and ``rays=N`` ``rays=4``; each ``baker bake`` and ``baker watch`` gets ``--page-size 128``
+  and each ``baker.Settings(`` ``page_size=128`` (about 9,000 texels instead of 530,000).
+- ``baker watch`` runs until its first bake is done; then it gets Ctrl-C (SIGINT to its
+  process group, as a terminal sends it) and must exit 130, as the README says.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from assets.make_scenes import cornell_box, textured_floor
+from gltf_transform import variant
+
+ROOT = Path(__file__).resolve().parents[1]
+README = ROOT / "README.md"
+SMALL_RAYS = "4"
+SMALL_PAGE = "128"
+NOT_RUN = ("npm ci",)  # the line that runs this test suite
+DROPPED = 'pip install ".[test]" && '  # the checkout is on PYTHONPATH instead
+
+
+def fenced_blocks(text: str) -> list[tuple[str, str]]:
+    """The README's fenced blocks as (language, body), in order."""
+    return re.findall(r"^```(\w+)\n(.*?)^```", text, flags=re.S | re.M)
+
+
+def commands(text: str) -> list[tuple[str, str]]:
+    """(kind, command) in README order: each line of an ``sh`` block, each ``python`` block whole."""
+    found = []
+    for language, body in fenced_blocks(text):
+        if language == "sh":
+            found += [("sh", line) for line in body.splitlines()
+                      if line.strip() and not line.startswith(NOT_RUN)]
+        elif language == "python":
+            found.append(("python", body))
+    return found
+
+
+def small(kind: str, command: str) -> str:
+    """The command with the test's small settings (the module docstring's mapping)."""
+    command = command.replace(DROPPED, "")
+    command = re.sub(r"--rays \d+", f"--rays {SMALL_RAYS}", command)
+    command = re.sub(r"\brays=\d+", f"rays={SMALL_RAYS}", command)
+    command = command.replace("baker.Settings(", f"baker.Settings(page_size={SMALL_PAGE}, ")
+    return re.sub(r"\bbaker (bake|watch) (?!--help)", rf"baker \1 --page-size {SMALL_PAGE} ",
+                  command)
+
+
+def outputs(command: str) -> list[str]:
+    """The files a shell command names with ``-o``, ``--report``, or a Python bake's second
+    argument, which must exist once it has run."""
+    named = re.findall(r"(?:-o|--report) (\S+)", command)
+    return named + re.findall(r'baker\.bake\("[^"]+", "([^"]+)"', command)
+
+
+def console_script(folder: Path) -> None:
+    """``baker`` (and ``python``) in ``folder`` as pip installs them: a script calling the entry
+    point that pyproject.toml names."""
+    scripts = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
+    module, function = scripts["baker"].split(":")
+    script = folder / "baker"
+    script.write_text(f"#!{sys.executable}\nimport sys\nfrom {module} import {function}\n"
+                      f"sys.exit({function}())\n")
+    script.chmod(0o755)
+    (folder / "python").symlink_to(sys.executable)
+
+
+def ktx2_scene(path: Path) -> Path:
+    """The textured floor of assets/ as a .glb whose texture is a KTX 2 image (UASTC), named by
+    KHR_texture_basisu, written to ``path``."""
+    import alktx2
+    import numpy as np
+    import pygltflib
+
+    builder = textured_floor()
+    rgb = builder.info["image"]
+    rgba = np.concatenate([rgb, np.full(rgb.shape[:2] + (1,), 255, np.uint8)], axis=-1)
+    data = alktx2.encode_raw_rgba_to_ktx2(rgba.tobytes(), rgb.shape[1], rgb.shape[0], False,
+                                          codec="uastc")
+    builder.save(path)
+    document = pygltflib.GLTF2().load(str(path))
+    blob = document.binary_blob()
+    blob += b"\0" * (-len(blob) % 4)
+    document.bufferViews.append(pygltflib.BufferView(buffer=0, byteOffset=len(blob),
+                                                     byteLength=len(data)))
+    blob += data + b"\0" * (-len(data) % 4)
+    document.buffers[0].byteLength = len(blob)
+    document.images = [pygltflib.Image(bufferView=len(document.bufferViews) - 1,
+                                       mimeType="image/ktx2")]
+    document.textures = [pygltflib.Texture(extensions={"KHR_texture_basisu": {"source": 0}})]
+    document.extensionsUsed = ["KHR_texture_basisu"]
+    document.set_binary_blob(blob)
+    document.save_binary(str(path))
+    return path
+
+
+def scene_files(folder: Path) -> None:
+    """The scene files the README's commands name, in ``folder`` (the module docstring)."""
+    demo = folder / "assets" / "scenes" / "cornell_box.glb"
+    for name in ("level.glb", "prop.glb"):
+        shutil.copy(demo, folder / name)
+    cornell_box().save(folder / "level.gltf")
+    variant("draco", demo, folder / "draco.glb")
+    ktx2_scene(folder / "ktx2.glb")
+
+
+@pytest.fixture
+def newcomer(tmp_path):
+    """A fresh folder holding the repository's assets/ (no scenes made yet), and the environment
+    a user has after ``pip install``."""
+    shutil.copytree(ROOT / "assets", tmp_path / "assets",
+                    ignore=shutil.ignore_patterns("scenes", "__pycache__"))
+    bin_folder = tmp_path / ".bin"
+    bin_folder.mkdir()
+    console_script(bin_folder)
+    env = dict(os.environ, PATH=f"{bin_folder}{os.pathsep}{os.environ['PATH']}",
+               PYTHONPATH=str(ROOT))
+    return tmp_path, env
+
+
+def run(kind: str, command: str, folder: Path, env: dict) -> subprocess.CompletedProcess:
+    """Run one README command in ``folder``; ``baker watch`` is stopped by Ctrl-C after its
+    first bake (it would watch for ever)."""
+    argv = ["bash", "-c", command] if kind == "sh" else [sys.executable, "-c", command]
+    if " watch " not in command:
+        return subprocess.run(argv, cwd=folder, env=env, capture_output=True, text=True,
+                              timeout=600)
+    process = subprocess.Popen(argv, cwd=folder, env=env, stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True, start_new_session=True)
+    lines = []
+    for line in process.stdout:
+        lines.append(line)
+        if line.startswith("baked "):
+            break
+    os.killpg(process.pid, signal.SIGINT)
+    out, err = process.communicate(timeout=60)
+    return subprocess.CompletedProcess(argv, process.returncode, "".join(lines) + out, err)
+
+
+def test_readme_lists_the_commands_this_test_runs():
+    """The extraction sees the README's blocks: the first line, the bake variants, Python, the
+    rebake and preview commands (so a README reshuffle cannot make this test run nothing)."""
+    found = [command for _, command in commands(README.read_text())]
+    assert any("make_scenes.py" in c for c in found)
+    for expected in ("baker bake level.gltf -o out/level.gltf", "baker watch", "baker relight",
+                     "baker rebake", "baker preview", "baker.bake(", "baker.preview.render("):
+        assert any(expected in c for c in found), expected
+
+
+def test_every_readme_command_runs_as_written(newcomer):
+    folder, env = newcomer
+    failures = []
+    for kind, command in commands(README.read_text()):
+        ran = run(kind, small(kind, command), folder, env)
+        if "make_scenes.py" in command:  # the demo scenes are made: the README's scene names
+            scene_files(folder)
+        expected = 130 if " watch " in command else 0
+        missing = [name for name in outputs(command) if not (folder / name).is_file()]
+        if ran.returncode != expected or missing or "Traceback" in ran.stderr:
+            failures.append(f"{command!r}: exit {ran.returncode} (expected {expected}), "
+                            f"missing {missing}\n{ran.stdout[-600:]}\n{ran.stderr[-1500:]}")
+    assert not failures, "\n\n".join(failures)
