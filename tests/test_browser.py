@@ -32,9 +32,10 @@ from tests.bakehelp import REAL_SCENES, saved
 from chromium import Browser, find_chromium
 
 SIZE = (200, 150)
-# Left out: the moz carrier on the shared scenes. MultiUVTest's cube is metal, black in both,
-# but for its emissive logos, which baker's own texture lookup (surface.py, the preview) places
-# elsewhere on the cube than three.js does, in the input file as in ours (a bug found here);
+# Left out: the moz carrier on the shared scenes. MultiUVTest's cube is metal: black in both but
+# for its emissive logos, which have nothing of the bake and which three.js samples through
+# mipmaps and the preview at full resolution (measured at 640 × 480: median ratio 1.27 and
+# log correlation 0.81 over the 1,690 pixels that emit, the logos in the same places);
 # LightsPunctualLamp's shade is transmissive, which three.js draws with the scene behind it and
 # the preview does not.
 CASES = [("cornell", "moz"), ("cornell", "emissive"), ("cornell", "occlusion"),
