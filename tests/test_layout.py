@@ -16,7 +16,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "baker"
 
 # Lowest first. A module belongs to the longest prefix that names it.
 LAYERS = (
-    ("baker.errors", "baker.jit"),  # the error family; how kernels are compiled
+    ("baker.errors", "baker.jit", "baker.frozen"),  # errors; compiled kernels; read-only hand-offs
     ("baker.run",),  # processes, threads, progress, spilled rows, atomic files
     ("baker.settings",),  # what the user may set
     ("baker.gltf",),  # reading glTF into a Scene; what its materials mean

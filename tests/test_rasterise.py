@@ -107,3 +107,23 @@ def test_coverage_does_not_depend_on_how_many_candidates_are_taken_at_once(tmp_p
     cut = rasterise_module.cover(atlas, world)
     for name in ("key", "triangle", "triangle_texels"):
         assert np.array_equal(getattr(cut, name), getattr(whole, name)), name
+
+
+def test_the_geometry_handed_on_is_read_only(tmp_path):
+    """The world, each instance's unwrap, the coverage and the owners are read by every later
+    stage and written by none (``baker/frozen.py``): numpy refuses a write into any of them."""
+    import pytest
+
+    from baker.atlas.rasterise import cover, owners
+
+    scene = loaded(three_instances(), tmp_path)
+    world = build_world(scene)
+    settings = resolve(Settings(texel_density=8.0), world.areas().sum(), 1.0)
+    atlas = unwrap(scene, world, settings)
+    coverage = cover(atlas, world)
+    arrays = [world.positions, world.triangles, world.texcoords[0] if world.texcoords else
+              world.normals, atlas.instances[0].uv, coverage.key,
+              owners(atlas, world, coverage).normal]
+    for array in arrays:
+        with pytest.raises(ValueError, match="read-only"):
+            array[(0,) * array.ndim] = array[(0,) * array.ndim]

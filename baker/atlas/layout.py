@@ -10,6 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from baker.frozen import read_only
+
 
 @dataclass(frozen=True)
 class InstanceUV:
@@ -27,6 +29,10 @@ class InstanceUV:
     triangles: np.ndarray  # (m, 3) int64 into the new vertices
     uv: np.ndarray  # (k, 2) float64 in [0, 1]
     pages: np.ndarray  # (m,) int64, page of each triangle; -1 where xatlas gave it no area
+
+
+    def __post_init__(self) -> None:
+        read_only(self)  # a hand-off: later stages read it (frozen.py)
 
 
 @dataclass(frozen=True)

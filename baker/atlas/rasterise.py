@@ -37,6 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from baker.atlas.layout import Atlas
+from baker.frozen import read_only
 from baker.geometry.world import World
 from baker.jit import jit
 from baker.run.parallel import run_chunks
@@ -346,6 +347,9 @@ class Coverage:
     triangle: np.ndarray
     triangle_texels: np.ndarray
 
+    def __post_init__(self) -> None:
+        read_only(self)  # a hand-off: later stages read it (frozen.py)
+
 
 def rasterise(atlas: Atlas, world: World) -> Texels:
     """All texels touched by baked triangles, with their world sample points and normals."""
@@ -399,6 +403,9 @@ class Owners:
     normal: np.ndarray
     size: np.ndarray
     axes: np.ndarray
+
+    def __post_init__(self) -> None:
+        read_only(self)  # a hand-off: later stages read it (frozen.py)
 
 
 def owners(atlas: Atlas, world: World, coverage: Coverage) -> Owners:

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from baker.frozen import read_only
 from baker.geometry.surface import alpha_test
 from baker.gltf.scene import Scene
 
@@ -52,6 +53,9 @@ class World:
     center: np.ndarray
     alpha: object = field(default=None, compare=False, repr=False)
 
+
+    def __post_init__(self) -> None:
+        read_only(self)  # a hand-off: later stages read it (frozen.py)
     def corners(self, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """World positions of the three corners of triangles ``tris`` (k,), each (k, 3)."""
         v = self.triangles[tris]
