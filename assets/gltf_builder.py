@@ -254,13 +254,14 @@ class GltfBuilder:
         matrix: np.ndarray | None = None,
         children: Sequence[int] = (),
         extensions: dict[str, Any] | None = None,
+        extras: dict[str, Any] | None = None,
     ) -> int:
         """Add a node; return its index.
 
         ``translation`` metres, ``rotation`` unit quaternion (x, y, z, w), ``scale`` per axis;
         or ``matrix``: (4, 4) local-to-parent transform acting on column vectors (stored
         column-major, as glTF wants), exclusive with TRS. ``children`` are earlier node indices;
-        they stop being roots.
+        they stop being roots. ``extras``: the node's application data (e.g. ``foliage``).
         """
         if matrix is not None and any(v is not None for v in (translation, rotation, scale)):
             raise ValueError(f"{name}: give either matrix or translation/rotation/scale, not both")
@@ -286,6 +287,8 @@ class GltfBuilder:
         if extensions:
             node.extensions = dict(extensions)
             self._extensions_used.update(extensions)
+        if extras:
+            node.extras = dict(extras)
         self._nodes.append(node)
         return len(self._nodes) - 1
 

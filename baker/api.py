@@ -259,6 +259,7 @@ def _report(input_path: Path, output: Path, done, info, pages, times: dict[str, 
         "lightmap_pages": [{"intensity": page.intensity, "peak": page.peak,
                             "clipped_fraction": page.clipped} for page in pages],
         "rebake": rebake,
+        **({"foliage": done.foliage.report()} if done.foliage is not None else {}),
     }
 
 

@@ -20,6 +20,7 @@ BAKED_LIGHTS = ("remove", "keep", "indirect")
 METHODS = ("obscurance", "gi")
 SPECULAR_STRATEGIES = ("b", "a", "c")
 TECHNIQUES = ("sobol", "stratified", "random")  # how ray directions are drawn: rays.sampling
+FOLIAGE_MODES = ("none", "approx")  # how leaves' obscurance is found: light.foliage
 INSTALL_FIX = ('pip install "baker[denoise]" (or pip install ".[denoise]" from a checkout of '
                'baker), or leave out --denoise')
 
@@ -93,6 +94,11 @@ class Settings:
         ray from the texel's sample point.
     denoise: run Intel Open Image Denoise's lightmap filter on each chart of the composed
         pages before dilation (denoise.py; needs ``pip install "baker[denoise]"``).
+    foliage: "none" (every texel traced) or "approx": leaves and grass get their obscurance
+        from a closed form fitted per crown, the rest is traced without the crowns' leaves
+        and shaded by them in closed form (light/foliage.py).
+    foliage_density: αρ (per cubic world unit) of every crown in ``foliage`` "approx" whose
+        node's extras give none; None fits it to a few traced texels.
     """
 
     texel_density: float | None = None
@@ -128,6 +134,8 @@ class Settings:
     max_depth: int = 16
     supersample: int = 1
     denoise: bool = False
+    foliage: str = "none"
+    foliage_density: float | None = None
 
     def check(self) -> None:
         """Raise SettingsError for a value that cannot work, saying which values can."""
@@ -136,6 +144,7 @@ class Settings:
             "d_max": self.d_max,
             "d_max_fraction": self.d_max_fraction,
             "target_error": self.target_error,
+            "foliage_density": self.foliage_density,
             "ambient": self.ambient if self.ambient is None else self.ambient + 1.0,
         }
         for name, value in positive.items():
@@ -171,7 +180,8 @@ class Settings:
         self._check_output()
         for name, value, allowed in (("rho", self.rho, RHO_FUNCTIONS),
                                      ("sampling", self.sampling, TECHNIQUES),
-                                     ("method", self.method, METHODS)):
+                                     ("method", self.method, METHODS),
+                                     ("foliage", self.foliage, FOLIAGE_MODES)):
             if value not in allowed:
                 raise SettingsError(f"{name} must be one of {', '.join(allowed)}, not {value!r}",
                                     fix=f"use --{name} {allowed[0]}")

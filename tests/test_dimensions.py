@@ -52,7 +52,7 @@ def test_lights_before_the_twelfth_keep_their_dimensions():
 def test_the_uniform_stream_never_takes_a_scramble_word():
     """sample_2d's scrambles hash (seed, key, dimension, j) with j ≤ 4; the uniform stream hashes
     (seed, key, sample, dimension): its dimensions must never be such a j."""
-    assert dimensions.MATERIAL > 4
+    assert dimensions.MATERIAL > 4 and dimensions.FOLIAGE_FIT > 4
 
 
 def test_no_module_keeps_a_dimension_of_its_own():

@@ -87,6 +87,14 @@ def add_parser(commands) -> None:
                             f"{d.max_depth}; rays that reach it are counted)")
     model.add_argument("--max-rays", type=int, default=d.max_rays, metavar="N",
                        help=f"the most rays a texel gets with --target-error (default {d.max_rays})")
+    model.add_argument("--foliage", choices=baker.settings.FOLIAGE_MODES, default=d.foliage,
+                       help="approx: leaves and marked grass get their obscurance from a closed "
+                            "form (Hegeman et al.) fitted per crown to a few traced texels, and "
+                            "the crowns shade the rest in closed form; the report gives its "
+                            "error against tracing (default none: trace every texel)")
+    model.add_argument("--foliage-density", type=positive_float, metavar="AR",
+                       help="with --foliage approx: the crowns' αρ per cubic unit, instead of "
+                            "fitting it (a node's extras.foliage_density wins)")
     direct = bake.add_argument_group("direct light (KHR_lights_punctual, emissive surfaces, sky)")
     direct.add_argument("--shadow-rays", type=int, default=d.shadow_rays, metavar="N",
                         help="shadow rays per texel towards a light with a size (soft shadows); "
@@ -204,6 +212,12 @@ def print_summary(result: baker.BakeResult) -> None:
             if rebake.get("incremental") else
             f"{result.rays:,} obscurance rays, {result.report['rays_per_second'] / 1e6:.2f} M rays/s, "
             f"{result.report.get('shadow_rays', 0):,} shadow/sky rays")
+    foliage = result.report.get("foliage")
+    if foliage is not None:
+        held = foliage["error"]["held_out"]
+        print(f"  foliage approx: {len(foliage['crowns'])} crown(s) fitted with "
+              f"{foliage['rays']:,} rays; against tracing (held out) RMSE {held['rmse']:.3g}, "
+              f"bias {held['bias']:+.3g}")
     print(f"  {rays}; estimated RMSE {result.rmse_estimate:.3g}; {result.seconds:.1f} s "
           f"({', '.join(f'{k} {v:.1f}' for k, v in times.items())})")
 

@@ -43,6 +43,7 @@ from baker.light.direct import (
     direct_light,
     light_sources,
 )
+from baker.light.foliage import FitInputs, Foliage, integrate_with_foliage, prepare_foliage
 from baker.light.gi import indirect_light
 from baker.light.hemisphere import Surfaces, Terms, surfaces_of
 from baker.light.integrate import integrate
@@ -97,6 +98,7 @@ class Computed:
     sources: Sources | None = None  # what lights the scene directly (direct.py)
     power: Power | None = None  # what each source lays on the surfaces, for I_A
     denoised: DenoiseInfo | None = None  # what --denoise did (denoise.py); None: not denoised
+    foliage: Foliage | None = None  # --foliage approx: the crowns and their fit (foliage.py)
 
     @property
     def texels(self) -> Texels:
@@ -167,6 +169,7 @@ class Baking:
     owned: Owners | None = None  # what the texels take from their triangles (rasterise.owners)
     faces: Faces | None = None  # back faces, for the validity probes
     surfaces: Surfaces | None = None  # shading of obscurance hits (integrate.surfaces_of)
+    foliage: Foliage | None = None  # --foliage approx: crowns in closed form (foliage.py)
 
     @property
     def tracer(self) -> Tracer:
@@ -239,6 +242,12 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True,
     spill = Spill(spill_folder) if len(part_slices(count)) > 1 else None
     baking = Baking(scene, world, resolved, lit, atlas, coverage, owned, Faces(scene, world),
                     surfaces_of(scene, world))
+    if resolved.foliage == "approx":
+        with timed(times, "foliage fit"):
+            baking = replace(baking, foliage=prepare_foliage(
+                scene, world, lit.tracer, resolved, FitInputs(
+                    atlas, coverage, owned, baking.faces, baking.surfaces,
+                    effective_r_ave(lit.ambient, resolved.rho))))
     try:
         pages, last = _bake_parts(baking, spill, times, quiet)
         per_texel = (PerTexel.spilled(spill, atlas, world) if spill is not None
@@ -283,8 +292,12 @@ def _bake_part(baking: Baking, rows: slice, times: dict[str, float],
         points = TexelPoints.of(texels, made.position)
     with timed(times, "trace"):
         error_scale = (effective_r_ave(ambient, s.rho), float(ambient.intensity @ LUMINANCE))
-        terms = integrate(scene, world, tracer, texels, s, advance, error_scale=error_scale,
-                          surfaces=baking.surfaces)
+        if baking.foliage is None:
+            terms = integrate(scene, world, tracer, texels, s, advance, error_scale=error_scale,
+                              surfaces=baking.surfaces)
+        else:
+            terms = integrate_with_foliage(baking.foliage, scene, world, texels, s, advance,
+                                           error_scale, baking.surfaces)
     with timed(times, "direct"):
         direct = direct_light(scene, world, tracer, texels, baking.sources, s, advance)
     indirect = None
@@ -366,6 +379,6 @@ def _finish_pages(baking: Baking, per_texel: PerTexel, pages: _Pages, times: dic
                     ambient=baking.ambient, plan=baking.lit.plan, atlas=baking.atlas,
                     per_texel=per_texel, tally=pages.tally, lightmaps=lightmaps,
                     stage_seconds=times, sources=baking.sources, power=baking.lit.power,
-                    denoised=denoised)
+                    denoised=denoised, foliage=baking.foliage)
 
 

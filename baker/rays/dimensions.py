@@ -38,6 +38,7 @@ GI_EMITTER = 43  # the next-event emitter point at each vertex (vertex keys)
 _LIGHTS_HIGH = 64  # light l ≥ 12: 64 + 2(l − 12), above every other sobol range
 
 # --- the uniform stream -------------------------------------------------------------------------
+FOLIAGE_FIT = 5  # the rank of a crown's texels, which picks its fit texels (sample 0, texel keys)
 MATERIAL = 60  # mirror/glass/translucent chains: 60 + 3·depth + (branch 0, Fresnel 1, roulette 2)
 MATERIAL_STRIDE = 3
 
@@ -88,7 +89,8 @@ def ranges(lights: int, max_depth: int, continuations: int) -> list[Range]:
              Range("gi", "sobol", GI_FIRST, GI_EMITTER + 1)]
     table += [Range(f"light {l}", "sobol", light_dimension(l), light_dimension(l) + 1)
               for l in range(lights)]
-    table += [Range("material", "uniform", MATERIAL,
+    table += [Range("foliage fit", "uniform", FOLIAGE_FIT, FOLIAGE_FIT + 1),
+              Range("material", "uniform", MATERIAL,
                     material_dimension(max_depth) + MATERIAL_STRIDE),
               Range("alpha", "ray", ALPHA, alpha_dimension(continuations))]
     return table

@@ -178,15 +178,19 @@ class RayCaster(Occluder, Protocol):
 
 
 class Tracer:
-    """Casts rays against all of a ``World``'s triangles."""
+    """Casts rays against all of a ``World``'s triangles, or all but the ``hidden`` ones."""
 
-    def __init__(self, world: World):
+    def __init__(self, world: World, hidden: np.ndarray | None = None):
+        """``hidden``: None, or (T,) bool world triangles that no ray meets (their corners are
+        NaN, which Embree leaves out; the others keep their indices as ``primID``)."""
         self.center = world.center
         self.triangle_count = len(world.triangles)
         self.alpha = world.alpha  # materials.AlphaTest or None (nothing to let through)
         self._scene = rtcore_scene.EmbreeScene()
         if self.triangle_count:
             corners = world.positions[world.triangles] - self.center  # (T, 3, 3)
+            if hidden is not None:
+                corners[hidden] = np.nan
             TriangleMesh(self._scene, corners.astype(np.float32))
             # The first run commits the scene; do it here, not from several threads at once.
             self._scene.run(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32),

@@ -1017,6 +1017,9 @@ def _compared(scene: Scene, settings: Settings, path, relight: bool, times: dict
     if relight and (change.moved or change.recoloured or change.lights_placed):
         raise FullBake("more than light colours and intensities changed: "
                        + "; ".join(change.changes))
+    if resolved.foliage == "approx" and not relight:
+        raise FullBake("foliage approx fits every crown to texels traced in the whole scene: "
+                       "an edit changes the fit, which the rebake does not follow yet")
     if resolved.method != "obscurance":
         raise FullBake(f"method {resolved.method!r} traces paths through the whole scene from "
                        "every texel")
