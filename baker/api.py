@@ -21,6 +21,7 @@ from baker.image.compose import Lightmaps
 from baker.image.encode import encode
 from baker.image.errormap import write_error_maps
 from baker.image.hdr import check_format, page_file
+from baker.light.gi import MAX_BOUNCES
 from baker.output.write import WriteOptions, image_file_name, write
 from baker.pipeline.full import compute, timed, writes_occlusion
 from baker.pipeline.input_warnings import input_warnings
@@ -254,13 +255,20 @@ def _report(input_path: Path, output: Path, done, info, pages, times: dict[str, 
         "denoise": done.denoised.as_dict() if done.denoised is not None else {"denoised": False},
         "carrier": done.settings.carrier, "baked_lights": done.settings.baked_lights,
         "notes": list(info.notes) + clipping_notes(pages) + viewer_notes(
-            done.scene, baked_materials(done), done.settings.carrier),
+            done.scene, baked_materials(done), done.settings.carrier) + gi_notes(done),
         "warnings": input_warnings(done.scene, done.world),  # dropped or changed, counted
         "lightmap_pages": [{"intensity": page.intensity, "peak": page.peak,
                             "clipped_fraction": page.clipped} for page in pages],
         "rebake": rebake,
         **({"foliage": done.foliage.report()} if done.foliage is not None else {}),
+        **({"gi": gi_report(done.tally)} if done.settings.method == "gi" else {}),
     }
+
+
+def gi_report(tally) -> dict:
+    """What ``--method gi``'s paths did: their rays, and how many were cut at ``MAX_BOUNCES``
+    (their share of the light is lost: at most a_max^(B−1) of what each would still gather)."""
+    return {"rays": tally.gi_rays, "max_bounces": MAX_BOUNCES, "paths_capped": tally.gi_capped}
 
 
 def carried(done) -> Lightmaps:
@@ -277,6 +285,14 @@ def baked_materials(done) -> set[int]:
     scene = done.scene
     return {scene.primitives[scene.instances[unwrap.instance].primitive].material
             for unwrap in done.atlas.instances}
+
+
+def gi_notes(done) -> list[str]:
+    """A report note when ``--method gi`` cut paths at its bounce cap (its light is then low)."""
+    capped = done.tally.gi_capped
+    return ([f"--method gi: {capped:,} paths were still going after {MAX_BOUNCES} bounces and were "
+             "cut there, so the indirect light is low (albedos of 1 with nothing escaping?)"]
+            if capped else [])
 
 
 def clipping_notes(pages) -> list[str]:

@@ -17,8 +17,21 @@ cosθ/π = p_b) may meet an emitter too (counted from b ≥ 1: the light of emit
 is in D(P) already); each counts with weight p²/(p_l² + p_b²) of its own pdf. A small lamp,
 which cosine paths seldom meet, is then found by every vertex, and the next-event estimate's
 peaks near an emitter's edges (p_l ≫ p_b there) are weighted down to the paths' bounded one.
-Paths end by Russian roulette after two bounces (unbiased) or at ``max_bounces``. The lightmap is then L(P) = D(P) + E_ind(P), what
-``--method gi`` bakes and what ``baker study`` compares obscurances with.
+Paths end by Russian roulette from the second vertex on: a path goes on with probability
+s = min(1, max channel of its throughput) and its throughput is divided by s, so the estimate
+is unbiased and a surviving path's throughput never exceeds 1 (its variance stays finite even
+at albedo 0.99, where a cap on s, such as 0.95, lets weights grow as (a/0.95)^b). The only
+bias left is the cap of ``MAX_BOUNCES`` vertices, for scenes whose paths would never end
+(albedo 1 everywhere and nothing escaping): a path that survives to it carries throughput
+≤ a_max^(B−1) (a_max the largest albedo met), so the light it loses is that fraction of what
+a path from there gathers; ``Indirect.capped`` counts such paths and the report prints them.
+The lightmap is then L(P) = D(P) + E_ind(P), what ``--method gi`` bakes and what
+``baker study`` compares obscurances with.
+
+The error estimate: each texel's paths are independent estimates (their first directions are
+one scrambled Sobol net, which only makes them better than independent), so the variance of a
+texel's mean is the sample variance of its paths' luminance over the path count
+(``Indirect.variance``).
 
 Randomness is a pure function of (seed, texel key, path, bounce): the first direction of each
 path comes from the texel's Owen-scrambled Sobol points, later ones from per-vertex keys.
@@ -32,7 +45,7 @@ from typing import Callable
 import numpy as np
 
 from baker.atlas.rasterise import Texels
-from baker.geometry.surface import albedo, emission
+from baker.geometry.surface import LUMINANCE, albedo, emission
 from baker.geometry.world import World
 from baker.gltf.scene import Scene
 from baker.light.direct import (
@@ -51,14 +64,19 @@ from baker.run.parallel import run_chunks
 from baker.settings import Resolved
 
 _FAR = 1e30  # "no length limit" for Embree's float32 tfar
+MAX_BOUNCES = 1024  # a path cut here at albedo 0.99 has throughput 0.99^1023 = 3.4e-5
 
 
 @dataclass(frozen=True)
 class Indirect:
-    """E_ind (N, 3) at N texels, and the rays the paths cast (bounce and shadow rays)."""
+    """E_ind (N, 3) at N texels; the variance (N,) of each texel's E_ind luminance (of the
+    mean of its paths); the rays the paths cast (bounce and shadow rays); the paths cut at
+    ``MAX_BOUNCES`` (0 unless paths could not end by themselves)."""
 
     irradiance: np.ndarray
+    variance: np.ndarray
     rays: int
+    capped: int = 0
 
 
 def _path_keys(keys: np.ndarray, paths: int) -> np.ndarray:
@@ -86,8 +104,8 @@ def _cosine_directions(normals: np.ndarray, points: np.ndarray) -> np.ndarray:
 
 
 def _chunk(scene: Scene, world: World, tracer: Tracer, sources: Sources, texels: Texels,
-           rows: slice, settings: Resolved, paths: int, max_bounces: int) -> tuple[np.ndarray, int]:
-    """E_ind (k, 3) of the texels ``rows`` and the rays cast."""
+           rows: slice, settings: Resolved, paths: int, max_bounces: int) -> Indirect:
+    """E_ind of the texels ``rows`` (k of them)."""
     keys = texels.key[rows]
     k = len(keys)
     path_keys = _path_keys(keys, paths)
@@ -150,13 +168,16 @@ def _chunk(scene: Scene, world: World, tracer: Tracer, sources: Sources, texels:
             total[alive] += throughput * reflectance * direct.irradiance()
         throughput = throughput * reflectance
         if bounce >= 1:  # Russian roulette: survive with the throughput's largest channel
-            survive = np.minimum(throughput.max(axis=1), 0.95)
+            survive = np.minimum(throughput.max(axis=1), 1.0)
             u = sample_2d(settings.seed, _bounce_keys(path_keys[alive], bounce), 0,
                           GI_ROULETTE)[:, 0]
             keep = u < survive
             throughput = throughput[keep] / survive[keep, None]
             alive, position, normal, size = alive[keep], position[keep], normal[keep], size[keep]
-    return total.reshape(k, paths, 3).mean(axis=1), rays
+    per_path = total.reshape(k, paths, 3)
+    luminance = per_path @ LUMINANCE
+    variance = (luminance.var(axis=1, ddof=1) / paths if paths > 1 else np.zeros(k))
+    return Indirect(per_path.mean(axis=1), variance, rays, len(alive))
 
 
 def _emitter_index(world: World, emitters: Emitters | None) -> np.ndarray:
@@ -219,21 +240,22 @@ def _select(hits, mask):
 
 
 def indirect_light(scene: Scene, world: World, tracer: Tracer, sources: Sources, texels: Texels,
-                   settings: Resolved, paths: int, max_bounces: int = 16,
+                   settings: Resolved, paths: int, max_bounces: int = MAX_BOUNCES,
                    progress: Callable[[int], None] | None = None) -> Indirect:
     """E_ind at every texel from ``paths`` paths each (see the module's docstring)."""
     count = len(texels)
-    irradiance = np.zeros((count, 3))
-    rays = np.zeros(count, np.int64)
+    irradiance, variance = np.zeros((count, 3)), np.zeros(count)
+    rays, capped = np.zeros(count, np.int64), np.zeros(count, np.int64)
     step = max(1, settings.chunk_texels // max(1, paths // 16))
     chunks = [slice(start, min(start + step, count)) for start in range(0, count, step)]
 
     def work(rows: slice) -> None:
-        irradiance[rows], cast = _chunk(scene, world, tracer, sources, texels, rows, settings,
-                                        paths, max_bounces)
-        rays[rows.start] = cast
+        part = _chunk(scene, world, tracer, sources, texels, rows, settings, paths, max_bounces)
+        irradiance[rows], variance[rows] = part.irradiance, part.variance
+        rays[rows.start], capped[rows.start] = part.rays, part.capped
         if progress is not None:
             progress(rows.stop - rows.start)
 
     run_chunks(work, chunks, settings.threads)
-    return Indirect(irradiance=irradiance, rays=int(rays.sum()))
+    return Indirect(irradiance=irradiance, variance=variance, rays=int(rays.sum()),
+                    capped=int(capped.sum()))

@@ -44,7 +44,7 @@ from baker.light.direct import (
     light_sources,
 )
 from baker.light.foliage import FitInputs, Foliage, integrate_with_foliage, prepare_foliage
-from baker.light.gi import indirect_light
+from baker.light.gi import Indirect, indirect_light
 from baker.light.hemisphere import Surfaces, Terms, surfaces_of
 from baker.light.integrate import integrate
 from baker.pipeline.parts import PerTexel, Tally, TexelPoints, part_slices
@@ -124,10 +124,13 @@ class Computed:
             self.ambient.intensity @ LUMINANCE)
 
     def rmse_estimate(self) -> float:
-        """RMSE of the lightmap's luminance estimated from the rays: I_A·W's and D's."""
+        """RMSE of the lightmap's luminance estimated from the rays: D's, and I_A·W's or, with
+        ``--method gi``, the path-traced indirect light's (``gi.Indirect.variance``)."""
         if not self.tally.texels:
             return 0.0
         direct = self.tally.direct_variance / self.tally.texels
+        if self.settings.method == "gi":
+            return float(np.sqrt(direct + self.tally.indirect_variance / self.tally.texels))
         return float(np.sqrt(self.obscurance_rmse() ** 2 + direct))
 
 
@@ -188,14 +191,14 @@ class Baking:
 class BakedPart:
     """One part's texels and what was computed for them (``_bake_part``): the texels with their
     sample points moved by the probes, what the state keeps of them, validity, obscurance terms,
-    direct light, and the full-GI indirect irradiance (k, 3) with ``--method gi``, else None."""
+    direct light, and the full-GI indirect light (``gi.Indirect``) with ``--method gi``, else None."""
 
     texels: Texels
     points: TexelPoints
     validity: Validity
     terms: Terms
     direct: Direct
-    indirect: np.ndarray | None = None
+    indirect: Indirect | None = None
 
     def held(self) -> PerTexel:
         """The part's results as a bake's ``PerTexel`` (a bake of one part)."""
@@ -303,8 +306,7 @@ def _bake_part(baking: Baking, rows: slice, times: dict[str, float],
     indirect = None
     if s.method == "gi":  # the full-GI reference instead of I_A·W (gi.py)
         with timed(times, "gi"):
-            indirect = indirect_light(scene, world, tracer, baking.sources, texels, s,
-                                      s.rays).irradiance
+            indirect = indirect_light(scene, world, tracer, baking.sources, texels, s, s.rays)
     return BakedPart(texels, points, validity, terms, direct, indirect)
 
 
@@ -341,16 +343,17 @@ class _Pages:
                                np.zeros_like(lightmaps.covered)), Tally())
 
     def add(self, baking: Baking, texels: Texels, validity: Validity, terms: Terms,
-            direct: Direct, indirect: np.ndarray | None = None) -> None:
+            direct: Direct, indirect: Indirect | None = None) -> None:
         """Compose the texels' light, mark their validity and count them. With baked lights
         "indirect" the punctual lights' direct light is left out (the viewer's lights give
         it); their power still sets I_A."""
         rho, ambient = baking.settings.rho, baking.ambient
         colours = (np.zeros_like(direct.light_colours)
                    if baking.settings.baked_lights == "indirect" else None)
-        compose_into(self.lightmaps, texels, terms, ambient, rho, direct, colours, indirect)
+        compose_into(self.lightmaps, texels, terms, ambient, rho, direct, colours,
+                     None if indirect is None else indirect.irradiance)
         validity.mark(texels, *self.masks)
-        self.tally.add(terms, direct, validity, effective_r_ave(ambient, rho))
+        self.tally.add(terms, direct, validity, effective_r_ave(ambient, rho), indirect)
 
 
 def writes_occlusion(settings: Resolved) -> bool:

@@ -20,6 +20,7 @@ from baker.atlas.rasterise import Coverage, Texels, texels_of
 from baker.atlas.validity import STATE_NAMES, Validity
 from baker.geometry.world import World
 from baker.light.direct import Direct
+from baker.light.gi import Indirect
 from baker.light.hemisphere import Terms, rmse_of
 from baker.run.parallel import even_slices
 from baker.run.spill import Spill
@@ -94,7 +95,9 @@ class Tally:
 
     texels: how many; rays: obscurance rays cast; shadow_rays: shadow and sky rays cast;
     states: texels in each validity state, by name; split_squares: (2,) ``Terms.split_squares``
-    summed; direct_variance: the sum over texels of the variance of D's luminance.
+    summed; direct_variance: the sum over texels of the variance of D's luminance; with
+    ``--method gi``, indirect_variance the same of E_ind's, the paths' rays (gi_rays) and the
+    paths cut at ``gi.MAX_BOUNCES`` (gi_capped).
     """
 
     texels: int = 0
@@ -103,9 +106,12 @@ class Tally:
     states: dict[str, int] = field(default_factory=lambda: dict.fromkeys(STATE_NAMES, 0))
     split_squares: np.ndarray = field(default_factory=lambda: np.zeros(2))
     direct_variance: float = 0.0
+    indirect_variance: float = 0.0
+    gi_rays: int = 0
+    gi_capped: int = 0
 
     def add(self, terms: Terms, direct: Direct | None, validity: Validity,
-            r_ave: np.ndarray) -> None:
+            r_ave: np.ndarray, indirect: Indirect | None = None) -> None:
         """Count the texels of one part (``r_ave``: the R_ave the estimator used)."""
         self.texels += len(terms.counts)
         self.rays += terms.rays
@@ -113,6 +119,10 @@ class Tally:
         if direct is not None:
             self.shadow_rays += direct.rays
             self.direct_variance += float(np.sum(direct.variance()))
+        if indirect is not None:
+            self.indirect_variance += float(np.sum(indirect.variance))
+            self.gi_rays += indirect.rays
+            self.gi_capped += indirect.capped
         for name, count in validity.counts().items():
             self.states[name] += count
 
