@@ -6,7 +6,8 @@ For every carrier of the demo Cornell box and the carriers of two shared scenes 
 bake in plain three.js, over the pixels that show a lightmapped surface (one pixel in from every
 silhouette, where a rasteriser and a ray caster may see different triangles):
 - the log luminances correlate (≥ 0.98) and their median ratio is within 5 % of 1;
-- no pixel the preview shows lit (luminance above 1 % of white) is black in the browser.
+- no pixel the preview shows lit (luminance above 1 % of white) is black in the browser;
+and the Khronos validator finds no error in any file shown.
 
 Chromium is Debian's package: installed with apt-get when missing and running as root (CI);
 the tests are skipped only where it cannot be installed, and say so.
@@ -29,6 +30,7 @@ from baker.preview import default_view, render, scene_camera
 from baker.view import start
 from tests.bakehelp import REAL_SCENES, saved
 
+import gltf_validator
 from chromium import Browser, find_chromium
 
 SIZE = (200, 150)
@@ -65,6 +67,9 @@ def baked(tmp_path_factory):
             density = 8.0 if name == "cornell" else 4.0
             baker.bake(sources[name], out, baker.Settings(texel_density=density, rays=16,
                                                           carrier=carrier), state=False)
+            report = gltf_validator.validate(out)  # every file shown is valid glTF
+            assert not gltf_validator.issue_codes(report, gltf_validator.ERROR), \
+                gltf_validator.describe(report, gltf_validator.ERROR)
             done[name, carrier] = out
         return done[name, carrier]
 

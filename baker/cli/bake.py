@@ -201,6 +201,8 @@ def print_summary(result: baker.BakeResult) -> None:
     print(f"  {result.texels:,} texels on {result.pages} page(s) of "
           f"{result.report['atlas']['width']}×{result.report['atlas']['height']}, "
           f"texel density {s.texel_density:.4g}/unit, d_max {s.d_max:.4g}, {s.rays} rays/texel")
+    print(f"  carrier {s.carrier} ({s.encoding}), baked lights {s.baked_lights}; "
+          f"baker view {result.output} shows it")
     print("\n".join(result.plan.lines()))
     for note in result.report["notes"]:
         print(f"  note: {note}")
