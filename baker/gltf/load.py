@@ -69,6 +69,7 @@ from baker.gltf.materials import (
     classify,
     no_lightmap_reason,
 )
+from baker.gltf.references import check_references
 from baker.gltf.scene import (
     REPEAT,
     Image,
@@ -255,6 +256,7 @@ def read_document(path: str | Path) -> pygltflib.GLTF2:
     raw = _parse_json(text, file)
     _check_asset(raw, file)
     _check_arrays(raw, file)
+    check_references(raw, file)
     _check_required_extensions(raw, file)
     try:
         document = _document_from_json(text, raw)
