@@ -3,10 +3,11 @@
 Two scenes, classic AO (``--rho step --d-max 1``) at a 512² page as issue 27 measured them: the
 demo Cornell room (36 triangles: the cost per texel shows) and a room of 200 boxes and a sphere
 (``assets/many_objects.py``, 98,732 triangles in 202 meshes: the cost per triangle and object
-shows). For each, after one bake to load numba's kernels, ``--repeat`` bakes in this process
-(medians), printing every stage's seconds, µs per texel and per triangle, the share of the
+shows). For each, after one bake to load numba's kernels and fill a fresh unwrap cache
+(``baker/atlas/unwrap_cache.py``), ``--repeat`` bakes in this process (medians), printing every stage's seconds, µs per texel and per triangle, the share of the
 stages other than trace and direct light against the tracing, and the raw embreex rate on the
-bake's own rays measured in the same run (``bench_cornell.raw_embree_rate``). Then the cost of
+bake's own rays measured in the same run (``bench_cornell.raw_embree_rate``), and the unwrap
+without the cache (xatlas run: the cold cost, what a first bake or an edited mesh pays). Then the cost of
 a new process: Python with baker's imports, against Python alone (medians of ``--repeat``).
 
     python benchmarks/bench_fixed_cost.py [--rays 64] [--repeat 3] [--scenes cornell boxes]
@@ -15,6 +16,7 @@ a new process: Python with baker's imports, against Python alone (medians of ``-
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import subprocess
 import sys
@@ -26,6 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from assets.make_scenes import cornell_box  # noqa: E402
 from assets.many_objects import boxes_and_sphere  # noqa: E402
+from baker.atlas.unwrap import unwrap  # noqa: E402
 from baker.gltf.load import load  # noqa: E402
 from baker.pipeline.full import compute  # noqa: E402
 from baker.run.parallel import cores  # noqa: E402
@@ -68,6 +71,20 @@ def bake_scene(name: str, rays: int, repeat: int) -> None:
           f"tracing {tracing:.3f} s ({fixed / tracing:.2f}×)")
     print(f"  obscurance rays {done.terms.rays / stages['trace'] / 1e6:.2f} M/s end to end; "
           f"raw embreex {raw / 1e6:.2f} M/s on {raw_rays:,} of the same rays")
+    print(f"  unwrap cold (no cache, xatlas run): {cold_unwrap(done, repeat):.3f} s; "
+          f"from the cache (above): {stages['unwrap']:.3f} s")
+
+
+def cold_unwrap(done, repeat: int) -> float:
+    """Median seconds of the bake's unwrap with the cache off."""
+    cache, os.environ["BAKER_CACHE_DIR"] = os.environ["BAKER_CACHE_DIR"], "off"
+    times = []
+    for _ in range(repeat):
+        started = time.perf_counter()
+        unwrap(done.scene, done.world, done.settings)
+        times.append(time.perf_counter() - started)
+    os.environ["BAKER_CACHE_DIR"] = cache
+    return statistics.median(times)
 
 
 def seconds_of(command: list[str], repeat: int) -> float:
@@ -99,8 +116,10 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--scenes", nargs="+", choices=sorted(SCENES), default=list(SCENES))
     args = parser.parse_args()
-    for name in args.scenes:
-        bake_scene(name, args.rays, args.repeat)
+    with tempfile.TemporaryDirectory() as cache:
+        os.environ["BAKER_CACHE_DIR"] = cache  # starts empty: the warm-up bake fills it
+        for name in args.scenes:
+            bake_scene(name, args.rays, args.repeat)
     start_up(max(args.repeat, 5))
 
 

@@ -89,6 +89,8 @@ def test_a_bake_whose_unwrapper_crashes_once_gives_the_same_bytes(tmp_path, monk
     task scheduler's race makes it) costs a re-run, not the bake."""
     import xatlas
 
+    monkeypatch.setenv("BAKER_CACHE_DIR", "off")  # both bakes run xatlas
+
     import baker
     from assets.make_scenes import cornell_box
 

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import xatlas
 
+from baker.atlas import unwrap_cache
 from baker.atlas.layout import Atlas, InstanceUV
 from baker.errors import SettingsError
 from baker.geometry.world import World
@@ -147,8 +148,43 @@ def _generate(scene: Scene, world: World, instances: list[int], settings: Resolv
                        meshes=tuple(tuple(atlas[m]) + tuple(atlas.get_mesh_vertex_assignment(m))
                                     for m in range(len(meshes))))
 
+    name = unwrap_cache.key(meshes, (xatlas.__version__, _options_of(xatlas.ChartOptions()),
+                                     _options_of(_pack_options(settings, resolution))))
+    stored = unwrap_cache.read(name, len(meshes))
+    if stored is not None and _fits(stored, meshes):
+        (width, height, atlas_count, chart_count), arrays = stored
+        return _Packed(width, height, atlas_count, chart_count, arrays)
     triangles = sum(len(t) for _, t in meshes)
-    return call_forked(run, "the unwrapper (xatlas)", _SECONDS + triangles * _SECONDS_PER_TRIANGLE)
+    packed = call_forked(run, "the unwrapper (xatlas)",
+                         _SECONDS + triangles * _SECONDS_PER_TRIANGLE)
+    unwrap_cache.write(name, (packed.width, packed.height, packed.atlas_count,
+                              packed.chart_count), packed.meshes)
+    return packed
+
+
+def _options_of(options: xatlas.ChartOptions | xatlas.PackOptions) -> dict[str, object]:
+    """Every setting of an xatlas options object by name (for the cache key)."""
+    return {name: getattr(options, name) for name in sorted(dir(options))
+            if not name.startswith("_")}
+
+
+def _fits(stored: tuple[tuple[int, ...], tuple[tuple[np.ndarray, ...], ...]],
+          meshes: list[tuple[np.ndarray, np.ndarray]]) -> bool:
+    """Whether a cache entry (``unwrap_cache.read``) has the shapes, types and index ranges
+    an xatlas run of ``meshes`` gives; one that does not is run again (and rewritten)."""
+    header, arrays = stored
+    if len(header) != 4 or min(header) < 0:
+        return False
+    for (positions, triangles), (vertices, faces, uv, page, chart) in zip(meshes, arrays):
+        k = len(vertices)
+        if (vertices.dtype != np.uint32 or faces.dtype != np.uint32 or uv.dtype != np.float32
+                or vertices.shape != (k,) or faces.shape != triangles.shape
+                or page.dtype != np.uint32 or chart.dtype != np.uint32
+                or uv.shape != (k, 2) or page.shape != (k,) or chart.shape != (k,)
+                or (k and int(vertices.max()) >= len(positions))
+                or (faces.size and int(faces.max()) >= k)):
+            return False
+    return True
 
 
 def unwrap(scene: Scene, world: World, settings: Resolved) -> Atlas:

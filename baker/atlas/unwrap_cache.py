@@ -1,0 +1,119 @@
+"""Unwraps kept across bakes, keyed by a hash of everything xatlas is given.
+
+An xatlas run is a pure function of its input (the meshes' float32 positions in texel units and
+uint32 triangles, the chart and pack options, xatlas's version), so its result is stored under
+the SHA-256 of that input and a later bake of the same meshes at the same settings reads it back
+instead of running xatlas: the result is the same arrays either way, so the bake's bytes do not
+depend on whether the cache was hit. A rigid move of a node leaves its unwrap input bit-identical
+(``unwrap.frame_positions``), so a rebake after moving objects hits.
+
+The folder is ``$BAKER_CACHE_DIR`` if set (``off`` or empty: no cache), else
+``$XDG_CACHE_HOME/baker`` or ``~/.cache/baker``; entries are ``unwrap/<hash>.npz`` (NumPy's zip
+of arrays, no pickle), written atomically, at most ``KEEP`` of them (the least recently used go
+first). An entry that cannot be read whole (truncated, a bad CRC, arrays of the wrong shape) is
+ignored, and the fresh result written over it. A cache that cannot be written (read-only, full)
+only costs the next bake the xatlas run.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import os
+import zipfile
+from pathlib import Path
+from typing import Iterable
+
+import numpy as np
+
+from baker.errors import BakerError
+from baker.run.atomic import write_atomically
+
+FORMAT = b"baker unwrap cache 2"  # bump when what an entry holds, or how it is keyed, changes
+KEEP = 256  # entries kept; one of the 100k-triangle test scene is ~4 MB
+PER_MESH = 5  # arrays per mesh: vertices, triangles, uv, page and chart of each vertex
+_NAMES = ("header", "lengths") + tuple(f"joined{k}" for k in range(PER_MESH))
+
+
+def folder() -> Path | None:
+    """The cache folder, or None when caching is off (``BAKER_CACHE_DIR=off`` or empty)."""
+    chosen = os.environ.get("BAKER_CACHE_DIR")
+    if chosen is not None:
+        return None if chosen.strip().lower() in ("", "off", "0", "none") else Path(chosen)
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "baker"
+
+
+def key(meshes: Iterable[tuple[np.ndarray, np.ndarray]], options: Iterable[object]) -> str:
+    """Hex SHA-256 of the xatlas input: each mesh's (positions float32 (n, 3), triangles uint32
+    (m, 3)) with their shapes, and ``options`` (their ``repr``s: settings and versions)."""
+    digest = hashlib.sha256(FORMAT)
+    for option in options:
+        digest.update(repr(option).encode() + b"\0")
+    for positions, triangles in meshes:
+        for array in (positions, triangles):
+            digest.update(f"{array.dtype.str}{array.shape}".encode())
+            digest.update(np.ascontiguousarray(array).data)
+    return digest.hexdigest()
+
+
+def _path(name: str) -> Path | None:
+    place = folder()
+    return None if place is None else place / "unwrap" / f"{name}.npz"
+
+
+def read(name: str, mesh_count: int) -> tuple[tuple[int, ...], tuple[tuple[np.ndarray, ...], ...]] | None:
+    """The entry ``name``: (header ints, per mesh ``PER_MESH`` arrays), or None when there is
+    none or it cannot be read whole (it is then rewritten by the next ``write``)."""
+    path = _path(name)
+    if path is None or not path.is_file():
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as entry:
+            if sorted(entry.files) != sorted(_NAMES):
+                return None
+            header = tuple(int(v) for v in entry["header"])
+            lengths = entry["lengths"]
+            joined = [entry[f"joined{k}"] for k in range(PER_MESH)]
+        os.utime(path)  # recently used: kept longest
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
+        return None
+    if lengths.shape != (mesh_count, PER_MESH) or lengths.dtype != np.int64 or (lengths < 0).any():
+        return None
+    if any(len(a) != n for a, n in zip(joined, lengths.sum(axis=0))):
+        return None
+    split = [np.split(a, np.cumsum(n)[:-1]) for a, n in zip(joined, lengths.T)]
+    return header, tuple(tuple(parts[m] for parts in split) for m in range(mesh_count))
+
+
+def write(name: str, header: tuple[int, ...], meshes: tuple[tuple[np.ndarray, ...], ...]) -> None:
+    """Store an entry (atomically): the header, each array's length per mesh, and per kind of
+    array all meshes' joined (a few large arrays read much faster than thousands of small
+    ones). Then drop the least recently used beyond ``KEEP``. Any failure to write leaves the
+    cache as it was, and the bake goes on."""
+    path = _path(name)
+    if path is None or not meshes:
+        return
+    arrays = {"header": np.asarray(header, np.int64),
+              "lengths": np.array([[len(a) for a in mesh] for mesh in meshes], np.int64)}
+    for k in range(PER_MESH):
+        arrays[f"joined{k}"] = np.concatenate([np.asarray(mesh[k]) for mesh in meshes])
+    buffer = io.BytesIO()
+    np.savez(buffer, **arrays)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_atomically(path, buffer.getvalue())
+        _prune(path.parent)
+    except (OSError, BakerError):
+        pass
+
+
+def _prune(place: Path) -> None:
+    """Remove all but the ``KEEP`` most recently used entries of ``place``."""
+    entries = sorted(((e.stat().st_mtime, e.path) for e in os.scandir(place)
+                      if e.name.endswith(".npz")), reverse=True)
+    for _mtime, path in entries[KEEP:]:
+        try:
+            os.unlink(path)
+        except FileNotFoundError:
+            pass

@@ -1,0 +1,125 @@
+"""Unwraps cached across bakes (``baker/atlas/unwrap_cache.py``): the bytes of a bake do not
+depend on whether the cache was hit, missed, off, corrupted or unwritable, and an entry is used
+exactly when xatlas's input is the same (a rigid move of a node keeps it)."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+
+import baker
+from assets.make_scenes import cornell_box
+from assets.rebake_scenes import box_room, grid_boxes, moved
+from baker.atlas import unwrap as unwrap_module
+from baker.atlas import unwrap_cache
+
+SETTINGS = baker.Settings(page_size=128, rays=4, shadow_rays=1, threads=1)
+
+
+@pytest.fixture
+def cache(tmp_path, monkeypatch):
+    """A cache folder of the test's own."""
+    place = tmp_path / "cache"
+    monkeypatch.setenv("BAKER_CACHE_DIR", str(place))
+    return place
+
+
+def _entries(place):
+    return sorted((place / "unwrap").glob("*.npz")) if (place / "unwrap").is_dir() else []
+
+
+def _no_xatlas(monkeypatch):
+    """From here on, running xatlas fails the test: the unwrap must come from the cache."""
+    def refuse(*args, **kwargs):
+        raise AssertionError("xatlas ran although its input was cached")
+    monkeypatch.setattr(unwrap_module, "call_forked", refuse)
+
+
+def _bake(scene, out):
+    baker.bake(scene, out, SETTINGS, state=False)
+    return out.read_bytes()
+
+
+def test_a_bake_from_the_cache_has_the_bytes_of_one_without(tmp_path, cache, monkeypatch):
+    scene = cornell_box().save(tmp_path / "cornell.glb")
+    cold = _bake(scene, tmp_path / "cold.glb")
+    assert len(_entries(cache)) == 1
+    with monkeypatch.context() as m:
+        _no_xatlas(m)
+        assert _bake(scene, tmp_path / "hit.glb") == cold
+    monkeypatch.setenv("BAKER_CACHE_DIR", "off")
+    assert _bake(scene, tmp_path / "off.glb") == cold
+
+
+@pytest.mark.parametrize("damage", ["truncated", "flipped", "wrong arrays", "empty"])
+def test_a_damaged_entry_is_ignored_and_written_again(tmp_path, cache, damage):
+    scene = cornell_box().save(tmp_path / "cornell.glb")
+    cold = _bake(scene, tmp_path / "cold.glb")
+    [entry] = _entries(cache)
+    data = entry.read_bytes()
+    if damage == "truncated":
+        entry.write_bytes(data[: len(data) // 2])
+    elif damage == "flipped":  # a bit of the arrays' data (the zip's CRC no longer matches)
+        flipped = bytearray(data)
+        flipped[len(data) // 2] ^= 0x10
+        entry.write_bytes(bytes(flipped))
+    elif damage == "wrong arrays":
+        np.savez(entry.with_suffix(""), header=np.zeros(4, np.int64))
+    else:
+        entry.write_bytes(b"")
+    assert unwrap_cache.read(entry.stem, 8) is None
+    assert _bake(scene, tmp_path / "again.glb") == cold
+    assert _entries(cache) == [entry]
+    header, meshes = unwrap_cache.read(entry.stem, 8)  # the room's 8 baked instances
+    assert header[0] > 0 and len(meshes) == 8
+
+
+def test_a_rigid_move_hits_the_cache_and_a_changed_mesh_misses(tmp_path, cache, monkeypatch):
+    boxes = grid_boxes(6)
+    before = box_room(boxes).save(tmp_path / "before.glb")
+    turned = box_room(moved(boxes, "box2", at=(1.9, -1.7), turn=33.0)).save(tmp_path / "after.glb")
+    grown = box_room(moved(boxes, "box2", size=(0.5, 0.3, 0.3))).save(tmp_path / "grown.glb")
+    _bake(before, tmp_path / "before_baked.glb")
+    with monkeypatch.context() as m:
+        _no_xatlas(m)
+        _bake(turned, tmp_path / "after_baked.glb")
+    assert len(_entries(cache)) == 1
+    _bake(grown, tmp_path / "grown_baked.glb")  # a stretched box is new xatlas input
+    assert len(_entries(cache)) == 2
+
+
+def test_the_key_is_every_bit_of_the_input_and_every_option():
+    positions = np.random.default_rng(1).random((5, 3)).astype(np.float32)
+    triangles = np.array([[0, 1, 2], [2, 3, 4]], np.uint32)
+    base = unwrap_cache.key([(positions, triangles)], ("v1", {"padding": 2}))
+    nudged = positions.copy()
+    nudged[3, 1] = np.nextafter(nudged[3, 1], np.float32(2))
+    assert unwrap_cache.key([(nudged, triangles)], ("v1", {"padding": 2})) != base
+    assert unwrap_cache.key([(positions, triangles[::-1].copy())], ("v1", {"padding": 2})) != base
+    assert unwrap_cache.key([(positions, triangles)], ("v1", {"padding": 3})) != base
+    assert unwrap_cache.key([(positions, triangles)], ("v2", {"padding": 2})) != base
+    assert unwrap_cache.key([(positions, triangles)], ("v1", {"padding": 2})) == base
+
+
+def test_an_unwritable_cache_costs_nothing_but_the_cache(tmp_path, monkeypatch):
+    scene = cornell_box().save(tmp_path / "cornell.glb")
+    monkeypatch.setenv("BAKER_CACHE_DIR", "off")
+    without = _bake(scene, tmp_path / "without.glb")
+    blocker = tmp_path / "a file"
+    blocker.write_text("not a folder")
+    monkeypatch.setenv("BAKER_CACHE_DIR", str(blocker))
+    assert _bake(scene, tmp_path / "blocked.glb") == without
+    assert blocker.read_text() == "not a folder"
+
+
+def test_only_the_most_recently_used_entries_are_kept(tmp_path, cache, monkeypatch):
+    monkeypatch.setattr(unwrap_cache, "KEEP", 2)
+    arrays = ((np.zeros(1, np.uint32),) * 5,)
+    for n, name in enumerate(("a", "b", "c")):
+        unwrap_cache.write(name, (1, 1, 1, 1), arrays)
+        path = cache / "unwrap" / f"{name}.npz"
+        os.utime(path, (1000 + n, 1000 + n))
+    unwrap_cache.write("d", (1, 1, 1, 1), arrays)
+    assert [p.stem for p in _entries(cache)] == ["c", "d"]
