@@ -168,3 +168,30 @@ def test_rebake_says_why_it_bakes_fully_and_relight_keeps_working(tmp_path):
     assert (tmp_path / "out.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()
     assert default_path(tmp_path / "out.glb").read_bytes() == default_path(
         tmp_path / "full.glb").read_bytes()
+
+
+def test_a_crown_without_texels_takes_its_density_from_its_leaf_area(tmp_path):
+    """Leaves that get no texels (here: not baked) still shade the ground, with αρ from their
+    leaf area: V = exp(−σR) where the cap is the whole shell, σ = area / volume / 2."""
+    from baker.pipeline.full import compute
+
+    b = _tree()
+    scene = loaded(b, tmp_path)
+    crown_node = b.info["nodes"]["crown"]
+    scene = replace(scene, instances=tuple(
+        replace(i, baked=False, reason="not under test") if i.node == crown_node else i
+        for i in scene.instances))
+    done = compute(scene, baker.Settings(**SETTINGS, foliage="approx"))
+    crown = done.foliage.crowns[0]
+    assert crown.source == "leaf area" and crown.errors["held_out"].texels == 0
+    assert len(crown.shells) == 1
+    shell = crown.shells[0]
+    tris = np.flatnonzero(done.foliage.group == 0)
+    sigma = done.world.areas(tris).sum() / shell.volume / 2
+    edge = shell.center - shell.axes[0] * shell.radii[0]  # facing the centre: the whole shell
+    v = crown.visibility(edge[None], shell.axes[:1])[0]
+    assert v == pytest.approx(np.exp(-sigma * shell.radius), rel=1e-9)
+    ground = done.world.tri_instance[done.texels.triangle] == 0
+    radius = np.hypot(done.texels.position[:, 0], done.texels.position[:, 2])
+    w = _w(done)
+    assert w[ground & (radius > 0.5) & (radius < 1.5)].mean() < w[ground & (radius > 5.5)].mean()

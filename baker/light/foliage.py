@@ -91,7 +91,8 @@ class Error:
 class Crown:
     """One node's foliage. kind: "crown" or "grass"; shells: the crown's (empty for grass);
     layer: grass's (lowest world y, height); density: αρ per world unit³ and where it came from
-    (``source``: "fit", "extras", "setting" or "leaf area" for a crown with no texels to fit);
+    (``source``: "fit", "extras", "setting", "leaf area" for a crown with no texels to fit,
+    "grass term" for grass, which has none);
     colour: (3,) c, the R·ρ an occluded ray picks up; fit: the density fit (None if not fitted);
     errors: {"fit": Error, "held_out": Error}."""
 
@@ -209,8 +210,9 @@ def _ranked_rows(coverage: Coverage, wanted: np.ndarray, seed: int) -> np.ndarra
 
 def _prior_density(shells: tuple[Shell, ...], area: float) -> float:
     """αρ for a crown with no texels to fit: a random leaf cloud of leaf area a per volume
-    stops a ray at σ = a/2 per unit length; exp(−σR) at the centre's full cap 4πR³/3 gives
-    αρ = 3σ / (4πR²)."""
+    stops a ray at σ = a/2 per unit length; asking V = exp(−σR) where the cap is the whole
+    shell (4πR³/3, at its surface facing its centre) gives αρ = 3σ / (4πR²), R the largest
+    shell's equal-volume radius."""
     volume = sum(s.volume for s in shells)
     radius = max(s.radius for s in shells)
     return 3.0 * (area / max(volume, 1e-300) / 2.0) / (4.0 * np.pi * radius * radius)
@@ -287,6 +289,8 @@ def _fit_crown(scene: Scene, world: World, inputs: FitInputs, settings: Resolved
     source, value = ("extras", density) if density is not None else (
         ("setting", settings.foliage_density) if settings.foliage_density is not None else
         ("fit", None))
+    if kind == "grass":  # the grass term has no density
+        source, value = "grass term", 0.0
     albedo = inputs.surfaces.table[tris].mean(axis=0)
     if value is None and not len(mine) and kind == "crown":
         source, value = "leaf area", _prior_density(shells, float(world.areas(tris).sum()))
