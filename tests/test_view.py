@@ -82,3 +82,21 @@ def test_bad_input_is_a_clean_error(tmp_path, capsys):
         page_info(unbaked)
     assert main(["view", str(unbaked)]) == 1
     assert "bake it first" in capsys.readouterr().err
+
+
+def test_a_gltf_is_served_with_its_buffer(tmp_path):
+    """A .gltf output names its .bin by relative URI: the page's loader finds it beside it."""
+    out = tmp_path / "room.gltf"
+    baker.bake(saved(cornell_box(), tmp_path), out, baker.Settings(texel_density=4, rays=4),
+               state=False)
+    server, url = start(out)
+    try:
+        info = json.loads(_get(url + "info.json")[1])
+        status, body, kind = _get(url + info["model"])
+        assert status == 200 and kind == "model/gltf+json"
+        uri = json.loads(body)["buffers"][0]["uri"]
+        status, blob, _ = _get(url + "model/" + uri)
+        assert status == 200 and blob == (tmp_path / uri).read_bytes()
+    finally:
+        server.shutdown()
+        server.server_close()
