@@ -1,15 +1,20 @@
 """What a pipeline's clean-up keeps of each carrier (issue 20): glTF Transform's optimize steps
 (``tests/transform/optimize.js``: dedup, instance, palette, flatten, join, weld, resample,
-prune, sparse) run on baked files, and the result previewed against the baked file.
+prune, sparse) and gltfpack with its defaults (``tests/gltfpack``: quantized attributes) run on
+baked files, and the result previewed against the baked file.
 
-- emissive and occlusion are core glTF: they survive, and the picture is the same;
-- moz does not: glTF Transform drops the extension it does not know, then prunes the lightmap
-  image and its UV set (docs/output.md says so; this test notices if that changes).
+- emissive and occlusion are core glTF: they survive, and the picture is the same (within the
+  UVs' quantization for gltfpack);
+- moz does not: both tools drop the extension they do not know (glTF Transform prunes the
+  lightmap image and its UV set too); docs/output.md says so, and this test notices if that
+  changes.
 """
 
 from __future__ import annotations
 
+import shutil
 import subprocess
+from pathlib import Path
 
 import numpy as np
 import pygltflib
@@ -25,16 +30,31 @@ from tests.bakehelp import REAL_SCENES, saved
 import gltf_transform
 
 SIZE = (160, 120)
+GLTFPACK = Path(__file__).resolve().parent / "gltfpack"  # the pinned npm package
 
 
-def _optimized(source, folder, name, carrier):
+def _gltfpack() -> list[str]:
+    """The command that runs the pinned gltfpack (``npm ci`` once, when it is missing)."""
+    node, npm = shutil.which("node"), shutil.which("npm")
+    if node is None or npm is None:
+        pytest.skip("no Node.js: gltfpack cannot run (the README's test command needs it)")
+    script = GLTFPACK / "node_modules" / "gltfpack" / "cli.js"
+    if not script.is_file():
+        subprocess.run([npm, "ci", "--prefix", str(GLTFPACK), "--no-audit", "--no-fund"],
+                       check=True, capture_output=True, timeout=600)
+    return [node, str(script)]
+
+
+def _optimized(source, folder, name, carrier, tool="gltf-transform"):
     out = folder / f"{name}_{carrier}.glb"
-    baker.bake(source, out, baker.Settings(texel_density=8 if name == "cornell" else 4, rays=16,
-                                           carrier=carrier), state=False)
-    optimized = folder / f"{name}_{carrier}_optimized.glb"
-    script = gltf_transform.TRANSFORM_DIR / "optimize.js"
-    run = subprocess.run([gltf_transform._node(), str(script), str(out), str(optimized)],
-                         capture_output=True, text=True, timeout=300)
+    if not out.exists():
+        baker.bake(source, out, baker.Settings(texel_density=8 if name == "cornell" else 4,
+                                               rays=16, carrier=carrier), state=False)
+    optimized = folder / f"{name}_{carrier}_{tool}.glb"
+    command = ([gltf_transform._node(), str(gltf_transform.TRANSFORM_DIR / "optimize.js"),
+                str(out), str(optimized)] if tool == "gltf-transform" else
+               [*_gltfpack(), "-i", str(out), "-o", str(optimized)])
+    run = subprocess.run(command, capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr
     return out, optimized
 
@@ -53,9 +73,26 @@ def test_core_carriers_survive_optimize(tmp_path, name, carrier):
     np.testing.assert_allclose(b[lit], a[lit], rtol=1e-3)
 
 
-def test_moz_is_lost_by_optimize(tmp_path):
-    out, optimized = _optimized(saved(cornell_box(), tmp_path), tmp_path, "cornell", "moz")
+@pytest.mark.parametrize("carrier", ["emissive", "occlusion"])
+def test_core_carriers_survive_gltfpack(tmp_path, carrier):
+    """gltfpack quantizes the UVs (KHR_mesh_quantization with KHR_texture_transform): the bake
+    stays, the picture within a few per cent in the median."""
+    out, packed = _optimized(saved(cornell_box(), tmp_path), tmp_path, "cornell", carrier,
+                             "gltfpack")
+    before = render(load(out), "lit", SIZE, exposure=2.0)
+    after = render(load(packed), "lit", SIZE, exposure=2.0)
+    assert after.lightmapped.sum() == before.lightmapped.sum() > 0
+    a, b = (p.radiance[before.lightmapped] @ LUMINANCE for p in (before, after))
+    lit = a > 1e-3
+    assert abs(np.median(b[lit] / a[lit]) - 1) < 0.01
+
+
+@pytest.mark.parametrize("tool", ["gltf-transform", "gltfpack"])
+def test_moz_is_lost_by_pipeline_tools(tmp_path, tool):
+    out, optimized = _optimized(saved(cornell_box(), tmp_path), tmp_path, "cornell", "moz", tool)
     document = pygltflib.GLTF2.load(str(optimized))
     assert "MOZ_lightmap" not in (document.extensionsUsed or [])
-    assert not document.images  # the lightmap page pruned with it
+    assert not any("MOZ_lightmap" in (m.extensions or {}) for m in document.materials)
+    if tool == "gltf-transform":
+        assert not document.images  # the lightmap page pruned with it
     assert not render(load(optimized), "lit", SIZE).lightmapped.any()
