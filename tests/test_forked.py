@@ -120,3 +120,39 @@ def test_a_bake_whose_unwrapper_crashes_once_gives_the_same_bytes(tmp_path, monk
     baker.bake(scene, tmp_path / "crashed.glb", settings, state=False)
     assert marker.read_text() == "crashed"
     assert (tmp_path / "crashed.glb").read_bytes() == (tmp_path / "calm.glb").read_bytes()
+
+
+def test_calls_made_together_run_at_once_and_come_back_in_order(tmp_path):
+    def meets(me: str, other: str):
+        def work():
+            (tmp_path / me).touch()
+            for _ in range(2000):  # up to 20 s: only a child running beside the other's sees it
+                if (tmp_path / other).exists():
+                    return me, os.getpid()
+                time.sleep(0.01)
+            return me, None
+        return work
+
+    (a, pid_a), (b, pid_b) = forked.call_forked_together([meets("a", "b"), meets("b", "a")],
+                                                         "a test", 60)
+    assert (a, b) == ("a", "b")
+    assert None not in (pid_a, pid_b) and pid_a != pid_b
+
+
+def test_a_crashed_call_of_several_is_run_again_alone(tmp_path):
+    runs = tmp_path / "runs"
+    runs.mkdir()
+
+    def steady():
+        (runs / f"steady{len(list(runs.iterdir()))}").touch()
+        return "steady"
+
+    def crashes_once():
+        if not (tmp_path / "crashed").exists():
+            (tmp_path / "crashed").touch()
+            _crash()
+        return "second run"
+
+    assert forked.call_forked_together([steady, crashes_once], "a test", 60) == ["steady",
+                                                                                 "second run"]
+    assert len(list(runs.iterdir())) == 1

@@ -34,7 +34,7 @@ def _no_xatlas(monkeypatch):
     """From here on, running xatlas fails the test: the unwrap must come from the cache."""
     def refuse(*args, **kwargs):
         raise AssertionError("xatlas ran although its input was cached")
-    monkeypatch.setattr(unwrap_module, "call_forked", refuse)
+    monkeypatch.setattr(unwrap_module, "call_forked_together", refuse)
 
 
 def _bake(scene, out):
@@ -123,3 +123,54 @@ def test_only_the_most_recently_used_entries_are_kept(tmp_path, cache, monkeypat
         os.utime(path, (1000 + n, 1000 + n))
     unwrap_cache.write("d", (1, 1, 1, 1), arrays)
     assert [p.stem for p in _entries(cache)] == ["c", "d"]
+
+
+def _unwrapped(path, **settings):
+    """The scene at ``path``, its world and the atlas of ``unwrap`` at ``settings``."""
+    from baker.geometry.world import build_world
+    from baker.gltf.load import load
+    from baker.pipeline.full import bounds_of_baked
+    from baker.settings import resolve
+
+    scene = load(path)
+    world = build_world(scene)
+    resolved = resolve(baker.Settings(**settings), *bounds_of_baked(world, scene))
+    return scene, world, resolved, unwrap_module.unwrap(scene, world, resolved)
+
+
+def test_the_two_packings_made_at_once_give_the_atlas_made_one_after_the_other(tmp_path,
+                                                                               monkeypatch):
+    """Where the page xatlas sizes itself may exceed a page, it and the run into whole pages
+    are made at once (threads > 1): the atlas is the one the runs made in turn give."""
+    monkeypatch.setenv("BAKER_CACHE_DIR", "off")
+    path = box_room(grid_boxes(40)).save(tmp_path / "boxes.glb")
+    *_, in_turn = _unwrapped(path, page_size=128, threads=1)
+    *_, at_once = _unwrapped(path, page_size=128, threads=2)
+    assert in_turn.page_count > 1  # the first run came out larger than a page
+    assert (in_turn.width, in_turn.height, in_turn.page_count) == (
+        at_once.width, at_once.height, at_once.page_count)
+    for a, b in zip(in_turn.instances, at_once.instances):
+        assert np.array_equal(a.uv, b.uv) and np.array_equal(a.triangles, b.triangles)
+
+
+def test_the_unwrappers_time_limit_grows_with_the_texels_it_packs(tmp_path, monkeypatch):
+    """A few triangles at a high density are little charting but much packing: the watchdog
+    gives the xatlas run 10 µs per expected texel beyond its 5 s."""
+    from assets.make_scenes import open_plane
+
+    monkeypatch.setenv("BAKER_CACHE_DIR", "off")
+    given = []
+
+    class Stop(Exception):
+        pass
+
+    def record(functions, what, seconds):
+        given.append(seconds)
+        raise Stop
+
+    monkeypatch.setattr(unwrap_module, "call_forked_together", record)
+    path = open_plane(10.0).save(tmp_path / "plane.glb")  # 100 m², 2 triangles
+    with pytest.raises(Stop):
+        _unwrapped(path, page_size=8192, texel_density=500.0, threads=1)
+    texels = 100.0 * 500.0 ** 2
+    assert given and given[0] >= 5.0 + 1e-5 * texels

@@ -19,14 +19,20 @@ from baker.atlas.layout import Atlas, InstanceUV
 from baker.errors import SettingsError
 from baker.geometry.world import World
 from baker.gltf.scene import Scene
-from baker.run.forked import call_forked
+from baker.run.forked import call_forked_together
+from baker.run.parallel import cores
 from baker.settings import Resolved
 
 _NO_PAGE = np.uint32(0xFFFFFFFF)  # xatlas's page index for vertices of faces it could not place
 _SHRUNK = 0.95  # a chart whose texels are this much larger than asked was shrunk to fit a page
-# How long an xatlas run may take before it is taken for hung (``forked.call_forked``): 5 s and
-# 1 ms a triangle. The 60-crate room's 7,000 triangles take 0.03 s and are given 12 s.
-_SECONDS, _SECONDS_PER_TRIANGLE = 5.0, 1e-3
+# How long an xatlas run may take before it is taken for hung (``forked.call_forked``): 5 s,
+# 1 ms a triangle and 10 µs a texel its charts cover (packing is a search over the pages'
+# texels). Measured on 2 busy cores (load 12): 250,000 triangles of one mesh at 8·10⁶ texels
+# took 12–14 s and are given 335 s; the 60-crate room's 7,000 triangles take 0.03 s.
+_SECONDS, _SECONDS_PER_TRIANGLE, _SECONDS_PER_TEXEL = 5.0, 1e-3, 1e-5
+# Expected texels above this share of a page: the page xatlas sizes itself may come out larger
+# than a page, so the run into whole pages is made beside it (on a second core) instead of after.
+_BESIDE = 0.25
 
 
 class PageTooSmall(SettingsError):
@@ -124,10 +130,11 @@ class _Packed:
 
 
 def _generate(scene: Scene, world: World, instances: list[int], settings: Resolved,
-              resolution: int) -> _Packed:
-    """One xatlas run over the instances' triangles in their rigid-free frames
-    (``frame_positions``), scaled to texel units, in a forked child (``forked.py``: xatlas's
-    threads can crash it, and a crashed run is run again).
+              resolutions: tuple[int, ...]) -> list[_Packed]:
+    """xatlas runs over the instances' triangles in their rigid-free frames
+    (``frame_positions``), scaled to texel units, one per pack resolution of ``resolutions``:
+    each read from the cache (``unwrap_cache.py``) or run in a forked child, all at once
+    (``forked.py``: xatlas's threads can crash it, and a crashed run is run again).
 
     xatlas takes float32 and ignores faces with an area under about 1e-7 of its units; in texel
     units only faces far below a texel's size fall under that, not merely small ones.
@@ -138,7 +145,7 @@ def _generate(scene: Scene, world: World, instances: list[int], settings: Resolv
         local = world.triangles[world.instance_triangles(i)] - world.vertex_start[i]
         meshes.append((positions.astype(np.float32), local.astype(np.uint32)))
 
-    def run() -> _Packed:
+    def run(resolution: int) -> _Packed:
         atlas = xatlas.Atlas()
         for positions, triangles in meshes:
             atlas.add_mesh(positions, triangles)
@@ -148,18 +155,31 @@ def _generate(scene: Scene, world: World, instances: list[int], settings: Resolv
                        meshes=tuple(tuple(atlas[m]) + tuple(atlas.get_mesh_vertex_assignment(m))
                                     for m in range(len(meshes))))
 
-    name = unwrap_cache.key(meshes, (xatlas.__version__, _options_of(xatlas.ChartOptions()),
-                                     _options_of(_pack_options(settings, resolution))))
-    stored = unwrap_cache.read(name, len(meshes))
-    if stored is not None and _fits(stored, meshes):
-        (width, height, atlas_count, chart_count), arrays = stored
-        return _Packed(width, height, atlas_count, chart_count, arrays)
-    triangles = sum(len(t) for _, t in meshes)
-    packed = call_forked(run, "the unwrapper (xatlas)",
-                         _SECONDS + triangles * _SECONDS_PER_TRIANGLE)
-    unwrap_cache.write(name, (packed.width, packed.height, packed.atlas_count,
-                              packed.chart_count), packed.meshes)
-    return packed
+    names = [unwrap_cache.key(meshes, (xatlas.__version__, _options_of(xatlas.ChartOptions()),
+                                       _options_of(_pack_options(settings, resolution))))
+             for resolution in resolutions]
+    found: list[_Packed | None] = []
+    for name in names:
+        stored = unwrap_cache.read(name, len(meshes))
+        found.append(_Packed(*stored[0], stored[1]) if stored is not None
+                     and _fits(stored, meshes) else None)
+    missing = [k for k, packed in enumerate(found) if packed is None]
+    if missing:
+        limit = _time_limit(sum(len(t) for _, t in meshes),
+                            frame_area(scene, world, instances) * settings.texel_density ** 2)
+        runs = call_forked_together([functools.partial(run, resolutions[k]) for k in missing],
+                                    "the unwrapper (xatlas)", limit)
+        for k, packed in zip(missing, runs):
+            found[k] = packed
+            unwrap_cache.write(names[k], (packed.width, packed.height, packed.atlas_count,
+                                          packed.chart_count), packed.meshes)
+    return found
+
+
+def _time_limit(triangles: int, texels: float) -> float:
+    """Seconds an xatlas run of ``triangles`` charting ``texels`` texels may take before it is
+    taken for hung (``forked.call_forked``): ``_SECONDS`` and the work's share of each."""
+    return _SECONDS + triangles * _SECONDS_PER_TRIANGLE + texels * _SECONDS_PER_TEXEL
 
 
 def _options_of(options: xatlas.ChartOptions | xatlas.PackOptions) -> dict[str, object]:
@@ -191,7 +211,8 @@ def unwrap(scene: Scene, world: World, settings: Resolved) -> Atlas:
     """Unwrap the baked instances into pages of at most ``settings.page_size`` texels a side.
 
     One page of the size xatlas needs is tried first; if it would exceed the page size, the
-    charts are packed into as many ``page_size``² pages as they need.
+    charts are packed into as many ``page_size``² pages as they need. Where the first may well
+    exceed it (expected texels over ``_BESIDE`` of a page), both runs are made at once.
     """
     instances = baked_instances(scene)
     if not instances:
@@ -199,11 +220,17 @@ def unwrap(scene: Scene, world: World, settings: Resolved) -> Atlas:
                      padding=settings.padding, instances=())
     area = frame_area(scene, world, instances)
     expected = area * settings.texel_density ** 2
-    resolution = settings.page_size if expected > 0.5 * settings.page_size ** 2 else 0
+    page = settings.page_size
     _check_triangles_fit(world, scene, instances, settings)
-    atlas = _generate(scene, world, instances, settings, resolution)
-    if max(atlas.width, atlas.height) > settings.page_size:
-        atlas = _generate(scene, world, instances, settings, settings.page_size)
+    if expected > 0.5 * page ** 2:
+        [atlas] = _generate(scene, world, instances, settings, (page,))
+    elif expected > _BESIDE * page ** 2 and settings.threads != 1 and cores() > 1:
+        atlas, paged = _generate(scene, world, instances, settings, (0, page))
+        atlas = paged if max(atlas.width, atlas.height) > page else atlas
+    else:
+        [atlas] = _generate(scene, world, instances, settings, (0,))
+        if max(atlas.width, atlas.height) > page:
+            [atlas] = _generate(scene, world, instances, settings, (page,))
     if atlas.width == 0 or atlas.height == 0:
         raise SettingsError("no surface got any lightmap texels at this texel density",
                             fix="raise --texel-density, or check that the meshes have area")

@@ -42,41 +42,70 @@ def call_forked(function: Callable[[], Any], what: str, seconds: float) -> Any:
     after ``seconds``, is killed and run again, up to ``ATTEMPTS`` times; then ChildCrashed
     names ``what`` was being done. Ctrl-C here kills the child. Without ``os.fork``,
     ``function()`` is simply called."""
+    return call_forked_together([function], what, seconds)[0]
+
+
+def call_forked_together(functions: list[Callable[[], Any]], what: str, seconds: float
+                         ) -> list[Any]:
+    """Every function of ``functions`` run as ``call_forked`` runs one, each in its own child
+    and all at once (one per core would be busy), ``seconds`` for each: their values in order.
+    A crashed or hung child is run again on its own; the first error raised ends them all."""
     if not hasattr(os, "fork") or not sys.platform.startswith("linux"):
-        return function()
-    failures = []
-    for _ in range(ATTEMPTS):
-        outcome = _attempt(function, seconds)
-        if isinstance(outcome, str):
-            failures.append(outcome)
-            continue
-        ok, value = outcome
-        if ok:
-            return value
-        raise value
-    raise ChildCrashed(f"{what} crashed {ATTEMPTS} times in a row ({', '.join(failures)})",
-                       fix="run the bake again; if it keeps crashing, report it with the scene")
+        return [function() for function in functions]
+    values: dict[int, Any] = {}
+    failures: dict[int, list[str]] = {i: [] for i in range(len(functions))}
+    pending = list(range(len(functions)))
+    while pending:
+        outcomes = _attempts([functions[i] for i in pending], seconds)
+        for i, outcome in zip(pending, outcomes):
+            if isinstance(outcome, str):
+                failures[i].append(outcome)
+            elif outcome[0]:
+                values[i] = outcome[1]
+            else:
+                raise outcome[1]
+        lost = [i for i in pending if i not in values]
+        for i in lost:
+            if len(failures[i]) >= ATTEMPTS:
+                raise ChildCrashed(f"{what} crashed {ATTEMPTS} times in a row "
+                                   f"({', '.join(failures[i])})",
+                                   fix="run the bake again; if it keeps crashing, report it "
+                                       "with the scene")
+        pending = lost
+    return [values[i] for i in range(len(functions))]
 
 
-def _attempt(function: Callable[[], Any], seconds: float) -> tuple[bool, Any] | str:
-    """One forked run: (True, value) or (False, exception), or why the child was lost: the
-    name of the signal that killed it, or that it ran past ``seconds`` (it is killed)."""
+def _attempts(functions: list[Callable[[], Any]], seconds: float) -> list[tuple[bool, Any] | str]:
+    """One forked run of each function, all at once: per function (True, value) or (False,
+    exception), or why its child was lost: the name of the signal that killed it, or that it
+    ran past ``seconds`` (it is killed)."""
     _trim_heap()
-    read, write = os.pipe()
-    with warnings.catch_warnings():  # Python 3.12+ warns of forking a threaded process: the
-        warnings.simplefilter("ignore", DeprecationWarning)  # child only runs ``function``
-        pid = os.fork()
-    if pid == 0:
-        _child(function, read, write)
-    os.close(write)
+    children = []  # (pid, read end of its pipe)
     try:
-        data = _read_until(read, time.monotonic() + seconds)
-    except BaseException:  # Ctrl-C while the child runs: it goes too
-        os.kill(pid, signal.SIGKILL)
-        os.waitpid(pid, 0)
+        for function in functions:
+            read, write = os.pipe()
+            with warnings.catch_warnings():  # Python 3.12+ warns of forking a threaded
+                warnings.simplefilter("ignore", DeprecationWarning)  # process: the child
+                pid = os.fork()  # only runs ``function``
+            if pid == 0:
+                _child(function, read, write)
+            os.close(write)
+            children.append((pid, read))
+        data = _read_until([read for _, read in children], time.monotonic() + seconds)
+    except BaseException:  # Ctrl-C while the children run: they go too
+        for pid, _ in children:
+            os.kill(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
         raise
     finally:
-        os.close(read)
+        for _, read in children:
+            os.close(read)
+    return [_outcome(pid, got, seconds) for (pid, _), got in zip(children, data)]
+
+
+def _outcome(pid: int, data: bytes | None, seconds: float) -> tuple[bool, Any] | str:
+    """What child ``pid`` gave, from the whole of its pipe ``data`` (None: it did not end in
+    ``seconds``, and is killed now); the child is reaped."""
     if data is None:
         os.kill(pid, signal.SIGKILL)
     _, status = os.waitpid(pid, 0)
@@ -90,18 +119,23 @@ def _attempt(function: Callable[[], Any], seconds: float) -> tuple[bool, Any] | 
         return False, RuntimeError(f"the forked call gave no usable result ({error!r})")
 
 
-def _read_until(fd: int, deadline: float) -> bytes | None:
-    """All of pipe ``fd`` up to its end, or None if it has not ended by ``deadline``
-    (``time.monotonic``)."""
-    parts = []
-    while True:
+def _read_until(fds: list[int], deadline: float) -> list[bytes | None]:
+    """All of each pipe of ``fds`` up to its end, or None for those that have not ended by
+    ``deadline`` (``time.monotonic``)."""
+    parts: dict[int, list[bytes]] = {fd: [] for fd in fds}
+    done: dict[int, bytes] = {}
+    while len(done) < len(fds):
         left = deadline - time.monotonic()
-        if left <= 0 or not select.select([fd], [], [], left)[0]:
-            return None
-        part = os.read(fd, 1 << 20)
-        if not part:
-            return b"".join(parts)
-        parts.append(part)
+        ready = select.select([fd for fd in fds if fd not in done], [], [], max(left, 0))[0]
+        if left <= 0 or not ready:
+            break
+        for fd in ready:
+            part = os.read(fd, 1 << 20)
+            if part:
+                parts[fd].append(part)
+            else:
+                done[fd] = b"".join(parts[fd])
+    return [done.get(fd) for fd in fds]
 
 
 def _trim_heap() -> None:
