@@ -23,6 +23,7 @@ from baker.image.errormap import write_error_maps
 from baker.image.hdr import check_format, page_file
 from baker.light.gi import MAX_BOUNCES
 from baker.output.write import WriteOptions, image_file_name, write
+from baker.pipeline import cluster
 from baker.pipeline.full import compute, timed, writes_occlusion
 from baker.pipeline.input_warnings import input_warnings
 from baker.pipeline.plan import Plan
@@ -33,6 +34,7 @@ from baker.rebake.incremental import (
     record_full_bake,
     summary,
 )
+from baker.rebake.diff import code_fingerprint
 from baker.rebake.staging import StateStaging
 from baker.rebake.state import default_path as default_state_path
 from baker.run.atomic import Outputs, write_atomically
@@ -180,7 +182,8 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
     with timed(loading, "load"):
         scene = load(input_path, settings.mirror_roughness)
     check_input_kept(scene, output, overwrite)
-    with ThreadPoolExecutor(1) as beside:
+    with ThreadPoolExecutor(1) as beside, \
+            cluster.session(settings.cluster, settings.threads, cluster_identity) as on_cluster:
         staging = None if state_path is None else StateStaging(beside, state_path, settings)
         outputs = Outputs()  # every file of the bake, put in place together (run/atomic.py)
         try:
@@ -219,6 +222,8 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
             seconds = time.perf_counter() - started
             report = _report(input_path, output, done, info, pages, times, seconds,
                              summary(rebaked, state_path, incremental, seconds))
+            if on_cluster is not None:  # which worker baked what, the stages' time on them
+                report["cluster"] = on_cluster.report()
             if report_path is not None:
                 outputs.stage(Path(report_path), json.dumps(report, indent=2).encode())
             outputs.commit()
@@ -231,6 +236,13 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
                       rays=done.tally.rays, pages=done.atlas.page_count, seconds=seconds,
                       rmse_estimate=report["rmse_estimate"], report=report,
                       rebake=details(report["rebake"], rebaked))
+
+
+def cluster_identity() -> dict[str, str]:
+    """What the driver and every worker of a cluster must share (``pipeline.cluster``): baker's
+    code (``rebake.diff.code_fingerprint``), Python's and the libraries' versions. Run on each
+    node by name, so that a node answers with its own baker's."""
+    return {"baker code": code_fingerprint(), **cluster.versions()}
 
 
 def _report(input_path: Path, output: Path, done, info, pages, times: dict[str, float],

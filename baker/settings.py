@@ -48,7 +48,11 @@ class Settings:
         ambient occlusion: a hit closer than d_max counts 0, R(Q) = 1) or "linear" (d/d_max).
     ambient: the ambient intensity I_A; None computes it from the scene's emission (eq. 3).
     seed: the sampler's seed; the same seed gives the same bytes.
-    threads: worker threads for ray casting (0: one per core).
+    threads: worker threads for ray casting (0: one per core; with ``cluster``, the CPUs each
+        part takes on a worker, 0 counting as 1).
+    cluster: the address ("host:port") of a running Ray cluster's head to run the bake's parts
+        on (cluster.py; needs ``pip install "baker[cluster]"``); None: on this machine. The
+        bytes are the same either way.
     chunk_texels: texels per work unit; bounds memory, never changes the result.
     carrier: how the bake reaches a viewer (docs/output.md): "moz" (MOZ_lightmap: three.js with
         a plugin, Hubs, ``baker view``), "emissive" (the lit surface's radiance in the emission
@@ -136,6 +140,7 @@ class Settings:
     denoise: bool = False
     foliage: str = "none"
     foliage_density: float | None = None
+    cluster: str | None = None
 
     def check(self) -> None:
         """Raise SettingsError for a value that cannot work, saying which values can."""

@@ -47,6 +47,7 @@ from baker.light.foliage import FitInputs, Foliage, integrate_with_foliage, prep
 from baker.light.gi import Indirect, indirect_light
 from baker.light.hemisphere import Surfaces, Terms, surfaces_of
 from baker.light.integrate import integrate
+from baker.pipeline import cluster
 from baker.pipeline.parts import PerTexel, Tally, TexelPoints, part_slices
 from baker.pipeline.plan import Plan, make_plan
 from baker.rays.trace import Tracer
@@ -267,11 +268,13 @@ def _bake_parts(baking: Baking, spill: Spill | None, times: dict[str, float], qu
     """Bake the texels a part at a time, each composed into the pages as it is done and, with
     a ``spill``, its rows appended to it. Returns the composed ``_Pages``, and the last
     ``BakedPart`` — all the texels' when there is one part."""
-    count = len(baking.coverage.key)
+    count, units = len(baking.coverage.key), 1 + baking.sources.any()
     pages = _Pages.blank(baking)
-    with bar(count * (1 + baking.sources.any()), "baking", wanted(quiet)) as advance:
-        for rows in part_slices(count):
-            part = _bake_part(baking, rows, times, advance)
+    with bar(count * units, "baking", wanted(quiet)) as advance:
+        made = (cluster.parts(_bake_part, baking, part_slices(count), times, advance, units)
+                if baking.settings.cluster is not None else
+                (_bake_part(baking, rows, times, advance) for rows in part_slices(count)))
+        for part in made:
             with timed(times, "compose"):
                 pages.add(baking, part.texels, part.validity, part.terms, part.direct,
                           part.indirect)

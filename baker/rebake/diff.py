@@ -36,7 +36,7 @@ from baker.rebake.state import digest
 from baker.settings import Resolved
 
 # Settings that never change the result (how the work is split).
-_NO_EFFECT = ("threads", "chunk_texels")
+_NO_EFFECT = ("threads", "chunk_texels", "cluster")
 # Settings that only the composition, post-processing or encoding read: a recomposition.
 RECOMPOSE_SETTINGS = ("ambient", "encoding", "occlusion", "carrier", "baked_lights")
 # Settings that change the atlas.

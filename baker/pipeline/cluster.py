@@ -1,0 +1,371 @@
+"""A full bake's parts run as Ray tasks on a running cluster (``baker bake --cluster ADDRESS``).
+
+A bake is cut into parts of at most ``parts.PART_TEXELS`` texels whose results depend only on
+their texels' keys (``parts.py``): that is the unit sent to the cluster. The driver (the process
+that runs ``baker bake``) loads, unwraps and rasterises the scene as a local bake does, puts what
+every part needs (``_shipped``: scene, world, resolved settings, light sources, I_A, atlas and
+the texels' owners) into Ray's object store once, and sends each part only its texels' coverage
+rows. A worker process fetches the shipped bake once (``_ready``), builds Embree's scene from it,
+and runs the same part function as a local bake (``full._bake_part``) on each part it is given.
+It sends back the part's results less what the driver can make itself (``_Returned``); the
+driver takes the parts in order, whatever order they finish in, so that it composes, spills and
+writes exactly as a local bake does: the same bytes whatever the workers and their threads.
+
+Faults: a part whose worker process dies (SIGKILL, a machine lost) is run again by Ray on another
+worker (``_RETRIES``); Ctrl-C on the driver cancels the parts not done and leaves the cluster
+running, with nothing of the bake on it. Before any part, every node that has CPUs runs an
+identity function (``baker.api.cluster_identity``) and must report the driver's: the same code
+of baker, Python and libraries.
+
+Ray is an optional extra (``pip install "baker[cluster]"``), imported only here and only when a
+bake asks for a cluster.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import platform
+import socket
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass, field, replace
+from importlib import metadata
+from typing import Callable, Iterator
+
+import numpy as np
+
+from baker.atlas.rasterise import Coverage, texels_of
+from baker.atlas.validity import Faces
+from baker.errors import SettingsError
+from baker.light.hemisphere import surfaces_of
+from baker.pipeline.parts import TexelPoints
+from baker.rays.trace import Tracer
+
+INSTALL = 'pip install "baker[cluster]"'
+_RETRIES = 4  # times Ray runs a part again whose worker process died
+_REACH_SECONDS = 5.0  # how long to wait for the head's port to answer
+_IDENTITY_SECONDS = 120.0  # how long each node may take to start a worker and answer
+_WAIT_SECONDS = 0.1  # how often the driver looks at the parts (progress, Ctrl-C)
+_LIBRARIES = ("ray", "numpy", "numba", "embreex", "xatlas", "pygltflib")
+
+
+def _ray():
+    """The ``ray`` module, or a SettingsError saying how to install it."""
+    try:
+        import ray
+    except ImportError:
+        raise SettingsError("--cluster needs Ray, which is not installed",
+                            fix=f"{INSTALL} on this machine and on every machine of the "
+                                "cluster") from None
+    return ray
+
+
+def versions() -> dict[str, str]:
+    """Python's and the libraries' versions here: with baker's own code (``api``'s
+    ``cluster_identity``), what must be the same on the driver and every worker for their
+    texels to be the same bits."""
+    out = {"python": platform.python_version()}
+    for name in _LIBRARIES:
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            out[name] = "(not installed)"
+    return out
+
+
+def _node_identity(identity: Callable[[], dict[str, str]]) -> dict:
+    """``identity()`` of the node this runs on, with its host name (run as a Ray task)."""
+    return {"host": socket.gethostname(), "identity": identity()}
+
+
+@dataclass
+class Session:
+    """A connection to a Ray cluster at ``address``, whose nodes run the driver's baker, and
+    the account of the parts run on it (``report``).
+
+    workers: per worker ("host ip pid"), texels and parts it baked; worker_seconds: the stages'
+    seconds summed over the workers (``full._bake_part``'s stages, "receive": fetching the
+    shipped bake and building Embree's scene); sent/received: array bytes to and from the
+    workers per part (the shipped bake once: ``shipped_bytes``); parts_run: parts the driver
+    took, retries not counted (Ray's own)."""
+
+    address: str
+    cpus: int
+    nodes: int
+    largest: int  # CPUs of the largest node: the most one part may take
+    connected_here: bool
+    workers: dict[str, dict[str, int]] = field(default_factory=dict)
+    worker_seconds: dict[str, float] = field(default_factory=dict)
+    shipped_bytes: int = 0
+    sent: int = 0
+    received: int = 0
+    parts_run: int = 0
+
+    def report(self) -> dict:
+        """The JSON-able ``cluster`` entry of the bake's report."""
+        return {"address": self.address, "nodes": self.nodes, "cpus": self.cpus,
+                "parts": self.parts_run, "workers": self.workers,
+                "worker_stage_seconds": self.worker_seconds,
+                "shipped_bytes": self.shipped_bytes, "bytes_to_workers": self.sent,
+                "bytes_from_workers": self.received}
+
+
+_current: Session | None = None
+
+
+@contextmanager
+def session(address: str | None, threads: int, identity: Callable[[], dict[str, str]]
+            ) -> Iterator[Session | None]:
+    """Connect to the cluster at ``address`` ("host:port" of its head) and check its nodes
+    (``connect``: parts of ``threads`` CPUs, ``Settings.threads``, 0 for 1; ``identity``) for
+    the block; None for no address. Within a session for the same address, the same one (a
+    bake's parts find it with ``current``)."""
+    global _current
+    if address is None:
+        yield None
+        return
+    if _current is not None and _current.address == address:
+        yield _current
+        return
+    opened = connect(address, max(1, threads), identity)
+    _current = opened
+    try:
+        yield opened
+    finally:
+        _current = None
+        if opened.connected_here:
+            _ray().shutdown()
+
+
+def connect(address: str, threads: int, identity: Callable[[], dict[str, str]]) -> Session:
+    """Connect this process to the Ray cluster whose head is at ``address`` and check, before
+    any work, that it can bake parts of ``threads`` CPUs each: the head answers, some node has
+    that many CPUs, and every node with CPUs gives the driver's ``identity()`` (a module-level
+    function, which Ray sends by name: the workers run their own baker's). A SettingsError
+    names what is wrong."""
+    ray = _ray()
+    host, _, port = address.rpartition(":")
+    if not host or not port.isdigit():
+        raise SettingsError(f"--cluster {address!r} is not HOST:PORT",
+                            fix="give the address `ray start --head` printed, e.g. "
+                                "10.0.0.1:6379")
+    try:
+        socket.create_connection((host, int(port)), timeout=_REACH_SECONDS).close()
+    except OSError as error:
+        raise SettingsError(f"no Ray cluster answers at {address} ({error.strerror or error})",
+                            fix=f"start one with `ray start --head --port {port}` on {host}, "
+                                "or give the address of a running head") from None
+    connected_here = not ray.is_initialized()
+    if connected_here:
+        ray.init(address=address, logging_level=logging.WARNING, log_to_driver=False,
+                 configure_logging=True)
+    try:
+        nodes = [n for n in ray.nodes() if n["Alive"] and n["Resources"].get("CPU", 0) > 0]
+        if not nodes:
+            raise SettingsError(f"the Ray cluster at {address} has no node with CPUs to bake on",
+                                fix=f"start workers with `ray start --address {address}` on the "
+                                    "machines that should bake")
+        _check_nodes(ray, address, nodes, identity)
+        largest = max(int(n["Resources"]["CPU"]) for n in nodes)
+        if threads > largest:
+            raise SettingsError(f"each part asks for {threads} CPUs of one worker (--threads), "
+                                f"and the largest node of the cluster has {largest}",
+                                fix=f"give --threads {largest} or less, or start workers with "
+                                    f"`ray start --address {address} --num-cpus {threads}`")
+    except BaseException:
+        if connected_here:
+            ray.shutdown()
+        raise
+    cpus = [int(n["Resources"]["CPU"]) for n in nodes]
+    return Session(address, sum(cpus), len(nodes), max(cpus), connected_here)
+
+
+def _check_nodes(ray, address: str, nodes: list[dict], identity: Callable) -> None:
+    """Run ``_node_identity(identity)`` on each of ``nodes`` and raise a SettingsError naming
+    the first node whose baker cannot run, or differs from the driver's, and what differs."""
+    from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
+
+    task = ray.remote(num_cpus=0, max_retries=0)(_node_identity)
+    asks = [task.options(scheduling_strategy=NodeAffinitySchedulingStrategy(
+        n["NodeID"], soft=False)).remote(identity) for n in nodes]
+    mine = identity()
+    fix = (f"install the driver's baker ({INSTALL} from the same source, the same Python and "
+           "libraries) on every machine of the cluster, then restart its workers")
+    for node, ask in zip(nodes, asks):
+        where = f"node {node['NodeManagerAddress']}"
+        try:
+            theirs = ray.get(ask, timeout=_IDENTITY_SECONDS)
+        except Exception as error:
+            raise SettingsError(f"baker cannot run on {where} of the cluster at {address}: "
+                                f"{type(error).__name__}: {str(error).splitlines()[0]}",
+                                fix=fix) from None
+        differs = [f"{name} {theirs['identity'].get(name, '(none)')} there, {value} here"
+                   for name, value in mine.items() if theirs["identity"].get(name) != value]
+        if differs:
+            raise SettingsError(f"{where} ({theirs['host']}) of the cluster at {address} runs "
+                                f"another baker than this one: {'; '.join(differs)}", fix=fix)
+
+
+def current() -> Session:
+    """The session a bake runs in (``session``, which ``baker.bake`` opens)."""
+    if _current is None:
+        raise SettingsError("a bake on a cluster runs through baker.bake, which checks the "
+                            "cluster's workers first",
+                            fix="call baker.bake with Settings(cluster=...), or leave cluster "
+                                "None to compute on this machine")
+    return _current
+
+
+@dataclass(frozen=True)
+class _Returned:
+    """What a worker sends back of one part: the part function's ``BakedPart`` less its texels
+    and points, which the driver makes again from the coverage (``texels_of``, as
+    ``parts.PerTexel`` does), with the sample points the probes moved. moved: (m,) int64 rows
+    within the part whose sample point moved, to ``moved_position`` (m, 3) world; worker:
+    "host ip pid"; seconds: the part's stages on the worker."""
+
+    part: object
+    moved: np.ndarray
+    moved_position: np.ndarray
+    worker: str
+    seconds: dict[str, float]
+
+
+def parts(part: Callable, baking, slices: list[slice], times: dict[str, float],
+          advance: Callable[[int], None], units: int) -> Iterator[tuple]:
+    """``part``'s results (``full.BakedPart``) for the texels ``slices`` of ``baking``
+    (``full.Baking``), in order, each made on a worker of the current session. ``advance(units × texels)`` as each part ends, in any
+    order (the progress bar); ``times`` gets the driver's own stages ("cluster": the time it
+    waited for parts, as its trace stage: rays/s are the cluster's; "ship": putting
+    the bake in the object store; "rasterise": making each part's texels again)."""
+    ray, account = _ray(), current()
+    threads = max(1, baking.settings.threads)
+    task = ray.remote(num_cpus=threads, max_retries=_RETRIES)(_run_part)
+    start = time.perf_counter()
+    shipped = _shipped(baking, part)
+    box = [ray.put(shipped)]  # in a list: Ray hands the reference over, not the value
+    account.shipped_bytes += _array_bytes(shipped)
+    _add_seconds(times, "ship", start)
+    window = max(2, 2 * account.cpus // threads)  # parts asked for and not yet taken, at most
+    coverage, asked, pending = baking.coverage, {}, {}
+    try:
+        for index, rows in enumerate(slices):
+            while len(asked) < window and len(asked) + index < len(slices):
+                k = index + len(asked)
+                rows_k = slices[k]
+                item = (coverage.key[rows_k], coverage.triangle[rows_k])
+                account.sent += sum(a.nbytes for a in item)
+                asked[k] = task.remote(box, item)
+                pending[asked[k]] = rows_k.stop - rows_k.start
+            waited = time.perf_counter()
+            _wait_for(ray, asked[index], pending, advance, units)
+            returned = ray.get(asked.pop(index))
+            _add_seconds(times, "trace", waited)
+            yield _received(baking, rows, returned, times, account)
+    except BaseException:  # an error or Ctrl-C: no part of this bake goes on running
+        for ref in asked.values():
+            ray.cancel(ref, force=True)
+        raise
+
+
+def _wait_for(ray, wanted, pending: dict, advance: Callable[[int], None], units: int) -> None:
+    """Wait for the part ``wanted``, advancing the progress by the texels of every part that
+    ends meanwhile (``pending``: part reference → its texels, not yet counted)."""
+    while True:
+        done, _ = ray.wait(list(pending), num_returns=len(pending), timeout=_WAIT_SECONDS)
+        for ref in done:
+            advance(units * pending.pop(ref))
+        if wanted not in pending:
+            return
+
+
+def _received(baking, rows: slice, returned: _Returned, times: dict[str, float],
+              account: Session) -> tuple:
+    """A worker's ``_Returned`` part as ``full._bake_part`` gives it locally: the texels made
+    again from their coverage and their moved points put back, with what the state keeps of
+    them (``TexelPoints``); the part counted in ``account``."""
+    start = time.perf_counter()
+    made = texels_of(baking.atlas, baking.world, baking.coverage, rows, baking.owned)
+    position = made.position.copy()
+    position[returned.moved] = returned.moved_position
+    texels = replace(made, position=position)
+    points = TexelPoints.of(texels, made.position)
+    _add_seconds(times, "rasterise", start)
+    worker = account.workers.setdefault(returned.worker, {"texels": 0, "parts": 0})
+    worker["texels"] += len(made.key)
+    worker["parts"] += 1
+    for name, seconds in returned.seconds.items():
+        account.worker_seconds[name] = account.worker_seconds.get(name, 0.0) + seconds
+    account.received += _array_bytes(returned)
+    account.parts_run += 1
+    return replace(returned.part, texels=texels, points=points)
+
+
+def _shipped(baking, part: Callable):
+    """What every worker needs of ``baking`` (``full.Baking``) and the part function, once:
+    without Embree's scene, the back faces and the surfaces, which a worker builds from the
+    scene and world (``_ready``), and without the texels' coverage, whose rows each part
+    carries (the per-triangle texel counts stay)."""
+    coverage = baking.coverage
+    empty = Coverage(coverage.key[:0], coverage.triangle[:0], coverage.triangle_texels)
+    return part, replace(baking, lit=replace(baking.lit, tracer=None), faces=None,
+                         surfaces=None, coverage=empty)
+
+
+_READY: dict = {}  # in a worker process: the shipped bake's reference → (part, ready bake)
+
+
+def _ready(box: list, seconds: dict[str, float]):
+    """In a worker, the part function and the bake of the shipped reference ``box[0]``, made
+    ready once per process (Embree's scene, back faces, surfaces) and kept for the next parts;
+    a new bake's replaces the last one's (a worker holds one scene)."""
+    key = box[0].hex()
+    if key not in _READY:
+        started = time.perf_counter()
+        _READY.clear()
+        part, shipped = _ray().get(box[0])
+        scene, world = shipped.scene, shipped.world
+        _READY[key] = part, replace(shipped, lit=replace(shipped.lit, tracer=Tracer(world)),
+                                    faces=Faces(scene, world), surfaces=surfaces_of(scene, world))
+        seconds["receive"] = time.perf_counter() - started
+    return _READY[key]
+
+
+def _run_part(box: list, item: tuple[np.ndarray, np.ndarray]) -> _Returned:
+    """A Ray task: the part whose texels have the coverage rows ``item`` (keys (k,) uint64,
+    owning triangles (k,) int64) of the shipped bake ``box[0]``, made by the same part
+    function as a local bake, with the task's CPUs as threads."""
+    seconds: dict[str, float] = {}
+    part, baking = _ready(box, seconds)
+    threads = max(1, baking.settings.threads)
+    coverage = Coverage(item[0], item[1], baking.coverage.triangle_texels)
+    baking = replace(baking, coverage=coverage, settings=replace(baking.settings, threads=threads))
+    baked = part(baking, slice(None), seconds, lambda n: None)
+    moved = np.flatnonzero(baked.points.moved)
+    worker = f"{socket.gethostname()} {_ray().util.get_node_ip_address()} pid {os.getpid()}"
+    return _Returned(replace(baked, texels=None, points=None), moved,
+                     baked.texels.position[moved], worker, seconds)
+
+
+def _array_bytes(value, seen: set | None = None) -> int:
+    """Bytes of the numpy arrays in ``value`` (dataclasses, tuples, lists, dicts, nested), each
+    array counted once: what crosses the network beyond a few bytes of framing."""
+    seen = set() if seen is None else seen
+    if isinstance(value, np.ndarray):
+        if id(value) in seen:
+            return 0
+        seen.add(id(value))
+        return value.nbytes
+    if isinstance(value, (tuple, list)):
+        return sum(_array_bytes(v, seen) for v in value)
+    if isinstance(value, dict):
+        return sum(_array_bytes(v, seen) for v in value.values())
+    if hasattr(value, "__dataclass_fields__"):
+        return sum(_array_bytes(getattr(value, name), seen) for name in value.__dataclass_fields__)
+    return 0
+
+
+def _add_seconds(times: dict[str, float], name: str, start: float) -> None:
+    """Add the seconds since ``start`` (``time.perf_counter``) to ``times[name]``."""
+    times[name] = times.get(name, 0.0) + time.perf_counter() - start

@@ -1,0 +1,221 @@
+"""A bake whose parts run on a real Ray cluster (cluster.py) gives the bytes of a local bake:
+the output and the bake state, whatever the workers, their threads, the order the parts end in,
+and a worker killed in the middle of a part. A cluster that cannot bake (unreachable, another
+baker on a node, no Ray) is a clear error before any work, and Ctrl-C leaves it as it was.
+
+One cluster for the module (``tests/ray_cluster.py``: a head with no CPUs and two one-CPU
+workers on 127.0.0.1, about 13-20 s to start on this machine) and small bakes cut into many
+parts (``parts.PART_TEXELS``), so that both workers get several.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+import baker
+from assets.make_scenes import cornell_box
+from baker.pipeline import parts
+from tests.bakehelp import REAL_SCENES
+from tests.ray_cluster import ROOT, LocalCluster, free_port
+
+PART = 1500  # texels a part: the Cornell box's 9,181 at a 128² page make 7 parts
+
+
+@pytest.fixture(scope="module")
+def ray_cluster():
+    with LocalCluster(workers=2, cpus=1) as running:
+        yield running
+
+
+@pytest.fixture
+def small_parts(monkeypatch):
+    monkeypatch.setattr(parts, "PART_TEXELS", PART)
+
+
+def _outputs(folder: Path) -> tuple[Path, Path]:
+    """Where a local and a cluster bake write, under one name (the output's images beside it
+    are named after it)."""
+    for kind in ("local", "cluster"):
+        (folder / kind).mkdir()
+    return folder / "local" / "baked.glb", folder / "cluster" / "baked.glb"
+
+
+def _same_bake(local: Path, remote: Path) -> None:
+    assert remote.read_bytes() == local.read_bytes()
+    assert Path(f"{remote}.bake").read_bytes() == Path(f"{local}.bake").read_bytes()
+    assert sorted(p.name for p in remote.parent.iterdir()) == \
+        sorted(p.name for p in local.parent.iterdir())
+
+
+def _bake_both(source: Path, folder: Path, address: str, local_threads: int = 0, **settings):
+    """Bake ``source`` here (on ``local_threads``) and on the cluster (one thread a part);
+    return the cluster bake's result."""
+    local, remote = _outputs(folder)
+    baker.bake(source, local, baker.Settings(threads=local_threads, **settings))
+    result = baker.bake(source, remote, baker.Settings(cluster=address, **settings))
+    _same_bake(local, remote)
+    return result
+
+
+def test_the_demo_scene_baked_on_the_cluster_is_the_local_bake(ray_cluster, small_parts, tmp_path):
+    source = cornell_box().save(tmp_path / "cornell.glb")
+    result = _bake_both(source, tmp_path, ray_cluster.address, rays=16, page_size=128)
+    report = result.report["cluster"]
+    assert result.texels > 4 * PART and report["parts"] == len(parts.part_slices(result.texels))
+    assert report["nodes"] == 2 and report["cpus"] == 2
+    workers = report["workers"].values()
+    assert sum(w["texels"] for w in workers) == result.texels  # each part counted once
+    assert sum(w["parts"] for w in workers) == report["parts"]
+    assert {"receive", "validity", "trace", "direct"} <= set(report["worker_stage_seconds"])
+    assert report["bytes_from_workers"] > report["bytes_to_workers"] > 0
+
+
+def test_a_shared_scene_with_lights_is_the_local_bake_on_one_thread(ray_cluster, small_parts,
+                                                                     tmp_path):
+    """Punctual lights (direct light per texel) and glass-free leaves of a real scene, against
+    a local bake on one thread (the demo's test: on every core)."""
+    result = _bake_both(REAL_SCENES["LightsPunctualLamp"], tmp_path, ray_cluster.address,
+                        local_threads=1, rays=8, page_size=128)
+    assert result.report["shadow_rays"] > 0 and result.texels > 4 * PART
+
+
+def test_more_threads_a_part_than_a_worker_has_is_a_clear_error(ray_cluster, tmp_path):
+    source = cornell_box().save(tmp_path / "cornell.glb")
+    with pytest.raises(baker.SettingsError, match="largest node of the cluster has 1"):
+        baker.bake(source, tmp_path / "baked.glb",
+                   baker.Settings(cluster=ray_cluster.address, threads=2, page_size=128))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cornell.glb"]
+
+
+def _kill_first_part(killed: list, stop: threading.Event) -> None:
+    """SIGKILL the first worker process seen running a part (``_part_processes``)."""
+    while not stop.is_set():
+        running = _part_processes()
+        if running:
+            time.sleep(0.2)  # well into the part
+            os.kill(running[0], signal.SIGKILL)
+            killed.append(running[0])
+            return
+        time.sleep(0.02)
+
+
+def test_a_worker_killed_in_a_part_leaves_the_bytes_as_they_were(ray_cluster, small_parts,
+                                                                   tmp_path):
+    source = cornell_box().save(tmp_path / "cornell.glb")
+    settings = dict(rays=256, page_size=128)
+    local, remote = _outputs(tmp_path)
+    baker.bake(source, local, baker.Settings(**settings))
+    killed, stop = [], threading.Event()
+    killer = threading.Thread(target=_kill_first_part, args=(killed, stop))
+    killer.start()
+    try:
+        result = baker.bake(source, remote, baker.Settings(cluster=ray_cluster.address,
+                                                            **settings))
+    finally:
+        stop.set()
+        killer.join()
+    assert killed, "no worker was seen running a part"
+    _same_bake(local, remote)
+    assert not any(f" pid {killed[0]}" in name and w["texels"]
+                   for name, w in result.report["cluster"]["workers"].items())
+
+
+def test_ctrl_c_leaves_no_output_and_the_cluster_as_it_was(ray_cluster, tmp_path):
+    source = cornell_box().save(tmp_path / "cornell.glb")
+    script = ("import signal, sys\n"  # Ctrl-C as a terminal sends it
+              "signal.signal(signal.SIGINT, signal.default_int_handler)\n"
+              "from baker.cli.main import main\n"
+              "sys.exit(main(sys.argv[1:]))\n")
+    process = subprocess.Popen(
+        [sys.executable, "-c", script, "bake", str(source), "-o", str(tmp_path / "baked.glb"),
+         "--rays", "4096", "--page-size", "128", "--cluster", ray_cluster.address],
+        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while not _part_processes():
+        assert process.poll() is None, process.communicate()
+        assert time.monotonic() < deadline
+        time.sleep(0.05)
+    process.send_signal(signal.SIGINT)
+    out, err = process.communicate(timeout=60)
+    assert process.returncode == 130, err
+    assert err.strip().endswith("baker: interrupted; no output was changed")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cornell.glb"]
+    deadline = time.monotonic() + 30  # the cluster: both workers there, their CPUs free again
+    while _free_cpus(ray_cluster.address) != (2, 2.0):
+        assert time.monotonic() < deadline, _free_cpus(ray_cluster.address)
+        time.sleep(0.5)
+    assert not _part_processes()
+
+
+def _part_processes() -> list[int]:
+    """The worker processes on this machine running a part (Ray names them
+    ``ray::_run_part`` while they do)."""
+    pids = []
+    for pid in filter(str.isdigit, os.listdir("/proc")):
+        try:
+            if Path(f"/proc/{pid}/cmdline").read_bytes().startswith(b"ray::_run_part"):
+                pids.append(int(pid))
+        except OSError:
+            pass
+    return pids
+
+
+def _free_cpus(address: str) -> tuple[int, float]:
+    """(live nodes with CPUs, CPUs free) of the cluster, asked from a child process."""
+    script = ("import ray, sys; ray.init(address=sys.argv[1], logging_level='ERROR', "
+              "log_to_driver=False); print(sum(n['Alive'] and n['Resources'].get('CPU', 0) > 0 "
+              "for n in ray.nodes()), ray.available_resources().get('CPU', 0.0))")
+    run = subprocess.run([sys.executable, "-c", script, address], capture_output=True,
+                         text=True, check=True, cwd="/")
+    nodes, cpus = run.stdout.split()[-2:]
+    return int(nodes), float(cpus)
+
+
+def test_an_unreachable_cluster_is_a_clear_error_before_any_work(tmp_path):
+    address = f"127.0.0.1:{free_port()}"
+    source = cornell_box().save(tmp_path / "cornell.glb")
+    with pytest.raises(baker.SettingsError, match=f"no Ray cluster answers at {address}"):
+        baker.bake(source, tmp_path / "baked.glb", baker.Settings(cluster=address))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cornell.glb"]
+
+
+def test_without_ray_the_cluster_asks_for_the_extra(tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "ray", None)  # import ray fails, as when not installed
+    source = cornell_box().save(tmp_path / "cornell.glb")
+    with pytest.raises(baker.SettingsError, match="needs Ray") as error:
+        baker.bake(source, tmp_path / "baked.glb", baker.Settings(cluster="127.0.0.1:1"))
+    assert 'pip install "baker[cluster]"' in str(error.value)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cornell.glb"]
+
+
+def test_a_worker_with_another_baker_is_named_before_any_work(ray_cluster, tmp_path,
+                                                                monkeypatch):
+    """A third node whose Python finds a copy of baker with one line added: the bake stops
+    before any part, naming the node and what differs. (Ray puts the driver's working folder
+    first on its workers' paths, so the driver runs from one without baker in it.)"""
+    code = tmp_path / "code"
+    shutil.copytree(ROOT / "baker", code / "baker", ignore=shutil.ignore_patterns("__pycache__"))
+    with open(code / "baker" / "image" / "compose.py", "a") as changed:
+        changed.write("# another version\n")
+    source = cornell_box().save(tmp_path / "cornell.glb")
+    (tmp_path / "run").mkdir()
+    monkeypatch.chdir(tmp_path / "run")
+    other = ray_cluster.add_worker(1, code=code)
+    try:
+        with pytest.raises(baker.SettingsError, match="runs another baker than this one") as error:
+            baker.bake(source, tmp_path / "baked.glb",
+                       baker.Settings(cluster=ray_cluster.address, page_size=128))
+    finally:
+        ray_cluster.stop_worker(other)
+    assert "baker code" in str(error.value) and "127.0.0.1" in str(error.value)
+    assert "python" not in str(error.value).split("fix:")[0]  # only what differs is named
+    assert not (tmp_path / "baked.glb").exists()
