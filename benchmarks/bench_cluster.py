@@ -41,7 +41,7 @@ def _resident_kib(sessions: set[int]) -> int:
     for pid in filter(str.isdigit, os.listdir("/proc")):
         try:
             stat = Path(f"/proc/{pid}/stat").read_text()
-            session = int(stat.rsplit(")", 1)[1].split()[4])
+            session = int(stat.rsplit(")", 1)[1].split()[3])
             if session in sessions:
                 status = Path(f"/proc/{pid}/status").read_text()
                 total += int(next(line.split()[1] for line in status.splitlines()
@@ -122,12 +122,15 @@ def main() -> None:
                                          args.repeat)
             assert (folder / f"cluster{workers}.glb").read_bytes() == \
                 (folder / "local.glb").read_bytes(), "not the local bake's bytes"
-            stages = done.report["stage_seconds"]
+            stages, on = done.report["stage_seconds"], done.report["cluster"]
             driver = sum(stages.get(k, 0.0) for k in _DRIVER_STAGES)
+            receive = on["worker_stage_seconds"].get("receive", 0.0) / len(on["workers"])
             _row(f"cluster, {workers} worker{'s' * (workers > 1)}", seconds, texels, local,
                  f"; driver {1e3 * driver / count:5.1f} ms/part (local "
                  f"{1e3 * local_driver / count:.1f}), {statistics.mean(sizes['to']) / 1e3:,.0f} kB "
-                 f"out, {statistics.mean(sizes['from']) / 1e3:,.0f} kB back a part")
+                 f"out, {statistics.mean(sizes['from']) / 1e3:,.0f} kB back a part; "
+                 f"{len(on['workers'])} worker processes, each {receive:.2f} s to receive the "
+                 "bake and build Embree's scene")
     print(f"  shipped once per worker: {sizes['shipped'][0] / 1e3:,.0f} kB (pickled); "
           f"per texel: {statistics.mean(sizes['to']) / (texels / count):.1f} B out, "
           f"{statistics.mean(sizes['from']) / (texels / count):.1f} B back")

@@ -10,7 +10,9 @@ parts (``parts.PART_TEXELS``), so that both workers get several.
 
 from __future__ import annotations
 
+import json
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -86,6 +88,21 @@ def test_a_shared_scene_with_lights_is_the_local_bake_on_one_thread(ray_cluster,
     result = _bake_both(REAL_SCENES["LightsPunctualLamp"], tmp_path, ray_cluster.address,
                         local_threads=1, rays=8, page_size=128)
     assert result.report["shadow_rays"] > 0 and result.texels > 4 * PART
+
+
+def test_the_command_line_says_which_worker_baked_what(ray_cluster, small_parts, tmp_path,
+                                                       capsys):
+    from baker.cli.main import main
+
+    source = cornell_box().save(tmp_path / "cornell.glb")
+    assert main(["bake", str(source), "-o", str(tmp_path / "baked.glb"), "--rays", "4",
+                 "--page-size", "128", "--cluster", ray_cluster.address,
+                 "--report", str(tmp_path / "report.json")]) == 0
+    report = json.loads((tmp_path / "report.json").read_text())
+    line = next(line for line in capsys.readouterr().out.splitlines() if "on the cluster" in line)
+    assert f"at {ray_cluster.address}: {report['cluster']['parts']} parts" in line
+    for name, worker in report["cluster"]["workers"].items():
+        assert f"{name} {worker['texels']:,} texels" in line
 
 
 def test_more_threads_a_part_than_a_worker_has_is_a_clear_error(ray_cluster, tmp_path):
@@ -216,6 +233,8 @@ def test_a_worker_with_another_baker_is_named_before_any_work(ray_cluster, tmp_p
                        baker.Settings(cluster=ray_cluster.address, page_size=128))
     finally:
         ray_cluster.stop_worker(other)
-    assert "baker code" in str(error.value) and "127.0.0.1" in str(error.value)
-    assert "python" not in str(error.value).split("fix:")[0]  # only what differs is named
+    message = str(error.value)
+    assert re.match(rf"node \S+ \(\S+\) of the cluster at {ray_cluster.address} runs", message)
+    assert "baker code" in message
+    assert "python" not in message.split("fix:")[0]  # only what differs is named
     assert not (tmp_path / "baked.glb").exists()

@@ -228,6 +228,12 @@ def print_summary(result: baker.BakeResult) -> None:
               f"bias {held['bias']:+.3g}")
     print(f"  {rays}; estimated RMSE {result.rmse_estimate:.3g}; {result.seconds:.1f} s "
           f"({', '.join(f'{k} {v:.1f}' for k, v in times.items())})")
+    on = result.report.get("cluster")
+    if on:  # which worker baked how much, and where the workers' time went
+        print(f"  on the cluster at {on['address']}: {on['parts']} parts, "
+              + ", ".join(f"{name} {w['texels']:,} texels" for name, w in on["workers"].items())
+              + "; workers' " + ", ".join(f"{k} {v:.1f}" for k, v in
+                                          on["worker_stage_seconds"].items()) + " s")
 
 
 def run(args: argparse.Namespace) -> int:

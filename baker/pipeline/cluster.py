@@ -233,12 +233,13 @@ class _Returned:
 
 
 def parts(part: Callable, baking, slices: list[slice], times: dict[str, float],
-          advance: Callable[[int], None], units: int) -> Iterator[tuple]:
+          advance: Callable[[int], None], units: int) -> Iterator:
     """``part``'s results (``full.BakedPart``) for the texels ``slices`` of ``baking``
-    (``full.Baking``), in order, each made on a worker of the current session. ``advance(units × texels)`` as each part ends, in any
-    order (the progress bar); ``times`` gets the driver's own stages ("cluster": the time it
-    waited for parts, as its trace stage: rays/s are the cluster's; "ship": putting
-    the bake in the object store; "rasterise": making each part's texels again)."""
+    (``full.Baking``), in order, each made on a worker of the current session.
+    ``advance(units × texels)`` as each part ends, in any order (the progress bar). ``times``
+    gets the driver's own stages: "trace", the time it waited for parts (so rays/s are the
+    cluster's); "ship", putting the bake in the object store; "rasterise", making each part's
+    texels again."""
     ray, account = _ray(), current()
     threads = max(1, baking.settings.threads)
     task = ray.remote(num_cpus=threads, max_retries=_RETRIES)(_run_part)
@@ -271,13 +272,13 @@ def parts(part: Callable, baking, slices: list[slice], times: dict[str, float],
 
 def _wait_for(ray, wanted, pending: dict, advance: Callable[[int], None], units: int) -> None:
     """Wait for the part ``wanted``, advancing the progress by the texels of every part that
-    ends meanwhile (``pending``: part reference → its texels, not yet counted)."""
-    while True:
-        done, _ = ray.wait(list(pending), num_returns=len(pending), timeout=_WAIT_SECONDS)
+    ends meanwhile (``pending``: part reference → its texels, not yet counted). The results
+    stay on the nodes that made them until the driver takes them (``ray.get``)."""
+    while wanted in pending:
+        done, _ = ray.wait(list(pending), num_returns=1, timeout=_WAIT_SECONDS,
+                           fetch_local=False)
         for ref in done:
             advance(units * pending.pop(ref))
-        if wanted not in pending:
-            return
 
 
 def _received(baking, rows: slice, returned: _Returned, times: dict[str, float],
