@@ -1,0 +1,34 @@
+"""The kernels compiled at install (setup.py → assets/warm_kernels.py) are those a first bake
+needs: after the warm-up, the README's first bake compiles nothing.
+
+Slow (every kernel compiled cold, about a minute of CPU): it runs in the long mode,
+``BAKER_LONG=1 python -m pytest tests/test_warm_kernels.py``.
+"""
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from assets.make_scenes import cornell_box
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.mark.skipif(not os.environ.get("BAKER_LONG"), reason="long mode: BAKER_LONG=1")
+def test_after_the_warm_up_the_first_bake_compiles_nothing(tmp_path):
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"), NUMBA_DEBUG_CACHE="1")
+    warm = subprocess.run([sys.executable, str(ROOT / "assets" / "warm_kernels.py")], env=env,
+                          capture_output=True, text=True, cwd=ROOT)
+    assert warm.returncode == 0, warm.stderr[-2000:]
+    assert "data saved" in warm.stdout  # it did compile, into that cache
+    scene = cornell_box().save(tmp_path / "cornell_box.glb")
+    first = subprocess.run([sys.executable, "-m", "baker.cli.main", "bake", str(scene), "-o",
+                            str(tmp_path / "baked.glb"), "--quiet"], env=env,
+                           capture_output=True, text=True, cwd=ROOT)
+    assert first.returncode == 0, first.stderr[-2000:]
+    assert "data loaded" in first.stdout
+    saved = [line for line in first.stdout.splitlines() if "data saved" in line]
+    assert not saved, f"compiled on the first bake: {saved}"
