@@ -238,8 +238,8 @@ def prepare_foliage(scene: Scene, world: World, tracer: Tracer, settings: Resolv
         return None
     group = np.full(len(world.triangles), -1, np.int64)
     hidden = np.zeros(len(world.triangles), bool)
-    samples, crowns = [], []
-    for j, (node, kind, tris, _) in enumerate(found):
+    samples = []
+    for j, (_, kind, tris, _) in enumerate(found):
         group[tris] = j
         hidden[tris] = kind == "crown"
         wanted = np.zeros(len(world.triangles), bool)
@@ -250,30 +250,32 @@ def prepare_foliage(scene: Scene, world: World, tracer: Tracer, settings: Resolv
     texels, _ = check_texels(scene, world, tracer, texels, settings.d_max,
                              threads=settings.threads, faces=inputs.faces)
     traced = integrate(scene, world, tracer, texels, settings, surfaces=inputs.surfaces)
-    start = 0
-    for j, (node, kind, tris, density) in enumerate(found):
-        mine = np.arange(start, start + len(samples[j]))
-        start += len(samples[j])
-        crowns.append(_fit_crown(scene, world, inputs, settings, node, kind, tris, density,
-                                 texels, traced, mine))
-    foliage = Foliage(group, tuple(crowns), Tracer(world, hidden=hidden), {},
+    offsets = np.cumsum([0] + [len(s) for s in samples])
+    mine = [np.arange(offsets[j], offsets[j + 1]) for j in range(len(found))]
+    crowns = tuple(_fit_crown(scene, world, inputs, settings, node, kind, tris, density, texels,
+                              traced, mine[j])
+                   for j, (node, kind, tris, density) in enumerate(found))
+    foliage = Foliage(group, crowns, Tracer(world, hidden=hidden), {},
                       traced.rays + int(traced.chain_ray_counts().sum()))
+    return _with_errors(foliage, scene, world, texels, traced, mine, inputs.r_ave)
+
+
+def _with_errors(foliage: Foliage, scene: Scene, world: World, texels: Texels, traced: Terms,
+                 mine: list[np.ndarray], r_ave: np.ndarray) -> Foliage:
+    """``foliage`` with each crown's Error and the overall one: crown j's sample texels are the
+    rows ``mine[j]`` of ``texels`` (traced: ``traced``), every other one fitted (``_fit_crown``)
+    and the rest held out; W's luminance at R_ave ``r_ave`` (3,)."""
     approx = foliage_terms(foliage, scene, world, texels, np.arange(len(texels)))
-    w_approx = approx.obscurance(inputs.r_ave) @ LUMINANCE
-    w_traced = traced.obscurance(inputs.r_ave) @ LUMINANCE
-    fit_rows, held_rows = [], []
-    out = []
-    for j, crown in enumerate(foliage.crowns):
-        mine = np.arange(len(samples[j])) + sum(len(s) for s in samples[:j])
-        fit, held = mine[0::2], mine[1::2]
-        fit_rows.append(fit)
-        held_rows.append(held)
-        out.append(replace(crown, errors={"fit": Error.of(w_approx[fit], w_traced[fit]),
-                                          "held_out": Error.of(w_approx[held], w_traced[held])}))
-    fit, held = np.concatenate(fit_rows), np.concatenate(held_rows)
-    return replace(foliage, crowns=tuple(out),
-                   errors={"fit": Error.of(w_approx[fit], w_traced[fit]),
-                           "held_out": Error.of(w_approx[held], w_traced[held])})
+    w_approx, w_traced = (t.obscurance(r_ave) @ LUMINANCE for t in (approx, traced))
+
+    def errors(fit: np.ndarray, held: np.ndarray) -> dict:
+        return {"fit": Error.of(w_approx[fit], w_traced[fit]),
+                "held_out": Error.of(w_approx[held], w_traced[held])}
+
+    crowns = tuple(replace(c, errors=errors(m[0::2], m[1::2]))
+                   for c, m in zip(foliage.crowns, mine))
+    every = [np.concatenate([m[k::2] for m in mine]) for k in (0, 1)]
+    return replace(foliage, crowns=crowns, errors=errors(*every))
 
 
 def _fit_crown(scene: Scene, world: World, inputs: FitInputs, settings: Resolved, node: int,
@@ -282,9 +284,8 @@ def _fit_crown(scene: Scene, world: World, inputs: FitInputs, settings: Resolved
     """One crown fitted on the sample rows ``mine`` of ``texels`` (every other one: the rest
     are held out), whose traced terms are ``traced``."""
     name = scene.document.nodes[node].name or f"node {node}"
-    shells = () if kind == "grass" else tuple(fit_shells(
-        world.positions[world.triangles[tris]].reshape(-1, 3)))
     corners = world.positions[world.triangles[tris]].reshape(-1, 3)
+    shells = () if kind == "grass" else tuple(fit_shells(corners))
     layer = (float(corners[:, 1].min()), float(np.ptp(corners[:, 1])))
     source, value = ("extras", density) if density is not None else (
         ("setting", settings.foliage_density) if settings.foliage_density is not None else
