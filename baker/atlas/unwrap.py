@@ -282,30 +282,33 @@ def _check_not_shrunk(atlas: _Packed, world: World, scene: Scene, instances: lis
     over their world length × density (≈ 1 for a chart that was not shrunk, thin or not); one
     below ``_SHRUNK`` whose bounds fill the page was shrunk.
     """
-    uv_length, world_length, extent, label = [], [], [], []
+    corners, charts, tris, label = [], [], [], []
     for mesh, i in enumerate(instances):
         _vertices, triangles, uv, _page, chart = atlas.meshes[mesh]
-        corners = uv.astype(np.float64)[triangles.astype(np.int64)] * [atlas.width, atlas.height]
-        charts = chart.astype(np.int64)[triangles[:, 0].astype(np.int64)]
-        placed = (charts >= 0) & (charts < atlas.chart_count)
+        chart_of = chart.astype(np.int64)[triangles[:, 0].astype(np.int64)]
+        placed = (chart_of >= 0) & (chart_of < atlas.chart_count)
         if not placed.any() or len(placed) != len(world.instance_triangles(i)):
             continue
-        corners = corners[placed]
-        a, b, c = world.corners(world.instance_triangles(i)[placed])
-        ids, inverse = np.unique(charts[placed], return_inverse=True)
-        texels = sum(np.linalg.norm(corners[:, j] - corners[:, k], axis=1) for j, k in ((0, 1), (1, 2), (2, 0)))
-        metres = sum(np.linalg.norm(p - q, axis=1) for p, q in ((a, b), (b, c), (c, a)))
-        uv_length.append(np.bincount(inverse, texels, len(ids)))
-        world_length.append(np.bincount(inverse, metres, len(ids)))
-        low = np.full((len(ids), 2), np.inf)
-        high = np.full((len(ids), 2), -np.inf)
-        np.minimum.at(low, inverse, corners.min(axis=1))
-        np.maximum.at(high, inverse, corners.max(axis=1))
-        extent.append((high - low).max(axis=1))
-        label += [i] * len(ids)
-    if not uv_length:
+        corners.append(uv.astype(np.float64)[triangles.astype(np.int64)[placed]])
+        charts.append(chart_of[placed] + len(label) * atlas.chart_count)  # (instance, chart)
+        tris.append(world.instance_triangles(i)[placed])
+        label.append(i)
+    if not label:
         return
-    uv_length, world_length, extent = (np.concatenate(v) for v in (uv_length, world_length, extent))
+    # Every instance at once; np.unique orders the charts by instance, then by chart.
+    corners = np.concatenate(corners) * [atlas.width, atlas.height]
+    ids, inverse = np.unique(np.concatenate(charts), return_inverse=True)
+    a, b, c = world.corners(np.concatenate(tris))
+    texels = sum(np.linalg.norm(corners[:, j] - corners[:, k], axis=1) for j, k in ((0, 1), (1, 2), (2, 0)))
+    metres = sum(np.linalg.norm(p - q, axis=1) for p, q in ((a, b), (b, c), (c, a)))
+    uv_length = np.bincount(inverse, texels, len(ids))
+    world_length = np.bincount(inverse, metres, len(ids))
+    low = np.full((len(ids), 2), np.inf)
+    high = np.full((len(ids), 2), -np.inf)
+    np.minimum.at(low, inverse, corners.min(axis=1))
+    np.maximum.at(high, inverse, corners.max(axis=1))
+    extent = (high - low).max(axis=1)
+    label = np.asarray(label)[ids // atlas.chart_count]
     wanted = world_length * settings.texel_density
     scale = np.divide(uv_length, wanted, out=np.ones_like(uv_length), where=wanted > 0)
     room = settings.page_size - 2 * settings.padding
