@@ -19,6 +19,8 @@ CARRIERS = ("moz", "emissive", "occlusion")
 BAKED_LIGHTS = ("remove", "keep", "indirect")
 METHODS = ("obscurance", "gi")
 SPECULAR_STRATEGIES = ("b", "a", "c")
+ESCAPES = ("auto", "scene", "white")
+"""``Settings.escape``: chosen from the scene, R_ave, or a neutral white environment."""
 TECHNIQUES = ("sobol", "stratified", "random")  # how ray directions are drawn: rays.sampling
 FOLIAGE_MODES = ("none", "approx")  # how leaves' obscurance is found: light.foliage
 INSTALL_FIX = ('pip install "baker[denoise]" (or pip install ".[denoise]" from a checkout of '
@@ -103,6 +105,10 @@ class Settings:
         and shaded by them in closed form (light/foliage.py).
     foliage_density: αρ (per cubic world unit) of every crown in ``foliage`` "approx" whose
         node's extras give none; None fits it to a few traced texels.
+    escape: what obscurance rays that meet nothing within d_max count: "scene" (R_ave, the
+        scene's mean albedo: the rest of a closed level), "white" (a neutral environment; with
+        no punctual light or sky, I_A = 1), or "auto" (white for an open scene without lights,
+        a prop; R_ave otherwise: light/environment.py).
     """
 
     texel_density: float | None = None
@@ -141,6 +147,7 @@ class Settings:
     foliage: str = "none"
     foliage_density: float | None = None
     cluster: str | None = None
+    escape: str = "auto"
 
     def check(self) -> None:
         """Raise SettingsError for a value that cannot work, saying which values can."""
@@ -228,6 +235,9 @@ class Settings:
         if self.specular not in SPECULAR_STRATEGIES:
             raise SettingsError(f"specular must be one of {', '.join(SPECULAR_STRATEGIES)}, not "
                                 f"{self.specular!r}", fix="use --specular b")
+        if self.escape not in ESCAPES:
+            raise SettingsError(f"escape must be one of {', '.join(ESCAPES)}, not "
+                                f"{self.escape!r}", fix="use --escape auto")
         if int(self.max_depth) != self.max_depth or self.max_depth < 1:
             raise SettingsError(f"max_depth must be a whole number of at least 1, not "
                                 f"{self.max_depth}", fix="use --max-depth 16")

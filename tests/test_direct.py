@@ -195,7 +195,8 @@ def test_no_light_no_shadow_rays(tmp_path):
     done = computed(open_floor(), tmp_path, **FAST)
     assert done.direct.rays == 0 and done.sources.any() is False
     assert done.plan.stages["punctual lights"] == "none: no shadow rays"
-    assert done.ambient.source == "none" and np.all(done.ambient.intensity == 1.0)
+    # an open floor without light: a neutral environment (environment.py), I_A = 1
+    assert done.ambient.source == "environment" and np.all(done.ambient.intensity == 1.0)
 
 
 def test_an_emitter_that_lights_no_surface_is_not_called_no_light_source(tmp_path):
@@ -205,7 +206,7 @@ def test_an_emitter_that_lights_no_surface_is_not_called_no_light_source(tmp_pat
     b = GltfBuilder()
     b.node("glow", b.shape_mesh("glow", quad(1.0, 1.0),
                                 material=b.material("e", emissive=(1.0, 1.0, 1.0))))
-    done = computed(b, tmp_path, rays=4, page_size=32)
+    done = computed(b, tmp_path, rays=4, page_size=32, escape="scene")  # the model's own I_A
     assert "emissive triangle" in done.plan.stages["emissive surfaces"]
     assert "no light source" not in done.plan.stages["ambient"]
     assert "lay no light" in done.plan.stages["ambient"]

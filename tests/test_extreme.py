@@ -71,10 +71,10 @@ def test_white_room_with_tiny_or_huge_emission_bakes_finite(tmp_path):
 
 
 def test_one_triangle_scene(tmp_path):
-    """A single open triangle: every ray escapes, W = R_ave on every texel."""
+    """A single open triangle: every ray escapes, W = what escaping rays count on every texel."""
     done = computed(single_triangle(), tmp_path, texel_density=16.0, rays=8)
     assert len(done.texels) > 10
-    np.testing.assert_allclose(_w(done), done.ambient.r_ave.mean(), rtol=1e-9)
+    np.testing.assert_allclose(_w(done), effective_r_ave(done.ambient, done.settings.rho).mean(), rtol=1e-9)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -168,7 +168,7 @@ def test_mesh_defects_bake_to_open_sky_and_are_counted(tmp_path):
     assert (per_node[list(nodes.values())] >= 81).all()  # a 0.5 m panel at 16/m: 9 × 9 texels
     assert per_node[nodes["coincident"]] == 2 * per_node[nodes["clean"]]
     assert (done.terms.escaped == 1.0).all()
-    np.testing.assert_allclose(_w(done), done.ambient.r_ave.mean(), rtol=1e-12)
+    np.testing.assert_allclose(_w(done), effective_r_ave(done.ambient, done.settings.rho).mean(), rtol=1e-12)
     assert not degenerate(done.world, done.texels.triangle).any()
     assert input_warnings(done.scene, done.world) == {
         "degenerate triangles (no area): given no texels": 3,
@@ -202,7 +202,7 @@ def test_non_manifold_edge_shades_both_sides(tmp_path):
         far = flat & (side * x[:, 0] > 0.4)
         assert near.sum() > 10 and far.sum() > 10
         assert w[near].mean() < w[far].mean() - 0.02  # measured: 0.466 against 0.5
-        assert w[far].max() <= done.ambient.r_ave.mean() + 1e-12
+        assert w[far].max() <= effective_r_ave(done.ambient, done.settings.rho).mean() + 1e-12
     assert np.isfinite(w).all() and (w >= 0).all()
 
 
@@ -213,7 +213,7 @@ def test_a_triangle_smaller_than_a_texel_bakes_a_few_texels(tmp_path):
     done = computed(single_triangle(0.01), tmp_path, texel_density=10.0, rays=8)
     assert (done.atlas.width, done.atlas.height, done.atlas.page_count) == (2, 2, 1)
     assert 1 <= len(done.texels) <= 4
-    np.testing.assert_allclose(_w(done), done.ambient.r_ave.mean(), rtol=1e-12)
+    np.testing.assert_allclose(_w(done), effective_r_ave(done.ambient, done.settings.rho).mean(), rtol=1e-12)
 
 
 @pytest.mark.parametrize("count", [10_000])
@@ -239,7 +239,7 @@ def test_a_sparse_page_of_8192_squared(tmp_path, side):
     done = computed(l_strip(length, 0.25), tmp_path, texel_density=8.0, rays=4, d_max=1.0,
                     page_size=side)
     assert done.atlas.page_count == 1 and min(done.atlas.width, done.atlas.height) > 0.98 * side - 92
-    np.testing.assert_allclose(_w(done), done.ambient.r_ave.mean(), rtol=1e-12)
+    np.testing.assert_allclose(_w(done), effective_r_ave(done.ambient, done.settings.rho).mean(), rtol=1e-12)
     assert np.isfinite(done.lightmaps.light).all()
 
 

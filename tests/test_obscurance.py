@@ -14,7 +14,8 @@ def _w(done) -> np.ndarray:
 
 
 def test_open_plane_sees_r_ave_exactly(tmp_path):
-    done = computed(open_plane(albedo=0.6), tmp_path, texel_density=8.0, rays=16, d_max=1.0)
+    done = computed(open_plane(albedo=0.6), tmp_path, texel_density=8.0, rays=16, d_max=1.0,
+                    escape="scene")
     assert np.allclose(done.ambient.r_ave, 0.6)
     assert np.array_equal(done.terms.escaped, np.ones(len(done.texels)))
     assert np.allclose(_w(done), 0.6, atol=1e-12)
@@ -51,7 +52,8 @@ def test_parallel_plane_matches_closed_form(tmp_path, rho):
 
 
 def test_colour_bleeding_red_shift_falls_off_with_distance(tmp_path):
-    done = computed(red_wall_floor(), tmp_path, texel_density=8.0, rays=256, d_max=2.0)
+    done = computed(red_wall_floor(), tmp_path, texel_density=8.0, rays=256, d_max=2.0,
+                    escape="scene")
     distance = done.texels.position[:, 2] + 2.0  # from the wall at z = -2
     floor = (done.texels.geometric_normal()[:, 1] > 0.9) & (distance > 0.05)
     w = _w(done)[floor]

@@ -143,7 +143,8 @@ def small_bake(tmp_path_factory):
     def get(name):
         if name not in done:
             out = tmp_path_factory.mktemp(name) / "out.glb"
-            baker.bake(REAL_SCENES[name], out, baker.Settings(texel_density=4.0, rays=8))
+            baker.bake(REAL_SCENES[name], out, baker.Settings(texel_density=4.0, rays=8,
+                                                                       escape="scene"))
             done[name] = out
         return done[name]
 

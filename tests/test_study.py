@@ -16,7 +16,7 @@ def planes(tmp_path_factory):
     """The probe under a parallel plane (smooth integrand: the closed-form case)."""
     builder = parallel_planes(height=0.3)
     done = computed(builder, tmp_path_factory.mktemp("planes"),
-                    only_nodes={builder.info["nodes"]["probe"]}, texel_density=100.0, d_max=1.0)
+                    only_nodes={builder.info["nodes"]["probe"]}, texel_density=100.0, d_max=1.0, escape="scene")
     return run_study(done, RAYS, reference_rays=4096)
 
 

@@ -57,8 +57,15 @@ def add_parser(commands) -> None:
                        help="obscurance function ρ(d): sqrt (the paper's), linear, or step "
                             "(classic ambient occlusion) (default sqrt)")
     model.add_argument("--ambient", type=positive_float, metavar="I_A",
-                       help="ambient intensity I_A (default: from the scene's emissive surfaces, "
-                            "or 1 when it has none)")
+                       help="ambient intensity I_A (default: from the scene's lights and "
+                            "emissive surfaces, or 1 when it has none or is an open prop, see "
+                            "--escape)")
+    model.add_argument("--escape", choices=baker.settings.ESCAPES, default=d.escape,
+                       help="what rays that meet nothing within --d-max count: scene (R_ave, "
+                            "the scene's mean albedo: the rest of a closed level), white (a "
+                            "neutral environment; I_A = 1 without lights or sky), or auto: "
+                            "white for an open scene without lights (a prop), else R_ave "
+                            "(default auto; the plan says which and why)")
     model.add_argument("--seed", type=int, default=d.seed, help="sampler seed (default 0)")
     model.add_argument("--sampling", choices=baker.rays.sampling.TECHNIQUES, default=d.sampling,
                        help="how each texel's ray directions are drawn: sobol (Owen-scrambled, "

@@ -39,8 +39,11 @@ class Lightmaps:
 
 
 def effective_r_ave(ambient: Ambient, rho: str) -> np.ndarray:
-    """R_ave as the estimator uses it: 1 for classic ambient occlusion (every surface white)."""
-    return np.ones(3) if rho in UNIT_REFLECTIVITY else ambient.r_ave
+    """R_ave as the estimator uses it, what rays that meet nothing count: 1 for classic ambient
+    occlusion (every surface white), the environment's colour when it is set (environment.py)."""
+    if rho in UNIT_REFLECTIVITY:
+        return np.ones(3)
+    return ambient.r_ave if ambient.escape is None else ambient.escape
 
 
 def compose(atlas: Atlas, texels: Texels, terms: Terms, ambient: Ambient, rho: str,

@@ -21,7 +21,7 @@ irradiance × area (``direct.Power``). docs/direct_light.md derives it.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -47,9 +47,11 @@ class Ambient:
     r_ave: np.ndarray
     mean_emission: np.ndarray
     intensity: np.ndarray
-    source: str  # "user", "none" (no light in the scene: I_A = 1), or the sources I_A comes
-    # from: "emission" (equation 3 alone), or "+"-joined "lights", "emission", "sky" (with power)
+    source: str  # "user", "none" (no light in the scene: I_A = 1), "environment" (a neutral
+    # one, environment.py: I_A = 1), or the sources I_A comes from: "emission" (equation 3
+    # alone), or "+"-joined "lights", "emission", "sky" (with power)
     truncated: bool  # the bounce series was cut (R_ave close to 1)
+    escape: np.ndarray | None = None  # (3,) what rays that meet nothing count; None: R_ave
 
 
 def bounce_factor(r_ave: np.ndarray) -> tuple[np.ndarray, bool]:
@@ -71,13 +73,27 @@ def _triangle_means(scene: Scene, world: World, lookup) -> np.ndarray:
 
 
 def ambient_terms(scene: Scene, world: World, user_intensity: float | None,
-                  power: Power | None = None) -> Ambient:
+                  power: Power | None = None, neutral: bool = False) -> Ambient:
     """R_ave and I_A of the scene; ``user_intensity`` overrides I_A (all channels).
 
     ``power``: what the direct-light sources lay on the surfaces (direct.delivered_power); then
     I_A = R_ave·series·Φ/A_T, the light after its first bounce (D holds the direct light). Without
     it, equation (3) on the emissive surfaces alone, as when emission is not baked as direct light.
+    ``neutral``: rays that meet nothing count white (``environment.environment``), and without
+    punctual lights or sky I_A is 1, not what emissive surfaces would give.
     """
+    ambient = _ambient_terms(scene, world, user_intensity, power)
+    if not neutral:
+        return ambient
+    unlit = power is None or not (len(power.punctual) or np.any(power.sky > 0))
+    if unlit and ambient.source != "user":
+        ambient = Ambient(ambient.r_ave, ambient.mean_emission, np.ones(3), "environment", False)
+    return replace(ambient, escape=np.ones(3))
+
+
+def _ambient_terms(scene: Scene, world: World, user_intensity: float | None,
+                   power: Power | None) -> Ambient:
+    """``ambient_terms`` as the model has it, rays that meet nothing counting R_ave."""
     areas = world.areas()
     total = areas.sum()
     if total <= 0:

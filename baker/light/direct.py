@@ -102,6 +102,7 @@ class Emitters:
     corners: np.ndarray
     radiance: np.ndarray
     textured: np.ndarray
+    area_share: float = 1.0  # the emitting triangles' share of the scene's surface area
 
 
 @dataclass(frozen=True)
@@ -170,7 +171,8 @@ def find_emitters(scene: Scene, world: World) -> Emitters | None:
                     normals=world.geometric_normals(emitting), two_sided=sides[emitting] > 1,
                     power=float(math.pi * w.sum()),
                     corners=world.positions[world.triangles[emitting]],
-                    radiance=mean[emitting], textured=textured[world.tri_material[emitting]])
+                    radiance=mean[emitting], textured=textured[world.tri_material[emitting]],
+                    area_share=float(areas[emitting].sum() / areas.sum()))
 
 
 def light_sources(scene: Scene, world: World, settings: Resolved) -> Sources:

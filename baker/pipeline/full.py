@@ -35,6 +35,7 @@ from baker.image.denoise import DenoiseInfo, denoise
 from baker.image.postprocess import postprocess
 from baker.image.seams import find_seams
 from baker.light.ambient import Ambient, ambient_terms
+from baker.light.environment import environment
 from baker.light.direct import (
     Direct,
     Power,
@@ -155,8 +156,9 @@ def lighting(scene: Scene, world: World, resolved: Resolved, times: dict[str, fl
         sources = light_sources(scene, world, resolved)
         power = delivered_power(scene, world, tracer, sources, resolved)
     with timed(times, "plan"):
-        ambient = ambient_terms(scene, world, resolved.ambient, power)
-        plan = make_plan(scene, ambient, resolved.rho, sources)
+        surround = environment(world, tracer, sources, resolved.escape, resolved.seed)
+        ambient = ambient_terms(scene, world, resolved.ambient, power, surround.neutral)
+        plan = make_plan(scene, ambient, resolved.rho, sources, surround)
     return Lighting(tracer, sources, power, ambient, plan)
 
 

@@ -14,6 +14,7 @@ from baker.gltf.materials import material_table
 from baker.gltf.scene import Scene
 from baker.light.ambient import Ambient
 from baker.light.direct import Sources
+from baker.light.environment import Environment
 
 
 @dataclass(frozen=True)
@@ -50,8 +51,10 @@ def _node_label(scene: Scene, node: int) -> str:
     return f"nodes[{node}]" + (f" ({name})" if name else "")
 
 
-def make_plan(scene: Scene, ambient: Ambient, rho: str, sources: Sources | None = None) -> Plan:
-    """What this bake does with ``scene``; ``sources``: its direct light (direct.light_sources)."""
+def make_plan(scene: Scene, ambient: Ambient, rho: str, sources: Sources | None = None,
+              surround: Environment | None = None) -> Plan:
+    """What this bake does with ``scene``; ``sources``: its direct light (direct.light_sources);
+    ``surround``: what rays that meet nothing count, and why (environment.environment)."""
     baked, left_out = [], [(s.where, s.reason) for s in scene.skipped]
     for inst in scene.instances:
         prim = scene.primitives[inst.primitive]
@@ -64,6 +67,8 @@ def make_plan(scene: Scene, ambient: Ambient, rho: str, sources: Sources | None 
         "emission": f"I_A = {_rgb(ambient.intensity)} from emissive surfaces (eq. 3)",
         "user": f"I_A = {_rgb(ambient.intensity)} set by the user",
         "none": "no light source in the scene: I_A = 1, the lightmap is the obscurance W itself",
+        "environment": "I_A = 1 in a neutral environment: the lightmap is the obscurance W "
+                       "itself plus any emission's direct light",
     }.get(ambient.source, f"I_A = {_rgb(ambient.intensity)}: the power of "
                           f"{ambient.source.replace('+', ', ')} after its first bounce "
                           "(docs/direct_light.md)")
@@ -72,6 +77,8 @@ def make_plan(scene: Scene, ambient: Ambient, rho: str, sources: Sources | None 
                         "their power points, direct.delivered_power): I_A = 1, as with no source")
     if ambient.source == "emission" and sources is not None:
         ambient_text = ambient_text.replace("(eq. 3)", "after their first bounce (docs/direct_light.md)")
+    if ambient.source == "emission":
+        ambient_text += _emitter_warning(scene, sources)
     if ambient.truncated:
         ambient_text += (f"; R_ave = {_rgb(ambient.r_ave)} is close to 1, so 1/(1 - R_ave) "
                          "was summed as a bounded series (docs/model.md)")
@@ -80,9 +87,27 @@ def make_plan(scene: Scene, ambient: Ambient, rho: str, sources: Sources | None 
                        else f"obscurance with colour bleeding, ρ = {rho}, R_ave = {_rgb(ambient.r_ave)}"),
         "ambient": ambient_text,
     }
+    if surround is not None and rho not in ("step",):
+        stages["escaping rays"] = f"rays that meet nothing within d_max count {surround.reason}"
     stages.update(material_stages(scene))
     stages.update(_direct_stages(scene, sources))
     return Plan(stages=stages, baked=tuple(baked), left_out=tuple(left_out))
+
+
+EMITTER_SHARE = 0.01
+"""Share of the surface area below which emissive surfaces setting I_A get a warning."""
+
+
+def _emitter_warning(scene: Scene, sources: Sources | None) -> str:
+    """A warning when I_A comes from emissive surfaces covering little of the scene (decals):
+    their light then sets the whole scene's ambient term."""
+    if sources is None or sources.emitters is None:
+        return ""
+    share = sources.emitters.area_share
+    if share >= EMITTER_SHARE:
+        return ""
+    return (f"; warning: set by emissive surfaces covering {share:.2%} of the surface area "
+            "alone (decals?): --ambient 1 or --escape white gives the scene a neutral ambient")
 
 
 def material_stages(scene: Scene) -> dict[str, str]:
