@@ -341,3 +341,33 @@ def test_textures_past_the_scene_budget_are_left_out_with_the_figure(tmp_path, m
     assert scene.materials[1].base_color_texture is None
     (warning,) = [s.reason for s in scene.skipped if s.where == "textures[1]"]
     assert "past 1,500 pixels" in warning and "(32×32)" in warning
+
+
+# ---------------------------------------------------------------------------- animated nodes
+
+def test_a_node_an_animation_moves_is_baked_in_its_rest_pose_with_a_warning(tmp_path):
+    """A rotating wheel under an animated parent and a still floor: the wheel (its own channel)
+    and the parent's child are warned of, baked in their rest pose; the floor is not."""
+    b = GltfBuilder()
+    grey = b.material("grey")
+    floor = b.node("floor", b.shape_mesh("floor", quad(3.0, 3.0), material=grey))
+    body = b.node("body", b.shape_mesh("body", box((0.5, 0.2, 0.5)), material=grey),
+                  translation=(0, 0.5, 0))
+    wheel = b.node("wheel", b.shape_mesh("wheel", box((0.1, 0.3, 0.3)), material=grey),
+                   translation=(0, 0.3, 0))
+    path = b.save(tmp_path / "scene.gltf")
+    document = json.loads(path.read_text())
+    document["nodes"][body]["children"] = [wheel]
+    document["scenes"][0]["nodes"] = [floor, body]
+    times = len(document["accessors"])
+    document["accessors"] += [{"bufferView": 0, "componentType": 5126, "count": 1,
+                               "type": "SCALAR", "min": [0], "max": [0]},
+                              {"bufferView": 0, "componentType": 5126, "count": 1, "type": "VEC3"}]
+    document["animations"] = [{"name": "drive", "samplers": [
+        {"input": times, "output": times + 1}], "channels": [
+        {"sampler": 0, "target": {"node": body, "path": "translation"}}]}]
+    path.write_text(json.dumps(document))
+    scene = load(path)
+    warned = {s.where for s in scene.skipped if s.reason.startswith("node-animated")}
+    assert warned == {f"nodes[{body}]", f"nodes[{wheel}]"}
+    assert all(i.baked for i in scene.instances)

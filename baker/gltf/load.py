@@ -166,6 +166,8 @@ MAX_ACCESSOR_COMPONENTS = 1 << 28
 _GPU_REASON = "GPU-instanced (EXT_mesh_gpu_instancing): occluder only"
 _SKIN_REASON = "skinned: occluder only (rest pose)"
 _UNLIT_REASON = UNLIT_REASON
+_MOVING_REASON = ("node-animated (an animation moves it or an ancestor): baked in its rest pose, "
+                  "its lightmap does not follow the animation")
 _MORPH_REASON = "morph-animated (animated weights): occluder only (rest pose)"
 
 
@@ -1183,15 +1185,29 @@ def trs_matrices(
     return out
 
 
-def _morph_animated_nodes(document: pygltflib.GLTF2) -> set[int]:
-    """Nodes whose morph target weights an animation channel drives (path "weights")."""
+def _animated_nodes(document: pygltflib.GLTF2, paths: tuple[str, ...]) -> set[int]:
+    """Nodes that an animation channel drives on one of ``paths`` ("weights": morph targets;
+    "translation", "rotation", "scale": the node's transform)."""
     nodes = set()
     for animation in document.animations or []:
         for channel in animation.channels or []:
             target = channel.target
-            if target is not None and target.path == "weights" and isinstance(target.node, int):
+            if target is not None and target.path in paths and isinstance(target.node, int):
                 nodes.add(target.node)
     return nodes
+
+
+def _moving_nodes(document: pygltflib.GLTF2) -> set[int]:
+    """Nodes whose world transform an animation changes: its own, or an ancestor's."""
+    stack = list(_animated_nodes(document, ("translation", "rotation", "scale")))
+    moving: set[int] = set()
+    while stack:
+        index = stack.pop()
+        if index in moving or not 0 <= index < len(document.nodes):
+            continue
+        moving.add(index)
+        stack.extend(c for c in document.nodes[index].children or [] if isinstance(c, int))
+    return moving
 
 
 def _gpu_instances(ctx: _Context, index: int, node: pygltflib.Node) -> np.ndarray | None:
@@ -1242,11 +1258,14 @@ def _instantiate(
             if primitive is not None:
                 primitives.append(primitive)
     instances = []
-    morphed = _morph_animated_nodes(document)
+    morphed = _animated_nodes(document, ("weights",))
+    moving = _moving_nodes(document)
     for index, world in placements:
         node = document.nodes[index]
         if node.mesh is None:
             continue
+        if index in moving and node.skin is None:
+            ctx.skip(f"nodes[{index}]", _MOVING_REASON)
         with _schema(ctx.file, f"nodes[{index}].extensions.EXT_mesh_gpu_instancing"):
             gpu = _gpu_instances(ctx, index, node)
         worlds = [world] if gpu is None else list(world @ gpu)
