@@ -9,16 +9,21 @@ The mapping from the README to this test, and nothing else, is:
 - The scene files the README names (``level.glb``, ``level.gltf``, ``prop.glb``) are the demo
   Cornell box that the README's first line makes; ``draco.glb`` is it Draco-compressed by glTF
   Transform (tests/gltf_transform.py), ``ktx2.glb`` the textured floor of assets/ with its
-  texture as KTX 2 (KHR_texture_basisu, encoded by alktx2).
+  texture as KTX 2 (KHR_texture_basisu, encoded by alktx2), ``park.glb`` the tree of
+  assets/foliage_scenes.py.
+- ``--cluster 10.0.0.1:6379`` names a local Ray cluster of one worker started for it
+  (tests/ray_cluster.py), at its own address.
 - Small settings, so the whole README runs in about a minute: ``--rays N`` becomes ``--rays 4``
   and ``rays=N`` ``rays=4``; each ``baker bake`` and ``baker watch`` gets ``--page-size 128``
   and each ``baker.Settings(`` ``page_size=128`` (about 9,000 texels instead of 530,000).
-- ``baker watch`` runs until its first bake is done; then it gets Ctrl-C (SIGINT to its
-  process group, as a terminal sends it) and must exit 130, as the README says.
+- ``baker watch`` runs until its first bake is done, ``baker view`` until its page answers
+  at the address it printed; then each gets Ctrl-C (SIGINT to its process group, as a
+  terminal sends it) and must exit 130, as the README says.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import shutil
@@ -26,17 +31,21 @@ import signal
 import subprocess
 import sys
 import tomllib
+import urllib.request
 from pathlib import Path
 
 import pytest
 
+from assets.foliage_scenes import tree
 from assets.make_scenes import cornell_box, textured_floor
 from gltf_transform import variant
+from ray_cluster import LocalCluster
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
 SMALL_RAYS = "4"
 SMALL_PAGE = "128"
+README_CLUSTER = "10.0.0.1:6379"  # the README's example address
 NOT_RUN = ("npm ci",)  # the line that runs this test suite
 DROPPED = 'pip install ".[test]" && '  # the checkout is on PYTHONPATH instead
 
@@ -124,6 +133,7 @@ def scene_files(folder: Path) -> None:
     cornell_box().save(folder / "level.gltf")
     variant("draco", demo, folder / "draco.glb")
     ktx2_scene(folder / "ktx2.glb")
+    tree().save(folder / "park.glb")
 
 
 @pytest.fixture
@@ -140,23 +150,42 @@ def newcomer(tmp_path):
     return tmp_path, env
 
 
+# Commands that run until Ctrl-C, and the line each prints once it is ready.
+UNTIL_CTRL_C = {" watch ": "baked ", " view ": "baker view: "}
+
+
+def _until_ctrl_c(command: str) -> str | None:
+    """The ready line of a command that runs until Ctrl-C, None for one that ends."""
+    return next((ready for word, ready in UNTIL_CTRL_C.items() if word in command), None)
+
+
 def run(kind: str, command: str, folder: Path, env: dict) -> subprocess.CompletedProcess:
-    """Run one README command in ``folder``; ``baker watch`` is stopped by Ctrl-C after its
-    first bake (it would watch for ever)."""
+    """Run one README command in ``folder``. ``baker watch`` and ``baker view`` are stopped by
+    Ctrl-C once ready (watch: its first bake done; view: its page fetched from the address it
+    printed, which must answer 200)."""
     argv = ["bash", "-c", command] if kind == "sh" else [sys.executable, "-c", command]
-    if " watch " not in command:
+    ready = _until_ctrl_c(command)
+    if ready is None:
         return subprocess.run(argv, cwd=folder, env=env, capture_output=True, text=True,
                               timeout=600)
     process = subprocess.Popen(argv, cwd=folder, env=env, stdout=subprocess.PIPE,
                                stderr=subprocess.PIPE, text=True, start_new_session=True)
-    lines = []
+    lines, served = [], True
     for line in process.stdout:
         lines.append(line)
-        if line.startswith("baked "):
+        if line.startswith(ready):
             break
+    address = re.search(r"http://127\.0\.0\.1:\d+/\S*", "".join(lines))
+    if " view " in command:
+        try:
+            with urllib.request.urlopen(address.group(0), timeout=30) as page:
+                served = page.status == 200
+        except (AttributeError, OSError):
+            served = False
     os.killpg(process.pid, signal.SIGINT)
     out, err = process.communicate(timeout=60)
-    return subprocess.CompletedProcess(argv, process.returncode, "".join(lines) + out, err)
+    return subprocess.CompletedProcess(argv, process.returncode if served else -1,
+                                       "".join(lines) + out, err)
 
 
 def test_readme_lists_the_commands_this_test_runs():
@@ -172,13 +201,23 @@ def test_readme_lists_the_commands_this_test_runs():
 def test_every_readme_command_runs_as_written(newcomer):
     folder, env = newcomer
     failures = []
-    for kind, command in commands(README.read_text()):
-        ran = run(kind, small(kind, command), folder, env)
-        if "make_scenes.py" in command:  # the demo scenes are made: the README's scene names
-            scene_files(folder)
-        expected = 130 if " watch " in command else 0
-        missing = [name for name in outputs(command) if not (folder / name).is_file()]
-        if ran.returncode != expected or missing or "Traceback" in ran.stderr:
-            failures.append(f"{command!r}: exit {ran.returncode} (expected {expected}), "
-                            f"missing {missing}\n{ran.stdout[-600:]}\n{ran.stderr[-1500:]}")
+    with contextlib.ExitStack() as stack:
+        for kind, command in commands(README.read_text()):
+            if README_CLUSTER in command:
+                cluster = stack.enter_context(LocalCluster(workers=1, cpus=1))
+                command = command.replace(README_CLUSTER, cluster.address)
+            failures += _failures(kind, command, folder, env)
     assert not failures, "\n\n".join(failures)
+
+
+def _failures(kind: str, command: str, folder: Path, env: dict) -> list[str]:
+    """What went wrong running one README command: nothing ([]), or one message."""
+    ran = run(kind, small(kind, command), folder, env)
+    if "make_scenes.py" in command:  # the demo scenes are made: the README's scene names
+        scene_files(folder)
+    expected = 130 if _until_ctrl_c(command) else 0
+    missing = [name for name in outputs(command) if not (folder / name).is_file()]
+    if ran.returncode == expected and not missing and "Traceback" not in ran.stderr:
+        return []
+    return [f"{command!r}: exit {ran.returncode} (expected {expected}), missing {missing}\n"
+            f"{ran.stdout[-600:]}\n{ran.stderr[-1500:]}"]

@@ -579,8 +579,9 @@ def direct_at(scene: Scene, world: World, tracer: Tracer, sources: Sources,
 
 
 def direct_light(scene: Scene, world: World, tracer: Tracer, texels: Texels, sources: Sources,
-                 settings: Resolved, progress: Callable[[int], None] | None = None) -> Direct:
-    """Estimate every texel's direct irradiance from every source (no ray when there is none)."""
+                 settings: Resolved, progress: Callable[[int, int], None] | None = None) -> Direct:
+    """Estimate every texel's direct irradiance from every source (no ray when there is none);
+    ``progress(texels, rays)`` after each chunk (its shadow and sky rays, as ``rays_per_texel``)."""
     count = len(texels)
     if not sources.any():
         return no_direct(count)
@@ -602,7 +603,7 @@ def direct_light(scene: Scene, world: World, tracer: Tracer, texels: Texels, sou
         if len(sky):
             sky[rows], sky_var[rows] = part.sky, part.sky_var
         if progress is not None:
-            progress(rows.stop - rows.start)
+            progress(rows.stop - rows.start, (rows.stop - rows.start) * sources.rays_per_texel())
 
     run_chunks(work, chunks, settings.threads)
     return Direct(punctual=punctual, punctual_var=punctual_var,

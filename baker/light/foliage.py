@@ -398,7 +398,7 @@ def integrate_with_foliage(foliage: Foliage, scene: Scene, world: World, texels:
     traced = shade_by_crowns(foliage, texels, traced_rows, traced, settings.d_max)
     approx = foliage_terms(foliage, scene, world, texels, closed)
     if progress is not None and len(closed):
-        progress(len(closed))
+        progress(len(closed), 0)  # closed forms: no ray
     return _merged(len(texels), (traced_rows, traced), (closed, approx))
 
 

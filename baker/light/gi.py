@@ -239,10 +239,23 @@ def _select(hits, mask):
     return type(hits)(hits.triangle[mask], hits.distance[mask], hits.u[mask], hits.v[mask])
 
 
+def rays_per_path(sources: Sources, r_ave: np.ndarray) -> float:
+    """About how many rays a path casts, for a progress bar's first estimate (``_chunk``
+    measures the truth): a bounce ray at each vertex, two vertices before Russian roulette and
+    then, as a surviving throughput is divided back to a largest channel of 1, one more with
+    probability a ≈ max(R_ave) each: 2 + a²/(1 − a) in all (assuming every ray hits), and
+    a next-event ray per source kind at each vertex (emitters, each light, the sky)."""
+    a = min(float(np.max(r_ave)), 0.99)
+    vertices = 2.0 + a * a / (1.0 - a)
+    next_event = (sources.emitters is not None) + len(sources.lights) + (sources.sky is not None)
+    return vertices * (1 + next_event)
+
+
 def indirect_light(scene: Scene, world: World, tracer: Tracer, sources: Sources, texels: Texels,
                    settings: Resolved, paths: int, max_bounces: int = MAX_BOUNCES,
-                   progress: Callable[[int], None] | None = None) -> Indirect:
-    """E_ind at every texel from ``paths`` paths each (see the module's docstring)."""
+                   progress: Callable[[int, int], None] | None = None) -> Indirect:
+    """E_ind at every texel from ``paths`` paths each (see the module's docstring);
+    ``progress(texels, rays)`` after each chunk, with the rays its paths cast."""
     count = len(texels)
     irradiance, variance = np.zeros((count, 3)), np.zeros(count)
     rays, capped = np.zeros(count, np.int64), np.zeros(count, np.int64)
@@ -254,7 +267,7 @@ def indirect_light(scene: Scene, world: World, tracer: Tracer, sources: Sources,
         irradiance[rows], variance[rows] = part.irradiance, part.variance
         rays[rows.start], capped[rows.start] = part.rays, part.capped
         if progress is not None:
-            progress(rows.stop - rows.start)
+            progress(rows.stop - rows.start, part.rays)
 
     run_chunks(work, chunks, settings.threads)
     return Indirect(irradiance=irradiance, variance=variance, rays=int(rays.sum()),

@@ -628,7 +628,7 @@ def _chunk_sums(surfaces: Surfaces, tracer: Tracer, texels: Texels, rows: np.nda
 
 
 def hemisphere_terms(scene: Scene, world: World, tracer: Tracer, texels: Texels,
-                     settings: Resolved, progress: Callable[[int], None] | None = None,
+                     settings: Resolved, progress: Callable[[int, int], None] | None = None,
                      rows: np.ndarray | None = None,
                      error_scale: tuple[np.ndarray, float] | None = None,
                      surfaces: Surfaces | None = None) -> Terms:
@@ -639,8 +639,9 @@ def hemisphere_terms(scene: Scene, world: World, tracer: Tracer, texels: Texels,
     (so counts are rays·2^k, and halves of a count are whole nets) — and a texel stops
     once the standard error of its lightmap luminance, ``error_scale[1]`` × the standard error
     of W's luminance with R_ave = ``error_scale[0]``, is at most ``target_error``. The rounds
-    are the same whatever the chunking, so the result is too. ``progress`` is told how many
-    texels each chunk of the first round finished. ``surfaces``: ``surfaces_of(scene, world)``,
+    are the same whatever the chunking, so the result is too. ``progress(texels, rays)`` is told
+    after each chunk how many texels it finished (in the first round; 0 after) and the rays it
+    cast (``run.progress.Meter``). ``surfaces``: ``surfaces_of(scene, world)``,
     made here when not given. Light through translucent surfaces is not in these terms:
     ``light.integrate.integrate`` adds it (``inner.add_translucency``, §4).
     """
@@ -666,8 +667,8 @@ def hemisphere_terms(scene: Scene, world: World, tracer: Tracer, texels: Texels,
             if first:
                 round_sums[:, _HALF.start:] = 0.0
             sums[chunk] += round_sums
-            if progress is not None and first == 0:
-                progress(len(chunk))
+            if progress is not None:
+                progress(len(chunk) if first == 0 else 0, len(chunk) * batch)
 
         step = texels_per_chunk(settings.chunk_texels, batch)
         run_chunks(work, [active[rows] for rows in even_slices(len(active), step, 2 * cores())],

@@ -17,7 +17,7 @@ from baker.settings import Resolved
 
 
 def integrate(scene: Scene, world: World, tracer: Tracer, texels: Texels, settings: Resolved,
-              progress: Callable[[int], None] | None = None, rows: np.ndarray | None = None,
+              progress: Callable[[int, int], None] | None = None, rows: np.ndarray | None = None,
               error_scale: tuple[np.ndarray, float] | None = None,
               translucency: bool = True, surfaces: Surfaces | None = None) -> Terms:
     """The obscurance terms of the texels ``rows`` (default: all), in that order

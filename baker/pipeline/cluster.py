@@ -342,7 +342,7 @@ def _run_part(box: list, item: tuple[np.ndarray, np.ndarray]) -> _Returned:
     threads = max(1, baking.settings.threads)
     coverage = Coverage(item[0], item[1], baking.coverage.triangle_texels)
     baking = replace(baking, coverage=coverage, settings=replace(baking.settings, threads=threads))
-    baked = part(baking, slice(None), seconds, lambda n: None)
+    baked = part(baking, slice(None), seconds, None)  # no progress bar on a worker
     moved = np.flatnonzero(baked.points.moved)
     worker = f"{socket.gethostname()} {_ray().util.get_node_ip_address()} pid {os.getpid()}"
     return _Returned(replace(baked, texels=None, points=None), moved,

@@ -45,14 +45,14 @@ from baker.light.direct import (
     light_sources,
 )
 from baker.light.foliage import FitInputs, Foliage, integrate_with_foliage, prepare_foliage
-from baker.light.gi import Indirect, indirect_light
+from baker.light.gi import Indirect, indirect_light, rays_per_path
 from baker.light.hemisphere import Surfaces, Terms, surfaces_of
 from baker.light.integrate import integrate
 from baker.pipeline import cluster
 from baker.pipeline.parts import PerTexel, Tally, TexelPoints, part_slices
 from baker.pipeline.plan import Plan, make_plan
 from baker.rays.trace import Tracer
-from baker.run.progress import bar, wanted
+from baker.run.progress import Meter, bar, wanted
 from baker.run.spill import Spill
 from baker.settings import Resolved, Settings, resolve
 
@@ -265,17 +265,53 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True,
         raise
 
 
+@dataclass(frozen=True)
+class _Stages:
+    """The progress reports ``(texels, rays)`` of a bake's ray-casting stages, registered on
+    one ``run.progress.Meter`` with their first estimates of rays per texel: obscurance rays,
+    direct light's shadow and sky rays, GI's paths (``gi.rays_per_path``)."""
+
+    meter: Meter
+    obscurance: Callable[[int, int], None]
+    direct: Callable[[int, int], None] | None
+    gi: Callable[[int, int], None] | None
+    estimates: tuple[float, ...]  # the first rays per texel of each stage there is, in order
+
+    @classmethod
+    def of(cls, meter: Meter, baking: Baking, count: int) -> "_Stages":
+        s, sources = baking.settings, baking.sources
+        direct = sources.rays_per_texel() if sources.any() else None
+        gi = s.rays * rays_per_path(sources, baking.ambient.r_ave) if s.method == "gi" else None
+        stages = [None if per is None else meter.stage(count, per) for per in (s.rays, direct, gi)]
+        return cls(meter, *stages,
+                   estimates=tuple(per for per in (s.rays, direct, gi) if per is not None))
+
+    def whole_parts(self) -> Callable[[int], None]:
+        """For parts made elsewhere (``cluster.parts``), which say only their texels when done:
+        every stage advanced by them, at its first estimate of rays per texel."""
+        reports = [r for r in (self.obscurance, self.direct, self.gi) if r is not None]
+
+        def advance(texels: int) -> None:
+            self.meter.start()
+            for report, per_texel in zip(reports, self.estimates):
+                report(texels, round(texels * per_texel))
+
+        return advance
+
+
 def _bake_parts(baking: Baking, spill: Spill | None, times: dict[str, float], quiet: bool
                 ) -> tuple["_Pages", BakedPart]:
     """Bake the texels a part at a time, each composed into the pages as it is done and, with
     a ``spill``, its rows appended to it. Returns the composed ``_Pages``, and the last
     ``BakedPart`` — all the texels' when there is one part."""
-    count, units = len(baking.coverage.key), 1 + baking.sources.any()
+    count = len(baking.coverage.key)
     pages = _Pages.blank(baking)
-    with bar(count * units, "baking", wanted(quiet)) as advance:
-        made = (cluster.parts(_bake_part, baking, part_slices(count), times, advance, units)
+    with bar("baking", wanted(quiet)) as meter:
+        stages = _Stages.of(meter, baking, count)
+        made = (cluster.parts(_bake_part, baking, part_slices(count), times,
+                              stages.whole_parts(), 1)
                 if baking.settings.cluster is not None else
-                (_bake_part(baking, rows, times, advance) for rows in part_slices(count)))
+                (_bake_part(baking, rows, times, stages) for rows in part_slices(count)))
         for part in made:
             with timed(times, "compose"):
                 pages.add(baking, part.texels, part.validity, part.terms, part.direct,
@@ -289,8 +325,10 @@ def _bake_parts(baking: Baking, spill: Spill | None, times: dict[str, float], qu
 
 
 def _bake_part(baking: Baking, rows: slice, times: dict[str, float],
-               advance: Callable[[int], None]) -> BakedPart:
-    """Make, probe, trace and light the texels ``rows``."""
+               stages: "_Stages | None") -> BakedPart:
+    """Make, probe, trace and light the texels ``rows``, reporting to ``stages`` (None: to no
+    bar, as on a cluster's worker)."""
+    stages = stages or _Stages.of(Meter(), baking, 0)
     s, ambient, scene, world, tracer = (baking.settings, baking.ambient, baking.scene,
                                         baking.world, baking.tracer)
     with timed(times, "rasterise"):
@@ -298,20 +336,24 @@ def _bake_part(baking: Baking, rows: slice, times: dict[str, float],
     with timed(times, "validity"):  # sample points inside/behind geometry: moved or flagged
         texels, validity = check_texels(scene, world, tracer, made, s.d_max, faces=baking.faces)
         points = TexelPoints.of(texels, made.position)
+    stages.meter.start()
+    indirect = None
+    if s.method == "gi":  # the full-GI reference instead of I_A·W (gi.py); first, as it is
+        with timed(times, "gi"):  # most of the work: the bar's rate is then its rate
+            indirect = indirect_light(scene, world, tracer, baking.sources, texels, s, s.rays,
+                                      progress=stages.gi)
     with timed(times, "trace"):
         error_scale = (effective_r_ave(ambient, s.rho), float(ambient.intensity @ LUMINANCE))
         if baking.foliage is None:
-            terms = integrate(scene, world, tracer, texels, s, advance, error_scale=error_scale,
+            terms = integrate(scene, world, tracer, texels, s, stages.obscurance,
+                              error_scale=error_scale,
                               surfaces=baking.surfaces)
         else:
-            terms = integrate_with_foliage(baking.foliage, scene, world, texels, s, advance,
+            terms = integrate_with_foliage(baking.foliage, scene, world, texels, s,
+                                           stages.obscurance,
                                            error_scale, baking.surfaces)
     with timed(times, "direct"):
-        direct = direct_light(scene, world, tracer, texels, baking.sources, s, advance)
-    indirect = None
-    if s.method == "gi":  # the full-GI reference instead of I_A·W (gi.py)
-        with timed(times, "gi"):
-            indirect = indirect_light(scene, world, tracer, baking.sources, texels, s, s.rays)
+        direct = direct_light(scene, world, tracer, texels, baking.sources, s, stages.direct)
     return BakedPart(texels, points, validity, terms, direct, indirect)
 
 

@@ -1,17 +1,26 @@
-"""A progress bar with ETA on a terminal, silent in pipelines, CI and with ``quiet``.
+"""A progress bar of a bake's work, in rays cast, with ETA on a terminal; silent in
+pipelines, CI and with ``quiet``.
 
-tqdm does the drawing: it is small, well kept, and handles terminal widths and ETA smoothing
-better than code of our own would.
+The bar counts rays, the work there is: a texel of a 256-path GI bake costs a hundred times one
+of a 4-ray obscurance bake. Each stage (obscurance, direct light, GI) is registered with its
+texels and an estimate of the rays a texel casts (``Meter.stage``); as it reports the texels
+done and the rays they cast, its remaining rays are re-estimated from its mean so far, and the
+bar's total follows (GI's paths end by Russian roulette: their length is known only by casting
+them). tqdm draws it, with the average rate (``smoothing=0``): ETA = elapsed × to do / done.
 """
 
 from __future__ import annotations
 
 import os
 import sys
+import threading
 from contextlib import contextmanager
+from dataclasses import dataclass
 from typing import Callable, Iterator
 
 from tqdm import tqdm
+
+_DEFAULT_SIZE = (80, 24)  # columns and rows of a terminal that gives no size
 
 
 def wanted(quiet: bool) -> bool:
@@ -19,12 +28,91 @@ def wanted(quiet: bool) -> bool:
     return not quiet and not os.environ.get("CI") and sys.stderr.isatty()
 
 
+@dataclass
+class _Stage:
+    """One stage's texels, its first estimate of rays per texel, and what it reported done."""
+
+    texels: int
+    per_texel: float
+    texels_done: int = 0
+    rays_done: int = 0
+
+    def expected(self) -> float:
+        """The stage's rays in all: those cast, and the rest at the mean so far per texel (at
+        the first estimate before any texel is done)."""
+        if self.texels_done == 0:
+            return self.texels * self.per_texel
+        rest = max(0, self.texels - self.texels_done)
+        return self.rays_done + rest * self.rays_done / self.texels_done
+
+
+class Meter:
+    """The work of a bake's stages, in rays, drawn as one bar (``bar``: a tqdm, or None)."""
+
+    def __init__(self, bar: tqdm | None = None):
+        self._bar = bar
+        self._stages: list[_Stage] = []
+        self._lock = threading.Lock()  # the stages report from their worker threads
+        self._started = False
+
+    def stage(self, texels: int, rays_per_texel: float) -> Callable[[int, int], None]:
+        """Register a stage of ``texels`` texels casting about ``rays_per_texel`` rays each;
+        return its ``report(texels, rays)``: that many more texels done, casting that many
+        rays."""
+        stage = _Stage(int(texels), float(rays_per_texel))
+        with self._lock:
+            self._stages.append(stage)
+            self._show(0)
+
+        def report(texels_done: int, rays: int) -> None:
+            with self._lock:
+                stage.texels_done += int(texels_done)
+                stage.rays_done += int(rays)
+                self._show(int(rays))
+
+        return report
+
+    def total(self) -> int:
+        """The rays of every stage registered: cast, and estimated to come."""
+        return round(sum(stage.expected() for stage in self._stages))
+
+    def done(self) -> int:
+        """The rays the stages reported cast."""
+        return sum(stage.rays_done for stage in self._stages)
+
+    def start(self) -> None:
+        """The first rays are about to be cast: the bar's clock (its rate, its ETA) starts now
+        (the first time only), not with the texels' set-up before them."""
+        with self._lock:
+            if self._bar is not None and not self._started:
+                self._bar.reset(self._bar.total)
+            self._started = True
+
+    def _show(self, rays: int) -> None:
+        if self._bar is not None:
+            self._bar.total = max(self.total(), self.done())
+            self._bar.update(rays)
+
+
 @contextmanager
-def bar(total: int, label: str, show: bool) -> Iterator[Callable[[int], None]]:
-    """Yield an ``advance(n)`` callback; draws a bar of ``total`` units when ``show``."""
+def bar(label: str, show: bool) -> Iterator[Meter]:
+    """Yield a ``Meter`` for the stages to register with; drawn as a bar when ``show``."""
     if not show:
-        yield lambda n: None
+        yield Meter()
         return
-    with tqdm(total=total, desc=label, unit="texel", unit_scale=True, leave=False,
-              dynamic_ncols=True) as t:
-        yield t.update
+    sized = _has_size()
+    with tqdm(total=0, desc=label, unit="ray", unit_scale=True, leave=False, smoothing=0,
+              dynamic_ncols=sized, ncols=None if sized else _DEFAULT_SIZE[0],
+              nrows=None if sized else _DEFAULT_SIZE[1]) as drawn:
+        yield Meter(drawn)
+
+
+def _has_size() -> bool:
+    """Whether stderr's terminal gives its size. One made by ``script``, ``docker run -t`` or a
+    CI runner often says 0 × 0, where tqdm draws nothing (a bar below the screen's last row
+    is hidden): such a terminal gets ``_DEFAULT_SIZE``."""
+    try:
+        size = os.get_terminal_size(sys.stderr.fileno())
+    except (OSError, ValueError):
+        return False
+    return size.columns > 0 and size.lines > 0
