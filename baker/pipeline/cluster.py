@@ -93,7 +93,6 @@ class Session:
     address: str
     cpus: int
     nodes: int
-    largest: int  # CPUs of the largest node: the most one part may take
     connected_here: bool
     workers: dict[str, dict[str, int]] = field(default_factory=dict)
     worker_seconds: dict[str, float] = field(default_factory=dict)
@@ -119,14 +118,10 @@ def session(address: str | None, threads: int, identity: Callable[[], dict[str, 
             ) -> Iterator[Session | None]:
     """Connect to the cluster at ``address`` ("host:port" of its head) and check its nodes
     (``connect``: parts of ``threads`` CPUs, ``Settings.threads``, 0 for 1; ``identity``) for
-    the block; None for no address. Within a session for the same address, the same one (a
-    bake's parts find it with ``current``)."""
+    the block, in which a bake's parts find it (``current``); None for no address."""
     global _current
     if address is None:
         yield None
-        return
-    if _current is not None and _current.address == address:
-        yield _current
         return
     opened = connect(address, max(1, threads), identity)
     _current = opened
@@ -177,8 +172,8 @@ def connect(address: str, threads: int, identity: Callable[[], dict[str, str]]) 
         if connected_here:
             ray.shutdown()
         raise
-    cpus = [int(n["Resources"]["CPU"]) for n in nodes]
-    return Session(address, sum(cpus), len(nodes), max(cpus), connected_here)
+    return Session(address, sum(int(n["Resources"]["CPU"]) for n in nodes), len(nodes),
+                   connected_here)
 
 
 def _check_nodes(ray, address: str, nodes: list[dict], identity: Callable) -> None:
