@@ -38,6 +38,7 @@ from baker.rebake.diff import code_fingerprint
 from baker.rebake.staging import StateStaging
 from baker.rebake.state import default_path as default_state_path
 from baker.run.atomic import Outputs, write_atomically
+from baker.run.compile_clock import CompileClock
 from baker.settings import Resolved, Settings
 
 
@@ -182,7 +183,7 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
     with timed(loading, "load"):
         scene = load(input_path, settings.mirror_roughness)
     check_input_kept(scene, output, overwrite)
-    with ThreadPoolExecutor(1) as beside, \
+    with ThreadPoolExecutor(1) as beside, CompileClock() as compiling, \
             cluster.session(settings.cluster, settings.threads, cluster_identity) as on_cluster:
         staging = None if state_path is None else StateStaging(beside, state_path, settings)
         outputs = Outputs()  # every file of the bake, put in place together (run/atomic.py)
@@ -217,11 +218,12 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
                                      outputs.stage)
                 if staging is not None:
                     staging.stage_into(outputs)
-                    record_full_bake(state_path, rebaked, time.perf_counter() - started,
-                                     outputs.stage)
+                    record_full_bake(state_path, rebaked, time.perf_counter() - started
+                                     - compiling.seconds, outputs.stage)
             seconds = time.perf_counter() - started
             report = _report(input_path, output, done, info, pages, times, seconds,
-                             summary(rebaked, state_path, incremental, seconds))
+                             summary(rebaked, state_path, incremental, seconds,
+                                     compiling.seconds))
             if on_cluster is not None:  # which worker baked what, the stages' time on them
                 report["cluster"] = on_cluster.report()
             if report_path is not None:

@@ -36,9 +36,12 @@ def print_rebake(result: baker.BakeResult) -> None:
         reasons = ", ".join(f"{k} {v:,}" for k, v in info["dirty_by_reason"].items() if v)
         relit = (f"; shadow rays recast for light(s) {', '.join(map(str, info['relit_lights']))}"
                  if info["relit_lights"] else "")
-        full = info.get("last_full_bake_seconds")
-        against = (f" = {100 * info['seconds'] / full:.0f} % of the last full bake ({full:.2f} s)"
-                   if full and info.get("seconds") is not None else "")
+        full, compiled = info.get("last_full_bake_seconds"), info.get("compile_seconds", 0.0)
+        warm = None if info.get("seconds") is None else info["seconds"] - compiled
+        against = (f" = {100 * warm / full:.0f} % of the last full bake ({full:.2f} s), both "
+                   "without numba's compile"
+                   + (f" ({compiled:.2f} s of this one)" if compiled >= 0.005 else "")
+                   if full and warm is not None else "")
         print(f"rebake: {changes}: {info['dirty_texels']:,} of {info['texels']:,} texels "
               f"({100 * info['dirty_fraction']:.2f} %) recomputed"
               f"{' (' + reasons + ')' if reasons else ''}{relit}; {info['rays']:,} rays; "

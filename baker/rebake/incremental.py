@@ -1233,17 +1233,19 @@ def bake_state_writer(scene: Scene, world: World, resolved, atlas, per_texel,
 
 
 def record_full_bake(path, rebaked, seconds: float, write) -> None:
-    """After a full bake, record beside its state at ``path`` the ``seconds`` it took
-    (``state.timing_path``), which the reports of the rebakes that follow compare with;
+    """After a full bake, record beside its state at ``path`` the ``seconds`` it took without
+    numba's compile (``state.timing_path``), which the reports of the rebakes that follow compare with;
     ``write(path, bytes)`` writes it (``run.atomic.Outputs.stage``)."""
     if not isinstance(rebaked, Rebaked):
         state_file.save_full_bake_seconds(path, seconds, write)
 
 
-def summary(rebaked, state_path, incremental: bool, seconds: float | None = None) -> dict:
+def summary(rebaked, state_path, incremental: bool, seconds: float | None = None,
+            compile_seconds: float = 0.0) -> dict:
     """The JSON-able account of the rebake for the report: full or incremental, why, what
     changed, how many texels were dirty for which reason, rays cast, and its ``seconds``
-    against the last full bake's (``last_full_bake_seconds``, None when not recorded)."""
+    (``compile_seconds`` of them numba's compile, ``run.compile_clock``) against the last full
+    bake's without its compile (``last_full_bake_seconds``, None when not recorded)."""
     out: dict = {"incremental": isinstance(rebaked, Rebaked),
                  "state": None if state_path is None else str(state_path)}
     if isinstance(rebaked, str):
@@ -1261,7 +1263,7 @@ def summary(rebaked, state_path, incremental: bool, seconds: float | None = None
             "moved_nodes": sorted({rebaked.fingerprints["instances"][i]["name"]
                                    for i in rebaked.diff.moved}),
             "rays": int(rebaked.rays), "test_rays": int(rebaked.dirty.tested_rays),
-            "seconds": seconds,
+            "seconds": seconds, "compile_seconds": compile_seconds,
             "last_full_bake_seconds": state_file.last_full_bake_seconds(state_path)})
     return out
 
