@@ -1,0 +1,67 @@
+"""Rebake = full bake, as a property over generated rooms and edits.
+
+Each case draws a room (``assets.random_rooms``: props of every material kind, punctual lights,
+maybe sky, open or closed) and an edit of it (a prop moved, turned, scaled or recoloured, a
+light changed, or several at once), bakes the room, rebakes the edited room from that bake's
+state and bakes the edited room from scratch: the two outputs and the two bake states must be
+the same bytes. ``CASES`` rooms run in the normal suite; ``BAKER_LONG=1`` runs ``LONG_CASES``.
+Cases that once failed are kept in ``REGRESSIONS`` (room seed, edit seed).
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+
+import pytest
+
+import baker
+from assets.random_rooms import build, random_edit, random_room
+from baker.rebake.state import default_path
+
+CASES, LONG_CASES, EDITS_PER_ROOM = 8, 200, 3
+REGRESSIONS: list[tuple[int, int]] = []
+
+
+def _settings(spec) -> baker.Settings:
+    return baker.Settings(rays=spec["rays"], page_size=256, shadow_rays=4, threads=1,
+                          texel_density=spec["density"], supersample=spec["supersample"],
+                          sky=(0.2, 0.25, 0.3) if spec["sky"] else None)
+
+
+def _rooms() -> list[int]:
+    return list(range(LONG_CASES if os.environ.get("BAKER_LONG") else CASES))
+
+
+def check_case(folder, room_seed: int, edit_seeds) -> list[str]:
+    """Bake room ``room_seed``, then for each edit seed rebake and fully bake the edited room;
+    return a line per edit whose bytes differ."""
+    spec = random_room(room_seed)
+    build(spec).save(folder / "room.glb")
+    baker.bake(folder / "room.glb", folder / "base.glb", _settings(spec))
+    failures = []
+    for edit_seed in edit_seeds:
+        what, edited = random_edit(spec, edit_seed)
+        scene = build(edited).save(folder / "edited.glb")
+        shutil.copy(default_path(folder / "base.glb"), default_path(folder / "incremental.glb"))
+        result = baker.bake(scene, folder / "incremental.glb", _settings(edited), incremental=True)
+        baker.bake(scene, folder / "full.glb", _settings(edited))
+        same_output = (folder / "incremental.glb").read_bytes() == (folder / "full.glb").read_bytes()
+        same_state = (default_path(folder / "incremental.glb").read_bytes()
+                      == default_path(folder / "full.glb").read_bytes())
+        if not (same_output and same_state):
+            failures.append(f"room {room_seed}, edit {edit_seed} ({what}, incremental "
+                            f"{result.rebake['incremental']}): output same {same_output}, "
+                            f"state same {same_state}")
+    return failures
+
+
+@pytest.mark.parametrize("room_seed", _rooms())
+def test_rebake_equals_a_full_bake_on_generated_rooms(tmp_path, room_seed):
+    edit_seeds = [1000 * room_seed + e for e in range(EDITS_PER_ROOM)]
+    assert check_case(tmp_path, room_seed, edit_seeds) == []
+
+
+@pytest.mark.parametrize("room_seed, edit_seed", REGRESSIONS)
+def test_rebake_equals_a_full_bake_on_cases_that_once_failed(tmp_path, room_seed, edit_seed):
+    assert check_case(tmp_path, room_seed, [edit_seed]) == []
