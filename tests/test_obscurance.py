@@ -139,3 +139,22 @@ def test_a_rays_change_replaces_its_value_in_the_sums_exactly():
     for name in ("w_hit", "escaped", "hit_sq", "half_split", "quarter_split"):
         assert np.array_equal(getattr(terms, name), getattr(fresh, name)), name
     assert not np.array_equal(fresh.w_hit, _means(before, counts).w_hit)
+
+
+def test_step_ao_under_a_low_ceiling_never_claims_an_exact_texel(tmp_path):
+    """Classic AO (step) under a ceiling at 0.3·d_max: a ray escapes with p = 0.3² = 0.09, so
+    at 16 rays about 0.91¹⁶ = 22 % of texels see no escape and have sample variance 0, while
+    their true W is 0.09 (their error 100 %). Their standard error must not be 0, and the
+    texels' ±2σ band must hold W's closed form about as often as a normal band does."""
+    height, d_max = 0.3, 1.0
+    builder = parallel_planes(height=height, half_extent=50.0, probe_size=0.4)
+    done = computed(builder, tmp_path, only_nodes={builder.info["nodes"]["probe"]},
+                    texel_density=40.0, rays=16, d_max=d_max, rho="step")
+    r_ave = effective_r_ave(done.ambient, "step")
+    w = _w(done).mean(axis=1)
+    sigma = done.terms.standard_error(r_ave)
+    expected = _closed_form_w("step", height, d_max, 0.5, float(r_ave[0]))
+    unseen = done.terms.escaped == 0
+    assert 0.1 < unseen.mean() < 0.4 and np.all(sigma[unseen] > 0)
+    covered = np.mean(np.abs(w - expected) <= 2 * sigma)
+    assert covered > 0.9, covered

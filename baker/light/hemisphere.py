@@ -114,12 +114,17 @@ class Terms:
         return self.w_hit + self.escaped[:, None] * r_ave
 
     def standard_error(self, r_ave: np.ndarray) -> np.ndarray:
-        """(N,) standard error of the luminance of W, from the rays' sample variance."""
+        """(N,) standard error of the luminance of W, from the rays' sample variance; where
+        that is 0 and no ray escaped (every ray hit within d_max with ``--rho step``: W = 0),
+        ``binomial_floor``: a fraction p ~ 1/n of the texel's directions may still escape
+        unseen, and an error of 0 would claim W exact. (A texel whose every ray escaped, an
+        open floor's, keeps 0: there the rays' value R_ave is usually exact.)"""
         mean = self._front(r_ave) @ LUMINANCE
         second = self.hit_sq + self.escaped * float(r_ave @ LUMINANCE) ** 2
         n = np.maximum(self.counts, 1)
         variance = np.maximum(second - mean * mean, 0.0) * n / np.maximum(n - 1, 1)
-        return np.sqrt(variance / n)
+        unseen = (variance <= 0) & (self.escaped <= 0)
+        return np.where(unseen, binomial_floor(self.counts, r_ave), np.sqrt(variance / n))
 
     def rmse(self, r_ave: np.ndarray, technique: str) -> float:
         """Estimated RMSE over the texels of W's luminance, from the rays alone.
@@ -157,6 +162,16 @@ def _split_square_sum(split, escaped_lum):
         e = min(max(0.5 * (split[i, 0] + escaped_lum * split[i, 1]), -_SPLIT_MAX), _SPLIT_MAX)
         total += e * e
     return total
+
+
+def binomial_floor(counts: np.ndarray, r_ave: np.ndarray) -> np.ndarray:
+    """(N,) the standard error of a mean of ``counts`` rays that all gave one value, their
+    values lying in [0, M], M = max(1, lum R_ave) (a ray gives R·ρ or R_ave): M/(n + 2), the
+    rule of succession's p̂ = (k + 1)/(n + 2) at k = 0 of n rays giving another value. When
+    no ray of n saw an event of probability p, p ≲ 1/n is all they can say, and the texel may
+    be off by p·M; one such ray in n gives a sample error of about M/n, so the two meet."""
+    bound = max(1.0, float(r_ave @ LUMINANCE))
+    return bound / (np.asarray(counts, np.float64) + 2.0)
 
 
 def rmse_of(squares: np.ndarray, count: int, technique: str) -> float:
