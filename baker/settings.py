@@ -197,6 +197,11 @@ class Settings:
             if value not in allowed:
                 raise SettingsError(f"{name} must be one of {', '.join(allowed)}, not {value!r}",
                                     fix=f"use --{name} {allowed[0]}")
+        if self.cluster is not None and self.foliage != "none":
+            raise SettingsError("--foliage approx does not run on a cluster: the workers would "
+                                "need its Embree scene without the crowns' leaves, which is "
+                                "not shipped to them", fix="bake without --cluster or without "
+                                                           "--foliage")
 
     def _check_output(self) -> None:
         """Carrier, baked lights, encoding and occlusion: known values that fit together."""

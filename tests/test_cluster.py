@@ -205,6 +205,14 @@ def test_an_unreachable_cluster_is_a_clear_error_before_any_work(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["cornell.glb"]
 
 
+def test_foliage_on_a_cluster_is_refused_before_any_work(tmp_path):
+    source = cornell_box().save(tmp_path / "cornell.glb")
+    with pytest.raises(baker.SettingsError, match="--foliage approx does not run on a cluster"):
+        baker.bake(source, tmp_path / "baked.glb",
+                   baker.Settings(cluster="127.0.0.1:1", foliage="approx"))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cornell.glb"]
+
+
 def test_without_ray_the_cluster_asks_for_the_extra(tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "ray", None)  # import ray fails, as when not installed
     source = cornell_box().save(tmp_path / "cornell.glb")
