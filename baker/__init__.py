@@ -29,11 +29,27 @@ edit changed, from the bake state (``rebake.state``). ``api.bake`` chooses betwe
 writes the files and the report; ``baker.cli`` is the command line over it.
 """
 
-from baker.api import BakeResult, bake
+from __future__ import annotations
+
+import importlib
+
 from baker.errors import BakerError, InputError, OutputError, SettingsError
 from baker.settings import Settings
-from baker import gltf, preview  # after `import baker`: baker.preview.render(baker.gltf.load.load(...))
 
 __all__ = ["bake", "BakeResult", "Settings", "BakerError", "InputError", "OutputError",
            "SettingsError"]
 __version__ = "0.1.0"
+
+
+def __getattr__(name: str):
+    """``bake``, ``BakeResult`` and the subpackages, imported on first use (after ``import
+    baker``, ``baker.preview.render(baker.gltf.load.load(...))`` works): ``import baker`` stays
+    light (numpy, numba, Embree are loaded by the first bake), so that the command line can say
+    "interrupted" for a Ctrl-C while they load (``cli.main.entry``)."""
+    api = importlib.import_module("baker.api")  # the whole pipeline, as ``import baker`` was
+    if name in ("bake", "BakeResult"):
+        return getattr(api, name)
+    try:
+        return importlib.import_module(f"baker.{name}")
+    except ModuleNotFoundError:
+        raise AttributeError(f"module 'baker' has no attribute {name!r}") from None

@@ -352,3 +352,361 @@ def test_the_default_state_path_being_a_folder_is_refused_before_baking(case, ca
     code, err = case.bake(capsys)
     assert code == 1 and "baked.glb.bake" in err and "is a folder" in err, err
     assert snapshot(case.root) == before
+
+
+# ------------------------------------------------------------------------------------------------
+# the bake state: checked member by member, anything off a full bake
+
+
+def _edit_state(path: Path, edit) -> None:
+    """Rewrite the bake state at ``path`` with ``edit(header, arrays)`` applied (the header's
+    JSON and every ``.npy`` member as arrays, changed in place), CRCs recomputed as an attacker
+    would: the state passes every check of its bytes."""
+    import io
+    import zipfile
+
+    import numpy as np
+
+    with zipfile.ZipFile(path) as archive:
+        header = json.loads(archive.read("header.json"))
+        arrays = {name[:-4]: np.load(io.BytesIO(archive.read(name)))
+                  for name in archive.namelist() if name.endswith(".npy")}
+    for name, listed in header.pop("zeros").items():  # every array stored whole, to be edited
+        arrays[name] = np.zeros(listed["shape"], listed["dtype"])
+    for name, listed in header.pop("repeated").items():
+        arrays[name] = np.broadcast_to(arrays[name], listed["shape"]).astype(listed["dtype"])
+    for name, listed in header.pop("sparse").items():
+        full = np.zeros(listed["shape"], listed["dtype"])
+        full[arrays.pop(f"{name}.rows")] = arrays[name]
+        arrays[name] = full
+    header.update(zeros={}, repeated={}, sparse={})
+    compress = edit(header, arrays) or zipfile.ZIP_STORED
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_STORED) as archive:
+        archive.writestr("header.json", json.dumps(header), compress_type=compress)
+        for name, array in arrays.items():
+            buffer = io.BytesIO()
+            np.save(buffer, array)
+            archive.writestr(f"{name}.npy", buffer.getvalue())
+
+
+def _set(name, index, value):
+    def edit(header, arrays):
+        arrays[name][index] = value
+    return edit
+
+
+def _header(change):
+    def edit(header, arrays):
+        change(header)
+    return edit
+
+
+STATE_EDITS = {
+    "fingerprints {}": _header(lambda h: h.update(fingerprints={})),
+    "fingerprints a list": _header(lambda h: h.update(fingerprints=[1, 2])),
+    "an instance's fingerprint a string": _header(
+        lambda h: h["fingerprints"]["instances"].__setitem__(0, "x")),
+    "stored density a string": _header(
+        lambda h: h["fingerprints"]["settings"]["values"].update(texel_density="dense")),
+    "atlas width 0": _header(lambda h: h["groups"]["atlas"]["scalars"].update(width=0)),
+    "page_count -1": _header(lambda h: h["groups"]["atlas"]["scalars"].update(page_count=-1)),
+    "a huge listed shape": _header(lambda h: h["zeros"].update(
+        {"terms/escaped": {"shape": [1 << 40], "dtype": "<f8"}})),
+    "an object dtype": _header(lambda h: h["zeros"].update(
+        {"terms/escaped": {"shape": [4], "dtype": "|O"}})),
+    "a texel's triangle out of range": _set("texels/triangle", 0, 10 ** 6),
+    "an unwrap's vertex out of range": _set("atlas/triangles", (0, 0), 10 ** 6),
+    "vertex counts that do not add up": _set("atlas/vertex_counts", 0, 10 ** 6),
+    "unsorted keys": _set("texels/key", 0, 1 << 40),
+    "NaN terms": _set("terms/w_hit", (0, 0), float("nan")),
+    "escaped 5": _set("terms/escaped", slice(None), 5.0),
+    "validity state 7": _set("validity/state", 0, 7),
+    "infinite world matrix": _set("instance_world", (0, 0, 0), float("inf")),
+    "counts as floats": lambda h, a: a.update({"terms/counts": a["terms/counts"] * 1.0}),
+    "a deflated header": lambda h, a: __import__("zipfile").ZIP_DEFLATED,
+}
+
+
+@pytest.mark.parametrize("edit", list(STATE_EDITS))
+def test_an_edited_bake_state_gives_a_full_bake_of_the_right_lightmap(case, capsys, edit):
+    """Every edit of a state whose CRCs pass: exit 0 (never 3) with "full bake: the bake state
+    is unusable …" or another reason for a full bake, and an output byte for byte the one a
+    bake without a state gives."""
+    code, err = case.bake(capsys, "--no-state", output=case.out / "reference.glb")
+    assert code == 0, err
+    code, err = case.bake(capsys)
+    assert code == 0, err
+    state = case.out / "baked.glb.bake"
+    _edit_state(state, STATE_EDITS[edit])
+    case.json["nodes"][0]["translation"] = [0.0, 0.0, 0.0]  # an edit a rebake can follow
+    code = main(["bake", str(case.gltf), "-o", str(case.output), *FAST[:-1]])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    assert "full bake: " in out and "internal error" not in err, out
+    if edit not in ("fingerprints a list", "a deflated header"):
+        assert "unusable" in out or "damaged" in out, out
+    assert case.output.read_bytes() == (case.out / "reference.glb").read_bytes()
+
+
+def test_an_unedited_state_rewritten_so_still_rebakes(case, capsys):
+    """The control of the edits above: the state rewritten by ``_edit_state`` with no edit (every
+    array stored whole) is used: the rebake follows."""
+    code, err = case.bake(capsys)
+    assert code == 0, err
+    _edit_state(case.out / "baked.glb.bake", lambda header, arrays: None)
+    case.json["nodes"][0]["translation"] = [0.0, 0.0, 0.0]
+    case.gltf.write_text(json.dumps(case.json))
+    code = main(["bake", str(case.gltf), "-o", str(case.output), *FAST[:-1]])
+    out, err = capsys.readouterr()
+    assert code == 0 and out.startswith("rebake: "), (out, err)
+
+
+# ------------------------------------------------------------------------------------------------
+# exhaustion: special files, bombs, huge declared counts — in a child process, time and memory
+# measured
+
+CEILING_KIB = 1_000_000  # resident memory of the whole `baker bake` process (Python, numba, …)
+LIMIT_SECONDS = 60.0
+
+
+def run_measured(*args: str) -> tuple[int, str, float, int]:
+    """Run ``python -m baker.cli.main ARGS`` as a child; return (exit code, stderr, seconds,
+    peak resident KiB of that child alone, ``os.wait4``). Killed after ``LIMIT_SECONDS``."""
+    import subprocess
+    import sys
+    import tempfile
+    import time
+
+    root = Path(__file__).resolve().parents[1]
+    with tempfile.TemporaryFile() as err:
+        start = time.monotonic()
+        child = subprocess.Popen([sys.executable, "-m", "baker.cli.main", *args], cwd=root,
+                                 stdout=subprocess.DEVNULL, stderr=err)
+        while True:
+            pid, status, usage = os.wait4(child.pid, os.WNOHANG)
+            if pid:
+                break
+            if time.monotonic() - start > LIMIT_SECONDS:
+                child.kill()
+                pid, status, usage = os.wait4(child.pid, 0)
+                break
+            time.sleep(0.02)
+        child.returncode = os.waitstatus_to_exitcode(status)
+        seconds = time.monotonic() - start
+        err.seek(0)
+        return child.returncode, err.read().decode(), seconds, usage.ru_maxrss
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no FIFOs on this system")
+@pytest.mark.parametrize("special", ["state FIFO", "state link to /dev/zero", "timing FIFO"])
+def test_a_special_file_as_the_bake_state_is_not_read(case, capsys, special):
+    """``OUT.bake`` (or its ``.json``) a FIFO, or a link to ``/dev/zero``: refused without a
+    read, a full bake within the time and memory limits."""
+    code, err = case.bake(capsys)
+    assert code == 0, err
+    state = case.out / "baked.glb.bake"
+    target = state if special.startswith("state") else state.with_name(state.name + ".json")
+    target.unlink()
+    if special.endswith("FIFO"):
+        os.mkfifo(target)
+    else:
+        target.symlink_to("/dev/zero")
+    case.gltf.write_text(json.dumps(case.json))
+    code, err, seconds, kib = run_measured("bake", str(case.gltf), "-o", str(case.output), *FAST)
+    assert code == 0, err
+    assert seconds < LIMIT_SECONDS and kib < CEILING_KIB, (seconds, kib)
+    assert state.is_file() and not state.is_symlink()  # a new state in its place
+
+
+def deflate_bomb(name: bytes, gib: int) -> bytes:
+    """A ZIP archive of one member ``name`` deflated from ``gib`` GiB of spaces, a few MB:
+    one deflated MiB (a full flush: a block that stands alone) repeated, then the final block."""
+    import struct
+    import zlib
+
+    block = b" " * (1 << 20)
+    squeeze = zlib.compressobj(9, zlib.DEFLATED, -15)
+    chunk = squeeze.compress(block) + squeeze.flush(zlib.Z_FULL_FLUSH)
+    data = chunk * (gib << 10) + squeeze.flush(zlib.Z_FINISH)
+    crc = 0
+    for _ in range(gib << 10):
+        crc = zlib.crc32(block, crc)
+    size = gib << 30
+    local = struct.pack("<IHHHHHIIIHH", 0x04034B50, 20, 0, 8, 0, 33, crc, len(data), size,
+                        len(name), 0) + name
+    central = struct.pack("<IHHHHHHIIIHHHHHII", 0x02014B50, 20, 20, 0, 8, 0, 33, crc, len(data),
+                          size, len(name), 0, 0, 0, 0, 0, 0) + name
+    end = struct.pack("<IHHHHIIH", 0x06054B50, 0, 0, 1, 1, len(central), len(local) + len(data),
+                      0)
+    return local + data + central + end
+
+
+def test_a_deflate_bomb_in_the_state_is_not_inflated(case, capsys):
+    """A 3 MB state whose header.json inflates to 3 GiB: refused from its directory entry (baker
+    writes its members stored), a full bake within the time and memory limits."""
+    import zipfile
+
+    code, err = case.bake(capsys)
+    assert code == 0, err
+    state = case.out / "baked.glb.bake"
+    state.write_bytes(deflate_bomb(b"header.json", 3))
+    with zipfile.ZipFile(state) as archive:  # a valid archive that would inflate to 3 GiB
+        assert archive.getinfo("header.json").file_size == 3 << 30
+    assert state.stat().st_size < 8 << 20
+    case.gltf.write_text(json.dumps(case.json))
+    code, err, seconds, kib = run_measured("bake", str(case.gltf), "-o", str(case.output), *FAST)
+    assert code == 0, err
+    assert seconds < LIMIT_SECONDS and kib < CEILING_KIB, (seconds, kib)
+
+
+@pytest.mark.parametrize("asked", [{"rays": "many"}, {"page_size": -3}, "not an object"])
+def test_rebake_with_unusable_stored_settings_does_not_fail(case, capsys, asked):
+    """``baker rebake`` takes the last bake's settings from the state; stored settings that
+    are not settings: exit 1 saying so (never 3), the previous output kept."""
+    code, err = case.bake(capsys)
+    assert code == 0, err
+    _edit_state(case.out / "baked.glb.bake",
+                _header(lambda h: h["fingerprints"].update(asked=asked)))
+    before = snapshot(case.root)
+    code = main(["rebake", str(case.gltf), "-o", str(case.output), "--quiet"])
+    out, err = capsys.readouterr()
+    assert code == 1 and "stored in the bake state" in err and "unusable" in err, err
+    assert err.startswith("baker: error: ") and "Traceback" not in err, err
+    assert snapshot(case.root) == before
+
+
+# ------------------------------------------------------------------------------------------------
+# no internal error for any input: the JSON parser bounded, overflow-safe checks, Ctrl-C anywhere
+
+
+def _json_text(case: Case, extra: str) -> None:
+    """Save the scene with ``"extras": <extra>`` as raw JSON text at its top."""
+    text = json.dumps(case.json)
+    case.gltf.write_text('{"extras": ' + extra + ", " + text[1:])
+
+
+@pytest.mark.parametrize("extra, message", [
+    ("1" * 5000, "an integer of 5,000 digits"),
+    ("-" + "9" * 401, "an integer of 401 digits"),
+    ("[" * 100_000 + "]" * 100_000, "nested more than 64"),
+    ("[" * 900 + "]" * 900, "nested more than 64"),  # parses, then too deep for what follows
+    ('{"a": ' * 65 + "0" + "}" * 65, "nested more than 64"),
+])
+def test_json_numbers_and_nesting_are_bounded(case, capsys, extra, message):
+    _json_text(case, extra)
+    code = main(["bake", str(case.gltf), "-o", str(case.output), *FAST])
+    err = capsys.readouterr().err
+    assert code == 1, err
+    case.assert_refused(err, message)
+
+
+def test_json_within_the_bounds_bakes(case, capsys):
+    _json_text(case, '{"a": ' * 60 + str(int(1e300)) + "}" * 60)
+    code = main(["bake", str(case.gltf), "-o", str(case.output), *FAST])
+    assert code == 0, capsys.readouterr().err
+
+
+@pytest.mark.parametrize("scales", [[1e300], [1e200, 1e200], [1e13], [-1e300]])
+def test_a_node_scale_that_overflows_is_refused_naming_the_node(case, capsys, scales):
+    """Scales of 1e300 (or two nested of 1e200: infinity) made the density check overflow
+    (exit 3); a mesh beyond 1e12 units is refused naming the node (the innermost)."""
+    nodes = case.json["nodes"]
+    for scale in scales[1:]:  # parents around the mesh's node
+        nodes.append({"children": [len(nodes) - 1], "scale": [scale] * 3})
+    nodes[0]["scale"] = [scales[0]] * 3
+    case.json["scenes"][0]["nodes"] = [len(nodes) - 1]
+    code, err = case.bake(capsys)
+    assert code == 1, err
+    case.assert_refused(err, "nodes[0]", "from the origin")
+
+
+def test_ctrl_c_while_the_pipeline_is_imported_exits_130_with_one_line(monkeypatch, capsys):
+    """``baker`` imports the pipeline (numpy, numba, Embree: about a second) inside ``entry``:
+    a Ctrl-C then exits 130 with one line, not a traceback of the imports."""
+    import signal
+    import sys
+
+    from baker.cli import main as cli_main
+
+    real = importlib.import_module
+
+    def interrupted(name, *args):
+        if name == "baker.api":
+            raise KeyboardInterrupt
+        return real(name, *args)
+
+    handler = signal.getsignal(signal.SIGINT)
+    monkeypatch.setattr(importlib, "import_module", interrupted)
+    monkeypatch.setattr(sys, "argv", ["baker", "bake", "x.glb", "-o", "y.glb"])
+    try:
+        assert cli_main.entry() == 130
+    finally:
+        signal.signal(signal.SIGINT, handler)
+    assert capsys.readouterr().err == "baker: interrupted; no output was changed\n"
+
+
+def test_importing_baker_loads_no_pipeline():
+    """What makes the test above hold for real: ``import baker.cli.main`` (what the ``baker``
+    script does first) loads neither numpy nor the pipeline; the first use does."""
+    import subprocess
+    import sys
+
+    code = ("import sys, baker.cli.main; "
+            "print(sorted(m for m in ('numpy', 'numba', 'embreex', 'baker.api') if m in sys.modules))")
+    root = Path(__file__).resolve().parents[1]
+    out = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True)
+    assert out.stdout.strip() == "[]", out
+
+
+# ------------------------------------------------------------------------------------------------
+# baker watch: every file the scene uses
+
+
+def test_watch_rebakes_when_the_bin_or_an_image_alone_changes(case):
+    """``baker watch`` on a .gltf: touching only its .bin, then only its texture, rebakes each
+    time (it watched the .gltf alone: an edit to the .bin was never baked)."""
+    import subprocess
+    import sys
+
+    case.with_texture("tex.png")
+    case.gltf.write_text(json.dumps(case.json))
+    root = Path(__file__).resolve().parents[1]
+    child = subprocess.Popen(
+        [sys.executable, "-m", "baker.cli.main", "watch", str(case.gltf), "-o", str(case.output),
+         "--interval", "0.05", "--max-bakes", "3", "--rays", "2", "--page-size", "32"],
+        cwd=root, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    watchdog = threading.Timer(LIMIT_SECONDS * 2, child.kill)
+    watchdog.start()
+    try:
+        for touched in (case.bin, case.png, None):
+            line = child.stdout.readline()
+            while line and not line.startswith("baked "):
+                line = child.stdout.readline()
+            assert line.startswith("baked "), child.stderr.read()
+            if touched is not None:
+                stamp = touched.stat().st_mtime_ns
+                os.utime(touched, ns=(stamp + 10 ** 9, stamp + 10 ** 9))
+        assert child.wait() == 0, child.stderr.read()
+    finally:
+        watchdog.cancel()
+        child.kill()
+
+
+@pytest.mark.parametrize("accessors, count", [(6, 1 << 25), (1, 1 << 27)])
+def test_accessors_declaring_gigabytes_are_refused_before_allocating(case, accessors, count):
+    """A 2 KB glTF whose accessors have no bufferView (zeros: nothing in the file bounds their
+    count) and declare 6 × 2^25 VEC3 or one 2^27 VEC3 (4.8 and 3.2 GB as float64): refused from
+    the declared counts, naming the largest accessor and the figure, in a child well under the
+    memory ceiling."""
+    first = len(case.json["accessors"])
+    attributes = case.json["meshes"][0]["primitives"][0]["attributes"]
+    for k in range(accessors):
+        case.json["accessors"].append({"componentType": 5126, "count": count, "type": "VEC3"})
+        attributes[f"COLOR_{k}" if k else "NORMAL"] = first + k
+    case.gltf.write_text(json.dumps(case.json))
+    assert case.gltf.stat().st_size < 4096
+    code, err, seconds, kib = run_measured("bake", str(case.gltf), "-o", str(case.output), *FAST)
+    assert code == 1, err
+    assert f"accessors[{first}]" in err and f"{3 * count:,}" in err, err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 2, err
+    assert seconds < LIMIT_SECONDS and kib < CEILING_KIB, (seconds, kib)

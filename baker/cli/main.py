@@ -18,20 +18,23 @@ from contextlib import contextmanager
 from typing import Iterator
 
 import baker
-from baker.cli import bake, hook, preview, rebake, relight, study, view, watch
 
-SUBCOMMANDS = (bake, rebake, relight, watch, hook, preview, view, study)
+SUBCOMMANDS = ("bake", "rebake", "relight", "watch", "hook", "preview", "view", "study")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The ``baker`` parser with every subcommand registered."""
+    """The ``baker`` parser with every subcommand registered (their modules, and with them the
+    whole pipeline, imported here rather than when this module is)."""
+    from importlib import import_module
+
     parser = argparse.ArgumentParser(
         prog="baker", description="Bake lightmaps (obscurances with colour bleeding) into glTF scenes.")
     parser.add_argument("--version", action="version", version=f"baker {baker.__version__}")
     parser.add_argument("--debug", action="store_true", help="show the traceback of an error")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for module in SUBCOMMANDS:
-        module.add_parser(commands)
+    import_module("baker.api")  # the whole pipeline, which the subcommands' options name
+    for name in SUBCOMMANDS:
+        import_module(f"baker.cli.{name}").add_parser(commands)
     return parser
 
 
@@ -88,12 +91,17 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def entry() -> int:
-    """The ``baker`` command: ``main`` on the process's arguments. Once it has returned, a
-    second Ctrl-C (an impatient user presses it twice) has nothing left to stop: it is ignored
-    while Python waits for the worker threads to end their chunk, rather than printing a
-    traceback from the interpreter's shutdown."""
+    """The ``baker`` command: ``main`` on the process's arguments. A Ctrl-C while the pipeline's
+    modules are imported (``build_parser``: numpy, numba and Embree take a second) exits 130 with
+    one line, as one during the bake does. Once ``main`` has returned, a second Ctrl-C (an
+    impatient user presses it twice) has nothing left to stop: it is ignored while Python waits
+    for the worker threads to end their chunk, rather than printing a traceback from the
+    interpreter's shutdown."""
     try:
         return main()
+    except KeyboardInterrupt:
+        print("baker: interrupted; no output was changed", file=sys.stderr)
+        return 130
     finally:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
 

@@ -1,4 +1,4 @@
-"""``baker watch``: rebake a scene whenever its file changes, until Ctrl-C."""
+"""``baker watch``: rebake a scene whenever its file, or a file it uses, changes, until Ctrl-C."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ from pathlib import Path
 
 import baker
 from baker.cli.state import print_rebake, settings_for
+from baker.gltf.load import used_files
 
 
 def add_parser(commands) -> None:
@@ -16,8 +17,9 @@ def add_parser(commands) -> None:
     are those of ``baker bake``: the defaults, or the ones given here)."""
     parser = commands.add_parser(
         "watch", help="rebake a scene each time its file changes (Ctrl-C stops)",
-        description="Bake SCENE into OUTPUT, then watch SCENE's modification time and rebake "
-                    "incrementally (from OUTPUT.bake) each time it changes. Ctrl-C ends it.")
+        description="Bake SCENE into OUTPUT, then watch the modification times of SCENE and "
+                    "of the files it uses (.bin, images) and rebake incrementally (from "
+                    "OUTPUT.bake) each time one changes. Ctrl-C ends it.")
     parser.set_defaults(run=run)
     parser.add_argument("scene", type=Path, help="the scene to watch, .glb or .gltf")
     parser.add_argument("-o", "--output", type=Path, required=True, help="the baked scene")
@@ -42,17 +44,34 @@ def _stamp(path: Path) -> tuple[int, int] | None:
     return info.st_mtime_ns, info.st_size
 
 
+class _Watched:
+    """The files a bake of ``scene`` reads (``gltf.load.used_files``: the scene, its .bin, its
+    images), listed again whenever the scene file itself changes; ``stamp()`` changes when any
+    of them does (its modification time or size), or is None while the scene file is missing."""
+
+    def __init__(self, scene: Path):
+        self._scene, self._seen, self._files = scene, None, [scene]
+
+    def stamp(self) -> tuple | None:
+        own = _stamp(self._scene)
+        if own is None:
+            return None
+        if own != self._seen:
+            self._seen, self._files = own, used_files(self._scene)
+        return tuple(_stamp(path) for path in self._files)
+
+
 def run(args: argparse.Namespace) -> int:
     """Watch and rebake until Ctrl-C, which exits 130 (interrupted), as every subcommand does;
     a bake that fails prints its error and the watch goes on (``--max-bakes``, for tests,
     returns 1 when the last bake failed)."""
     settings = settings_for(args.output, rays=args.rays, page_size=args.page_size,
                             threads=args.threads)
-    seen, bakes, failed = None, 0, False
-    print(f"watching {args.scene} (Ctrl-C to stop)", flush=True)
+    seen, bakes, failed, watched = None, 0, False, _Watched(args.scene)
+    print(f"watching {args.scene} and the files it uses (Ctrl-C to stop)", flush=True)
     try:
         while True:
-            stamp = _stamp(args.scene)
+            stamp = watched.stamp()
             if stamp is not None and stamp != seen:
                 seen = stamp
                 started = time.perf_counter()

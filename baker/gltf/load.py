@@ -61,7 +61,7 @@ from baker.gltf.decompress import (
     is_meshopt_fallback,
 )
 from baker.gltf.document import COMPONENT_DTYPES
-from baker.gltf.files import read_inside
+from baker.gltf.files import inside, read_inside
 from baker.gltf.images import MAX_SCENE_PIXELS
 from baker.gltf.materials import (
     MIRROR_ROUGHNESS,
@@ -161,6 +161,18 @@ MAX_IMAGE_FILE_BYTES = 1 << 30
 """Most bytes read of an image file (a PNG of ``images.MAX_IMAGE_PIXELS`` is at most about 512 MiB)."""
 MAX_FALLBACK_BYTES = 1 << 30
 """Largest meshopt fallback buffer without data that baker decodes views into (zeros first)."""
+MAX_JSON_DEPTH = 64
+"""Deepest nesting of arrays and objects in the glTF JSON (glTF's own is 5; extras may add)."""
+MAX_INTEGER_DIGITS = 400
+"""Longest integer in the glTF JSON: glTF's are below 2^53 (16 digits), but a float of the input
+(1e300) written back as an integer index has up to 309; Python refuses 4,300, and converting
+10^5 digits takes seconds."""
+MAX_WORLD_UNITS = 1e12
+"""Farthest a mesh may lie from the origin, in scene units (Embree's float32 has a resolution of
+1e5 units there already; a scale of 1e300 would overflow every later computation)."""
+MAX_SCENE_COMPONENTS = 1 << 28
+"""Most numbers the accessors of the baked meshes may declare in all (2 GiB as float64: some
+40 million vertices with normals and UVs)."""
 MAX_ACCESSOR_COMPONENTS = 1 << 28
 """Largest accessor without a bufferView (all zeros: nothing in the file bounds its count)."""
 _GPU_REASON = "GPU-instanced (EXT_mesh_gpu_instancing): occluder only"
@@ -275,6 +287,31 @@ def read_document(path: str | Path) -> pygltflib.GLTF2:
     return document
 
 
+def used_files(path: str | Path) -> list[Path]:
+    """The files a bake of ``path`` reads: ``path`` itself, and every file inside its folder
+    that its buffers and images name by URI (``files.inside``; the others, and a file that cannot
+    be parsed, are left for the bake to report). For ``baker watch``, which rebakes when any of
+    them changes."""
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+        text = _split_glb(data, str(path))[0] if data[:4] == _GLB_MAGIC else _decode_text(data, "")
+        raw = _parse_json(text, str(path))
+    except (OSError, InputError):
+        return [path]
+    out = [path]
+    for kind in ("buffers", "images"):
+        items = raw.get(kind)
+        for i, item in enumerate(items if isinstance(items, list) else []):
+            uri = item.get("uri") if isinstance(item, dict) else None
+            if isinstance(uri, str) and not uri.startswith("data:"):
+                try:
+                    out.append(inside(uri, path.parent, str(path), f"{kind}[{i}]"))
+                except InputError:
+                    pass
+    return out
+
+
 def _document_from_json(text: str, raw: dict) -> pygltflib.GLTF2:
     """pygltflib's document of the JSON ``text`` (parsed: ``raw``): made directly
     (``gltf_document.document``, 50 ms sooner for 60 nodes, 5 s for 10 000), or by pygltflib
@@ -352,10 +389,32 @@ def _decode_text(data: bytes, file: str) -> str:
         ) from None
 
 
+class _LongNumber(Exception):
+    """An integer in the JSON with more digits than ``MAX_INTEGER_DIGITS``."""
+
+
+def _bounded_int(text: str) -> int:
+    """``int(text)`` for the JSON parser, refusing integers of more than ``MAX_INTEGER_DIGITS``
+    digits (converting 10^5 digits takes seconds; Python refuses 4300 with a ValueError)."""
+    if len(text) > MAX_INTEGER_DIGITS + 1:
+        raise _LongNumber(len(text.lstrip("-")))
+    return int(text)
+
+
 def _parse_json(text: str, file: str) -> dict:
-    """The top-level JSON object; a syntax error names its line and column."""
+    """The top-level JSON object; a syntax error names its line and column. Integers are at most
+    ``MAX_INTEGER_DIGITS`` digits long and arrays and objects nested at most ``MAX_JSON_DEPTH``
+    deep (extras nested 10^5 deep overflowed Python's stack, in the parser or after it)."""
+    too_deep = InputError(f"the JSON is nested more than {MAX_JSON_DEPTH} arrays or objects deep",
+                          file=file, fix="re-export the file; glTF needs a few levels")
     try:
-        raw = json.loads(text)
+        raw = json.loads(text, parse_int=_bounded_int)
+    except _LongNumber as exc:
+        raise InputError(f"the JSON holds an integer of {exc.args[0]:,} digits (baker reads at "
+                         f"most {MAX_INTEGER_DIGITS})", file=file,
+                         fix="re-export the file; if it was edited by hand, fix that number") from None
+    except RecursionError:
+        raise too_deep from None
     except json.JSONDecodeError as exc:
         raise InputError(
             f"not valid JSON: {exc.msg} at line {exc.lineno}, column {exc.colno}",
@@ -369,7 +428,23 @@ def _parse_json(text: str, file: str) -> dict:
             file=file,
             fix="give baker a .gltf or .glb file",
         )
+    if _depth(raw) > MAX_JSON_DEPTH:
+        raise too_deep
     return raw
+
+
+def _depth(value: Any) -> int:
+    """How deep arrays and objects nest in the parsed JSON ``value`` (a scalar: 0), walked
+    without recursion."""
+    deepest, level = 0, [(value, 1)]
+    while level:
+        item, depth = level.pop()
+        children = item.values() if isinstance(item, dict) else item if isinstance(item, list) else None
+        if children is None:
+            continue
+        deepest = max(deepest, depth)
+        level.extend((child, depth + 1) for child in children if isinstance(child, (dict, list)))
+    return deepest
 
 
 def _check_asset(raw: dict, file: str) -> None:
@@ -1135,7 +1210,8 @@ def _walk_nodes(ctx: _Context) -> list[tuple[int, np.ndarray]]:
         visited.add(index)
         node = document.nodes[index]
         with _schema(ctx.file, where):
-            world = parent @ _local_matrix(ctx, node, where)
+            with np.errstate(over="ignore", invalid="ignore"):  # checked in _check_reach
+                world = parent @ _local_matrix(ctx, node, where)
             children = [_checked_node(ctx, c, f"{where}.children") for c in node.children or []]
         out.append((index, world))
         stack.extend((child, world) for child in reversed(children))
@@ -1249,6 +1325,7 @@ def _instantiate(
         if mesh is not None:
             _item(document.meshes, mesh, "meshes", ctx.file, f"nodes[{index}].mesh")
             used.add(mesh)
+    _check_declared_sizes(ctx, sorted(used))
     primitives: list[Primitive] = []
     slots: dict[int, list[int | None]] = {}
     for mesh in sorted(used):
@@ -1269,6 +1346,8 @@ def _instantiate(
         with _schema(ctx.file, f"nodes[{index}].extensions.EXT_mesh_gpu_instancing"):
             gpu = _gpu_instances(ctx, index, node)
         worlds = [world] if gpu is None else list(world @ gpu)
+        _check_reach(ctx, index, worlds, [primitives[slot] for slot in slots[node.mesh]
+                                          if slot is not None])
         node_reasons = [_GPU_REASON] if gpu is not None else []
         node_reasons += [_SKIN_REASON] if node.skin is not None else []
         node_reasons += [_MORPH_REASON] if index in morphed and node_reasons[-1:] != [_SKIN_REASON] else []
@@ -1289,6 +1368,79 @@ def _instantiate(
                     )
                 )
     return primitives, instances
+
+
+def _check_declared_sizes(ctx: _Context, meshes: list[int]) -> None:
+    """Refuse, before any accessor is read, meshes whose accessors (attributes, targets and
+    indices of every primitive, each accessor once) declare more than ``MAX_SCENE_COMPONENTS``
+    numbers in all: a 3 KB file of accessors without a bufferView and large counts took 9 GB
+    and 86 s before it failed. The error names the largest accessor and where it is used.
+    Entries that are not valid are left for the reading to report."""
+    accessors = ctx.document.accessors or []
+    seen: set[int] = set()
+    total, largest, largest_count, used_at = 0, -1, 0, ""
+    for mesh in meshes:
+        for j, primitive in enumerate(ctx.document.meshes[mesh].primitives or []):
+            for name, index in _accessors_of(primitive):
+                if not isinstance(index, int) or not 0 <= index < len(accessors) or index in seen:
+                    continue
+                seen.add(index)
+                accessor = accessors[index]
+                shape = _TYPE_SHAPES.get(accessor.type)
+                if shape is None or not isinstance(accessor.count, int) or accessor.count < 0:
+                    continue
+                numbers = accessor.count * shape[0] * shape[1]
+                total += numbers
+                if numbers > largest_count:
+                    largest, largest_count = index, numbers
+                    used_at = f"meshes[{mesh}].primitives[{j}].{name}"
+    if total > MAX_SCENE_COMPONENTS:
+        raise InputError(
+            f"the meshes' {len(seen)} accessors declare {total:,} numbers in all, more than baker "
+            f"holds ({MAX_SCENE_COMPONENTS:,}, {8 * MAX_SCENE_COMPONENTS >> 30} GiB as float64); "
+            f"the largest, accessors[{largest}], declares {largest_count:,}",
+            file=ctx.file,
+            where=f"{used_at} → accessors[{largest}]",
+            fix="check the accessors' counts; split the scene, or bake its parts apart",
+        )
+
+
+def _accessors_of(primitive: Any) -> list[tuple[str, Any]]:
+    """(JSON path within the primitive, accessor index) of every accessor a primitive names:
+    its attributes, its morph targets', its indices."""
+    def named(attributes: Any, at: str) -> list[tuple[str, Any]]:
+        if attributes is None:
+            return []
+        items = attributes if isinstance(attributes, dict) else vars(attributes)
+        return [(f"{at}.{k}", v) for k, v in items.items() if v is not None]
+
+    targets = primitive.targets if isinstance(primitive.targets, list) else []
+    return (named(primitive.attributes, "attributes")
+            + [pair for t, target in enumerate(targets) for pair in named(target, f"targets[{t}]")]
+            + [("indices", primitive.indices)])
+
+
+def _check_reach(ctx: _Context, index: int, worlds: list[np.ndarray],
+                 primitives: list[Primitive]) -> None:
+    """Refuse a node whose world matrices (one, or one per GPU instance) take its mesh farther
+    than ``MAX_WORLD_UNITS`` from the origin on some axis, or to no finite place (a scale of
+    1e300 overflows): a bound from the matrices' absolute values and the mesh's largest local
+    coordinate, computed without overflow warnings."""
+    if not primitives or not worlds:
+        return
+    local = max(float(np.abs(p.positions).max(initial=0.0)) for p in primitives)
+    matrices = np.asarray(worlds, np.float64)
+    with np.errstate(over="ignore", invalid="ignore"):
+        reach = (np.abs(matrices[:, :3, :3]).sum(axis=2) * local + np.abs(matrices[:, :3, 3])).max()
+    if not (np.isfinite(reach) and reach <= MAX_WORLD_UNITS):
+        raise InputError(
+            f"its world transform places the mesh up to {reach:.3g} units from the origin, more "
+            f"than baker bakes ({MAX_WORLD_UNITS:.0e})",
+            file=ctx.file,
+            where=f"nodes[{index}]",
+            fix="check the scale and translation of this node and of its parents "
+                "(a scale of 1e300 is an export error)",
+        )
 
 
 # --------------------------------------------------------------------------------------------

@@ -89,6 +89,12 @@ from baker.rays.sampling import (
 )
 from baker.rays.trace import Hits, LocalHits, RayCaster, Tracer, ray_lift
 from baker.rebake import state as state_file
+from baker.rebake.state_check import (
+    check_fingerprints,
+    check_for_scene,
+    check_state,
+    stored_density,
+)
 from baker.rebake.diff import Diff, diff, fingerprints
 from baker.rebake.exact_sums import changed_terms, ray_changes
 from baker.rebake.sobol_cells import cap_boxes, net_solve, sobol_cell_sample
@@ -997,21 +1003,28 @@ def _compared(scene: Scene, settings: Settings, path, relight: bool, times: dict
     with timed(times, "load"):
         try:
             stored = state_file.load(path, state_classes())
+            check_state(stored)
+            density = stored_density(stored.fingerprints)
         except state_file.StateUnusable as error:
             raise FullBake(str(error)) from None
         world = build_world(scene)
     area, diagonal = bounds_of_baked(world, scene)
     resolved = resolve(settings, area, diagonal)
-    stored_density = stored.fingerprints["settings"]["values"].get("texel_density")
-    if settings.texel_density is None and stored_density is not None and (
-            stored_density < resolved.texel_density):
+    if settings.texel_density is None and density is not None and (
+            density < resolved.texel_density):
         # The full bake lowered its derived density until the charts fit a page
         # (``pipeline.full.compute``); the same scene derives the same density, so take the
         # value it ended with. Were the geometry different, the unwrap fingerprint below
         # would still call for a full bake.
-        resolved = replace(resolved, texel_density=stored_density)
+        resolved = replace(resolved, texel_density=density)
     fingerprint = fingerprints(scene, world, resolved, settings)
-    change = diff(stored.fingerprints, fingerprint)
+    try:
+        check_fingerprints(stored.fingerprints, fingerprint)
+        change = diff(stored.fingerprints, fingerprint)
+        if change.full is None:
+            check_for_scene(stored, scene, world)
+    except state_file.StateUnusable as error:
+        raise FullBake(str(error)) from None
     if change.full is not None:
         raise FullBake(change.full)
     if relight and (change.moved or change.recoloured or change.lights_placed):
@@ -1054,8 +1067,6 @@ def _stored_texels(scene: Scene, start: _Compared, lit: Lighting, times: dict[st
     old_terms, old_direct = groups["terms"], groups["direct"]
     if old_texels is None or old_validity is None or old_terms is None:
         raise FullBake("the bake state lacks the texels' terms")
-    if len(old_texels.triangle_texels) != len(world.triangles):
-        raise FullBake("the stored texels belong to other triangles")
     with timed(times, "rasterise"):  # the stored coverage: no rasterising again
         raw = texels_of(start.stored.atlas, world, Coverage(old_texels.key, old_texels.triangle,
                                                             old_texels.triangle_texels))
@@ -1288,9 +1299,16 @@ def asked_settings(path, **overrides) -> Settings:
     except state_file.StateUnusable as error:
         raise SettingsError(f"cannot rebake: {error}",
                             fix="run baker bake once (it writes the state), then rebake") from None
-    asked = dict(stored.fingerprints.get("asked") or {})
+    asked = stored.fingerprints.get("asked") if isinstance(stored.fingerprints, dict) else None
     names = {f.name for f in fields(Settings)}
-    values = {k: tuple(v) if isinstance(v, list) else v for k, v in asked.items() if k in names}
+    try:
+        values = {k: tuple(v) if isinstance(v, list) else v
+                  for k, v in (asked or {}).items() if k in names}
+        Settings(**values).check()
+    except (SettingsError, TypeError, ValueError, AttributeError) as error:
+        raise SettingsError(f"cannot rebake: the settings stored in the bake state {path} are "
+                            f"unusable ({str(error).splitlines()[0]})",
+                            fix="bake with `baker bake` and the settings you want") from None
     return Settings(**dict(values, **overrides))
 
 

@@ -26,6 +26,8 @@ from __future__ import annotations
 import hashlib
 import io
 import json
+import os
+import stat
 import struct
 import zipfile
 from dataclasses import dataclass, fields, is_dataclass
@@ -39,6 +41,7 @@ from baker.atlas.layout import Atlas, InstanceUV
 from baker.rebake.storedzip import StoredZip
 from baker.run.atomic import write_atomically
 from baker.run.spill import Column, Group
+from baker.settings import MAX_TEXELS
 
 FORMAT = "baker-bake-state"
 VERSION = 6
@@ -74,9 +77,10 @@ def save_full_bake_seconds(state_path: str | Path, seconds: float,
 def last_full_bake_seconds(state_path: str | Path) -> float | None:
     """The seconds of the last full bake recorded beside the state (None if none or unreadable)."""
     try:
-        seconds = json.loads(timing_path(state_path).read_text())["full_bake_seconds"]
+        with _open_regular(timing_path(state_path)) as file:
+            seconds = json.loads(file.read(4096))["full_bake_seconds"]
         return float(seconds) if seconds > 0 else None
-    except (OSError, ValueError, KeyError, TypeError):
+    except (OSError, ValueError, KeyError, TypeError, StateUnusable):
         return None
 
 
@@ -143,12 +147,17 @@ def _atlas_group(atlas: Atlas) -> tuple[dict, dict[str, np.ndarray]]:
 
 
 def _atlas_of(scalars: dict, array) -> Atlas:
-    """The atlas ``_atlas_group`` stored: ``array(name)`` reads ``atlas/<name>``."""
-    vertex_ends = np.cumsum(array("atlas/vertex_counts"))[:-1]
-    triangle_ends = np.cumsum(array("atlas/triangle_counts"))[:-1]
-    split = {name: np.split(array(f"atlas/{name}"),
-                            vertex_ends if name in ("vertices", "uv") else triangle_ends)
-             for name in _UNWRAP}
+    """The atlas ``_atlas_group`` stored: ``array(name)`` reads ``atlas/<name>``. Counts that do
+    not split the arrays into one part per instance are a ValueError."""
+    counts = {"vertices": array("atlas/vertex_counts"), "triangles": array("atlas/triangle_counts")}
+    counts["uv"], counts["pages"] = counts["vertices"], counts["triangles"]
+    split = {}
+    for name in _UNWRAP:
+        values, each = array(f"atlas/{name}"), counts[name]
+        if (each.ndim != 1 or len(each) != len(scalars["instances"]) or (each < 0).any()
+                or int(each.sum()) != len(values)):
+            raise ValueError(f"atlas/{name}: counts do not split it by instance")
+        split[name] = np.split(values, np.cumsum(each)[:-1])
     return Atlas(width=scalars["width"], height=scalars["height"],
                  page_count=scalars["page_count"], texel_density=scalars["texel_density"],
                  padding=scalars["padding"],
@@ -203,6 +212,29 @@ def write_state(file: BinaryIO, state: BakeState) -> None:
 _LOCAL_HEADER = struct.Struct("<4s22xHH")  # a member's local header: signature, name, extra
 
 
+MAX_ARRAY_ELEMENTS = 16 * MAX_TEXELS
+"""Most elements of one array of a state (an (N, 16) array of ``settings.MAX_TEXELS`` texels):
+an array declared larger is refused before anything is allocated for it."""
+MAX_HEADER_BYTES = 256 << 20
+"""Largest ``header.json`` read (the fingerprints of every instance: 3 MB for 10,000)."""
+_DTYPES = frozenset({"|b1", "|i1", "|u1", "<i8", "<u8", "<f8"})  # those write_state writes
+
+
+def _check_declared(name: str, shape: Any, dtype: Any) -> None:
+    """Refuse, before allocating, an array declared (in its .npy header or the state's header)
+    with a dtype ``write_state`` never writes or more than ``MAX_ARRAY_ELEMENTS`` elements."""
+    if not isinstance(shape, (tuple, list)) or not all(
+            isinstance(n, int) and not isinstance(n, bool) and n >= 0 for n in shape):
+        raise ValueError(f"{name}: shape {shape!r}")
+    if np.dtype(dtype).str not in _DTYPES:
+        raise ValueError(f"{name}: dtype {np.dtype(dtype).str}")
+    elements = 1
+    for n in shape:
+        elements *= n
+    if elements > MAX_ARRAY_ELEMENTS:
+        raise ValueError(f"{name}: {elements:,} elements, more than a bake holds")
+
+
 def _read_member(archive: zipfile.ZipFile, file: BinaryIO, name: str) -> np.ndarray:
     """The array of the stored member ``<name>.npy`` of ``archive`` (whose bytes ``file``
     reads), read once into its own memory, its CRC-32 checked. ``zipfile`` finds the member;
@@ -224,12 +256,13 @@ def _read_member(archive: zipfile.ZipFile, file: BinaryIO, name: str) -> np.ndar
     read_header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
                    else np.lib.format.read_array_header_2_0)
     shape, fortran, dtype = read_header(head)
-    if fortran or dtype.hasobject:
+    if fortran:
         raise ValueError(f"{name}.npy: not a plain C-order array")
+    _check_declared(name, shape, dtype)
     offset = head.tell()
-    out = np.empty(shape, dtype)
-    if offset + out.nbytes != info.file_size:
+    if offset + int(np.prod(shape, dtype=np.int64)) * dtype.itemsize != info.file_size:
         raise EOFError(f"{name}.npy does not hold its array")
+    out = np.empty(shape, dtype)
     file.seek(start + offset)
     data = out.reshape(-1).view(np.uint8)
     if out.nbytes and file.readinto(data) != out.nbytes:
@@ -246,14 +279,16 @@ def load(path: str | Path, classes: dict[str, type]) -> BakeState:
     file, or one whose groups or fields differ from the dataclasses' (written by older code).
     """
     path = Path(path)
-    if not path.exists():
-        raise StateUnusable(f"no bake state at {path}")
     try:
-        with zipfile.ZipFile(path) as archive, open(path, "rb") as raw:
+        with _open_regular(path) as raw, zipfile.ZipFile(raw) as archive:
             try:
-                header = json.loads(archive.read("header.json"))
+                info = archive.getinfo("header.json")
             except KeyError:
                 raise StateUnusable(f"{path} is not a baker bake state (no header)") from None
+            if info.compress_type != zipfile.ZIP_STORED or info.file_size > MAX_HEADER_BYTES:
+                raise StateUnusable(f"{path} is not a bake state this baker wrote (its header "
+                                    f"is compressed or {info.file_size:,} bytes)")
+            header = json.loads(archive.read("header.json"))
             if not isinstance(header, dict) or header.get("format") != FORMAT:
                 raise StateUnusable(f"{path} is not a baker bake state")
             if header.get("version") != VERSION:
@@ -265,6 +300,7 @@ def load(path: str | Path, classes: dict[str, type]) -> BakeState:
                                if name in header[k]), None)
                 if listed is None:
                     return _read_member(archive, raw, name)
+                _check_declared(name, listed["shape"], listed["dtype"])
                 out = np.zeros(listed["shape"], np.dtype(listed["dtype"]))
                 if name in header["repeated"]:
                     out[:] = _read_member(archive, raw, name)
@@ -292,5 +328,19 @@ def load(path: str | Path, classes: dict[str, type]) -> BakeState:
                              instance_world=array("instance_world"))
     except StateUnusable:
         raise
-    except (zipfile.BadZipFile, KeyError, ValueError, TypeError, OSError, EOFError) as error:
+    except FileNotFoundError:
+        raise StateUnusable(f"no bake state at {path}") from None
+    except Exception as error:  # whatever a damaged or edited file provokes in reading it
         raise StateUnusable(f"{path} is damaged or truncated ({type(error).__name__})") from None
+
+
+def _open_regular(path: Path) -> BinaryIO:
+    """``path`` opened for reading if it is a regular file (followed through links): a FIFO
+    (which would wait for a writer for ever), a device (``/dev/zero``: endless bytes) or a
+    folder is ``StateUnusable`` before a byte is read."""
+    descriptor = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_BINARY", 0))
+    mode = os.fstat(descriptor).st_mode
+    if not stat.S_ISREG(mode):
+        os.close(descriptor)
+        raise StateUnusable(f"{path} is not a regular file: not a bake state")
+    return os.fdopen(descriptor, "rb")
