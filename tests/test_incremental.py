@@ -269,6 +269,28 @@ def test_pre_commit_hook_bakes_each_scene_beside_it(tmp_path, capsys):
     assert main(["hook", str(tmp_path / "missing.glb")]) == 1
 
 
+def test_the_hook_has_git_ignore_the_bake_states(tmp_path, capsys):
+    """In a git repository, after ``baker hook``: the baked output is not ignored, its bake
+    state and timing record are, by one line added once to the folder's .gitignore (the lines
+    there before kept)."""
+    import subprocess
+
+    subprocess.run(["git", "init", "-q", str(tmp_path)], check=True)
+    (tmp_path / ".gitignore").write_text("*.tmp")  # no final newline
+    scene = box_room(BOXES[:1], room=ROOM).save(tmp_path / "crate.glb")
+    for _ in range(2):
+        assert main(["hook", str(scene), "--rays", "4", "--page-size", "64"]) == 0
+    assert capsys.readouterr().out.count("to " + str(tmp_path / ".gitignore")) == 1
+    lines = (tmp_path / ".gitignore").read_text().splitlines()
+    assert lines[0] == "*.tmp" and lines.count("*_baked.gl*.bake*") == 1
+
+    def ignored(name: str) -> bool:
+        return subprocess.run(["git", "-C", str(tmp_path), "check-ignore", "-q", name]).returncode == 0
+
+    assert ignored("crate_baked.glb.bake") and ignored("crate_baked.glb.bake.json")
+    assert not ignored("crate_baked.glb") and not ignored("crate.glb")
+
+
 def test_relight_after_a_shrunk_default_density_casts_no_ray(tmp_path):
     """A default density too large for one page is lowered by the full bake; changing only the
     light's intensity and colour still recomposes (no ray) to the full bake's bytes."""
