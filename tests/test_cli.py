@@ -118,3 +118,23 @@ def test_a_bake_that_bakes_nothing_says_so_and_exits_4(tmp_path, capsys):
     assert code == 4 and out.is_file() and captured.out == ""
     assert captured.err.startswith("baker: nothing baked") and "0 texels" in captured.err
     assert "125 × GPU-instanced" in captured.err
+
+
+def test_relight_says_what_it_recomposes_and_refuses_an_emission_change(tmp_path, capsys):
+    """``baker relight --help`` lists only punctual lights' colour and intensity as what it
+    recomposes, and names emissive changes as refused; an emissive strength change is indeed
+    refused (exit 1, nothing written), so the help promises nothing relight does not do."""
+    from assets.light_scenes import emissive_square
+
+    with pytest.raises(SystemExit):
+        main(["relight", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "emissive strength)" not in text and "emissive material's colour or strength" in text
+    scene, out = tmp_path / "lamp.glb", tmp_path / "lamp_baked.glb"
+    emissive_square().save(scene)
+    assert main(["bake", str(scene), "-o", str(out), "--rays", "4", "--page-size", "32",
+                 "--quiet"]) == 0
+    emissive_square(radiance=5.0).save(scene)
+    before = out.read_bytes()
+    assert main(["relight", str(scene), "-o", str(out)]) == 1
+    assert "beyond its base colour" in capsys.readouterr().err and out.read_bytes() == before

@@ -15,10 +15,12 @@ def add_parser(commands) -> None:
     """Register ``relight`` on the ``baker`` command's subparsers."""
     parser = commands.add_parser(
         "relight", help="recompose the lightmaps for new light colours/intensities (no rays)",
-        description="The scene's lights changed only in colour or intensity (KHR_lights_punctual "
-                    "color/intensity, emissive strength): recompose the lightmaps from the bake "
-                    "state of the last bake, casting no ray. The result equals a full bake. "
-                    "Any other change is refused, and nothing is written: use `baker bake`.")
+        description="The scene's punctual lights changed only in colour or intensity "
+                    "(KHR_lights_punctual color/intensity): recompose the lightmaps from the "
+                    "bake state of the last bake, casting no ray. The result equals a full "
+                    "bake. Any other change, an emissive material's colour or strength "
+                    "included (the state holds emitters' light at their baked strength), is "
+                    "refused, and nothing is written: use `baker bake`.")
     parser.set_defaults(run=run)
     parser.add_argument("scene", type=Path, help="the scene with its new lights, .glb or .gltf")
     parser.add_argument("-o", "--output", type=Path, required=True,
