@@ -406,15 +406,13 @@ def test_a_failed_write_leaves_the_old_state_and_no_temporary(base, tmp_path, mo
 
 def test_the_state_a_rebake_replaces_is_freed_beside_it_and_leaves_nothing(base, tmp_path,
                                                                            monkeypatch):
-    """The old state (as every file a bake replaces, of ``SET_ASIDE_BYTES`` or more: all of
-    them here) is given a second name before the new one replaces it, and deleted on a thread of
-    its own (``spill.set_aside``, ``remove_later``); once those threads are done, the folder
-    holds the output and the state only."""
+    """The old state (as every file a bake replaces) is given a second name before the new one
+    replaces it, and deleted on a thread of its own (``spill.set_aside``, ``remove_later``);
+    once those threads are done, the folder holds the output and the state only."""
     import importlib
     import threading
 
     staging = importlib.import_module("baker.run.atomic")
-    monkeypatch.setattr(importlib.import_module("baker.run.spill"), "SET_ASIDE_BYTES", 0)
     output = _baked_copy(base, tmp_path / "out")
     folder = output.parent
     old = default_path(output).read_bytes()

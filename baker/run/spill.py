@@ -254,24 +254,12 @@ def remove_stale(folder: str | os.PathLike | None = None) -> list[str]:
     return removed
 
 
-SET_ASIDE_BYTES = 8 << 20
-"""Files smaller than this are freed by their replacement at once (microseconds): only larger
-ones are worth a second name and a thread, and a folder right after a bake holds no second
-name of a small file."""
-
-
 def set_aside(path: str | os.PathLike) -> str | None:
-    """Give the file at ``path``, if there is one of ``SET_ASIDE_BYTES`` or more, a second name
-    beside it that ``remove_stale`` knows (this process's id in it): replacing ``path`` then
-    frees nothing, and ``remove_later`` frees it on a thread of its own. Freeing a large file's
-    pages takes a while — 30 ms for a 50 MB bake state, a tenth of a small rebake. None when
-    there is no such file, or its disk has no hard links (the replacement then frees it, as
-    usual)."""
-    try:
-        if os.stat(path).st_size < SET_ASIDE_BYTES:
-            return None
-    except OSError:
-        return None
+    """Give the file at ``path``, if there is one, a second name beside it that
+    ``remove_stale`` knows (this process's id in it): replacing ``path`` then frees nothing,
+    and ``remove_later`` frees it on a thread of its own. Freeing a large file's pages takes a
+    while — 30 ms for a 50 MB bake state, a tenth of a small rebake. None when there is no
+    file, or its disk has no hard links (the replacement then frees it, as usual)."""
     folder = os.path.dirname(os.fspath(path)) or "."
     link = os.path.join(folder, f"{_PREFIX}{os.getpid()}-{uuid.uuid4().hex}.old")
     try:
