@@ -413,6 +413,7 @@ def test_the_state_a_rebake_replaces_is_freed_beside_it_and_leaves_nothing(base,
     import threading
 
     staging = importlib.import_module("baker.run.atomic")
+    monkeypatch.setattr(importlib.import_module("baker.run.spill"), "LATER_BYTES", 0)
     output = _baked_copy(base, tmp_path / "out")
     folder = output.parent
     old = default_path(output).read_bytes()

@@ -269,9 +269,22 @@ def set_aside(path: str | os.PathLike) -> str | None:
     return link
 
 
+LATER_BYTES = 8 << 20
+"""Files smaller than this are deleted at once (microseconds): only freeing a larger one's pages
+is worth a thread, and a folder right after a bake then holds no second name of a small file."""
+
+
 def remove_later(path: str) -> None:
-    """Delete the file ``path`` on a thread of its own. Not a daemon: the interpreter waits for
-    it before it exits, so nothing is left behind but after a kill (``remove_stale``)."""
+    """Delete the file ``path``: on a thread of its own if it has ``LATER_BYTES`` or more, else
+    at once. The thread is not a daemon: the interpreter waits for it before it exits, so
+    nothing is left behind but after a kill (``remove_stale``)."""
+    try:
+        small = os.stat(path).st_size < LATER_BYTES
+    except OSError:
+        return
+    if small:
+        _remove_quietly(path)
+        return
     threading.Thread(target=_remove_quietly, args=(path,), name="baker-remove-later").start()
 
 
