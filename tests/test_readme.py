@@ -9,8 +9,7 @@ The mapping from the README to this test, and nothing else, is:
 - The scene files the README names (``level.glb``, ``level.gltf``, ``prop.glb``) are the demo
   Cornell box that the README's first line makes; ``draco.glb`` is it Draco-compressed by glTF
   Transform (tests/gltf_transform.py), ``ktx2.glb`` the textured floor of assets/ with its
-  texture as KTX 2 (KHR_texture_basisu, encoded by alktx2), ``park.glb`` the tree of
-  assets/foliage_scenes.py.
+  texture as KTX 2 (KHR_texture_basisu, encoded by alktx2).
 - ``--cluster 10.0.0.1:6379`` names a local Ray cluster of one worker started for it
   (tests/ray_cluster.py), at its own address.
 - Small settings, so the whole README runs in about a minute: ``--rays N`` becomes ``--rays 4``
@@ -36,7 +35,6 @@ from pathlib import Path
 
 import pytest
 
-from assets.foliage_scenes import tree
 from assets.make_scenes import cornell_box, textured_floor
 from gltf_transform import variant
 from ray_cluster import LocalCluster
@@ -133,7 +131,6 @@ def scene_files(folder: Path) -> None:
     cornell_box().save(folder / "level.gltf")
     variant("draco", demo, folder / "draco.glb")
     ktx2_scene(folder / "ktx2.glb")
-    tree().save(folder / "park.glb")
 
 
 @pytest.fixture
