@@ -73,3 +73,13 @@ def test_a_closed_room_keeps_r_ave_and_says_why(tmp_path):
 def test_escape_takes_one_of_three_values():
     with pytest.raises(SettingsError, match="escape must be one of auto, scene, white"):
         Settings(escape="sky").check()
+
+
+def test_a_small_lamp_that_lights_the_room_is_no_decal(tmp_path):
+    """The demo Cornell box's lamp covers 0.69 % of the surfaces but gives I_A of about 0.25:
+    the plan warns of decals only where the ambient they give is faint."""
+    done = computed(make_scenes.cornell_box(), tmp_path, **FAST)
+    assert done.ambient.source == "emission"
+    assert done.sources.emitters.area_share < 0.01
+    assert float(done.ambient.intensity @ np.array([0.2126, 0.7152, 0.0722])) > 0.05
+    assert "warning" not in done.plan.stages["ambient"]
