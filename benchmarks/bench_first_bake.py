@@ -38,21 +38,23 @@ def install(venv: Path, warm: bool) -> float:
     return time.perf_counter() - started
 
 
-def bake_seconds(venv: Path, scene: Path, folder: Path) -> tuple[float, float]:
-    """(wall, CPU) seconds of ``baker bake scene`` as a new process, from outside the checkout.
-    CPU (user + system, every thread and child) is what a compile adds to; on a shared machine
-    the wall time also holds the other work's share of the cores."""
-    env = dict(os.environ)
+def bake_seconds(venv: Path, scene: Path, folder: Path) -> tuple[float, float, int]:
+    """(wall, CPU) seconds of ``baker bake scene`` as a new process, from outside the checkout,
+    and how many kernels it compiled (numba's cache saves, NUMBA_DEBUG_CACHE). CPU (user +
+    system, every thread and child) is what a compile adds to; on a shared machine the wall
+    time also holds the other work's share of the cores."""
+    env = dict(os.environ, NUMBA_DEBUG_CACHE="1")
     env.pop("PYTHONPATH", None)
     env.pop("NUMBA_CACHE_DIR", None)
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     started = time.perf_counter()
-    subprocess.run([str(venv / "bin" / "baker"), "bake", str(scene), "-o",
-                    str(folder / "cornell_box_baked.glb"), "--no-state", "--quiet"],
-                   check=True, env=env, cwd=folder, stdout=subprocess.DEVNULL)
+    done = subprocess.run([str(venv / "bin" / "baker"), "bake", str(scene), "-o",
+                           str(folder / "cornell_box_baked.glb"), "--no-state", "--quiet"],
+                          check=True, env=env, cwd=folder, capture_output=True, text=True)
     wall = time.perf_counter() - started
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    compiled = sum("data saved" in line for line in done.stdout.splitlines())
+    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime), compiled
 
 
 def measure(folder: Path, warm: bool, repeat: int) -> None:
@@ -63,7 +65,8 @@ def measure(folder: Path, warm: bool, repeat: int) -> None:
     scene = ROOT / "assets" / "scenes" / "cornell_box.glb"
     runs = [bake_seconds(venv, scene, folder) for _ in range(repeat)]
     label = "kernels compiled at install" if warm else "kernels compiled on first use"
-    print(f"{label}: install {seconds:.1f} s")
+    print(f"{label}: install {seconds:.1f} s; kernels compiled by each bake: "
+          f"{', '.join(str(run[2]) for run in runs)}")
     for i, what in enumerate(("wall", "CPU")):
         first, later = runs[0][i], statistics.median(run[i] for run in runs[1:])
         print(f"  {what}: first bake {first:.2f} s, warm {later:.2f} s (median of "

@@ -224,7 +224,8 @@ def test_a_missing_image_file_fails_at_load_whatever_uses_it(tmp_path, slot):
 
 def _texture_scene(folder, data: bytes, extension: str | None = None, name="albedo.png"):
     """A floor whose base colour texture's image is the file ``name`` holding ``data``, named by
-    texture.source or, with ``extension``, by that extension's source."""
+    texture.source or, with ``extension``, by that extension's source only (so the extension
+    is required, as glTF asks of a texture without a core source)."""
     pixels = np.full((2, 2, 4), 255, np.uint8)
     b = GltfBuilder()
     b.node("floor", b.shape_mesh("floor", quad(1.0, 1.0), material=b.material(
@@ -235,7 +236,7 @@ def _texture_scene(folder, data: bytes, extension: str | None = None, name="albe
     document["images"] = [{"uri": name}]
     if extension is not None:
         document["textures"][0] = {"extensions": {extension: {"source": 0}}}
-        document["extensionsUsed"] = [extension]
+        document["extensionsUsed"] = document["extensionsRequired"] = [extension]
     path.write_text(json.dumps(document))
     return path
 

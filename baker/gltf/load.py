@@ -110,6 +110,8 @@ SUPPORTED_EXTENSIONS = VIEW_ONLY_EXTENSIONS | COMPRESSION_EXTENSIONS | frozenset
         "EXT_mesh_gpu_instancing",
         "KHR_mesh_quantization",
         "KHR_materials_diffuse_transmission",
+        "EXT_texture_webp",  # decoded (images.py); a texture's image only in them is required
+        "KHR_texture_basisu",  # there, and without its decoder the texture's factor is used
     }
 )
 """Extensions a file may list in ``extensionsRequired`` and still be baked."""
