@@ -84,6 +84,63 @@ def test_a_child_that_hangs_is_killed_and_run_again(tmp_path):
     assert time.monotonic() - start < 10
 
 
+def test_a_child_that_spins_is_killed_by_its_cpu_time_and_run_again(tmp_path):
+    """A hung xatlas may spin (its main thread yields in a loop): its CPU time passes the limit."""
+    marker = tmp_path / "first"
+
+    def spins_once():
+        if not marker.exists():
+            marker.write_text("spun")
+            while True:
+                pass
+        return "second run"
+
+    start = time.monotonic()
+    assert forked.call_forked(spins_once, "a test", 1.0) == "second run"
+    assert time.monotonic() - start < 30  # 1 s of CPU, at any share of a core a CI gives
+
+
+def test_a_child_slowed_by_a_busy_machine_is_not_killed(tmp_path):
+    """A child that gets a tenth of a core (a machine loaded by other work) runs three times
+    its CPU limit in clock time and is left to finish: hung is judged by CPU time."""
+    runs = tmp_path / "runs"
+    runs.mkdir()
+
+    def slowed():
+        (runs / str(len(list(runs.iterdir())))).touch()
+        end = time.monotonic() + 3.0
+        while time.monotonic() < end:
+            busy = time.thread_time() + 0.01
+            while time.thread_time() < busy:  # 10 ms of work, then 90 ms without the core
+                pass
+            time.sleep(0.09)
+        return "finished"
+
+    assert forked.call_forked(slowed, "a test", 1.0) == "finished"
+    assert len(list(runs.iterdir())) == 1
+
+
+def test_cpu_time_is_that_of_the_process_and_none_once_it_has_exited():
+    pid = os.fork()
+    if pid == 0:
+        busy = time.process_time() + 0.3
+        while time.process_time() < busy:
+            pass
+        time.sleep(30)
+        os._exit(0)
+    try:
+        deadline = time.monotonic() + 30
+        while (forked.cpu_seconds_of(pid) or 0.0) < 0.28 and time.monotonic() < deadline:
+            time.sleep(0.05)  # /proc counts in ticks (10 ms): 0.3 s may read 0.29
+        time.sleep(0.5)  # asleep now: no more CPU time
+        used = forked.cpu_seconds_of(pid)
+        assert used is not None and 0.28 <= used < 0.5
+    finally:
+        os.kill(pid, signal.SIGKILL)
+        os.waitpid(pid, 0)
+    assert forked.cpu_seconds_of(pid) is None
+
+
 def test_a_bake_whose_unwrapper_crashes_once_gives_the_same_bytes(tmp_path, monkeypatch):
     """The unwrap goes through ``call_forked``: xatlas dying of SIGSEGV in its first run (as its
     task scheduler's race makes it) costs a re-run, not the bake."""

@@ -25,8 +25,9 @@ from baker.settings import Resolved
 
 _NO_PAGE = np.uint32(0xFFFFFFFF)  # xatlas's page index for vertices of faces it could not place
 _SHRUNK = 0.95  # a chart whose texels are this much larger than asked was shrunk to fit a page
-# How long an xatlas run may take before it is taken for hung (``forked.call_forked``): 5 s,
-# 1 ms a triangle and 10 µs a texel its charts cover (packing is a search over the pages'
+# The CPU time (all its threads) an xatlas run may use before it is taken for hung
+# (``forked.call_forked``: CPU time, so a loaded machine never makes a genuine run look hung):
+# 5 s, 1 ms a triangle and 10 µs a texel its charts cover (packing is a search over the pages'
 # texels). Measured on 2 busy cores (load 12): 250,000 triangles of one mesh at 8·10⁶ texels
 # took 12–14 s and are given 335 s; the 60-crate room's 7,000 triangles take 0.03 s.
 _SECONDS, _SECONDS_PER_TRIANGLE, _SECONDS_PER_TEXEL = 5.0, 1e-3, 1e-5
@@ -177,8 +178,8 @@ def _generate(scene: Scene, world: World, instances: list[int], settings: Resolv
 
 
 def _time_limit(triangles: int, texels: float) -> float:
-    """Seconds an xatlas run of ``triangles`` charting ``texels`` texels may take before it is
-    taken for hung (``forked.call_forked``): ``_SECONDS`` and the work's share of each."""
+    """CPU seconds an xatlas run of ``triangles`` charting ``texels`` texels may use before it
+    is taken for hung (``forked.call_forked``): ``_SECONDS`` and the work's share of each."""
     return _SECONDS + triangles * _SECONDS_PER_TRIANGLE + texels * _SECONDS_PER_TEXEL
 
 

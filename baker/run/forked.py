@@ -9,10 +9,17 @@ from ``TaskScheduler::workerThread``, the main thread in ``AddMeshJoin``).
 The same race can leave a task unfinished, so that xatlas waits for it for ever (a fuzzed bake
 of a few triangles once ran past the test's 20 s). ``unwrap.py`` runs xatlas through
 ``call_forked``: the child is forked (copy-on-write, so the inputs cost nothing to pass), its
-result comes back pickled through a pipe, and a child killed by a signal, or running far longer
-than its work can take, is killed and run again — xatlas's result does not depend on its
-threads' timing. Where ``os.fork`` is missing (Windows) the call runs in this process,
-unprotected.
+result comes back pickled through a pipe, and a child killed by a signal, or hung, is killed and
+run again — xatlas's result does not depend on its threads' timing. Where ``os.fork`` is
+missing (Windows) the call runs in this process, unprotected.
+
+Hung is judged by the child's CPU time (``/proc/PID/stat``: all its threads, user and system),
+not the clock: a machine loaded by other work slows a child's clock time, never its CPU time,
+so a genuine run is never taken for hung however busy the cores are (on 2 cores shared by 9
+bakes a 250,000-triangle unwrap was killed at its clock limit and started again). A hung xatlas
+either spins (its main thread yields in a loop waiting for a task that never ends: CPU time
+grows past the limit) or sleeps (its CPU time stops growing: ``STALL_SECONDS`` of clock time
+without a single tick of CPU is no runnable process, however loaded the machine).
 """
 
 from __future__ import annotations
@@ -30,6 +37,9 @@ from typing import Any, Callable
 from baker.errors import BakerError
 
 ATTEMPTS = 3  # runs of a call whose child died of a signal or hung, before giving up
+STALL_SECONDS = 30.0  # clock seconds without any CPU time gained after which a child is hung
+_POLL_SECONDS = 0.25  # how often the children's CPU time is read
+_TICK = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100  # /proc's CPU time unit
 
 
 class ChildCrashed(BakerError):
@@ -38,9 +48,10 @@ class ChildCrashed(BakerError):
 
 def call_forked(function: Callable[[], Any], what: str, seconds: float) -> Any:
     """``function()`` run in a forked child: its value, or the exception it raised, raised here
-    (as RuntimeError when it cannot be pickled). A child killed by a signal, or still running
-    after ``seconds``, is killed and run again, up to ``ATTEMPTS`` times; then ChildCrashed
-    names ``what`` was being done. Ctrl-C here kills the child. Without ``os.fork``,
+    (as RuntimeError when it cannot be pickled). A child killed by a signal, or hung (more than
+    ``seconds`` of CPU time, or none gained for ``STALL_SECONDS``, or ``seconds`` if less), is
+    killed and run again, up to ``ATTEMPTS`` times; then ChildCrashed names ``what`` was being
+    done. Ctrl-C here kills the child. Without ``os.fork``,
     ``function()`` is simply called."""
     return call_forked_together([function], what, seconds)[0]
 
@@ -48,7 +59,8 @@ def call_forked(function: Callable[[], Any], what: str, seconds: float) -> Any:
 def call_forked_together(functions: list[Callable[[], Any]], what: str, seconds: float
                          ) -> list[Any]:
     """Every function of ``functions`` run as ``call_forked`` runs one, each in its own child
-    and all at once (one per core would be busy), ``seconds`` for each: their values in order.
+    and all at once (one per core would be busy), ``seconds`` of CPU time for each: their
+    values in order.
     A crashed or hung child is run again on its own; the first error raised ends them all."""
     if not hasattr(os, "fork") or not sys.platform.startswith("linux"):
         return [function() for function in functions]
@@ -77,8 +89,8 @@ def call_forked_together(functions: list[Callable[[], Any]], what: str, seconds:
 
 def _attempts(functions: list[Callable[[], Any]], seconds: float) -> list[tuple[bool, Any] | str]:
     """One forked run of each function, all at once: per function (True, value) or (False,
-    exception), or why its child was lost: the name of the signal that killed it, or that it
-    ran past ``seconds`` (it is killed)."""
+    exception), or why its child was lost: the name of the signal that killed it, or why it was
+    taken for hung (it is killed)."""
     _trim_heap()
     children = []  # (pid, read end of its pipe)
     try:
@@ -91,7 +103,7 @@ def _attempts(functions: list[Callable[[], Any]], seconds: float) -> list[tuple[
                 _child(function, read, write)
             os.close(write)
             children.append((pid, read))
-        data = _read_until([read for _, read in children], time.monotonic() + seconds)
+        data = _read_until(children, seconds, min(seconds, STALL_SECONDS))
     except BaseException:  # Ctrl-C while the children run: they go too
         for pid, _ in children:
             os.kill(pid, signal.SIGKILL)
@@ -100,17 +112,17 @@ def _attempts(functions: list[Callable[[], Any]], seconds: float) -> list[tuple[
     finally:
         for _, read in children:
             os.close(read)
-    return [_outcome(pid, got, seconds) for (pid, _), got in zip(children, data)]
+    return [_outcome(pid, got) for (pid, _), got in zip(children, data)]
 
 
-def _outcome(pid: int, data: bytes | None, seconds: float) -> tuple[bool, Any] | str:
-    """What child ``pid`` gave, from the whole of its pipe ``data`` (None: it did not end in
-    ``seconds``, and is killed now); the child is reaped."""
-    if data is None:
+def _outcome(pid: int, data: bytes | str) -> tuple[bool, Any] | str:
+    """What child ``pid`` gave, from the whole of its pipe ``data`` (a str: why it was taken
+    for hung, and it is killed now); the child is reaped."""
+    if isinstance(data, str):
         os.kill(pid, signal.SIGKILL)
     _, status = os.waitpid(pid, 0)
-    if data is None:
-        return f"still running after {seconds:.0f} s"
+    if isinstance(data, str):
+        return data
     if os.WIFSIGNALED(status):
         return signal.Signals(os.WTERMSIG(status)).name
     try:
@@ -119,23 +131,51 @@ def _outcome(pid: int, data: bytes | None, seconds: float) -> tuple[bool, Any] |
         return False, RuntimeError(f"the forked call gave no usable result ({error!r})")
 
 
-def _read_until(fds: list[int], deadline: float) -> list[bytes | None]:
-    """All of each pipe of ``fds`` up to its end, or None for those that have not ended by
-    ``deadline`` (``time.monotonic``)."""
-    parts: dict[int, list[bytes]] = {fd: [] for fd in fds}
-    done: dict[int, bytes] = {}
-    while len(done) < len(fds):
-        left = deadline - time.monotonic()
-        ready = select.select([fd for fd in fds if fd not in done], [], [], max(left, 0))[0]
-        if left <= 0 or not ready:
-            break
+def _read_until(children: list[tuple[int, int]], cpu_seconds: float, stall_seconds: float
+                ) -> list[bytes | str]:
+    """All of each child's pipe (``children``: (pid, read end)) up to its end, or, for a child
+    taken for hung first, why: more than ``cpu_seconds`` of CPU time used, or none gained in
+    ``stall_seconds`` of clock time."""
+    parts: dict[int, list[bytes]] = {fd: [] for _, fd in children}
+    done: dict[int, bytes | str] = {}
+    progress = {fd: (-1.0, time.monotonic()) for _, fd in children}  # (CPU s, when it grew)
+    while len(done) < len(children):
+        ready = select.select([fd for _, fd in children if fd not in done], [], [],
+                              _POLL_SECONDS)[0]
         for fd in ready:
             part = os.read(fd, 1 << 20)
             if part:
                 parts[fd].append(part)
             else:
                 done[fd] = b"".join(parts[fd])
-    return [done.get(fd) for fd in fds]
+        now = time.monotonic()
+        for pid, fd in children:
+            if fd in done:
+                continue
+            used = cpu_seconds_of(pid)
+            if used is None:  # exited: its pipe's end comes with the next select
+                continue
+            if used > cpu_seconds:
+                done[fd] = f"past {cpu_seconds:.0f} s of CPU time"
+            elif used > progress[fd][0]:
+                progress[fd] = (used, now)
+            elif now - progress[fd][1] > stall_seconds:
+                done[fd] = f"no CPU time used in {stall_seconds:.0f} s"
+    return [done[fd] for _, fd in children]
+
+
+def cpu_seconds_of(pid: int) -> float | None:
+    """CPU seconds process ``pid`` has used so far, all its threads, user and system time
+    (``/proc/PID/stat`` fields 14 and 15, in clock ticks); None once it has exited (a zombie
+    counts as exited) or where /proc cannot tell."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as stat:
+            fields = stat.read().rsplit(b")", 1)[1].split()  # the name may hold spaces, ")"
+    except (OSError, IndexError):
+        return None
+    if fields[0] == b"Z":
+        return None
+    return (int(fields[11]) + int(fields[12])) / _TICK
 
 
 def _trim_heap() -> None:
