@@ -39,6 +39,7 @@ from baker.rebake.staging import StateStaging
 from baker.rebake.state import default_path as default_state_path
 from baker.run.atomic import Outputs, write_atomically
 from baker.run.compile_clock import CompileClock
+from baker.run.progress import StageLines
 from baker.settings import Resolved, Settings
 
 
@@ -157,7 +158,8 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
     ``report_path`` writes the JSON report; ``lightmaps_dir`` also writes each page as a file,
     ``lightmaps_format`` "png" (the embedded image), "hdr" or "exr" (the float page, hdr.py);
     ``error_map_dir`` writes each page's per-texel standard error (errormap.py);
-    ``quiet=False`` draws a progress bar when stderr is a terminal. ``overwrite`` lets
+    ``quiet=False`` prints a line per stage with its time to stderr, and draws a progress
+    bar of the rays on a terminal (``run.progress``). ``overwrite`` lets
     ``output`` be the input itself (or replace a file the input uses); it is replaced
     atomically, only once the bake has succeeded.
 
@@ -180,7 +182,8 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
     check_format(lightmaps_format)
     started = time.perf_counter()
     loading: dict[str, float] = {}
-    with timed(loading, "load"):
+    log = StageLines(not quiet)
+    with timed(loading, "load"), log.stage("load"):
         scene = load(input_path, settings.mirror_roughness)
     check_input_kept(scene, output, overwrite)
     with ThreadPoolExecutor(1) as beside, CompileClock() as compiling, \
@@ -202,7 +205,7 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
             resolved = done.settings
             # closing(): the rows the state is written from (parts.py), if on disk, are
             # removed once the state is written.
-            with closing(done.per_texel), timed(times, "write"):
+            with closing(done.per_texel), timed(times, "write"), log.stage("write"):
                 pages = encode(carried(done), resolved.encoding, writes_occlusion(resolved),
                                resolved.clip_percentile)
                 info = write(scene, done.atlas, pages, output,

@@ -1,10 +1,13 @@
-"""The bake's progress bar: one bar over the rays there are to cast, on every method; its total
-known early enough for an ETA to mean something; drawn on any terminal, silent in pipelines."""
+"""The bake's progress: one bar over the rays there are to cast, on every method; its total
+known early enough for an ETA to mean something; drawn on any terminal, never in pipelines;
+one line per stage with its time, everywhere but with --quiet."""
 
 from __future__ import annotations
 
 import io
+import json
 import os
+import re
 import pty
 import subprocess
 import sys
@@ -70,14 +73,16 @@ def test_the_eta_after_a_tenth_of_the_work_is_within_a_quarter(tmp_path, monkeyp
     assert 0.75 <= eta / left <= 1.25, (n, total, final)
 
 
-def _bake_with_stderr_on(stderr, env, tmp_path) -> subprocess.Popen:
+def _bake_with_stderr_on(stderr, env, tmp_path, *more: str) -> subprocess.Popen:
     source = cornell_box().save(tmp_path / "box.glb")
     return subprocess.Popen(
         [sys.executable, "-m", "baker.cli.main", "bake", str(source), "-o",
-         str(tmp_path / "baked.glb"), "--rays", "64", "--page-size", "256", "--no-state"],
+         str(tmp_path / "baked.glb"), "--rays", "64", "--page-size", "256", "--no-state", *more],
         cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=stderr)
 
 
+STAGES = ("load", "lights and plan", "unwrap", "rasterise", "texels and rays", "post-process",
+          "write")  # a full bake's stage lines, in order
 def test_the_bar_is_drawn_on_a_terminal_that_gives_no_size(tmp_path):
     """A new pseudo-terminal has a size of 0 × 0 (as under ``script`` or a CI runner's tty):
     the bar is drawn all the same (tqdm alone hides it there)."""
@@ -98,10 +103,37 @@ def test_the_bar_is_drawn_on_a_terminal_that_gives_no_size(tmp_path):
     assert process.wait(timeout=300) == 0
     text = drawn.decode(errors="replace")
     assert "baking:" in text and "%|" in text and "ray/s" in text
+    for stage in STAGES:  # shown while it runs, then completed with its time
+        assert f"baker: {stage}" in text
+        assert re.search(rf"baker: {re.escape(stage)}[^\r\n]* …", text)
+        assert re.search(rf"\r\x1b\[Kbaker: {re.escape(stage)}[^\r\n]* \d+\.\d\d s\r?\n", text)
 
 
-def test_no_bar_in_a_pipeline(tmp_path):
+def test_a_pipeline_gets_one_line_per_stage_with_its_true_time(tmp_path):
+    """Not a terminal (a pipe; CI likewise): no bar, no redraws, one line per stage, in order,
+    each with the stage's wall time; the unwrap's is the report's unwrap time."""
     env = {k: v for k, v in os.environ.items() if k != "CI"}
-    process = _bake_with_stderr_on(subprocess.PIPE, env, tmp_path)
+    report = tmp_path / "report.json"
+    process = _bake_with_stderr_on(subprocess.PIPE, env, tmp_path, "--report", str(report))
+    _, err = process.communicate(timeout=300)
+    assert process.returncode == 0
+    text = err.decode()
+    assert "\r" not in text and "%|" not in text
+    lines = text.splitlines()
+    assert len(lines) == len(STAGES)
+    seconds = {}
+    for line, stage in zip(lines, STAGES):
+        found = re.fullmatch(rf"baker: ({re.escape(stage)})(?: \([\d,]+ texels\))? "
+                             rf"(\d+\.\d\d) s", line)
+        assert found, line
+        seconds[stage] = float(found.group(2))
+    stage_seconds = json.loads(report.read_text())["stage_seconds"]
+    assert abs(seconds["unwrap"] - stage_seconds["unwrap"]) <= 0.01 + 0.05 * stage_seconds["unwrap"]
+    assert abs(seconds["write"] - stage_seconds["write"]) <= 0.01 + 0.05 * stage_seconds["write"]
+
+
+def test_quiet_prints_no_stage_line(tmp_path):
+    env = {k: v for k, v in os.environ.items() if k != "CI"}
+    process = _bake_with_stderr_on(subprocess.PIPE, env, tmp_path, "--quiet")
     _, err = process.communicate(timeout=300)
     assert process.returncode == 0 and err == b""

@@ -52,7 +52,7 @@ from baker.pipeline import cluster
 from baker.pipeline.parts import PerTexel, Tally, TexelPoints, part_slices
 from baker.pipeline.plan import Plan, make_plan
 from baker.rays.trace import Tracer
-from baker.run.progress import Meter, bar, wanted
+from baker.run.progress import Meter, StageLines, bar, wanted
 from baker.run.spill import Spill
 from baker.settings import Resolved, Settings, resolve
 
@@ -228,12 +228,14 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True,
     bake state starts to be written once the texels are done.
     """
     times: dict[str, float] = {}
-    with timed(times, "load"):
-        world = build_world(scene)
-    area, diagonal = bounds_of_baked(world, scene)
-    resolved = resolve(settings, area, diagonal)
-    lit = lighting(scene, world, resolved, times)
-    with timed(times, "unwrap"):
+    log = StageLines(not quiet)
+    with log.stage("lights and plan"):
+        with timed(times, "load"):
+            world = build_world(scene)
+        area, diagonal = bounds_of_baked(world, scene)
+        resolved = resolve(settings, area, diagonal)
+        lit = lighting(scene, world, resolved, times)
+    with timed(times, "unwrap"), log.stage("unwrap"):
         try:
             atlas = unwrap(scene, world, resolved)
         except PageTooSmall as error:
@@ -241,7 +243,7 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True,
                 raise
             resolved = replace(resolved, texel_density=error.texel_density)  # derived: shrink it
             atlas = unwrap(scene, world, resolved)
-    with timed(times, "rasterise"):
+    with timed(times, "rasterise"), log.stage("rasterise"):
         coverage = cover(atlas, world)
         owned = owners(atlas, world, coverage)
     count = len(coverage.key)
@@ -249,16 +251,18 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True,
     baking = Baking(scene, world, resolved, lit, atlas, coverage, owned, Faces(scene, world),
                     surfaces_of(scene, world))
     if resolved.foliage == "approx":
-        with timed(times, "foliage fit"):
+        with timed(times, "foliage fit"), log.stage("foliage fit"):
             baking = replace(baking, foliage=prepare_foliage(
                 scene, world, lit.tracer, resolved, FitInputs(
                     atlas, coverage, owned, baking.faces, baking.surfaces,
                     effective_r_ave(lit.ambient, resolved.rho))))
     try:
-        pages, last = _bake_parts(baking, spill, times, quiet)
+        with log.stage(f"texels and rays ({count:,} texels)"):
+            pages, last = _bake_parts(baking, spill, times, quiet)
         per_texel = (PerTexel.spilled(spill, atlas, world) if spill is not None
                      else last.held())
-        return _finish_pages(baking, per_texel, pages, times, staging)
+        with log.stage("post-process"):
+            return _finish_pages(baking, per_texel, pages, times, staging)
     except BaseException:  # an error or Ctrl-C: no spilled rows left behind
         if spill is not None:
             spill.close()

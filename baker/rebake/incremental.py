@@ -99,6 +99,7 @@ from baker.rebake.diff import Diff, diff, fingerprints
 from baker.rebake.exact_sums import changed_terms, ray_changes
 from baker.rebake.sobol_cells import cap_boxes, net_solve, sobol_cell_sample
 from baker.run.parallel import cores, even_slices, run_chunks
+from baker.run.progress import StageLines
 from baker.settings import TECHNIQUES, Resolved, Settings, resolve
 
 # Extra reach (in texel sides of each texel) beyond d_max: the validity probes move a sample
@@ -960,17 +961,23 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
     atlas, new rays for every texel, or a new float32 frame.
     """
     times: dict[str, float] = {}
-    start = _compared(scene, settings, path, relight, times)
-    lit = lighting(scene, start.world, start.resolved, times)
-    stored = _stored_texels(scene, start, lit, times)
-    search = _dirty_search(scene, start, lit, stored, times)
-    with timed(times, "trace"):
-        terms, obscurance_rays = _traced_again(scene, start, lit, stored, search)
-    with timed(times, "direct"):
-        direct, direct_rays = _lit_again(scene, start, lit, stored, search)
+    log = StageLines(not quiet)
+    with log.stage("state and changes"):
+        start = _compared(scene, settings, path, relight, times)
+    with log.stage("lights and plan"):
+        lit = lighting(scene, start.world, start.resolved, times)
+    with log.stage("changed texels"):
+        stored = _stored_texels(scene, start, lit, times)
+        search = _dirty_search(scene, start, lit, stored, times)
+    with log.stage("rays"):
+        with timed(times, "trace"):
+            terms, obscurance_rays = _traced_again(scene, start, lit, stored, search)
+        with timed(times, "direct"):
+            direct, direct_rays = _lit_again(scene, start, lit, stored, search)
     per_texel = PerTexel.held(search.texels, stored.texels, search.validity, terms, direct)
-    done = finish(scene, start.world, start.resolved, lit, stored.atlas, per_texel, times,
-                  staging, start.fingerprint)  # exactly as a full bake goes on
+    with log.stage("post-process"):
+        done = finish(scene, start.world, start.resolved, lit, stored.atlas, per_texel, times,
+                      staging, start.fingerprint)  # exactly as a full bake goes on
     rows = np.flatnonzero(search.reason >= 0)
     dirty = Dirty(rows=rows, reason=search.reason, tested_rays=search.tested,
                   relit=tuple(start.change.lights_placed))

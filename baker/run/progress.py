@@ -1,12 +1,17 @@
-"""A progress bar of a bake's work, in rays cast, with ETA on a terminal; silent in
-pipelines, CI and with ``quiet``.
+"""A bake's progress: one line per stage with its time, and a bar of its rays on a terminal;
+nothing with ``quiet``.
+
+``StageLines`` prints ``baker: <stage> <seconds> s`` to stderr as each stage ends, wherever
+stderr goes (a pipeline's or CI's log gets one line per stage); on a terminal the line is shown
+while the stage runs (``baker: unwrap …``) and completed with the time when it ends.
 
 The bar counts rays, the work there is: a texel of a 256-path GI bake costs a hundred times one
 of a 4-ray obscurance bake. Each stage (obscurance, direct light, GI) is registered with its
 texels and an estimate of the rays a texel casts (``Meter.stage``); as it reports the texels
 done and the rays they cast, its remaining rays are re-estimated from its mean so far, and the
 bar's total follows (GI's paths end by Russian roulette: their length is known only by casting
-them). tqdm draws it, with the average rate (``smoothing=0``): ETA = elapsed × to do / done.
+them). tqdm draws it, with the average rate (``smoothing=0``): ETA = elapsed × to do / done;
+only on a terminal, not in CI (a log would get every redraw).
 """
 
 from __future__ import annotations
@@ -14,6 +19,7 @@ from __future__ import annotations
 import os
 import sys
 import threading
+import time
 from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Callable, Iterator
@@ -116,3 +122,36 @@ def _has_size() -> bool:
     except (OSError, ValueError):
         return False
     return size.columns > 0 and size.lines > 0
+
+
+class StageLines:
+    """One line per stage of a bake, with its wall time, to stderr (none when not ``show``)."""
+
+    def __init__(self, show: bool):
+        self.show = show
+        self._live = show and wanted(False)  # a terminal: the line shows while the stage runs
+
+    @contextmanager
+    def stage(self, name: str) -> Iterator[None]:
+        """Print ``baker: NAME S s`` when the block ends (S: its wall seconds); on a terminal
+        ``baker: NAME …`` from its start. A block ended by an error prints no time (on a
+        terminal its line is ended, so that the error starts a line of its own)."""
+        if not self.show:
+            yield
+            return
+        if self._live:
+            self._write(f"baker: {name} …")
+        started = time.perf_counter()
+        try:
+            yield
+        except BaseException:
+            if self._live:
+                self._write("\n")
+            raise
+        seconds = time.perf_counter() - started
+        self._write(("\r\x1b[K" if self._live else "") + f"baker: {name} {seconds:.2f} s\n")
+
+    @staticmethod
+    def _write(text: str) -> None:
+        sys.stderr.write(text)
+        sys.stderr.flush()
