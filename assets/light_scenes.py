@@ -12,7 +12,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from assets.gltf_builder import GltfBuilder, quad, rotation_matrix, transformed
+from assets.gltf_builder import GltfBuilder, box, quad, rotation_matrix, transformed
 
 FLOOR_ALBEDO = (0.5, 0.5, 0.5)
 
@@ -110,4 +110,15 @@ def open_floor(size: float = 2.0) -> GltfBuilder:
     """A floor alone (for the sky)."""
     b = GltfBuilder()
     b.info["floor"] = _floor(b, size, size)
+    return b
+
+
+def floor_under_box() -> GltfBuilder:
+    """A 3 m floor with a 0.6 m box on it, for the sky (its shadow and the box's sides)."""
+    b = GltfBuilder()
+    grey = b.material("grey", (0.6, 0.6, 0.6))
+    b.node("floor", b.shape_mesh("floor", box((3.0, 0.02, 3.0)), material=grey),
+           translation=(0.0, -0.01, 0.0))
+    b.node("box", b.shape_mesh("box", box((0.6, 0.6, 0.6)), material=grey),
+           translation=(0.0, 0.3, 0.0))
     return b

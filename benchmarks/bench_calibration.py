@@ -1,19 +1,14 @@
 """Benchmark: do the error estimates baker prints hold? (issue 22's calibration set)
 
-For each scene of the set, bakes at ``--rays`` and a reference of the same scene at
-``--reference`` × as many rays (obscurance, shadow, emissive and sky rays) with another seed, and prints, over the baked texels' lightmap
-luminance (post-processed pages, as written):
-
-- ``reported``: the bake's ``rmse_estimate``; ``measured``: the RMS of (bake − reference)
-  × sqrt(f / (f + 1)), f the reference's ray factor (the reference's own error taken out, as
-  if it fell as 1/sqrt(rays)); their ratio (issue 22 asks for [0.67, 1.5]);
-- ``2σ`` / ``3σ``: the share of texels whose |bake − reference| is within 2 / 3 of their own
-  ``--error-map`` value (``errormap.texel_errors``, the reference's added in quadrature); a
-  normal error gives 95.4 % / 99.7 %.
+For each scene of the set, ``baker.study.calibration``: a bake at ``--rays`` rays of every
+kind a texel against a reference with ``--reference`` × as many (and as many points for I_A's
+power) and another seed; prints the bake's ``rmse_estimate`` ("reported"), the RMSE measured
+against the reference, their ratio (issue 22 asks for [0.67, 1.5]) and the share of texels
+within 2σ / 3σ of their own ``--error-map`` value (normal errors: 95.4 % / 99.7 %).
 
 The set spans obscurance with ρ = sqrt, linear and step under a low ceiling, a Cornell room
 with its emissive lamp, a soft point light's penumbra, a floor under the sky and the
-path-traced GI of a glowing closed room (``--method gi``).
+path-traced GI (``--method gi``) of a glowing closed room and of the Cornell room.
 
     python benchmarks/bench_calibration.py [--rays 64] [--reference 16] [--only NAME]
 """
@@ -27,35 +22,19 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
-
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from assets.gltf_builder import GltfBuilder, box  # noqa: E402
-from assets.light_scenes import penumbra  # noqa: E402
+from assets.light_scenes import floor_under_box, penumbra  # noqa: E402
 from assets.make_scenes import cornell_box, parallel_planes  # noqa: E402
-from baker.geometry.surface import LUMINANCE  # noqa: E402
 from baker.gltf.load import load  # noqa: E402
-from baker.image.errormap import error_pages  # noqa: E402
-from baker.pipeline.full import compute  # noqa: E402
-from baker.settings import Settings  # noqa: E402
+from baker.study import calibration  # noqa: E402
 
 
 def _glowing_room(albedo: float = 0.8) -> GltfBuilder:
     b = GltfBuilder()
     wall = b.material("wall", (albedo,) * 3, emissive=(1.0, 1.0, 1.0))
     b.node("room", b.shape_mesh("room", box((2.0, 2.0, 2.0), inward=True), material=wall))
-    return b
-
-
-def _floor_under_box() -> GltfBuilder:
-    """A 3 m floor with a 0.6 m box on it, for the sky (its shadow and the box's sides)."""
-    b = GltfBuilder()
-    grey = b.material("grey", (0.6, 0.6, 0.6))
-    b.node("floor", b.shape_mesh("floor", box((3.0, 0.02, 3.0)), material=grey),
-           translation=(0.0, -0.01, 0.0))
-    b.node("box", b.shape_mesh("box", box((0.6, 0.6, 0.6)), material=grey),
-           translation=(0.0, 0.3, 0.0))
     return b
 
 
@@ -72,9 +51,10 @@ SCENES = {
         lambda: parallel_planes(height=0.3, half_extent=5.0, probe_size=1.0),
         dict(texel_density=20.0, d_max=1.0, rho="step")),
     "cornell (emissive lamp)": (cornell_box, dict(texel_density=8.0)),
-    "soft light penumbra": (lambda: penumbra(0.2), dict(texel_density=40.0, shadow_rays=16)),
-    "sky over a box": (_floor_under_box, dict(texel_density=10.0, sky=(0.3, 0.4, 0.6))),
+    "soft light penumbra": (lambda: penumbra(0.2), dict(texel_density=40.0)),
+    "sky over a box": (floor_under_box, dict(texel_density=10.0, sky=(0.3, 0.4, 0.6))),
     "gi, glowing room a = 0.8": (_glowing_room, dict(texel_density=4.0, method="gi")),
+    "gi, cornell (emissive lamp)": (cornell_box, dict(texel_density=4.0, method="gi")),
 }
 
 
@@ -89,32 +69,12 @@ def _probe_only(scene):
         for inst in scene.instances))
 
 
-def _bake(scene, rays: int, seed: int, settings: dict):
-    done = compute(_probe_only(scene), Settings(rays=rays, seed=seed, **settings))
-    covered = done.lightmaps.covered
-    value = (done.lightmaps.light @ LUMINANCE)[covered]
-    return value, error_pages(done)[covered], done.rmse_estimate()
-
-
 def calibrate(name: str, rays: int, factor: int, folder: Path) -> dict:
-    """Bake ``name`` at ``rays`` and its reference; return the figures printed."""
+    """``study.calibration`` of the scene ``name``, timed."""
     make, settings = SCENES[name]
-    path = make().save(folder / "scene.glb")
-    scene = load(path)
+    scene = _probe_only(load(make().save(folder / "scene.glb")))
     start = time.perf_counter()
-    value, sigma, reported = _bake(scene, rays, 1, settings)
-    more = {name: factor * settings.get(name, getattr(Settings(), name))
-            for name in ("shadow_rays", "emissive_rays", "sky_rays")}  # every term's rays
-    ref_value, ref_sigma, ref_reported = _bake(scene, rays * factor, 2, {**settings, **more})
-    error = value - ref_value
-    # E[error²] = RMSE² · (1 + 1/factor) when the error falls as 1/sqrt(rays)
-    measured = float(np.sqrt(np.mean(error ** 2) * factor / (factor + 1)))
-    band = np.sqrt(sigma ** 2 + ref_sigma ** 2)
-    return {"reported": reported, "measured": measured, "reference": ref_reported,
-            "ratio": reported / measured if measured > 0 else float("inf"),
-            "2σ": float(np.mean(np.abs(error) <= 2 * band)),
-            "3σ": float(np.mean(np.abs(error) <= 3 * band)),
-            "texels": len(value), "seconds": time.perf_counter() - start}
+    return {**calibration(scene, settings, rays, factor), "seconds": time.perf_counter() - start}
 
 
 def main() -> None:

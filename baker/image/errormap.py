@@ -1,9 +1,7 @@
 """Per-texel error pages (``--error-map DIR``): where the lightmap is still noisy.
 
-Each texel's standard error of its lightmap luminance, in lightmap units: the obscurance term's
-from its rays' sample variance, scaled so that the map's RMS equals the bake's ``rmse_estimate``
-(the sample variance overstates quasi-Monte Carlo error; ``Terms.rmse`` measures by how much),
-plus the direct light's own variance. Written per page as ``<stem>_error_<p>.hdr`` (float,
+Each texel's standard error of its lightmap luminance, in lightmap units, the terms of the
+bake's ``rmse_estimate`` texel by texel (``texel_errors``). Written per page as ``<stem>_error_<p>.hdr`` (float,
 Radiance RGBE, grey) and ``<stem>_error_<p>.png`` (8-bit grey, scaled to the page's largest
 error, for a quick look).
 """
@@ -21,19 +19,65 @@ from baker.image.compose import effective_r_ave
 from baker.image.hdr import hdr_bytes
 
 
-def texel_errors(done) -> np.ndarray:
-    """(N,) standard error of each texel's lightmap luminance, lightmap units.
+POOL_RADIUS = 2  # the direct light's per-texel variances are pooled over (2r + 1)² texels
 
-    ``done``: a ``bake.Computed``.
+
+def texel_errors(done) -> np.ndarray:
+    """(N,) standard error of each texel's lightmap luminance, lightmap units (``done``: a
+    ``bake.Computed``), in quadrature:
+
+    - the obscurance's, I_A·W: the rays' sample variance, scaled so that its RMS over the
+      texels is ``obscurance_rmse`` (the halves' estimate); with ``--method gi`` the paths'
+      variance instead (``gi.Indirect.variance``, independent paths: no scaling);
+    - I_A's own, common to every texel: I_A·W × I_A's relative standard error
+      (``ambient.Ambient.relative_variance``, the power estimate's);
+    - the direct light's: each texel's estimate from its rays' two independent halves
+      (``direct.mean_and_variance``) has one degree of freedom, so it is averaged over the
+      baked texels of the (2·``POOL_RADIUS`` + 1)² window about it on its page, whose light
+      is alike (rescaled to keep their sum: the map's mean square is the report's), and a
+      texel's error is not judged from two numbers.
     """
+    texels = done.texels
     r_ave = effective_r_ave(done.ambient, done.settings.rho)
-    scale = float(done.ambient.intensity @ LUMINANCE)
-    sample = done.terms.standard_error(r_ave) * scale
-    rms = float(np.sqrt(np.mean(sample ** 2))) if len(sample) else 0.0
-    target = done.obscurance_rmse()
-    obscurance = sample * (target / rms if rms > 0 else 0.0)
-    direct = done.direct.variance() if done.direct is not None else 0.0
-    return np.sqrt(obscurance ** 2 + direct)
+    intensity = done.ambient.intensity
+    if done.settings.method == "gi":
+        indirect = done.indirect_variance
+    else:
+        scale = float(intensity @ LUMINANCE)
+        sample = done.terms.standard_error(r_ave) * scale
+        rms = float(np.sqrt(np.mean(sample ** 2))) if len(sample) else 0.0
+        indirect = (sample * (done.obscurance_rmse() / rms if rms > 0 else 0.0)) ** 2
+        shared = (done.terms.obscurance(r_ave) * intensity) @ LUMINANCE
+        indirect = indirect + done.ambient.relative_variance * shared ** 2
+    direct = 0.0
+    if done.direct is not None and len(texels):
+        own = done.direct.variance()
+        direct = pooled(own, texels.pixels(),
+                        (done.atlas.page_count, done.atlas.height, done.atlas.width))
+        total = float(direct.sum())
+        direct = direct * (float(own.sum()) / total if total > 0 else 0.0)
+    return np.sqrt(indirect + direct)
+
+
+def pooled(values: np.ndarray, pixels: tuple[np.ndarray, np.ndarray, np.ndarray],
+           shape: tuple[int, int, int], radius: int = POOL_RADIUS) -> np.ndarray:
+    """(N,) the mean of ``values`` (N,) over the texels within ``radius`` texels (a square
+    window) of each one on its page; ``pixels``: the texels' (page, y, x), ``shape`` the
+    pages' (P, H, W). Summed-area tables: O(P·H·W)."""
+    page, y, x = pixels
+    total = np.zeros((shape[0], shape[1] + 1, shape[2] + 1))
+    count = np.zeros_like(total)
+    total[page, y + 1, x + 1] = values
+    count[page, y + 1, x + 1] = 1.0
+    sums = []
+    for table in (total, count):
+        table = table.cumsum(axis=1).cumsum(axis=2)
+        top, bottom = np.maximum(y - radius, 0), np.minimum(y + radius + 1, shape[1])
+        left, right = np.maximum(x - radius, 0), np.minimum(x + radius + 1, shape[2])
+        sums.append(table[page, bottom, right] - table[page, top, right]
+                    - table[page, bottom, left] + table[page, top, left])
+    return np.maximum(sums[0], 0.0) / np.maximum(sums[1], 1.0)  # (the tables' differences
+    # of non-negative values may round below 0)
 
 
 def error_pages(done) -> np.ndarray:

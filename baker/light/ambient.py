@@ -52,6 +52,8 @@ class Ambient:
     # alone), or "+"-joined "lights", "emission", "sky" (with power)
     truncated: bool  # the bounce series was cut (R_ave close to 1)
     escape: np.ndarray | None = None  # (3,) what rays that meet nothing count; None: R_ave
+    relative_variance: float = 0.0  # of I_A's estimate (I_A from the power of sources,
+    # estimated at points, ``direct.Power``); 0 when I_A is exact (the user's, equation 3)
 
 
 def bounce_factor(r_ave: np.ndarray) -> tuple[np.ndarray, bool]:
@@ -109,7 +111,8 @@ def _ambient_terms(scene: Scene, world: World, user_intensity: float | None,
         if not names:
             return Ambient(r_ave, mean_emission, np.ones(3), "none", False)
         bounced = r_ave * series * power.total() / total
-        return Ambient(r_ave, mean_emission, bounced, "+".join(names), truncated)
+        return Ambient(r_ave, mean_emission, bounced, "+".join(names), truncated,
+                       relative_variance=power.relative_variance)
     if not np.any(mean_emission > 0):
         return Ambient(r_ave, mean_emission, np.ones(3), "none", False)
     return Ambient(r_ave, mean_emission, series * mean_emission, "emission", truncated)

@@ -33,7 +33,8 @@ a little below their own facet's plane (above the shading normal's), so the ligh
 across the facets instead of stopping at each facet's edge.
 
 Randomness is a pure function of (seed, texel key, sample, dimension) through
-``sampling.sample_2d``; each source has dimensions of its own
+``sampling.split_samples`` (two independent halves, which make each estimate's error
+measurable: ``mean_and_variance``); each source has dimensions of its own
 (``baker/rays/dimensions.py``, the one table of them). Chunks of texels
 run on a thread pool and write only their own rows, so the result does not depend on chunking.
 
@@ -56,7 +57,7 @@ from baker.geometry.world import World
 from baker.gltf.scene import Light, Scene
 from baker.jit import jit
 from baker.rays.dimensions import EMISSIVE, POWER, SKY, light_dimension
-from baker.rays.sampling import cosine_hemisphere, sample_2d, tangent_frames
+from baker.rays.sampling import cosine_hemisphere, sample_2d, split_samples, tangent_frames
 from baker.rays.trace import Tracer, ray_lift
 from baker.run.parallel import run_chunks
 from baker.settings import Resolved
@@ -250,13 +251,25 @@ def _cone_directions(axis: np.ndarray, cos_max: np.ndarray, u: np.ndarray) -> np
             + cos_t[..., None] * axis[:, None])
 
 
-def _mean_and_variance(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Mean over the last axis of (k, n) samples, and the variance of that mean (0 when n = 1)."""
+def mean_and_variance(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean over the last axis of (k, n) samples drawn as ``sampling.split_samples`` draws
+    them, and an unbiased estimate of that mean's variance (0 when n = 1).
+
+    The samples' variance over n would assume independent samples; scrambled Sobol points
+    are better than that, and it overstated the error of soft shadows, emitters and the sky
+    2–4× (``benchmarks/bench_calibration.py``). The two halves (a = ⌈n/2⌉ and b = n − a
+    samples) are independent estimates, so with m₁, m₂ their means, E[(m₁ − m₂)²] = V₁ + V₂
+    and the whole mean's variance (a²V₁ + b²V₂)/n² is ab/n²·(m₁ − m₂)² when V ∝ 1/size, and
+    exactly (m₁ − m₂)²/4 for a = b whatever the points' convergence. One texel's estimate has
+    one degree of freedom: the error map pools it over neighbouring texels
+    (``errormap.texel_errors``), the report over all of them."""
     n = values.shape[1]
     mean = values.mean(axis=1)
     if n < 2:
         return mean, np.zeros_like(mean)
-    return mean, values.var(axis=1, ddof=1) / n
+    a = (n + 1) // 2
+    gap = values[:, :a].mean(axis=1) - values[:, a:].mean(axis=1)
+    return mean, a * (n - a) / (n * n) * gap * gap
 
 
 def _facing(receivers: Receivers, directions: np.ndarray) -> np.ndarray:
@@ -303,7 +316,7 @@ def punctual_irradiance(light: Light, spread: float, n: int, receivers: Receiver
         return np.zeros(0), np.zeros(0)
     soft = spread > 0
     n = n if soft or receivers.sub is not None else 1
-    u = sample_2d(seed, receivers.key[:, None], np.arange(n)[None, :], dimension)  # (k, n, 2)
+    u = split_samples(seed, receivers.key, n, dimension)  # (k, n, 2)
     if light.kind == "directional":
         axis = np.broadcast_to(-light.direction, (k, 3)).copy()
         if soft:
@@ -345,7 +358,7 @@ def punctual_irradiance(light: Light, spread: float, n: int, receivers: Receiver
         rays = directions.reshape(-1, 3)[flat]
         visible[flat] = ~tracer.occluded(origins, rays, lengths[flat])
     values = cos * visible.reshape(k, n) * scale
-    return _mean_and_variance(values)
+    return mean_and_variance(values)
 
 
 @jit
@@ -403,7 +416,7 @@ def emissive_irradiance(scene: Scene, world: World, emitters: Emitters, n: int,
     k = len(receivers.position)
     if k == 0:
         return np.zeros((0, 3)), np.zeros(0)
-    u = sample_2d(seed, receivers.key[:, None], np.arange(n)[None, :], EMISSIVE).reshape(-1, 2)
+    u = split_samples(seed, receivers.key, n, EMISSIVE).reshape(-1, 2)
     origins = receivers.origins(n)
     raised = np.zeros(k, bool) if receivers.raised is None else receivers.raised
     chosen, bary, directions, distance, weight = emitter_samples(
@@ -418,7 +431,7 @@ def emissive_irradiance(scene: Scene, world: World, emitters: Emitters, n: int,
         radiance = emitter_radiance(scene, world, emitters, chosen[live], bary[live])
         value[live] = radiance * (weight[live] * visible)[:, None]
     value = value.reshape(k, n, 3)
-    _, variance = _mean_and_variance(value @ LUMINANCE)
+    _, variance = mean_and_variance(value @ LUMINANCE)
     return value.mean(axis=1), variance
 
 
@@ -450,15 +463,14 @@ def sky_irradiance(sky: np.ndarray, n: int, receivers: Receivers, tracer: Tracer
     k = len(receivers.position)
     if k == 0:
         return np.zeros((0, 3)), np.zeros(0)
-    local = cosine_hemisphere(sample_2d(seed, receivers.key[:, None], np.arange(n)[None, :],
-                                        SKY))
+    local = cosine_hemisphere(split_samples(seed, receivers.key, n, SKY))
     normal = receivers.geometric
     t1, t2 = tangent_frames(normal)
     directions = (local[..., :1] * t1[:, None] + local[..., 1:2] * t2[:, None]
                   + local[..., 2:] * normal[:, None]).reshape(-1, 3)
     escaped = ~tracer.occluded(receivers.origins(n), directions, np.inf)
     value = (np.pi * sky_radiance(sky, directions) * escaped[:, None]).reshape(k, n, 3)
-    _, variance = _mean_and_variance(value @ LUMINANCE)
+    _, variance = mean_and_variance(value @ LUMINANCE)
     return value.mean(axis=1), variance
 
 
@@ -623,6 +635,9 @@ class Power:
     punctual: (L,) float64 per light at unit intensity and white colour; light_colours: (L, 3)
     colour × intensity as baked; emission: (3,) from emissive surfaces; sky: (3,) from the sky.
     area: A_T, the scene's total triangle area. Units: irradiance × scene units².
+    relative_variance: the variance of the estimate of the total's luminance over its square
+    (the points' luminance of D, at the baked colours, independent from point to point:
+    their sample variance over their count), which I_A inherits (``ambient.Ambient``).
     """
 
     punctual: np.ndarray
@@ -630,6 +645,7 @@ class Power:
     emission: np.ndarray
     sky: np.ndarray
     area: float
+    relative_variance: float = 0.0
 
     def total(self, light_colours: np.ndarray | None = None) -> np.ndarray:
         """(3,) power from every source, with light colours × intensities (L, 3) if given."""
@@ -648,9 +664,11 @@ class Power:
 
 
 def power_points(world: World, seed: int,
-                 count: int = POWER_POINTS) -> tuple[np.ndarray, np.ndarray, Receivers]:
-    """``count`` points spread over every triangle by area (systematic sampling): their
-    triangles (count,), barycentrics (count, 3) and the Receivers they make."""
+                 count: int | None = None) -> tuple[np.ndarray, np.ndarray, Receivers]:
+    """``count`` points (None: ``POWER_POINTS``, as it is when called) spread over every
+    triangle by area (systematic sampling): their triangles (count,), barycentrics (count, 3)
+    and the Receivers they make."""
+    count = POWER_POINTS if count is None else count
     areas = world.areas()
     total = areas.sum()
     keys = _POWER_KEY_BASE + np.arange(count, dtype=np.uint64)
@@ -679,18 +697,27 @@ def delivered_power(scene: Scene, world: World, tracer: Tracer, sources: Sources
     lights = len(sources.lights)
     area = float(world.areas().sum()) if len(world.triangles) else 0.0
     punctual, emitted, sky = np.zeros(lights), np.zeros(3), np.zeros(3)
+    colours = sources.light_colours()
+    relative_variance = 0.0
     if area > 0 and sources.any():
         _, _, receivers = power_points(world, settings.seed)
+        seen = np.zeros(len(receivers.key))  # each point's luminance of D
         for l, light in enumerate(sources.lights):
             mean, _ = punctual_irradiance(light, float(sources.spread[l]), 1, receivers, tracer,
                                           settings.seed, light_dimension(l))
             punctual[l] = area * mean.mean()
+            seen += mean * float(colours[l] @ LUMINANCE)
         if sources.emitters is not None:
             mean, _ = emissive_irradiance(scene, world, sources.emitters, 1, receivers, tracer,
                                           settings.seed)
             emitted = area * mean.mean(axis=0)
+            seen += mean @ LUMINANCE
         if sources.sky is not None:
             mean, _ = sky_irradiance(sources.sky, 1, receivers, tracer, settings.seed)
             sky = area * mean.mean(axis=0)
-    return Power(punctual=punctual, light_colours=sources.light_colours(), emission=emitted,
-                 sky=sky, area=area)
+            seen += mean @ LUMINANCE
+        level = float(seen.mean())
+        if level > 0:
+            relative_variance = float(seen.var(ddof=1) / len(seen)) / level ** 2
+    return Power(punctual=punctual, light_colours=colours, emission=emitted,
+                 sky=sky, area=area, relative_variance=relative_variance)

@@ -101,6 +101,7 @@ class Computed:
     power: Power | None = None  # what each source lays on the surfaces, for I_A
     denoised: DenoiseInfo | None = None  # what --denoise did (denoise.py); None: not denoised
     foliage: Foliage | None = None  # --foliage approx: the crowns and their fit (foliage.py)
+    indirect_variance: np.ndarray | None = None  # --method gi: (N,) gi.Indirect.variance
 
     @property
     def texels(self) -> Texels:
@@ -126,14 +127,16 @@ class Computed:
             self.ambient.intensity @ LUMINANCE)
 
     def rmse_estimate(self) -> float:
-        """RMSE of the lightmap's luminance estimated from the rays: D's, and I_A·W's or, with
-        ``--method gi``, the path-traced indirect light's (``gi.Indirect.variance``)."""
+        """RMSE of the lightmap's luminance estimated from the rays: D's, and I_A·W's (its
+        rays', and I_A's own: ``Ambient.relative_variance`` × the mean square of I_A·W) or,
+        with ``--method gi``, the path-traced indirect light's (``gi.Indirect.variance``)."""
         if not self.tally.texels:
             return 0.0
         direct = self.tally.direct_variance / self.tally.texels
         if self.settings.method == "gi":
             return float(np.sqrt(direct + self.tally.indirect_variance / self.tally.texels))
-        return float(np.sqrt(self.obscurance_rmse() ** 2 + direct))
+        shared = self.ambient.relative_variance * self.tally.ambient_squares / self.tally.texels
+        return float(np.sqrt(self.obscurance_rmse() ** 2 + shared + direct))
 
 
 @dataclass(frozen=True)
@@ -385,13 +388,14 @@ class _Pages:
     lightmaps: Lightmaps
     masks: tuple[np.ndarray, np.ndarray]
     tally: Tally
+    indirect_variance: list[np.ndarray]  # --method gi: each part's gi.Indirect.variance
 
     @classmethod
     def blank(cls, baking: Baking) -> "_Pages":
         """Nothing composed yet (pages of the visibility only for the occlusion texture)."""
         lightmaps = blank(baking.atlas, visibility=writes_occlusion(baking.settings))
         return cls(lightmaps, (np.zeros_like(lightmaps.covered),
-                               np.zeros_like(lightmaps.covered)), Tally())
+                               np.zeros_like(lightmaps.covered)), Tally(), [])
 
     def add(self, baking: Baking, texels: Texels, validity: Validity, terms: Terms,
             direct: Direct, indirect: Indirect | None = None) -> None:
@@ -404,7 +408,10 @@ class _Pages:
         compose_into(self.lightmaps, texels, terms, ambient, rho, direct, colours,
                      None if indirect is None else indirect.irradiance)
         validity.mark(texels, *self.masks)
-        self.tally.add(terms, direct, validity, effective_r_ave(ambient, rho), indirect)
+        self.tally.add(terms, direct, validity, effective_r_ave(ambient, rho), indirect,
+                       ambient.intensity)
+        if indirect is not None:
+            self.indirect_variance.append(indirect.variance)
 
 
 def writes_occlusion(settings: Resolved) -> bool:
@@ -433,6 +440,8 @@ def _finish_pages(baking: Baking, per_texel: PerTexel, pages: _Pages, times: dic
                     ambient=baking.ambient, plan=baking.lit.plan, atlas=baking.atlas,
                     per_texel=per_texel, tally=pages.tally, lightmaps=lightmaps,
                     stage_seconds=times, sources=baking.sources, power=baking.lit.power,
-                    denoised=denoised, foliage=baking.foliage)
+                    denoised=denoised, foliage=baking.foliage,
+                    indirect_variance=(np.concatenate(pages.indirect_variance)
+                                       if pages.indirect_variance else None))
 
 

@@ -18,6 +18,7 @@ import numpy as np
 from baker.atlas.layout import Atlas
 from baker.atlas.rasterise import Coverage, Texels, texels_of
 from baker.atlas.validity import STATE_NAMES, Validity
+from baker.geometry.surface import LUMINANCE
 from baker.geometry.world import World
 from baker.light.direct import Direct
 from baker.light.gi import Indirect
@@ -97,7 +98,8 @@ class Tally:
     states: texels in each validity state, by name; split_squares: (2,) ``Terms.split_squares``
     summed; direct_variance: the sum over texels of the variance of D's luminance; with
     ``--method gi``, indirect_variance the same of E_ind's, the paths' rays (gi_rays) and the
-    paths cut at ``gi.MAX_BOUNCES`` (gi_capped).
+    paths cut at ``gi.MAX_BOUNCES`` (gi_capped); ambient_squares: the sum over texels of the
+    squared luminance of I_A·W, which an error of I_A scales (``Ambient.relative_variance``).
     """
 
     texels: int = 0
@@ -109,13 +111,19 @@ class Tally:
     indirect_variance: float = 0.0
     gi_rays: int = 0
     gi_capped: int = 0
+    ambient_squares: float = 0.0
 
     def add(self, terms: Terms, direct: Direct | None, validity: Validity,
-            r_ave: np.ndarray, indirect: Indirect | None = None) -> None:
-        """Count the texels of one part (``r_ave``: the R_ave the estimator used)."""
+            r_ave: np.ndarray, indirect: Indirect | None = None,
+            intensity: np.ndarray | None = None) -> None:
+        """Count the texels of one part (``r_ave``: the R_ave the estimator used; ``intensity``:
+        I_A (3,), for ``ambient_squares``)."""
         self.texels += len(terms.counts)
         self.rays += terms.rays
         self.split_squares = self.split_squares + terms.split_squares(r_ave)
+        if intensity is not None:
+            self.ambient_squares += float(np.sum(((terms.obscurance(r_ave) * intensity)
+                                                  @ LUMINANCE) ** 2))
         if direct is not None:
             self.shadow_rays += direct.rays
             self.direct_variance += float(np.sum(direct.variance()))

@@ -244,6 +244,26 @@ def sample_2d(seed: int, keys: np.ndarray, samples: np.ndarray, dimension: int,
     return out
 
 
+REPLICA = 1 << 32  # replica r of a dimension d draws from the scrambles of word d + r·REPLICA
+
+
+def split_samples(seed: int, keys: np.ndarray, n: int, dimension: int) -> np.ndarray:
+    """(k, n, 2) points for ``n`` samples of each of the (k,) ``keys`` in two independent
+    replicas: samples 0 … ⌈n/2⌉ − 1 are the first points of ``dimension``'s scrambled Sobol
+    sequence (``sample_2d``), samples ⌈n/2⌉ … n − 1 the first points of another scramble
+    (word ``dimension + REPLICA``; no dimension reaches 2^32). Each half is stratified in
+    itself (a net when its size is a power of two) and the halves are independent, so
+    the difference of their means measures the error of the whole mean without bias
+    (``direct.mean_and_variance``); a single net's halves are anti-correlated and would not.
+    n = 1 gives sample 0 of ``dimension``, as ``sample_2d`` does."""
+    keys = np.asarray(keys, np.uint64).reshape(-1, 1)
+    first = (n + 1) // 2
+    halves = [sample_2d(seed, keys, np.arange(first)[None, :], dimension)]
+    if n > first:
+        halves.append(sample_2d(seed, keys, np.arange(n - first)[None, :], dimension + REPLICA))
+    return np.concatenate(halves, axis=1)
+
+
 @jit
 def _sin_cos(t):
     """(sin t, cos t) for |t| ≤ π/4 by their Taylor polynomials (error below 1e-16).
