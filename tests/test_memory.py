@@ -83,14 +83,12 @@ def test_a_bake_in_parts_grows_with_its_pages_not_its_texels(tmp_path, monkeypat
     its pages (two float pages, the coverage's page-sized arrays, masks), not by what it holds
     per texel: all at once, the same growth was 9 light pages."""
     from baker.pipeline import parts as parts
-    from baker.atlas import rasterise as rasterise
     from baker.pipeline.full import compute
     from baker.settings import Settings
     from tests.bakehelp import loaded
 
     scene = loaded(cornell_box(), tmp_path)
     monkeypatch.setattr(parts, "PART_TEXELS", 4096)
-    monkeypatch.setattr(rasterise, "_CANDIDATES_PER_CHUNK", 50_000)
     peaks, pages = [], []
     for size in (256, 640):
         held = []

@@ -94,19 +94,60 @@ def test_texel_size_follows_texel_density(tmp_path):
     assert 350 < len(texels) < 600
 
 
-def test_coverage_does_not_depend_on_how_many_candidates_are_taken_at_once(tmp_path, monkeypatch):
-    """Triangles' texel boxes are cut into bands of rows and taken in chunks (memory): tiny
-    bands and chunks, cutting every triangle, give the same owners and counts."""
-    from baker.atlas import rasterise as rasterise_module
+def _overlap_area(triangle: np.ndarray, x: int, y: int) -> float:
+    """Area of the texel square [x, x+1] × [y, y+1] inside the UV triangle (3, 2): the square
+    clipped by each edge's half-plane in turn (Sutherland–Hodgman), then the shoelace."""
+    polygon = [np.array(p, float) for p in ((x, y), (x + 1, y), (x + 1, y + 1), (x, y + 1))]
+    a, b, c = triangle
+    sign = np.sign((b - a)[0] * (c - a)[1] - (b - a)[1] * (c - a)[0])
+    for p, q in ((a, b), (b, c), (c, a)):
+        def inside(point, p=p, q=q):
+            return sign * ((q - p)[0] * (point - p)[1] - (q - p)[1] * (point - p)[0])
+        clipped = []
+        for i, current in enumerate(polygon):
+            previous = polygon[i - 1]
+            now, before = inside(current), inside(previous)
+            if (now >= 0) != (before >= 0):
+                clipped.append(previous + (current - previous) * before / (before - now))
+            if now >= 0:
+                clipped.append(current)
+        polygon = clipped
+        if not polygon:
+            return 0.0
+    xs, ys = np.array([p[0] for p in polygon]), np.array([p[1] for p in polygon])
+    return 0.5 * abs(np.dot(xs, np.roll(ys, -1)) - np.dot(ys, np.roll(xs, -1)))
 
-    scene, world, atlas, texels = _raster(three_instances(), tmp_path, 48.0)
-    whole = rasterise_module.cover(atlas, world)
-    monkeypatch.setattr(rasterise_module, "_CANDIDATES_PER_CHUNK", 7)
-    bands = rasterise_module._bands(_baked_triangles(atlas, world)[0], 7)[0]
-    assert len(bands) > 10 * len(np.unique(bands))  # every triangle in many bands
-    cut = rasterise_module.cover(atlas, world)
-    for name in ("key", "triangle", "triangle_texels"):
-        assert np.array_equal(getattr(cut, name), getattr(whole, name)), name
+
+def test_coverage_is_every_texel_a_triangle_overlaps_owned_by_the_deepest():
+    """Random triangles (some past the page's edges, of every size down to a sliver) on a
+    12 × 9 page: a texel is covered exactly when its square overlaps some triangle with an area
+    (square clipped by the triangle, computed independently of the separating axes), each
+    triangle counts the texels it overlaps, and the owner is the triangle whose edges are
+    farthest from the texel centre on the inside (the centre's distance inside the nearest)."""
+    from baker.atlas.rasterise import _cover_kernel, _edge_terms
+
+    rng = np.random.default_rng(11)
+    width, height = 12, 9
+    centres = rng.uniform([-2, -2], [width + 2, height + 2], size=(40, 1, 2))
+    corners = centres + rng.normal(size=(40, 3, 2)) * rng.choice([0.05, 0.7, 3.0], (40, 1, 1))
+    corners[0] = [[1.1, 1.2], [6.3, 1.25], [10.7, 1.3]]  # a sliver along a row
+    normals, offsets = _edge_terms(corners)
+    best_depth, best_owner = np.full(width * height, -np.inf), np.full(width * height, -1, np.int32)
+    counts = np.zeros(len(corners), np.int64)
+    _cover_kernel(corners, normals, offsets, np.zeros(len(corners), np.int64), width, height,
+                  best_depth, best_owner, counts)
+    area = np.array([[[_overlap_area(t, x, y) for x in range(width)] for y in range(height)]
+                     for t in corners])  # (triangles, y, x)
+    overlapping = area > 1e-12
+    np.testing.assert_array_equal(counts, overlapping.sum(axis=(1, 2)))
+    np.testing.assert_array_equal(best_owner >= 0, overlapping.any(axis=0).reshape(-1))
+    y, x = np.divmod(np.arange(width * height), width)
+    centre = np.stack([x + 0.5, y + 0.5], axis=1)
+    depth = (np.einsum("tej,pj->tpe", normals, centre) - offsets[:, None]).min(axis=2)
+    depth = np.where(overlapping.reshape(len(corners), -1), depth, -np.inf)
+    covered = best_owner >= 0
+    np.testing.assert_array_equal(best_owner[covered], np.argmax(depth, axis=0)[covered])
+    assert covered.sum() > 30 and (counts == 0).sum() > 2  # covered texels and triangles off the page
 
 
 def test_the_geometry_handed_on_is_read_only(tmp_path):

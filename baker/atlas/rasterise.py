@@ -42,10 +42,6 @@ from baker.geometry.world import World
 from baker.jit import jit
 from baker.run.parallel import run_chunks
 
-# Candidate (triangle, texel) pairs examined at once; bounds memory at ~150 bytes a pair.
-_CANDIDATES_PER_CHUNK = 500_000
-
-
 _KEY_BITS = np.uint64((1 << 63) - 1)  # a texel key's bits below inner.OTHER_SIDE
 
 
@@ -165,20 +161,6 @@ def _baked_triangles(atlas: Atlas, world: World) -> tuple[np.ndarray, np.ndarray
     return np.concatenate(corners), np.concatenate(pages), np.concatenate(tris)
 
 
-def _candidates(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """All (triangle, x, y) pairs of the integer texel boxes [lo, hi] (inclusive), vectorised.
-
-    lo, hi: (k, 2) int64. Returns owner (c,) index into the k boxes and texel x, y (c,).
-    """
-    w = hi[:, 0] - lo[:, 0] + 1
-    h = hi[:, 1] - lo[:, 1] + 1
-    counts = w * h
-    owner = np.repeat(np.arange(len(lo)), counts)
-    start = np.cumsum(counts) - counts
-    local = np.arange(counts.sum()) - start[owner]
-    return owner, lo[owner, 0] + local % w[owner], lo[owner, 1] + local // w[owner]
-
-
 def _edge_terms(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Inward unit edge normals (k, 3, 2) and offsets (k, 3) of UV triangles.
 
@@ -196,46 +178,47 @@ def _edge_terms(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return normals, np.einsum("kej,kej->ke", normals, starts)
 
 
-def _bands(corners: np.ndarray, limit: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Every UV triangle's (k, 3, 2) texel box cut into bands of rows of at most about
-    ``limit`` texels (a wall's one triangle can span millions): (b,) triangle of each band,
-    and its box's lowest and highest texel lo, hi (b, 2) int64, inclusive."""
-    lo = np.floor(corners.min(axis=1)).astype(np.int64)
-    hi = np.maximum(np.floor(corners.max(axis=1)).astype(np.int64), lo)
-    rows = np.maximum(1, limit // (hi[:, 0] - lo[:, 0] + 1))  # rows per band
-    bands = (hi[:, 1] - lo[:, 1]) // rows + 1
-    tri = np.repeat(np.arange(len(corners)), bands)
-    first = lo[tri, 1] + (np.arange(len(tri)) - (np.cumsum(bands) - bands)[tri]) * rows[tri]
-    band_lo = np.stack([lo[tri, 0], first], axis=1)
-    band_hi = np.stack([hi[tri, 0], np.minimum(first + rows[tri] - 1, hi[tri, 1])], axis=1)
-    return tri, band_lo, band_hi
-
-
-def _cover(corners: np.ndarray, lo: np.ndarray, hi: np.ndarray
-           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Conservative coverage of a chunk of UV triangles (k, 3, 2) in texel units, within the
-    texel boxes [lo, hi] (k, 2) (inclusive; a band of each triangle's box).
-
-    Returns, for every (triangle, texel) pair whose square overlaps the triangle: triangle (c,)
-    index into the chunk, texel x and y (c,), and the depth (c,) of the texel centre inside the
-    triangle (negative when the centre is outside).
-    """
-    owner, x, y = _candidates(lo, hi)
-    normals, offsets = _edge_terms(corners)
-    centre = np.stack([x + 0.5, y + 0.5], axis=1)
-    n = normals[owner]
-    inside = np.einsum("cej,cj->ce", n, centre) - offsets[owner]  # (c, 3) distance inside
-    radius = 0.5 * np.abs(n).sum(axis=-1)  # the square's half-extent along each normal
-    overlaps = np.all(inside >= -radius, axis=1)
-    depth = inside.min(axis=1)
-    return owner[overlaps], x[overlaps], y[overlaps], depth[overlaps]
-
-
-def _chunks(counts: np.ndarray, limit: int) -> list[slice]:
-    """Split consecutive items with ``counts`` candidates each into slices of about ``limit``."""
-    bounds = np.searchsorted(np.cumsum(counts), np.arange(limit, counts.sum() + limit, limit))
-    edges = np.unique(np.concatenate([[0], np.minimum(bounds + 1, len(counts)), [len(counts)]]))
-    return [slice(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:]) if b > a]
+@jit
+def _cover_kernel(corners: np.ndarray, normals: np.ndarray, offsets: np.ndarray,
+                  pages: np.ndarray, width: int, height: int, best_depth: np.ndarray,
+                  best_owner: np.ndarray, counts: np.ndarray) -> None:
+    """Conservative coverage of UV triangles (k, 3, 2) in texel units on pages ``width`` ×
+    ``height``, in place, one compiled pass over each triangle's texel box (clipped to its
+    page ``pages`` (k,)): a texel whose square overlaps triangle t (separating axes: the box
+    axes by the box itself, the three edges by ``normals`` (k, 3, 2) and ``offsets`` (k, 3),
+    ``_edge_terms``, each against the square's half-extent along it) counts in ``counts[t]``
+    (k,), and t becomes the texel's owner in ``best_owner`` (P·H·W,) int32 when the texel
+    centre's depth inside it (the least distance inside its edges, negative outside) is above
+    ``best_depth`` (P·H·W,) float64, or equal to it from a lower t. Every pair is looked at
+    once, in triangle order, with no temporaries: memory is the pages' (12 bytes a texel)."""
+    for t in range(len(corners)):
+        x_lo = np.floor(min(corners[t, 0, 0], corners[t, 1, 0], corners[t, 2, 0]))
+        y_lo = np.floor(min(corners[t, 0, 1], corners[t, 1, 1], corners[t, 2, 1]))
+        x_hi = max(np.floor(max(corners[t, 0, 0], corners[t, 1, 0], corners[t, 2, 0])), x_lo)
+        y_hi = max(np.floor(max(corners[t, 0, 1], corners[t, 1, 1], corners[t, 2, 1])), y_lo)
+        n0x, n0y, n1x, n1y = normals[t, 0, 0], normals[t, 0, 1], normals[t, 1, 0], normals[t, 1, 1]
+        n2x, n2y = normals[t, 2, 0], normals[t, 2, 1]
+        r0 = -(0.5 * (abs(n0x) + abs(n0y)))  # the square's half-extent along each normal
+        r1 = -(0.5 * (abs(n1x) + abs(n1y)))
+        r2 = -(0.5 * (abs(n2x) + abs(n2y)))
+        o0, o1, o2 = offsets[t, 0], offsets[t, 1], offsets[t, 2]
+        base = np.int64(pages[t]) * height * width
+        for y in range(max(np.int64(y_lo), 0), min(np.int64(y_hi), height - 1) + 1):
+            cy = y + 0.5
+            for x in range(max(np.int64(x_lo), 0), min(np.int64(x_hi), width - 1) + 1):
+                cx = x + 0.5
+                d0 = n0x * cx + n0y * cy - o0
+                d1 = n1x * cx + n1y * cy - o1
+                d2 = n2x * cx + n2y * cy - o2
+                if not (d0 >= r0 and d1 >= r1 and d2 >= r2):
+                    continue
+                counts[t] += 1
+                depth = min(d0, d1, d2)
+                texel = base + y * width + x
+                if depth > best_depth[texel] or (depth == best_depth[texel]
+                                                 and t < best_owner[texel]):
+                    best_depth[texel] = depth
+                    best_owner[texel] = t
 
 
 def texel_barycentrics(atlas: Atlas, world: World, texels: Texels) -> np.ndarray:
@@ -360,29 +343,14 @@ def cover(atlas: Atlas, world: World) -> Coverage:
     """The owner of every texel that a baked triangle touches (conservative coverage, the
     deepest triangle at the texel centre, ties to the lower index; see the module notes)."""
     corners, pages, tris = _baked_triangles(atlas, world)
-    width, height = atlas.width, atlas.height
-    page_texels = max(atlas.page_count, 1) * width * height
+    page_texels = max(atlas.page_count, 1) * atlas.width * atlas.height
     best_depth = np.full(page_texels, -np.inf)
     best_owner = np.full(page_texels, -1, np.int32)  # index into corners/tris (4 bytes a page texel)
+    counts = np.zeros(len(corners), np.int64)
+    _cover_kernel(np.ascontiguousarray(corners), *_edge_terms(corners), pages, atlas.width,
+                  atlas.height, best_depth, best_owner, counts)
     triangle_texels = np.zeros(len(world.triangles), np.int64)
-    band, lo, hi = _bands(corners, _CANDIDATES_PER_CHUNK)
-    for part in _chunks(np.prod(hi - lo + 1, axis=1), _CANDIDATES_PER_CHUNK):
-        owner, x, y, depth = _cover(corners[band[part]], lo[part], hi[part])
-        owner = band[part][owner]
-        inside_page = (x >= 0) & (x < width) & (y >= 0) & (y < height)
-        owner, x, y, depth = owner[inside_page], x[inside_page], y[inside_page], depth[inside_page]
-        np.add.at(triangle_texels, tris[owner], 1)
-        texel = (pages[owner] * height + y) * width + x
-        # Best candidate per texel inside the chunk: deepest, then lowest triangle index.
-        order = np.lexsort((owner, -depth, texel))
-        texel, owner, depth = texel[order], owner[order], depth[order]
-        first = np.ones(len(texel), bool)
-        first[1:] = texel[1:] != texel[:-1]
-        texel, owner, depth = texel[first], owner[first], depth[first]
-        better = (depth > best_depth[texel]) | ((depth == best_depth[texel])
-                                                 & (owner < best_owner[texel]))
-        best_depth[texel[better]] = depth[better]
-        best_owner[texel[better]] = owner[better]
+    triangle_texels[tris] = counts  # a world triangle is baked once, in one instance
     key = np.flatnonzero(best_owner >= 0)
     return Coverage(key=key.astype(np.uint64), triangle=tris[best_owner[key]],
                     triangle_texels=triangle_texels)

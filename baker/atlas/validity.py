@@ -167,42 +167,68 @@ def _tangent_step(tracer: Tracer, faces: Faces, position: np.ndarray, normal: np
                   size: np.ndarray, home: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One round of tangent probes for k points: (new position (k, 3), moved (k,) bool,
-    touching (k,) bool: ``_touching``).
+    touching (k,) bool: some probe met a surface within ``TOUCH`` ray lifts).
 
     Of the back faces within ``TIE`` texel sides of the nearest, the point crosses the one
     whose direction points most towards ``home`` (k, 3), the centroid of the texel's own
     triangle: where the surface really is (a wall's corner texel poking past the ceiling and a
     side wall moves back into the room, not over the ceiling)."""
-    k = len(position)
     t1, t2 = _frames(normal)
     angle = 2 * np.pi * np.arange(TANGENT_RAYS) / TANGENT_RAYS
     in_plane = np.stack([np.cos(angle), np.sin(angle), np.zeros(TANGENT_RAYS)], axis=1)
     lift = ray_lift(position, size, tracer.center)
     origins, directions = _fan(position, normal, t1, t2, lift, in_plane)
-    length = np.repeat(PROBE_RADIUS * size, TANGENT_RAYS)
-    hits = tracer.cast(origins, directions, length)
-    back = faces.back(hits.triangle, directions)
-    distance = np.where(back, hits.distance, np.inf).reshape(k, TANGENT_RAYS)
-    towards = home - position
-    towards /= np.maximum(np.linalg.norm(towards, axis=1, keepdims=True), 1e-300)
-    alignment = np.einsum("krj,kj->kr", directions.reshape(k, TANGENT_RAYS, 3), towards)
-    close = distance <= distance.min(axis=1, keepdims=True) + TIE * size[:, None]
-    nearest = np.argmax(np.where(close, alignment, -np.inf), axis=1)
-    moved = np.isfinite(distance[np.arange(k), nearest])
-    step = distance[np.arange(k), nearest] + PUSH * size
-    direction = directions.reshape(k, TANGENT_RAYS, 3)[np.arange(k), nearest]
-    new = np.where(moved[:, None], position + np.where(moved, step, 0.0)[:, None] * direction,
-                   position)
-    return new, moved, _touching(hits.distance, lift)
+    hits = tracer.cast(origins, directions, np.repeat(PROBE_RADIUS * size, TANGENT_RAYS))
+    new, moved, touching = (np.empty_like(position), np.empty(len(position), np.bool_),
+                            np.empty(len(position), np.bool_))
+    _cross_nearest(position, size, home, directions, hits.triangle, hits.distance, lift,
+                   faces.normals, faces.single, new, moved, touching)
+    return new, moved, touching
 
 
-def _touching(distance: np.ndarray, lift: np.ndarray) -> np.ndarray:
-    """(k,) bool: some of each point's probes (k·m distances, point-major; inf for misses) met
-    a surface within ``TOUCH`` × its ray ``lift`` (k,) (none for no point: a part whose texels
-    are all degenerate probes none)."""
-    if not len(lift):
-        return np.zeros(0, bool)
-    return (distance.reshape(len(lift), -1) <= TOUCH * lift[:, None]).any(axis=1)
+@jit
+def _cross_nearest(position: np.ndarray, size: np.ndarray, home: np.ndarray,
+                   directions: np.ndarray, triangle: np.ndarray, distance: np.ndarray,
+                   lift: np.ndarray, normals: np.ndarray, single: np.ndarray, new: np.ndarray,
+                   moved: np.ndarray, touching: np.ndarray) -> None:
+    """What ``_tangent_step``'s probes found, in one compiled pass over k points (numpy's
+    passes over (k, m) temporaries took most of the stage's time outside Embree): their m rays
+    point-major, ``directions`` (k·m, 3) and hits ``triangle`` (k·m,) (−1: none) at
+    ``distance`` (k·m,) (inf for misses). Writes ``new`` (k, 3), the point moved past the
+    chosen back face and ``PUSH`` texel sides ``size`` (k,) further (or where it was),
+    ``moved`` (k,) and ``touching`` (k,): a probe met anything within ``TOUCH`` × ``lift``
+    (k,). A back face: ``_back_faces`` with the faces' ``normals`` and ``single``."""
+    k = len(position)
+    m = len(triangle) // max(k, 1)
+    back = np.empty(m)
+    for i in range(k):
+        tx, ty, tz = (home[i, 0] - position[i, 0], home[i, 1] - position[i, 1],
+                      home[i, 2] - position[i, 2])
+        length = max(np.sqrt(tx * tx + ty * ty + tz * tz), 1e-300)
+        tx, ty, tz = tx / length, ty / length, tz / length
+        nearest, touch = np.inf, False
+        for j in range(m):
+            r = i * m + j
+            t = triangle[r]
+            touch |= distance[r] <= TOUCH * lift[i]
+            facing = t >= 0 and single[t] and (normals[t, 0] * directions[r, 0]
+                                               + normals[t, 1] * directions[r, 1]
+                                               + normals[t, 2] * directions[r, 2]) > 0
+            back[j] = distance[r] if facing else np.inf
+            nearest = min(nearest, back[j])
+        within = nearest + TIE * size[i]
+        chosen, best = 0, -np.inf
+        for j in range(m):  # the first of the most aligned, as np.argmax takes it
+            r = i * m + j
+            alignment = directions[r, 0] * tx + directions[r, 1] * ty + directions[r, 2] * tz
+            if back[j] <= within and alignment > best:
+                chosen, best = j, alignment
+        touching[i] = touch
+        moved[i] = np.isfinite(back[chosen])
+        step = back[chosen] + PUSH * size[i]
+        r = i * m + chosen
+        for c in range(3):
+            new[i, c] = position[i, c] + step * directions[r, c] if moved[i] else position[i, c]
 
 
 def hemisphere_probes(position: np.ndarray, normal: np.ndarray, size: np.ndarray,
@@ -235,12 +261,36 @@ def _fan(position: np.ndarray, normal: np.ndarray, t1: np.ndarray, t2: np.ndarra
 def _back_fraction(tracer: Tracer, faces: Faces, position: np.ndarray, normal: np.ndarray,
                    size: np.ndarray, d_max: float) -> tuple[np.ndarray, np.ndarray]:
     """(k,) fraction of the fixed hemisphere probes from each point that meet a back face, and
-    (k,) bool whether one touches (``_touching``)."""
-    k = len(position)
+    (k,) bool whether one touches (meets a surface within ``TOUCH`` ray lifts)."""
     origins, directions = hemisphere_probes(position, normal, size, tracer.center)
     hits = tracer.cast(origins, directions, d_max)
-    fraction = faces.back(hits.triangle, directions).reshape(k, HEMISPHERE_RAYS).mean(axis=1)
-    return fraction, _touching(hits.distance, ray_lift(position, size, tracer.center))
+    lift = ray_lift(position, size, tracer.center)
+    fraction, touching = np.empty(len(position)), np.empty(len(position), np.bool_)
+    _count_backs(directions, hits.triangle, hits.distance, lift, faces.normals, faces.single,
+                 fraction, touching)
+    return fraction, touching
+
+
+@jit
+def _count_backs(directions: np.ndarray, triangle: np.ndarray, distance: np.ndarray,
+                 lift: np.ndarray, normals: np.ndarray, single: np.ndarray,
+                 fraction: np.ndarray, touching: np.ndarray) -> None:
+    """Per point of k, of its m probes (point-major, as ``_cross_nearest`` takes them): the
+    ``fraction`` (k,) that met a back face (``_back_faces``) and ``touching`` (k,), whether one
+    met anything within ``TOUCH`` × ``lift`` (k,)."""
+    k = len(lift)
+    m = len(triangle) // max(k, 1)
+    for i in range(k):
+        backs, touch = 0, False
+        for r in range(i * m, (i + 1) * m):
+            t = triangle[r]
+            touch |= distance[r] <= TOUCH * lift[i]
+            if t >= 0 and single[t] and (normals[t, 0] * directions[r, 0]
+                                         + normals[t, 1] * directions[r, 1]
+                                         + normals[t, 2] * directions[r, 2]) > 0:
+                backs += 1
+        fraction[i] = backs / m
+        touching[i] = touch
 
 
 def _raise(tracer: Tracer, position: np.ndarray, normal: np.ndarray, size: np.ndarray,
@@ -259,6 +309,18 @@ def _raise(tracer: Tracer, position: np.ndarray, normal: np.ndarray, size: np.nd
                               length[pushing] + RAISE_MARGIN * size[pushing])
     out = position.copy()
     out[pushing[~blocked]] += push[pushing[~blocked]]
+    return out
+
+
+@jit
+def _centroids(positions: np.ndarray, triangles: np.ndarray, tri: np.ndarray) -> np.ndarray:
+    """(k, 3) world centroids of the triangles ``tri`` (k,): (a + b + c) / 3, corner by corner
+    as numpy's mean of the three corners sums them."""
+    out = np.empty((len(tri), 3))
+    for i in range(len(tri)):
+        a, b, c = triangles[tri[i], 0], triangles[tri[i], 1], triangles[tri[i], 2]
+        for j in range(3):
+            out[i, j] = (positions[a, j] + positions[b, j] + positions[c, j]) / 3.0
     return out
 
 
@@ -288,7 +350,7 @@ def check_texels(scene: Scene, world: World, tracer: Tracer, texels: Texels,
         p = position[rows]  # a view: the chunk's own rows
         p[:] = _raise(tracer, p, normal, texels.size(rows), texels.terminator(rows))
         start[rows] = p
-        home = np.mean(world.corners(texels.triangle[rows]), axis=0)  # (k, 3) centroids
+        home = _centroids(world.positions, world.triangles, texels.triangle[rows])
         step_moved, touched = moved[rows], touching[rows]  # views: the chunk's own rows
         for _ in range(TANGENT_ROUNDS):
             new, stepped, touch = _tangent_step(tracer, faces, p[usable], normal[usable],
