@@ -23,7 +23,7 @@ if __package__ in (None, ""):  # run as a script: make the repository root impor
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from assets.gltf_builder import (  # noqa: E402
-    GltfBuilder, Shape, box, merged, quat_axis_angle, uv_sphere)
+    GltfBuilder, Shape, box, cylinder, merged, quat_axis_angle, uv_sphere)
 
 ROOM = (12.0, 3.0, 12.0)
 
@@ -94,6 +94,22 @@ def main(out_dir: Path = Path(__file__).resolve().parent / "scenes") -> list[Pat
     """Write the default scene as ``boxes_and_sphere.glb``."""
     out_dir.mkdir(parents=True, exist_ok=True)
     return [boxes_and_sphere().save(out_dir / "boxes_and_sphere.glb")]
+
+
+def strewn_props(count: int, seed: int = 0) -> GltfBuilder:
+    """``count`` boxes, spheres and cylinders of random sizes (0.1–1 m), each its own mesh,
+    strewn through a 10 m cube: many small charts, whose padding can spill the default
+    density's atlas onto a second page (tests/test_default_pages.py)."""
+    rng = np.random.default_rng(seed)
+    builder = GltfBuilder()
+    grey = builder.material("grey", base_color=(0.6, 0.6, 0.6))
+    for k in range(count):
+        size = rng.uniform(0.1, 1.0)
+        shape = (box(rng.uniform(0.05, 1.0, 3)), uv_sphere(size, 6, 10),
+                 cylinder(size, rng.uniform(0.1, 2.0), segments=8))[k % 3]
+        builder.node(f"prop{k}", builder.shape_mesh(f"prop{k}", shape, material=grey),
+                     translation=rng.uniform(-5.0, 5.0, 3))
+    return builder
 
 
 if __name__ == "__main__":

@@ -31,7 +31,9 @@ INSTALL_FIX = ('pip install "baker[denoise]" (or pip install ".[denoise]" from a
 class Settings:
     """What the user asks for. Lengths in scene units (metres for glTF).
 
-    texel_density: texels per world unit along a surface; None derives it from ``page_size``.
+    texel_density: texels per world unit along a surface; None derives it from ``page_size``
+        (about half a page of texels, lowered until the charts fit one page when they
+        can: ``atlas.unwrap``).
     page_size: the largest lightmap page, in texels per side.
     padding: texels kept free around every chart (dilation fills them).
     rays: obscurance rays per texel.

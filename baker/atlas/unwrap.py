@@ -9,7 +9,7 @@ matrix), so moving or turning a node leaves the atlas bit for bit as it was (inc
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import xatlas
@@ -34,6 +34,10 @@ _SECONDS, _SECONDS_PER_TRIANGLE, _SECONDS_PER_TEXEL = 5.0, 1e-3, 1e-5
 # Expected texels above this share of a page: the page xatlas sizes itself may come out larger
 # than a page, so the run into whole pages is made beside it (on a second core) instead of after.
 _BESIDE = 0.25
+# The derived density is lowered, when the charts spill onto a second page though their texels
+# fit in one, by the page side over the side xatlas needs, times this (packing is not exactly
+# proportional: padding stays), in at most this many rounds (``_fitted``).
+_FIT_MARGIN, _FIT_TRIES = 0.98, 3
 
 
 class PageTooSmall(SettingsError):
@@ -208,30 +212,25 @@ def _fits(stored: tuple[tuple[int, ...], tuple[tuple[np.ndarray, ...], ...]],
     return True
 
 
-def unwrap(scene: Scene, world: World, settings: Resolved) -> Atlas:
+def unwrap(scene: Scene, world: World, settings: Resolved, fit_one_page: bool = False) -> Atlas:
     """Unwrap the baked instances into pages of at most ``settings.page_size`` texels a side.
 
     One page of the size xatlas needs is tried first; if it would exceed the page size, the
     charts are packed into as many ``page_size``² pages as they need. Where the first may well
     exceed it (expected texels over ``_BESIDE`` of a page), both runs are made at once.
+
+    ``fit_one_page`` (the derived, default density): when the charts spill onto a second page
+    although their texels would fit in one, the density is lowered until they fit
+    (``_fitted``); the atlas's ``texel_density`` is then the one used.
     """
     instances = baked_instances(scene)
     if not instances:
         return Atlas(width=0, height=0, page_count=0, texel_density=settings.texel_density,
                      padding=settings.padding, instances=())
-    area = frame_area(scene, world, instances)
-    expected = area * settings.texel_density ** 2
-    page = settings.page_size
     _check_triangles_fit(world, scene, instances, settings)
-    if expected > 0.5 * page ** 2:
-        [atlas] = _generate(scene, world, instances, settings, (page,))
-    elif expected > _BESIDE * page ** 2 and settings.threads != 1 and cores() > 1:
-        atlas, paged = _generate(scene, world, instances, settings, (0, page))
-        atlas = paged if max(atlas.width, atlas.height) > page else atlas
-    else:
-        [atlas] = _generate(scene, world, instances, settings, (0,))
-        if max(atlas.width, atlas.height) > page:
-            [atlas] = _generate(scene, world, instances, settings, (page,))
+    atlas, sized = _packed(scene, world, instances, settings)
+    if fit_one_page and atlas.atlas_count > 1:
+        atlas, settings = _fitted(scene, world, instances, settings, atlas, sized)
     if atlas.width == 0 or atlas.height == 0:
         raise SettingsError("no surface got any lightmap texels at this texel density",
                             fix="raise --texel-density, or check that the meshes have area")
@@ -247,6 +246,65 @@ def unwrap(scene: Scene, world: World, settings: Resolved) -> Atlas:
     return Atlas(width=int(atlas.width), height=int(atlas.height),
                  page_count=int(atlas.atlas_count), texel_density=float(settings.texel_density),
                  padding=int(settings.padding), instances=tuple(result))
+
+
+def _packed(scene: Scene, world: World, instances: list[int], settings: Resolved
+            ) -> tuple[_Packed, _Packed | None]:
+    """The atlas at ``settings.texel_density`` (see ``unwrap``), and the run in one page of
+    the size xatlas chose itself when one was made (None otherwise): its size says how much
+    the charts must shrink to fit one page."""
+    expected = frame_area(scene, world, instances) * settings.texel_density ** 2
+    page = settings.page_size
+    if expected > 0.5 * page ** 2:
+        [atlas] = _generate(scene, world, instances, settings, (page,))
+        return atlas, None
+    if expected > _BESIDE * page ** 2 and settings.threads != 1 and cores() > 1:
+        sized, paged = _generate(scene, world, instances, settings, (0, page))
+    else:
+        [sized] = _generate(scene, world, instances, settings, (0,))
+        if max(sized.width, sized.height) <= page:
+            return sized, sized
+        [paged] = _generate(scene, world, instances, settings, (page,))
+    return (paged if max(sized.width, sized.height) > page else sized), sized
+
+
+def _fitted(scene: Scene, world: World, instances: list[int], settings: Resolved,
+            atlas: _Packed, sized: _Packed | None) -> tuple[_Packed, Resolved]:
+    """The atlas in one page at a lower density when the charts' texels fit in one, else
+    ``atlas`` (spilled onto several pages) at ``settings``' density as it was.
+
+    The charts fit when their texels (``_chart_texels``) are at most a page's; the density is
+    then scaled by the page side over the side of the one page xatlas sized itself
+    (``sized``), less ``_FIT_MARGIN``, and packed again; padding does not shrink with the
+    charts, so up to ``_FIT_TRIES`` rounds. Deterministic: each round is a pure function of
+    the last one's atlas (and each is kept in the unwrap cache).
+    """
+    page = settings.page_size
+    if _chart_texels(atlas) > page * page:
+        return atlas, settings
+    if sized is None:
+        [sized] = _generate(scene, world, instances, settings, (0,))
+    trial = settings
+    for _round in range(_FIT_TRIES):
+        side = max(sized.width, sized.height)
+        trial = replace(trial, texel_density=_round_down(
+            trial.texel_density * page / side * _FIT_MARGIN))
+        found, sized = _packed(scene, world, instances, trial)
+        if found.atlas_count == 1 and max(found.width, found.height) <= page:
+            return found, trial
+        if sized is None:  # the lower density still expects over half a page: give up
+            break
+    return atlas, settings
+
+
+def _chart_texels(atlas: _Packed) -> float:
+    """Texels the charts of ``atlas`` cover, summed over its pages (their UV area)."""
+    total = 0.0
+    for _vertices, faces, uv, _page, _chart in atlas.meshes:
+        corners = uv.astype(np.float64)[faces.astype(np.int64)] * [atlas.width, atlas.height]
+        a, b = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
+        total += 0.5 * float(np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]).sum())
+    return total
 
 
 def _snap_unplaced(frame: np.ndarray, vertices: np.ndarray, uv: np.ndarray,

@@ -41,7 +41,8 @@ def add_parser(commands) -> None:
     quality = bake.add_argument_group("lightmap layout")
     quality.add_argument("--texel-density", type=positive_float, metavar="TEXELS_PER_UNIT",
                          help="lightmap texels per scene unit (metre) along a surface "
-                              "(default: fill about half of one page)")
+                              "(default: fill about half of one page, lowered until the "
+                              "charts fit one page when they can)")
     quality.add_argument("--page-size", type=int, default=d.page_size, metavar="TEXELS",
                          help=f"largest lightmap page side; more pages when one is full (default {d.page_size})")
     quality.add_argument("--padding", type=int, default=d.padding, metavar="TEXELS",

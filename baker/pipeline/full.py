@@ -238,14 +238,16 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True,
         area, diagonal = bounds_of_baked(world, scene)
         resolved = resolve(settings, area, diagonal)
         lit = lighting(scene, world, resolved, times)
+    derived = settings.texel_density is None  # then it may be lowered to fit (unwrap.py)
     with timed(times, "unwrap"), log.stage("unwrap"):
         try:
-            atlas = unwrap(scene, world, resolved)
+            atlas = unwrap(scene, world, resolved, fit_one_page=derived)
         except PageTooSmall as error:
-            if settings.texel_density is not None:  # the user's density: say what fits
+            if not derived:  # the user's density: say what fits
                 raise
             resolved = replace(resolved, texel_density=error.texel_density)  # derived: shrink it
-            atlas = unwrap(scene, world, resolved)
+            atlas = unwrap(scene, world, resolved, fit_one_page=True)
+        resolved = replace(resolved, texel_density=atlas.texel_density)
     with timed(times, "rasterise"), log.stage("rasterise"):
         coverage = cover(atlas, world)
         owned = owners(atlas, world, coverage)
