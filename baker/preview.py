@@ -48,8 +48,9 @@ from baker.gltf.scene import Scene
 from baker.image.encode import linear_to_srgb, png_bytes
 from baker.rays.trace import Tracer
 from baker.run.atomic import write_atomically
+from baker.settings import PREVIEW_MODES
 
-MODES = ("lit", "lightmap", "checker", "unlit")
+MODES = PREVIEW_MODES
 _RAYS_PER_CHUNK = 1 << 16
 _MAX_CULLED_LAYERS = 16  # back faces a primary ray may pass through before it gives up
 _BACKGROUND = np.array([0.02, 0.02, 0.025])  # linear RGB behind the scene
@@ -459,17 +460,6 @@ def _shade(scene: Scene, world: World, lightmaps: SceneLightmaps, mode: str, tri
     lightmapped = np.zeros(n, bool)
     lightmapped[hit[baked]] = True
     return radiance, lightmapped
-
-
-def parse_size(text: str) -> tuple[int, int]:
-    """'800x600' → (800, 600); ValueError unless both are whole numbers from 1 to 16384."""
-    parts = text.lower().replace("×", "x").split("x")
-    if len(parts) != 2 or not all(p.strip().isdigit() for p in parts):
-        raise ValueError(f"size must be WIDTHxHEIGHT, e.g. 800x600, not {text!r}")
-    width, height = (int(p) for p in parts)
-    if not (1 <= width <= 16384 and 1 <= height <= 16384):
-        raise ValueError(f"size {width}x{height} must be 1 to 16384 pixels a side")
-    return width, height
 
 
 def preview(input: str | os.PathLike, output: str | os.PathLike, mode: str = "lit",

@@ -22,6 +22,9 @@ SPECULAR_STRATEGIES = ("b", "a", "c")
 ESCAPES = ("auto", "scene", "white")
 """``Settings.escape``: chosen from the scene, R_ave, or a neutral white environment."""
 TECHNIQUES = ("sobol", "stratified", "random")  # how ray directions are drawn: rays.sampling
+LIGHTMAP_FORMATS = ("png", "hdr", "exr")  # files of --lightmaps DIR: image.hdr
+PREVIEW_MODES = ("lit", "lightmap", "checker", "unlit")  # what baker.preview shows
+STUDY_RAYS = (4, 8, 16, 32, 64, 128, 256, 512, 1024)  # rays per texel a study tries: baker.study
 FOLIAGE_MODES = ("none", "approx")  # how leaves' obscurance is found: light.foliage
 INSTALL_FIX = ('pip install "baker[denoise]" (or pip install ".[denoise]" from a checkout of '
                'baker), or leave out --denoise')

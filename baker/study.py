@@ -25,9 +25,9 @@ from baker.light.hemisphere import Terms
 from baker.light.integrate import integrate
 from baker.pipeline.full import Computed, compute
 from baker.rays.trace import Tracer
-from baker.settings import TECHNIQUES, Settings
+from baker.settings import STUDY_RAYS, TECHNIQUES, Settings
 
-DEFAULT_RAYS = (4, 8, 16, 32, 64, 128, 256, 512, 1024)
+DEFAULT_RAYS = STUDY_RAYS
 
 
 @dataclass(frozen=True)

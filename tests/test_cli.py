@@ -23,6 +23,22 @@ def test_help_explains_every_setting(capsys):
     assert "sqrt" in text and "step" in text and "examples:" in text
 
 
+def test_help_and_the_package_import_no_pipeline():
+    """``import baker`` and every subcommand's parser (what ``baker --help`` and a wrong option
+    build) load none of the heavy modules: those are imported by the command that runs (the
+    start-up, and with it the window where Ctrl-C meets Python's own imports, stays short)."""
+    heavy = ("numpy", "numba", "embreex", "PIL", "OpenEXR", "ray", "scipy", "pygltflib")
+    code = ("import sys\nimport baker\nfrom baker.cli.main import build_parser\n"
+            "parser = build_parser()\nfor name in ('bake', 'rebake', 'relight', 'watch', 'hook',"
+            " 'preview', 'view', 'study'):\n    try:\n        parser.parse_args([name, '--help'])\n"
+            "    except SystemExit:\n        pass\n"
+            f"print([m for m in {heavy!r} if m in sys.modules])")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          cwd=Path(__file__).resolve().parent.parent)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.splitlines()[-1] == "[]"
+
+
 def test_bake_prints_a_summary_and_writes_the_report(tmp_path, capsys):
     scene = cornell_box().save(tmp_path / "box.glb")
     out, report = tmp_path / "box_baked.glb", tmp_path / "report.json"

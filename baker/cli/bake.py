@@ -68,7 +68,7 @@ def add_parser(commands) -> None:
                             "white for an open scene without lights (a prop), else R_ave "
                             "(default auto; the plan says which and why)")
     model.add_argument("--seed", type=int, default=d.seed, help="sampler seed (default 0)")
-    model.add_argument("--sampling", choices=baker.rays.sampling.TECHNIQUES, default=d.sampling,
+    model.add_argument("--sampling", choices=baker.settings.TECHNIQUES, default=d.sampling,
                        help="how each texel's ray directions are drawn: sobol (Owen-scrambled, "
                             "least noise per ray), stratified or random (default sobol)")
     model.add_argument("--target-error", type=positive_float, metavar="E",
@@ -163,7 +163,7 @@ def add_parser(commands) -> None:
                           "RMSE at 16 rays 3-3.5x lower, see docs/denoise.md)")
     out.add_argument("--lightmaps", type=Path, metavar="DIR",
                      help="also write each lightmap page as a file in DIR (see --format)")
-    out.add_argument("--format", choices=baker.image.hdr.FORMATS, default="png", dest="lightmaps_format",
+    out.add_argument("--format", choices=baker.settings.LIGHTMAP_FORMATS, default="png", dest="lightmaps_format",
                      help="the --lightmaps files: png (the embedded 8-bit image) or the float "
                           "pages, unclipped: hdr (Radiance RGBE, 0.4%%) or exr (float32) "
                           "(default png)")

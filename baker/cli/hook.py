@@ -18,7 +18,6 @@ from pathlib import Path
 
 import baker
 from baker.cli.state import print_rebake, settings_for
-from baker.run.atomic import write_atomically
 
 SUFFIX = "_baked"
 IGNORE = "*_baked.gl*.bake*"  # every bake state the hook writes, and its timing record
@@ -71,6 +70,8 @@ def run(args: argparse.Namespace) -> int:
 def ignore_states(folder: Path) -> bool:
     """Add ``IGNORE`` to ``folder``'s .gitignore (made if missing) unless a line says it
     already; whether it was added."""
+    from baker.run.atomic import write_atomically
+
     path = folder / ".gitignore"
     text = path.read_text(encoding="utf-8") if path.is_file() else ""
     if IGNORE in (line.strip() for line in text.splitlines()):

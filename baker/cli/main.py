@@ -23,8 +23,10 @@ SUBCOMMANDS = ("bake", "rebake", "relight", "watch", "hook", "preview", "view", 
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The ``baker`` parser with every subcommand registered (their modules, and with them the
-    whole pipeline, imported here rather than when this module is)."""
+    """The ``baker`` parser with every subcommand registered. Their modules import only the
+    names their options need (``baker.settings``); the pipeline (numpy, numba, Embree, PIL:
+    most of a second) is imported by the command that runs, so ``baker --help`` and a wrong
+    option answer at once."""
     from importlib import import_module
 
     parser = argparse.ArgumentParser(
@@ -32,7 +34,6 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"baker {baker.__version__}")
     parser.add_argument("--debug", action="store_true", help="show the traceback of an error")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    import_module("baker.api")  # the whole pipeline, which the subcommands' options name
     for name in SUBCOMMANDS:
         import_module(f"baker.cli.{name}").add_parser(commands)
     return parser
@@ -92,8 +93,8 @@ def main(argv: list[str] | None = None) -> int:
 
 def entry() -> int:
     """The ``baker`` command: ``main`` on the process's arguments. A Ctrl-C while the pipeline's
-    modules are imported (``build_parser``: numpy, numba and Embree take a second) exits 130 with
-    one line, as one during the bake does. Once ``main`` has returned, a second Ctrl-C (an
+    modules are imported (by the subcommand that runs: numpy, numba and Embree take most of a
+    second) exits 130 with one line, as one during the bake does. Once ``main`` has returned, a second Ctrl-C (an
     impatient user presses it twice) has nothing left to stop: it is ignored while Python waits
     for the worker threads to end their chunk, rather than printing a traceback from the
     interpreter's shutdown."""

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from baker.cli.common import add_debug, positive_float
-from baker.preview import MODES, parse_size, preview
+from baker.settings import PREVIEW_MODES
 
 EPILOG = """examples:
   baker preview level_baked.glb -o preview.png
@@ -17,6 +17,17 @@ The view is the scene's first glTF camera, or a three-quarter view from above th
 whole scene. Single-sided surfaces are seen through from behind, as in glTF viewers, so a closed
 room is seen from outside looking in.
 """
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    """'800x600' → (800, 600); ValueError unless both are whole numbers from 1 to 16384."""
+    parts = text.lower().replace("×", "x").split("x")
+    if len(parts) != 2 or not all(p.strip().isdigit() for p in parts):
+        raise ValueError(f"size must be WIDTHxHEIGHT, e.g. 800x600, not {text!r}")
+    width, height = (int(p) for p in parts)
+    if not (1 <= width <= 16384 and 1 <= height <= 16384):
+        raise ValueError(f"size {width}x{height} must be 1 to 16384 pixels a side")
+    return width, height
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -45,7 +56,7 @@ def add_parser(commands) -> None:
                            "surfaces without a lightmap are magenta")
     what.add_argument("--unlit", dest="mode", action="store_const", const="unlit",
                       help="show diffuse colour + emission with the lightmaps left out, to compare")
-    parser.set_defaults(mode=MODES[0])
+    parser.set_defaults(mode=PREVIEW_MODES[0])
     parser.add_argument("--size", type=_size, metavar="WxH",
                         help="picture size in pixels (default 640 wide, the camera's aspect "
                              "ratio or 4:3)")
@@ -58,6 +69,8 @@ def add_parser(commands) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Render and write the picture; exit code 0."""
+    from baker.preview import preview
+
     picture = preview(args.scene, args.output, args.mode, args.size, args.exposure)
     if not args.quiet:
         height, width = picture.triangle.shape

@@ -10,7 +10,6 @@ import baker
 from baker.cli.bake import print_summary
 from baker.cli.common import exit_code
 from baker.cli.state import add_update_options, print_rebake
-from baker.rebake.incremental import asked_settings
 
 EPILOG = """examples:
   baker rebake level.glb -o level_baked.glb
@@ -45,6 +44,8 @@ def add_parser(commands) -> None:
 def run(args: argparse.Namespace) -> int:
     """Rebake; exit code 0 (1 with a message when there is no usable state or scene, 4 when
     no surface got a lightmap)."""
+    from baker.rebake.incremental import asked_settings
+
     state = args.state or baker.rebake.state.default_path(args.output)
     settings = asked_settings(state, threads=args.threads)
     result = baker.bake(args.scene, args.output, settings, report_path=args.report,

@@ -8,7 +8,6 @@ from pathlib import Path
 import baker
 from baker.cli.bake import print_summary
 from baker.cli.state import add_update_options, print_rebake
-from baker.rebake.incremental import asked_settings
 
 
 def add_parser(commands) -> None:
@@ -30,6 +29,8 @@ def add_parser(commands) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Relight; exit code 0 (1 with a message when more than the lights' colours changed)."""
+    from baker.rebake.incremental import asked_settings
+
     state = args.state or baker.rebake.state.default_path(args.output)
     result = baker.bake(args.scene, args.output, asked_settings(state), report_path=args.report,
                         quiet=args.quiet, relight=True, state=state)

@@ -9,10 +9,7 @@ from pathlib import Path
 
 import baker
 from baker.cli.common import add_debug
-from baker.gltf.load import load
-from baker.pipeline.full import compute
-from baker.run.atomic import write_atomically
-from baker.study import DEFAULT_RAYS, compare_with_gi, plot, run_study
+from baker.settings import STUDY_RAYS, TECHNIQUES
 
 
 def add_parser(commands) -> None:
@@ -28,10 +25,10 @@ def add_parser(commands) -> None:
     study.add_argument("--page-size", type=int, default=128, metavar="TEXELS",
                        help="lightmap page size for the study (default 128: a study bakes many "
                             "times, so it uses fewer texels than a bake)")
-    study.add_argument("--rays", type=int, nargs="+", default=list(DEFAULT_RAYS), metavar="N",
+    study.add_argument("--rays", type=int, nargs="+", default=list(STUDY_RAYS), metavar="N",
                        help="rays per texel to try (default 4 8 … 1024)")
-    study.add_argument("--techniques", nargs="+", default=list(baker.rays.sampling.TECHNIQUES),
-                       choices=baker.rays.sampling.TECHNIQUES, help="sampling techniques to compare")
+    study.add_argument("--techniques", nargs="+", default=list(TECHNIQUES),
+                       choices=TECHNIQUES, help="sampling techniques to compare")
     study.add_argument("--reference-rays", type=int, default=4096, metavar="N",
                        help="rays per texel of the converged reference (default 4096)")
     study.add_argument("--d-max", type=float, metavar="DISTANCE",
@@ -45,6 +42,11 @@ def add_parser(commands) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the study; print the table; exit code 0."""
+    from baker.gltf.load import load
+    from baker.pipeline.full import compute
+    from baker.run.atomic import write_atomically
+    from baker.study import compare_with_gi, plot, run_study
+
     settings = baker.Settings(page_size=args.page_size, d_max=args.d_max, rays=1)
     done = compute(load(args.scene), settings)
     result = run_study(done, tuple(args.rays), tuple(args.techniques), args.reference_rays,

@@ -6,7 +6,6 @@ import argparse
 import webbrowser
 from pathlib import Path
 
-from baker.view import serve, url_of
 from baker.cli.common import add_debug
 
 EPILOG = """examples:
@@ -36,6 +35,8 @@ def add_parser(commands) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Serve until Ctrl-C (which main turns into exit code 130)."""
+    from baker.view import serve, url_of
+
     server = serve(args.scene, args.port)
     url = url_of(server)
     print(f"baker view: {args.scene} at {url} (Ctrl-C stops)", flush=True)

@@ -9,7 +9,6 @@ from pathlib import Path
 
 import baker
 from baker.cli.state import print_rebake, settings_for
-from baker.gltf.load import used_files
 
 
 def add_parser(commands) -> None:
@@ -53,6 +52,8 @@ class _Watched:
         self._scene, self._seen, self._files = scene, None, [scene]
 
     def stamp(self) -> tuple | None:
+        from baker.gltf.load import used_files
+
         own = _stamp(self._scene)
         if own is None:
             return None

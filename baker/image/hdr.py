@@ -24,8 +24,9 @@ import tempfile
 import numpy as np
 
 from baker.errors import SettingsError
+from baker.settings import LIGHTMAP_FORMATS
 
-FORMATS = ("png", "hdr", "exr")
+FORMATS = LIGHTMAP_FORMATS
 
 
 def rgbe(rgb: np.ndarray) -> np.ndarray:
