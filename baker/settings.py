@@ -26,6 +26,8 @@ LIGHTMAP_FORMATS = ("png", "hdr", "exr")  # files of --lightmaps DIR: image.hdr
 PREVIEW_MODES = ("lit", "lightmap", "checker", "unlit")  # what baker.preview shows
 STUDY_RAYS = (4, 8, 16, 32, 64, 128, 256, 512, 1024)  # rays per texel a study tries: baker.study
 FOLIAGE_MODES = ("none", "approx")  # how leaves' obscurance is found: light.foliage
+ANIMATED = ("bake", "occlude", "skip")
+"""``Settings.animated``: what becomes of node-animated instances (``gltf.load.load``)."""
 INSTALL_FIX = ('pip install "baker[denoise]" (or pip install ".[denoise]" from a checkout of '
                'baker), or leave out --denoise')
 
@@ -114,6 +116,11 @@ class Settings:
         scene's mean albedo: the rest of a closed level), "white" (a neutral environment; with
         no punctual light or sky, I_A = 1), or "auto" (white for an open scene without lights,
         a prop; R_ave otherwise: light/environment.py).
+    animated: what becomes of an instance whose node (or an ancestor) an animation moves:
+        "bake" it in its rest pose, with a warning (its lightmap does not follow the
+        animation: the default, as a still pose is what most such files show), "occlude":
+        no lightmap, but it casts its rest pose's shadows and obscurance on the rest, or
+        "skip": left out entirely (no lightmap, no shadow), for parts that move far.
     """
 
     texel_density: float | None = None
@@ -153,6 +160,7 @@ class Settings:
     foliage_density: float | None = None
     cluster: str | None = None
     escape: str = "auto"
+    animated: str = "bake"
 
     def check(self) -> None:
         """Raise SettingsError for a value that cannot work, saying which values can."""
@@ -198,7 +206,8 @@ class Settings:
         for name, value, allowed in (("rho", self.rho, RHO_FUNCTIONS),
                                      ("sampling", self.sampling, TECHNIQUES),
                                      ("method", self.method, METHODS),
-                                     ("foliage", self.foliage, FOLIAGE_MODES)):
+                                     ("foliage", self.foliage, FOLIAGE_MODES),
+                                     ("animated", self.animated, ANIMATED)):
             if value not in allowed:
                 raise SettingsError(f"{name} must be one of {', '.join(allowed)}, not {value!r}",
                                     fix=f"use --{name} {allowed[0]}")

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from assets.gltf_builder import GltfBuilder, box, quad
-from baker.errors import InputError
+from baker.errors import InputError, SettingsError
 from baker.gltf.load import VIEW_ONLY_EXTENSIONS, load
 from baker.gltf.materials import DIFFUSE, classify
 from baker.settings import Settings
@@ -346,9 +346,10 @@ def test_textures_past_the_scene_budget_are_left_out_with_the_figure(tmp_path, m
 
 # ---------------------------------------------------------------------------- animated nodes
 
-def test_a_node_an_animation_moves_is_baked_in_its_rest_pose_with_a_warning(tmp_path):
-    """A rotating wheel under an animated parent and a still floor: the wheel (its own channel)
-    and the parent's child are warned of, baked in their rest pose; the floor is not."""
+def _animated_scene(folder, drop_moving: bool = False):
+    """A floor, a body over it that an animation drives, and a wheel under the body: the
+    scene's path and the three nodes. ``drop_moving``: the same file without the body (the
+    wheel goes with it), the animation kept (its channel then drives an empty node)."""
     b = GltfBuilder()
     grey = b.material("grey")
     floor = b.node("floor", b.shape_mesh("floor", quad(3.0, 3.0), material=grey))
@@ -356,10 +357,10 @@ def test_a_node_an_animation_moves_is_baked_in_its_rest_pose_with_a_warning(tmp_
                   translation=(0, 0.5, 0))
     wheel = b.node("wheel", b.shape_mesh("wheel", box((0.1, 0.3, 0.3)), material=grey),
                    translation=(0, 0.3, 0))
-    path = b.save(tmp_path / "scene.gltf")
+    path = b.save(folder / ("without.gltf" if drop_moving else "scene.gltf"))
     document = json.loads(path.read_text())
     document["nodes"][body]["children"] = [wheel]
-    document["scenes"][0]["nodes"] = [floor, body]
+    document["scenes"][0]["nodes"] = [floor] if drop_moving else [floor, body]
     times = len(document["accessors"])
     document["accessors"] += [{"bufferView": 0, "componentType": 5126, "count": 1,
                                "type": "SCALAR", "min": [0], "max": [0]},
@@ -368,7 +369,77 @@ def test_a_node_an_animation_moves_is_baked_in_its_rest_pose_with_a_warning(tmp_
         {"input": times, "output": times + 1}], "channels": [
         {"sampler": 0, "target": {"node": body, "path": "translation"}}]}]
     path.write_text(json.dumps(document))
+    return path, floor, body, wheel
+
+
+def test_a_node_an_animation_moves_is_baked_in_its_rest_pose_with_a_warning(tmp_path):
+    """The default (``--animated bake``): the wheel (under an animated parent) and the body
+    (its own channel) are warned of and baked in their rest pose; the floor is not warned of."""
+    path, _floor, body, wheel = _animated_scene(tmp_path)
     scene = load(path)
     warned = {s.where for s in scene.skipped if s.reason.startswith("node-animated")}
     assert warned == {f"nodes[{body}]", f"nodes[{wheel}]"}
     assert all(i.baked for i in scene.instances)
+    assert Settings().animated == "bake"
+
+
+ANIMATED_SETTINGS = dict(page_size=64, rays=16, shadow_rays=1, emissive_rays=1, threads=1,
+                         texel_density=8.0)
+
+
+def _floor_light(done) -> np.ndarray:
+    """The baked texels' light (n, 3), in page order (the floor's alone where it is the only
+    baked instance)."""
+    return done.lightmaps.light[done.lightmaps.covered]
+
+
+def test_animated_occlude_keeps_the_shadow_and_skip_bakes_as_without_the_nodes(tmp_path):
+    """``occlude``: the moving nodes get no texels, are listed with the reason, and still
+    darken the floor under them; ``skip``: no instance of them at all, and the floor's
+    lightmap is bit-identical to the same file's without them."""
+    path, floor, body, wheel = _animated_scene(tmp_path)
+    without, *_ = _animated_scene(tmp_path, drop_moving=True)
+    settings = Settings(**ANIMATED_SETTINGS)
+    occluded = load(path, animated="occlude")
+    moving = {i.node: i for i in occluded.instances if i.node != floor}
+    assert set(moving) == {body, wheel}
+    assert not any(i.baked for i in moving.values())
+    assert all("occluder only" in i.reason and "--animated occlude" in i.reason
+               for i in moving.values())
+    skipped = load(path, animated="skip")
+    assert {i.node for i in skipped.instances} == {floor}
+    assert {s.where for s in skipped.skipped if "--animated skip" in s.reason} == {
+        f"nodes[{body}]", f"nodes[{wheel}]"}
+    shadowed, open_floor, alone = (compute(scene, settings) for scene in (
+        occluded, skipped, load(without)))
+    assert [len(d.plan.baked) for d in (shadowed, open_floor)] == [1, 1]
+    assert any("--animated occlude" in reason for _where, reason in shadowed.plan.left_out)
+    assert np.array_equal(_floor_light(open_floor), _floor_light(alone))
+    under, bare = _floor_light(shadowed), _floor_light(open_floor)
+    assert under.shape == bare.shape
+    # The same rays, some stopped by the body's rest pose: darker under it, nowhere lighter.
+    assert (under <= bare).all() and under.min() < 0.9 * bare.min()
+
+
+def test_animated_bake_gives_the_moving_nodes_texels(tmp_path):
+    """``bake``: the body and wheel are baked (three instances get texels)."""
+    path, *_ = _animated_scene(tmp_path)
+    done = compute(load(path, animated="bake"), Settings(**ANIMATED_SETTINGS))
+    assert len(done.plan.baked) == 3
+    assert any("baked in its rest pose" in reason for _where, reason in done.plan.left_out)
+
+
+def test_the_animated_setting_reaches_the_bake_from_the_command_line(tmp_path, capsys):
+    """``--animated skip`` through the CLI: the report lists the nodes as left out, and an
+    unknown value is refused naming the choices."""
+    from baker.cli.main import main
+
+    path, _floor, body, _wheel = _animated_scene(tmp_path)
+    report = tmp_path / "report.json"
+    assert main(["bake", str(path), "-o", str(tmp_path / "out.glb"), "--animated", "skip",
+                 "--page-size", "64", "--rays", "4", "--threads", "1",
+                 "--report", str(report)]) == 0
+    left = json.loads(report.read_text())["plan"]["left_out"]
+    assert any(e["where"] == f"nodes[{body}]" and "--animated skip" in e["reason"] for e in left)
+    with pytest.raises(SettingsError, match="animated must be one of bake, occlude, skip"):
+        Settings(animated="freeze").check()

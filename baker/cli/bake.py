@@ -67,6 +67,11 @@ def add_parser(commands) -> None:
                             "neutral environment; I_A = 1 without lights or sky), or auto: "
                             "white for an open scene without lights (a prop), else R_ave "
                             "(default auto; the plan says which and why)")
+    model.add_argument("--animated", choices=baker.settings.ANIMATED, default=d.animated,
+                       help="what becomes of objects an animation moves (their node or an "
+                            "ancestor's transform): bake them in their rest pose, with a "
+                            "warning; occlude: no lightmap, their rest pose still casts "
+                            "shadows; skip: left out, no shadow either (default bake)")
     model.add_argument("--seed", type=int, default=d.seed, help="sampler seed (default 0)")
     model.add_argument("--sampling", choices=baker.settings.TECHNIQUES, default=d.sampling,
                        help="how each texel's ray directions are drawn: sobol (Owen-scrambled, "

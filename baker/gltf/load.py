@@ -180,8 +180,13 @@ MAX_ACCESSOR_COMPONENTS = 1 << 28
 _GPU_REASON = "GPU-instanced (EXT_mesh_gpu_instancing): occluder only"
 _SKIN_REASON = "skinned: occluder only (rest pose)"
 _UNLIT_REASON = UNLIT_REASON
-_MOVING_REASON = ("node-animated (an animation moves it or an ancestor): baked in its rest pose, "
-                  "its lightmap does not follow the animation")
+_MOVING = "node-animated (an animation moves it or an ancestor)"
+_MOVING_REASON = {  # what becomes of a node-animated instance, by ``Settings.animated``
+    "bake": f"{_MOVING}: baked in its rest pose, its lightmap does not follow the animation "
+            "(--animated occlude or skip leaves it out)",
+    "occlude": f"{_MOVING}: occluder only (rest pose), no lightmap (--animated occlude)",
+    "skip": f"{_MOVING}: left out, not even as an occluder (--animated skip)",
+}
 _MORPH_REASON = "morph-animated (animated weights): occluder only (rest pose)"
 
 
@@ -208,13 +213,18 @@ class _Context:
 # Entry point
 
 
-def load(path: str | Path, mirror_roughness: float = MIRROR_ROUGHNESS) -> Scene:
+def load(path: str | Path, mirror_roughness: float = MIRROR_ROUGHNESS,
+         animated: str = "bake") -> Scene:
     """Read a ``.gltf`` or ``.glb`` file into a ``Scene`` (see ``baker.gltf.scene``).
 
     Geometry stays in each mesh's local space (glTF units, metres); ``Instance.world`` is the
     (4, 4) float64 local-to-world matrix. Raises ``InputError`` for anything in the file that
     baker cannot read, naming the file, the glTF JSON path and what to do. ``mirror_roughness``:
     metals smoother than this are mirrors (``materials.classify``), which get no lightmap.
+    ``animated``: what becomes of node-animated instances (an animation drives the transform
+    of their node or of an ancestor): "bake" them in their rest pose with a warning, keep them
+    as "occlude"rs only (rest pose, no texels), or "skip" them (no instance at all: neither
+    baked nor casting shadows); each is listed with its reason in ``Scene.skipped``.
     """
     path = Path(path)
     document = read_document(path)
@@ -229,7 +239,7 @@ def load(path: str | Path, mirror_roughness: float = MIRROR_ROUGHNESS) -> Scene:
     images = _images(ctx)
     _check_image_files(ctx)
     unbaked = [no_lightmap_reason(classify(m, images, mirror_roughness)) for m in materials]
-    primitives, instances = _instantiate(ctx, placements, materials, unbaked)
+    primitives, instances = _instantiate(ctx, placements, materials, unbaked, animated)
     lights = _read_lights(ctx, placements)
     return Scene(
         path=path,
@@ -1315,11 +1325,12 @@ def _gpu_instances(ctx: _Context, index: int, node: pygltflib.Node) -> np.ndarra
 
 def _instantiate(
     ctx: _Context, placements: list[tuple[int, np.ndarray]], materials: list[Material],
-    unbaked: list[str],
+    unbaked: list[str], animated: str = "bake",
 ) -> tuple[list[Primitive], list[Instance]]:
     """Read the meshes the placed nodes use (in mesh order) and make their instances (in walk order).
 
-    ``unbaked``: per material, why its primitives get no lightmap ("" when they do)."""
+    ``unbaked``: per material, why its primitives get no lightmap ("" when they do);
+    ``animated``: what becomes of node-animated instances (``load``)."""
     document = ctx.document
     used = set()
     for index, _ in placements:
@@ -1343,8 +1354,11 @@ def _instantiate(
         node = document.nodes[index]
         if node.mesh is None:
             continue
-        if index in moving and node.skin is None:
-            ctx.skip(f"nodes[{index}]", _MOVING_REASON)
+        animated_here = index in moving and node.skin is None
+        if animated_here and animated != "occlude":
+            ctx.skip(f"nodes[{index}]", _MOVING_REASON[animated])
+            if animated == "skip":
+                continue
         with _schema(ctx.file, f"nodes[{index}].extensions.EXT_mesh_gpu_instancing"):
             gpu = _gpu_instances(ctx, index, node)
         worlds = [world] if gpu is None else list(world @ gpu)
@@ -1353,6 +1367,7 @@ def _instantiate(
         node_reasons = [_GPU_REASON] if gpu is not None else []
         node_reasons += [_SKIN_REASON] if node.skin is not None else []
         node_reasons += [_MORPH_REASON] if index in morphed and node_reasons[-1:] != [_SKIN_REASON] else []
+        node_reasons += [_MOVING_REASON["occlude"]] if animated_here and animated == "occlude" else []
         for slot in slots[node.mesh]:
             if slot is None:
                 continue
