@@ -212,7 +212,8 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
                              WriteOptions(encoding=resolved.encoding, occlusion=resolved.occlusion,
                                           clip_percentile=resolved.clip_percentile,
                                           carrier=resolved.carrier,
-                                          baked_lights=resolved.baked_lights), outputs)
+                                          baked_lights=resolved.baked_lights,
+                                          authored_uv=resolved.uv), outputs)
                 if lightmaps_dir is not None:
                     write_page_files(outputs.folder(Path(lightmaps_dir)), output.stem, pages,
                                      done.lightmaps.light, lightmaps_format, outputs.stage)

@@ -40,6 +40,9 @@ class Settings:
         (about half a page of texels, lowered until the charts fit one page when they
         can: ``atlas.unwrap``).
     page_size: the largest lightmap page, in texels per side.
+    uv: bake into the UV set TEXCOORD_<uv> every baked primitive already has (lightmap UVs
+        the artist authored: one ``page_size``² page, checked by ``atlas.authored``) instead
+        of unwrapping with xatlas; None: unwrap.
     padding: texels kept free around every chart (dilation fills them).
     rays: obscurance rays per texel.
     sampling: how each texel's ray directions are drawn: "sobol" (Owen-scrambled Sobol, the
@@ -161,6 +164,7 @@ class Settings:
     cluster: str | None = None
     escape: str = "auto"
     animated: str = "bake"
+    uv: int | None = None
 
     def check(self) -> None:
         """Raise SettingsError for a value that cannot work, saying which values can."""
@@ -188,6 +192,7 @@ class Settings:
             if int(value) != value or value < low:
                 raise SettingsError(f"{name} must be a whole number of at least {low}, not {value}",
                                     fix=f"give --{name.replace('_', '-')} a whole number ≥ {low}")
+        self._check_uv()
         self._check_lights()
         self._check_materials()
         if self.denoise:  # pyoidn is optional: say how to install it before any work
@@ -243,6 +248,19 @@ class Settings:
             raise SettingsError("the occlusion carrier holds no light, so it has no indirect "
                                 "light to bake", fix="leave out --baked-lights (keep)")
 
+
+    def _check_uv(self) -> None:
+        """An authored UV set: a set index, and no texel density (the set fixes the layout)."""
+        if self.uv is None:
+            return
+        if isinstance(self.uv, bool) or int(self.uv) != self.uv or self.uv < 0:
+            raise SettingsError(f"uv must be a UV set index (0, 1, 2, …), not {self.uv!r}",
+                                fix="give --uv the N of the TEXCOORD_N to bake into, e.g. 1")
+        if self.texel_density is not None:
+            raise SettingsError("--texel-density has no effect with --uv: the authored UVs "
+                                "fix where every texel lies",
+                                fix="leave out --texel-density (--page-size sets the "
+                                    "resolution), or leave out --uv")
 
     def _check_materials(self) -> None:
         """Material settings (materials.py, integrate.py) within their ranges."""

@@ -22,7 +22,7 @@ LAYERS = (
     ("baker.gltf",),  # reading glTF into a Scene; what its materials mean
     ("baker.geometry",),  # the world's triangles; what a surface looks like
     ("baker.rays",),  # sample points and Embree
-    ("baker.atlas",),  # unwrap, rasterise, validity, supersample
+    ("baker.atlas",),  # unwrap, authored UVs, rasterise, validity, supersample
     ("baker.light",),  # obscurance terms, translucency, direct light, ambient, GI
     ("baker.image",),  # compose, post-process, seams, denoise, encode, float files
     ("baker.output",),  # the glTF written back

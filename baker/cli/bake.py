@@ -45,6 +45,11 @@ def add_parser(commands) -> None:
                               "charts fit one page when they can)")
     quality.add_argument("--page-size", type=int, default=d.page_size, metavar="TEXELS",
                          help=f"largest lightmap page side; more pages when one is full (default {d.page_size})")
+    quality.add_argument("--uv", type=int, metavar="N",
+                         help="bake into the lightmap UVs the artist authored, TEXCOORD_N of "
+                              "every baked primitive (one --page-size page, checked: inside "
+                              "[0, 1], no overlaps, --padding texels between islands) instead "
+                              "of unwrapping; written as TEXCOORD_1 (default: unwrap)")
     quality.add_argument("--padding", type=int, default=d.padding, metavar="TEXELS",
                          help=f"free texels around each chart (default {d.padding})")
     model = bake.add_argument_group("light model")
@@ -219,7 +224,9 @@ def print_summary(result: baker.BakeResult) -> None:
     print(f"baked {result.output}")
     print(f"  {result.texels:,} texels on {result.pages} page(s) of "
           f"{result.report['atlas']['width']}×{result.report['atlas']['height']}, "
-          f"texel density {s.texel_density:.4g}/unit, d_max {s.d_max:.4g}, {s.rays} rays/texel")
+          + (f"TEXCOORD_{s.uv} (about {result.report['atlas']['texel_density']:.4g} "
+             "texels/unit)" if s.uv is not None else f"texel density {s.texel_density:.4g}/unit")
+          + f", d_max {s.d_max:.4g}, {s.rays} rays/texel")
     print(f"  carrier {s.carrier} ({s.encoding}), baked lights {s.baked_lights}; "
           f"baker view {result.output} shows it")
     print("\n".join(result.plan.lines()))

@@ -98,6 +98,8 @@ class WriteOptions:
     lightmap UV set next to ``MOZ_lightmap``.
     ``clip_percentile``: the percentile of each page's texels that its ``intensity`` is
     (encode.py; 100: the page's peak), recorded in ``asset.extras["baker"]``.
+    ``authored_uv``: the atlas is the primitives' own TEXCOORD_<n> (``--uv``); when n is 1,
+    the lightmap set is already where viewers read it, so no set moves. None: xatlas's UVs.
     """
 
     encoding: str = "linear"
@@ -105,6 +107,7 @@ class WriteOptions:
     clip_percentile: float = 100.0
     carrier: str = "moz"
     baked_lights: str = "remove"
+    authored_uv: int | None = None
 
     def __post_init__(self) -> None:
         for name, allowed in (("carrier", CARRIERS), ("baked_lights", BAKED_LIGHTS)):
@@ -471,7 +474,7 @@ class _Builder:
         attributes = primitive["attributes"]
         used_sets = {int(name[9:]) for name in attributes
                      if name.startswith("TEXCOORD_") and name[9:].isdigit()}
-        texcoord, shifted = 1, 1 in used_sets
+        texcoord, shifted = 1, 1 in used_sets and self.options.authored_uv != 1
         if shifted and VARIANTS_EXTENSION in primitive.get("extensions", {}):
             shifted = False  # its variants' materials would keep pointing at the old sets
             while texcoord in used_sets:
@@ -512,7 +515,8 @@ class _Builder:
                    if key not in ("attributes", "indices", "mode", "targets", "material")}
             new_attributes = {_moved(name, shifted): self._gather(accessor, rows,
                                                                   bounds=name == "POSITION")
-                              for name, accessor in attributes.items()}
+                              for name, accessor in attributes.items()
+                              if _moved(name, shifted) != f"TEXCOORD_{texcoord}"}
             lightmap_uv = self._add_accessor(uv[used].astype(np.float32), _FLOAT, "VEC2")
             if 0 not in used_sets:
                 new_attributes["TEXCOORD_0"] = lightmap_uv

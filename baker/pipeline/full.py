@@ -25,6 +25,7 @@ from baker.atlas.rasterise import (
     owners,
     texels_of,
 )
+from baker.atlas.authored import authored_atlas
 from baker.atlas.unwrap import PageTooSmall, baked_instances, frame_area, unwrap
 from baker.atlas.validity import Faces, Validity, check_texels
 from baker.geometry.surface import LUMINANCE
@@ -238,16 +239,11 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True,
         area, diagonal = bounds_of_baked(world, scene)
         resolved = resolve(settings, area, diagonal)
         lit = lighting(scene, world, resolved, times)
-    derived = settings.texel_density is None  # then it may be lowered to fit (unwrap.py)
     with timed(times, "unwrap"), log.stage("unwrap"):
-        try:
-            atlas = unwrap(scene, world, resolved, fit_one_page=derived)
-        except PageTooSmall as error:
-            if not derived:  # the user's density: say what fits
-                raise
-            resolved = replace(resolved, texel_density=error.texel_density)  # derived: shrink it
-            atlas = unwrap(scene, world, resolved, fit_one_page=True)
-        resolved = replace(resolved, texel_density=atlas.texel_density)
+        if settings.uv is not None:  # the artist's lightmap UVs: no unwrap
+            atlas = authored_atlas(scene, world, resolved)
+        else:
+            atlas, resolved = _unwrapped(scene, world, settings, resolved)
     with timed(times, "rasterise"), log.stage("rasterise"):
         coverage = cover(atlas, world)
         owned = owners(atlas, world, coverage)
@@ -272,6 +268,21 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True,
         if spill is not None:
             spill.close()
         raise
+
+
+def _unwrapped(scene: Scene, world: World, settings: Settings, resolved: Resolved
+               ) -> tuple[Atlas, Resolved]:
+    """xatlas's atlas and the settings with the density it used: a derived density is
+    lowered to fit a page (``unwrap.py``); the user's is kept or refused with what fits."""
+    derived = settings.texel_density is None
+    try:
+        atlas = unwrap(scene, world, resolved, fit_one_page=derived)
+    except PageTooSmall as error:
+        if not derived:  # the user's density: say what fits
+            raise
+        resolved = replace(resolved, texel_density=error.texel_density)  # derived: shrink it
+        atlas = unwrap(scene, world, resolved, fit_one_page=True)
+    return atlas, replace(resolved, texel_density=atlas.texel_density)
 
 
 @dataclass(frozen=True)

@@ -40,7 +40,7 @@ _NO_EFFECT = ("threads", "chunk_texels", "cluster")
 # Settings that only the composition, post-processing or encoding read: a recomposition.
 RECOMPOSE_SETTINGS = ("ambient", "encoding", "occlusion", "carrier", "baked_lights")
 # Settings that change the atlas.
-ATLAS_SETTINGS = ("texel_density", "page_size", "padding")
+ATLAS_SETTINGS = ("texel_density", "page_size", "padding", "uv")
 
 
 def instance_key(scene: Scene, i: int) -> str:
@@ -116,6 +116,13 @@ def sources_digest(package: Path) -> str:
                                  np.frombuffer(path.read_bytes(), np.uint8))])
 
 
+def _authored_uv(scene: Scene, instance: int, uv: int | None) -> tuple[np.ndarray, ...]:
+    """The instance's TEXCOORD_<uv> (the atlas with ``--uv``), as a one-array tuple; none
+    without ``--uv`` or when the set is missing (the bake refuses that)."""
+    sets = scene.primitives[scene.instances[instance].primitive].texcoords
+    return () if uv is None or len(sets) <= uv else (sets[uv],)
+
+
 def fingerprints(scene: Scene, world: World, settings: Resolved, asked=None) -> dict:
     """Hashes of everything the bake's result depends on, JSON-able, grouped for ``diff``.
 
@@ -126,9 +133,11 @@ def fingerprints(scene: Scene, world: World, settings: Resolved, asked=None) -> 
             if k not in _NO_EFFECT + RECOMPOSE_SETTINGS + ATLAS_SETTINGS}
     baked = baked_instances(scene)
     unwrap_input = digest(settings.texel_density, settings.page_size, settings.padding,
+                          settings.uv,
                           *[(instance_key(scene, i), digest(
                               frame_positions(scene, i).astype(np.float32),
-                              world.triangles[world.instance_triangles(i)] - world.vertex_start[i]))
+                              world.triangles[world.instance_triangles(i)] - world.vertex_start[i],
+                              *_authored_uv(scene, i, settings.uv)))
                             for i in baked])
     asked_values = None if asked is None else {
         k: list(v) if isinstance(v, tuple) else v for k, v in asdict(asked).items()
