@@ -16,7 +16,8 @@ if __package__ in (None, ""):  # run as a script: make the repository root impor
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from assets.gltf_builder import (  # noqa: E402
-    GltfBuilder, box, cylinder, quad, quat_axis_angle, rotation_matrix, transformed, uv_sphere)
+    GltfBuilder, box, cylinder, icosphere, quad, quat_axis_angle, rotation_matrix, transformed,
+    uv_sphere)
 from assets.make_scenes import WHITE, panel  # noqa: E402
 
 
@@ -215,6 +216,25 @@ def low_poly_sphere(radius: float = 0.5, rings: int = 8, segments: int = 12,
     _add_light(b, "directional", (5.0, 0.0, 0.0), tuple(-c for c in towards), intensity=1.0)
     b.info.update(sphere=sphere, radius=radius, rings=rings, segments=segments,
                   light_direction=towards)
+    return b
+
+
+def icosphere_on_floor(radius: float = 0.5, subdivisions: int = 1, floor_size: float = 4.0,
+                       gap: float = 0.0) -> GltfBuilder:
+    """An 80-face (``subdivisions`` = 1) smooth-shaded geodesic sphere ``gap`` above a floor quad
+    (0: resting on its lowest vertex), no light (I_A = 1, the lightmap is W): the floor darkens
+    the sphere's lower half, so an obscurance hemisphere that tilts from facet to facet steps
+    at every edge (issue 21, the lamp's base). ``info``: nodes (sphere, floor), radius, centre."""
+    b = GltfBuilder()
+    white = b.material("white", WHITE)
+    centre = (0.0, radius + gap, 0.0)
+    nodes = {
+        "floor": b.node("floor", b.shape_mesh("floor", quad(floor_size, floor_size),
+                                              material=white)),
+        "sphere": b.node("sphere", b.shape_mesh("sphere", icosphere(radius, subdivisions),
+                                                material=white), translation=centre),
+    }
+    b.info.update(nodes=nodes, radius=radius, centre=centre)
     return b
 
 

@@ -11,7 +11,8 @@ the same bytes.
     b.node("floor", floor)
     b.save("floor.glb")
 
-The shape helpers (``box``, ``box_face``, ``quad``, ``cylinder``, ``uv_sphere``, ``lathe``) return
+The shape helpers (``box``, ``box_face``, ``quad``, ``cylinder``, ``uv_sphere``, ``icosphere``,
+``lathe``) return
 ``(positions (n,3) float64, triangles (m,3) int64, normals (n,3) float64, uv0 (n,2) float64)``
 with counter-clockwise winding seen from the side the normal points to (glTF front face).
 """
@@ -583,3 +584,35 @@ def uv_sphere(radius: float = 0.5, rings: int = 16, segments: int = 32) -> Shape
     n2[0], n2[-1] = (0.0, -1.0), (0.0, 1.0)
     profile = radius * n2
     return lathe(profile, segments, normals2d=n2)
+
+
+def icosphere(radius: float = 0.5, subdivisions: int = 1) -> Shape:
+    """A geodesic sphere centred at the origin: an icosahedron whose triangles are cut in four
+    ``subdivisions`` times (20·4^s faces: 80 for s = 1), vertices pushed onto the sphere,
+    shared between faces, with the true sphere's (smooth) normals; UVs from the direction's
+    longitude and latitude (a placeholder: baker unwraps its own)."""
+    t = (1.0 + 5.0 ** 0.5) / 2.0
+    corners = [(-1, t, 0), (1, t, 0), (-1, -t, 0), (1, -t, 0), (0, -1, t), (0, 1, t),
+               (0, -1, -t), (0, 1, -t), (t, 0, -1), (t, 0, 1), (-t, 0, -1), (-t, 0, 1)]
+    points = [np.array(c, np.float64) / np.linalg.norm(c) for c in corners]
+    faces = [(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4),
+             (11, 10, 2), (10, 7, 6), (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8),
+             (3, 8, 9), (4, 9, 5), (2, 4, 11), (6, 2, 10), (8, 6, 7), (9, 8, 1)]
+    for _ in range(subdivisions):
+        middle: dict[tuple[int, int], int] = {}
+
+        def midpoint(a: int, b: int) -> int:
+            key = (min(a, b), max(a, b))
+            if key not in middle:
+                m = points[a] + points[b]
+                points.append(m / np.linalg.norm(m))
+                middle[key] = len(points) - 1
+            return middle[key]
+
+        faces = [tri for a, b, c in faces
+                 for ab, bc, ca in [(midpoint(a, b), midpoint(b, c), midpoint(c, a))]
+                 for tri in ((a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca))]
+    normals = np.array(points)
+    uv = np.stack([0.5 + np.arctan2(normals[:, 2], normals[:, 0]) / (2 * np.pi),
+                   0.5 - np.arcsin(np.clip(normals[:, 1], -1, 1)) / np.pi], axis=1)
+    return radius * normals, np.array(faces, np.int64), normals, uv

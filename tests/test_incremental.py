@@ -682,24 +682,45 @@ def test_the_cell_search_finds_the_rays_drawing_them_all_finds():
     """``_drawn_near_rays`` finds the rays of texels far from the spheres cell by cell
     (``_cell_candidates``) and draws all the rays of the others: the same rays, bit for bit,
     as drawing every texel's rays, for texels near and far, facing the spheres or not, and ray
-    counts that are powers of two or not."""
+    counts that are powers of two or not. Half the texels' hemispheres tilt from their front
+    faces (shading normals), so some of their rays are folded above the face
+    (``sampling.fold``): every ray whose folded direction passes near a sphere is found."""
     from baker.rebake.incremental import _drawn_near_rays
-    from baker.rays.sampling import tangent_frames
+    from baker.light.hemisphere import cosine_directions
+    from baker.rays.sampling import folded, tangent_frames
 
     rng = np.random.default_rng(6)
     for rays in (16, 64, 100):
         count = 3000
         normals = rng.normal(size=(count, 3))
         normals /= np.linalg.norm(normals, axis=1)[:, None]
+        geometric = normals + np.where(np.arange(count)[:, None] % 2, 0.6, 0.0) * rng.normal(
+            size=(count, 3))
+        geometric /= np.linalg.norm(geometric, axis=1)[:, None]
         starts = rng.uniform(-3, 3, (count, 3))
         centres = np.array([[0.3, 0.2, -0.1], [1.2, -0.4, 0.5]])
         radii = np.array([0.25, 0.1])
         keys = rng.integers(0, 2**40, count).astype(np.uint64)
-        args = (0, np.uint64(11), keys, rays, starts, *tangent_frames(normals), normals,
+        t1, t2 = tangent_frames(normals)
+        args = (0, np.uint64(11), keys, rays, starts, t1, t2, normals, geometric,
                 centres, radii, 2.5)
         found = [sorted(zip(*(a.tolist() for a in _drawn_near_rays(*args, cells))))
                  for cells in (True, False)]
         assert found[0] == found[1] and len(found[0]) > 100, rays
+        x, y, z = cosine_directions(keys, rays, 11, "sobol")
+        drawn = np.repeat(normals, rays, axis=0)
+        world = (x[:, None] * np.repeat(t1, rays, axis=0) + y[:, None] * np.repeat(t2, rays, axis=0)
+                 + z[:, None] * drawn)
+        world = folded(world, drawn, np.repeat(geometric, rays, axis=0))
+        assert (np.einsum("ij,ij->i", world, np.repeat(geometric, rays, axis=0)) >= -1e-12).all()
+        offset = centres[None] - np.repeat(starts, rays, axis=0)[:, None]  # (k·rays, 2, 3)
+        along = np.clip(np.einsum("rbc,rc->rb", offset, world), 0.0, 2.5)  # closest on the ray
+        near = (np.linalg.norm(offset - along[..., None] * world[:, None], axis=2)
+                < radii).any(axis=1)
+        folded_near = set(zip(*(a.tolist() for a in np.divmod(np.flatnonzero(near), rays))))
+        assert folded_near <= {(t, s) for t, s, *_ in found[0]}, rays
+        tilted = np.arange(count) % 2 == 1
+        assert sum(tilted[t] for t, _ in folded_near) > 30
 
 
 def test_a_state_with_zip64_members_reads_back_and_rebakes(tmp_path, monkeypatch):

@@ -54,9 +54,10 @@ def _chart_count(unwrap) -> int:
 
 
 # Measured (texel density 24, 64 rays; median standard error of a texel's W as the noise):
-# sphere: largest step 0.069 → 0.0020, median 0.0012 → 0.00004, noise 0.0036, 7 charts;
-# cylinder: largest step 0.063 → 0.0006, median 0.0056 → 0.00003, noise 0.0090, 4 side charts
-# (6 with the caps).
+# sphere: largest step 0.032 → 0.0015, median 0.0008 → 0.00003, noise 0.0035, 7 charts;
+# cylinder: largest step 0.012 → 0.0002, median 0.0008 → 0.00001, noise 0.0076, 4 side charts
+# (6 with the caps). (Before the hemispheres followed the shading normals, issue 21, the facets
+# on either side of a seam stepped too: largest steps 0.069 and 0.063 before stitching.)
 @pytest.mark.parametrize("shape", ["sphere", "cylinder"])
 def test_seams_agree_after_stitching(shape, request):
     builder, done = request.getfixturevalue(shape)
@@ -74,7 +75,7 @@ def test_seams_agree_after_stitching(shape, request):
     assert np.array_equal(done.ambient.intensity, np.ones(3))
     noise = float(np.median(done.terms.standard_error(
         effective_r_ave(done.ambient, done.settings.rho))[on_shape]))
-    assert before.max() > 5 * noise  # the seams were visible
+    assert before.max() > noise  # the seams were visible
     assert after.max() < noise  # now within the noise level, everywhere
     assert after.max() < before.max() / 10 and np.median(after) < np.median(before) / 10
     # Stitching moves texel values only near seams, and on average hardly at all.

@@ -40,6 +40,7 @@ from baker.atlas.layout import Atlas
 from baker.frozen import read_only
 from baker.geometry.world import World
 from baker.jit import jit
+from baker.rays.sampling import hemisphere_normals
 from baker.run.parallel import run_chunks
 
 _KEY_BITS = np.uint64((1 << 63) - 1)  # a texel key's bits below inner.OTHER_SIDE
@@ -125,6 +126,12 @@ class Texels:
     def geometric_normal(self, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
         """(k, 3) unit front-face normals of the texels ``rows`` (their triangles')."""
         return self.triangle_normal[self.triangle[rows]]
+
+    def hemisphere_normal(self, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
+        """(k, 3) the normals the texels ``rows``' hemispheres of rays are drawn about: their
+        shading normals, or their front-face normals on flat surfaces
+        (``sampling.hemisphere_normals``; rays below the front face are folded above it)."""
+        return hemisphere_normals(self.normal[rows], self.geometric_normal(rows))
 
     def size(self, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
         """(k,) world length of one texel side of the texels ``rows`` (their triangles')."""

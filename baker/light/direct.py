@@ -57,7 +57,14 @@ from baker.geometry.world import World
 from baker.gltf.scene import Light, Scene
 from baker.jit import jit
 from baker.rays.dimensions import EMISSIVE, POWER, SKY, light_dimension
-from baker.rays.sampling import cosine_hemisphere, sample_2d, split_samples, tangent_frames
+from baker.rays.sampling import (
+    cosine_hemisphere,
+    folded,
+    hemisphere_normals,
+    sample_2d,
+    split_samples,
+    tangent_frames,
+)
 from baker.rays.trace import Tracer, ray_lift
 from baker.run.parallel import run_chunks
 from baker.settings import Resolved
@@ -455,19 +462,22 @@ def sky_radiance(sky: np.ndarray, directions: np.ndarray) -> np.ndarray:
 
 def sky_irradiance(sky: np.ndarray, n: int, receivers: Receivers, tracer: Tracer,
                    seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """Irradiance (k, 3) from the sky about the geometric normal, and its luminance variance (k,).
+    """Irradiance (k, 3) from the sky about the shading normal, and its luminance variance (k,).
 
-    Cosine-distributed rays (pdf cosθ/π); a ray that meets nothing at any distance sees the sky,
-    so the estimate is π · mean(L_sky(ω) · V(ω)).
+    Cosine-distributed rays (pdf cosθ/π) about the receivers' hemisphere normals
+    (``sampling.hemisphere_normals``: the shading normal, the front face's on flat surfaces),
+    those below the front face folded above it (``sampling.fold``), as the obscurance's; a ray
+    that meets nothing at any distance sees the sky, so the estimate is π · mean(L_sky(ω) · V(ω)).
     """
     k = len(receivers.position)
     if k == 0:
         return np.zeros((0, 3)), np.zeros(0)
     local = cosine_hemisphere(split_samples(seed, receivers.key, n, SKY))
-    normal = receivers.geometric
+    normal = hemisphere_normals(receivers.normal, receivers.geometric)
     t1, t2 = tangent_frames(normal)
-    directions = (local[..., :1] * t1[:, None] + local[..., 1:2] * t2[:, None]
-                  + local[..., 2:] * normal[:, None]).reshape(-1, 3)
+    directions = folded((local[..., :1] * t1[:, None] + local[..., 1:2] * t2[:, None]
+                         + local[..., 2:] * normal[:, None]).reshape(-1, 3),
+                        np.repeat(normal, n, axis=0), np.repeat(receivers.geometric, n, axis=0))
     escaped = ~tracer.occluded(receivers.origins(n), directions, np.inf)
     value = (np.pi * sky_radiance(sky, directions) * escaped[:, None]).reshape(k, n, 3)
     _, variance = mean_and_variance(value @ LUMINANCE)

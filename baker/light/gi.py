@@ -58,7 +58,13 @@ from baker.light.direct import (
     emitter_samples,
 )
 from baker.rays.dimensions import GI_BOUNCE, GI_EMITTER, GI_FIRST, GI_ROULETTE
-from baker.rays.sampling import cosine_hemisphere, hash_u32, sample_2d, tangent_frames
+from baker.rays.sampling import (
+    cosine_hemisphere,
+    folded,
+    hash_u32,
+    sample_2d,
+    tangent_frames,
+)
 from baker.rays.trace import Tracer, ray_lift
 from baker.run.parallel import run_chunks
 from baker.settings import Resolved
@@ -111,6 +117,7 @@ def _chunk(scene: Scene, world: World, tracer: Tracer, sources: Sources, texels:
     path_keys = _path_keys(keys, paths)
     position = np.repeat(texels.position[rows], paths, axis=0)
     normal = np.repeat(texels.geometric_normal(rows), paths, axis=0)
+    frame = np.repeat(texels.hemisphere_normal(rows), paths, axis=0)  # the first rays'
     size = np.repeat(texels.size(rows), paths)
     points = sample_2d(settings.seed, keys[:, None], np.arange(paths)[None, :],
                        GI_FIRST).reshape(-1, 2)
@@ -125,11 +132,14 @@ def _chunk(scene: Scene, world: World, tracer: Tracer, sources: Sources, texels:
     for bounce in range(max_bounces):
         if not len(alive):
             break
-        if bounce:
+        if bounce:  # a path vertex: about its face's normal
             points = sample_2d(settings.seed, _bounce_keys(path_keys[alive], bounce), 0,
                                GI_BOUNCE)
-        directions = _cosine_directions(normal, points)
-        cos_out = np.einsum("ij,ij->i", directions, normal)  # the direction's pdf × π
+            directions = _cosine_directions(normal, points)
+            cos_out = np.einsum("ij,ij->i", directions, normal)  # the direction's pdf × π
+        else:  # the texel: about its hemisphere normal, folded above its front face
+            directions = folded(_cosine_directions(frame, points), frame, normal)
+            cos_out = np.einsum("ij,ij->i", directions, frame)
         origins = position + ray_lift(position, size, tracer.center)[:, None] * normal
         hits = tracer.cast(origins, directions, _FAR)
         rays += len(alive)

@@ -41,7 +41,7 @@ from baker.gltf.scene import Scene
 from baker.jit import inline, jit
 from baker.light.obscurance import RHO_KINDS, UNIT_REFLECTIVITY, rho
 from baker.rays.dimensions import OBSCURANCE, material_dimension
-from baker.rays.sampling import fill_cosine, fill_points, frame, hash_u32
+from baker.rays.sampling import fill_cosine, fill_points, fold, frame, hash_u32
 from baker.rays.trace import LocalHits, Tracer, ray_lift
 from baker.run.parallel import cores, even_slices, run_chunks, texels_per_chunk
 from baker.settings import TECHNIQUES, Resolved
@@ -207,32 +207,40 @@ def _obscurance_kernel(w_hit, escaped, through_hit, through_ave, r_ave, out):
 
 
 @jit
-def _to_world_kernel(rays, first, starts, normals, offsets, center, x, y, z, keep, origins,
-                     directions):
+def _to_world_kernel(rays, first, starts, normals, geometric, offsets, center, x, y, z, keep,
+                     origins, directions):
     """Turn local cosine directions (x, y, z) (k·rays,) into Embree's float32 rays.
 
-    Each texel's directions go into the frame of its normal; ray s of texel i (its sample
-    ``first`` + s) starts from ``starts[i, (first + s) mod S]`` (starts: (k, S, 3) world points
-    on the texel's plane, S = 1 without supersampling), lifted off the surface by the texel's
-    offset along the normal and recentred on ``center``. keep: (k·rays,) bool, the rays to
-    write, in order, to consecutive rows of ``origins`` and ``directions``; empty: all of them.
+    Each texel's directions go into the frame of its hemisphere normal ``normals`` (k, 3)
+    (``Texels.hemisphere_normal``); where that is not its front-face normal ``geometric`` (k, 3)
+    itself, a direction below the front face's plane is folded above it (``sampling.fold``).
+    Ray s of texel i (its sample ``first`` + s) starts from ``starts[i, (first + s) mod S]``
+    (starts: (k, S, 3) world points on the texel's plane, S = 1 without supersampling), lifted
+    off the surface by the texel's offset along the front-face normal and recentred on
+    ``center``. keep: (k·rays,) bool, the rays to write, in order, to consecutive rows of
+    ``origins`` and ``directions``; empty: all of them.
     """
     count = starts.shape[1]
     every = len(keep) == 0
     q = 0
     for i in range(len(starts)):
         nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
+        gx, gy, gz = geometric[i, 0], geometric[i, 1], geometric[i, 2]
+        tilted = nx != gx or ny != gy or nz != gz
         f = frame(nx, ny, nz)
         for r in range(i * rays, (i + 1) * rays):
             if not every and not keep[r]:
                 continue
             j = (first + r - i * rays) % count
-            origins[q, 0] = starts[i, j, 0] - center[0] + offsets[i] * nx
-            origins[q, 1] = starts[i, j, 1] - center[1] + offsets[i] * ny
-            origins[q, 2] = starts[i, j, 2] - center[2] + offsets[i] * nz
-            directions[q, 0] = x[r] * f[0] + y[r] * f[3] + z[r] * nx
-            directions[q, 1] = x[r] * f[1] + y[r] * f[4] + z[r] * ny
-            directions[q, 2] = x[r] * f[2] + y[r] * f[5] + z[r] * nz
+            origins[q, 0] = starts[i, j, 0] - center[0] + offsets[i] * gx
+            origins[q, 1] = starts[i, j, 1] - center[1] + offsets[i] * gy
+            origins[q, 2] = starts[i, j, 2] - center[2] + offsets[i] * gz
+            dx = x[r] * f[0] + y[r] * f[3] + z[r] * nx
+            dy = x[r] * f[1] + y[r] * f[4] + z[r] * ny
+            dz = x[r] * f[2] + y[r] * f[5] + z[r] * nz
+            if tilted:
+                dx, dy, dz = fold(dx, dy, dz, gx, gy, gz)
+            directions[q, 0], directions[q, 1], directions[q, 2] = dx, dy, dz
             q += 1
 
 
@@ -252,12 +260,14 @@ def cosine_directions(keys: np.ndarray, rays: int, seed: int, technique: str = "
 def hemisphere_rays(texels: Texels, rows: np.ndarray | slice, rays: int, seed: int,
                     center: np.ndarray, technique: str = "sobol", first: int = 0,
                     sub: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Cosine-distributed rays about each texel's front-face normal, ready for Embree.
+    """Cosine-distributed rays about each texel's hemisphere normal (its shading normal, or its
+    front-face normal on flat surfaces: ``Texels.hemisphere_normal``), those below the front
+    face folded above it (``sampling.fold``), ready for Embree.
 
     rows: the texels (indices or a slice); their samples ``first`` … ``first + rays − 1`` (one
     stratified grid, ``sampling.fill_points``). sub: None (every ray starts at the texel's
     sample point), or (k, S, 3) world sub-positions of the texels (``supersample.sub_positions``,
-    on the texel's plane, so the same normal and frame): sample j starts from sub-position
+    on the texel's plane, so the same normals and frame): sample j starts from sub-position
     j mod S. Returns origins and directions,
     each (k·rays, 3) float32 in the tracer's recentred frame (world − ``center``), texel-major
     (texel i's rays are rows i·rays … i·rays + rays − 1). Computed in float64 (points, then
@@ -279,7 +289,8 @@ def world_rays(texels: Texels, rows: np.ndarray | slice, rays: int, x: np.ndarra
     origins = np.empty((m, 3), np.float32)
     directions = np.empty((m, 3), np.float32)
     starts = texels.position[rows][:, None, :] if sub is None else sub
-    _to_world_kernel(rays, first, starts, texels.geometric_normal(rows),
+    _to_world_kernel(rays, first, starts, texels.hemisphere_normal(rows),
+                     texels.geometric_normal(rows),
                      ray_lift(texels.position[rows], texels.size(rows), center), center, x, y, z,
                      np.zeros(0, np.bool_) if keep is None else keep, origins, directions)
     return origins, directions

@@ -90,8 +90,9 @@ def translucent(scene: Scene) -> Translucent:
 
 
 def other_side(texels: Texels) -> Texels:
-    """The texels seen from their other side: geometric normals flipped, ``OTHER_SIDE`` keys."""
-    return replace(texels, triangle_normal=-texels.triangle_normal,
+    """The texels seen from their other side: geometric and shading normals flipped,
+    ``OTHER_SIDE`` keys."""
+    return replace(texels, triangle_normal=-texels.triangle_normal, normal=-texels.normal,
                    key=texels.key | OTHER_SIDE)
 
 

@@ -394,22 +394,53 @@ def _cell_candidates(local, distance_sq, radii, length, rays, bits, scrambles, s
     return found
 
 
+@inline
+def _mirrored_locals(t1, t2, normals, geometric, i, count, local, distance_sq):
+    """After ``_sphere_locals`` filled the first ``count`` spheres of texel i: their mirror
+    images in its front face's plane (through the ray origin) into ``local[count:]``, when the
+    texel's hemisphere normal ``normals[i]`` tilts from its front-face normal ``geometric[i]``
+    (its rays below the face are folded, ``sampling.fold``: a folded ray passes near a sphere
+    exactly when its direction as drawn passes near the sphere's mirror image); else spheres
+    no ray reaches (below the hemisphere, ``_sphere_reachable``)."""
+    gx, gy, gz = geometric[i, 0], geometric[i, 1], geometric[i, 2]
+    tilted = normals[i, 0] != gx or normals[i, 1] != gy or normals[i, 2] != gz
+    lx = t1[i, 0] * gx + t1[i, 1] * gy + t1[i, 2] * gz  # the face normal in the texel's frame
+    ly = t2[i, 0] * gx + t2[i, 1] * gy + t2[i, 2] * gz
+    lz = normals[i, 0] * gx + normals[i, 1] * gy + normals[i, 2] * gz
+    for b in range(count):
+        m = count + b
+        distance_sq[m] = distance_sq[b]
+        if not tilted:
+            local[m, 0], local[m, 1], local[m, 2] = 0.0, 0.0, -np.inf
+            continue
+        dot = local[b, 0] * lx + local[b, 1] * ly + local[b, 2] * lz
+        local[m, 0] = local[b, 0] - 2.0 * dot * lx
+        local[m, 1] = local[b, 1] - 2.0 * dot * ly
+        local[m, 2] = local[b, 2] - 2.0 * dot * lz
+
+
 @jit
 def _drawn_near_rays(technique: int, seed, keys: np.ndarray, rays: int, starts: np.ndarray,
-                     t1: np.ndarray, t2: np.ndarray, normals: np.ndarray, centres: np.ndarray,
-                     radii: np.ndarray, length: float, cells: bool = True):
+                     t1: np.ndarray, t2: np.ndarray, normals: np.ndarray,
+                     geometric: np.ndarray, centres: np.ndarray, radii: np.ndarray,
+                     length: float, cells: bool = True):
     """The obscurance rays of texels keys (k,) — each texel's rays from ``starts[i]`` (k, 3) in
-    its frame t1, t2, normals (k, 3) each — that may pass near the spheres (``_near_flags``):
-    (texel (m,) int64 index into keys, sample (m,) int64 its sample index, x, y, z (m,) their
-    local directions, the bits ``cosine_directions`` gives). Texels that cannot reach a sphere
-    (``_reachable``) draw nothing. With ``sobol`` points (and ``cells``; False draws every ray, for the tests), a
+    its frame t1, t2, normals (k, 3) each (``Texels.hemisphere_normal``; ``geometric`` (k, 3)
+    its front-face normal, which rays below are folded about) — that may pass near the spheres
+    (``_near_flags``, against the spheres and, for a tilted frame, their mirror images:
+    ``_mirrored_locals``): (texel (m,) int64 index into keys, sample (m,) int64 its sample
+    index, x, y, z (m,) their local directions as drawn, the bits ``cosine_directions`` gives;
+    ``world_rays`` folds them). Texels that cannot reach a sphere (``_reachable``) draw
+    nothing. With ``sobol`` points (and ``cells``; False draws every ray, for the tests), a
     texel whose spheres subtend narrow cones draws only the rays that may lie in them
     (``_cell_candidates``); the others' directions are drawn (``sampling.fill_points``,
     ``fill_cosine``) a few texels at a time into small buffers, so that no (k·rays,) arrays
     are made. Either way each drawn ray meets the same test."""
     k = len(starts)
-    local = np.empty((len(centres), 3))
-    distance_sq = np.empty(len(centres))
+    spheres = len(centres)
+    local = np.empty((2 * spheres, 3))  # the spheres, then their mirror images
+    distance_sq = np.empty(2 * spheres)
+    radii = np.concatenate((radii, radii))
     block = max(1, _DRAWN_RAYS // rays)
     todo, todo_keys = np.empty(block, np.int64), np.empty(block, keys.dtype)
     u, v = np.empty(block * rays), np.empty(block * rays)
@@ -418,8 +449,8 @@ def _drawn_near_rays(technique: int, seed, keys: np.ndarray, rays: int, starts: 
     bits = 0
     while (1 << bits) < rays:
         bits += 1
-    boxes, counts = np.empty((len(centres), 8, 4)), np.empty(len(centres), np.int64)
-    grids = np.empty((len(centres), 8), np.int64)
+    boxes, counts = np.empty((2 * spheres, 8, 4)), np.empty(2 * spheres, np.int64)
+    grids = np.empty((2 * spheres, 8), np.int64)
     marks, candidates = np.zeros(rays, np.uint8), np.empty(rays, np.int64)
     cells = cells and technique == 0 and bits <= 24  # (a point has 24 bits: ``_unit``)
     solve = net_solve(min(bits, 24))
@@ -431,6 +462,7 @@ def _drawn_near_rays(technique: int, seed, keys: np.ndarray, rays: int, starts: 
         count = 0
         for i in range(first, min(first + block, k)):
             _sphere_locals(starts, t1, t2, normals, i, centres, local, distance_sq)
+            _mirrored_locals(t1, t2, normals, geometric, i, spheres, local, distance_sq)
             if not _reachable(local, distance_sq, radii, length):
                 continue
             found = -1
@@ -460,6 +492,7 @@ def _drawn_near_rays(technique: int, seed, keys: np.ndarray, rays: int, starts: 
         for c in range(count):
             i = todo[c]
             _sphere_locals(starts, t1, t2, normals, i, centres, local, distance_sq)
+            _mirrored_locals(t1, t2, normals, geometric, i, spheres, local, distance_sq)
             base = c * rays
             if not _near_flags(x, y, z, base, base + rays, local, distance_sq, radii, length,
                                flags):
@@ -625,12 +658,12 @@ def _rays_meet(changed: _Changed, texels: Texels, rows: np.ndarray, settings,
 
     def work(part: slice) -> None:
         chosen = rows[part]
-        normal = texels.geometric_normal(chosen)
+        normal, frame = texels.geometric_normal(chosen), texels.hemisphere_normal(chosen)
         starts, radii = _starts(changed, texels.position[chosen], normal, texels.size(chosen),
                                 settings.d_max)
         texel, sample, x, y, z = _drawn_near_rays(
             TECHNIQUES.index(settings.sampling), np.uint64(settings.seed), texels.key[chosen],
-            n, starts, *tangent_frames(normal), normal, changed.sphere_centres, radii,
+            n, starts, *tangent_frames(frame), frame, normal, changed.sphere_centres, radii,
             settings.d_max)
         if not len(texel):
             return
