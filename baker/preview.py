@@ -6,9 +6,9 @@ Every pixel is one primary ray (all pixels in one batch, cast in chunks through
 ``trace.Tracer``). Where a ray meets a lightmapped surface the pixel shows what a glTF viewer
 shows there (three.js, measured by tests/test_browser.py): diffuse colour × lightmap / π +
 emission, where the diffuse colour is the base colour × (1 − metallic) × (1 − transmission)
-(``surface.viewer_diffuse_weight``: viewers light only a material's diffuse part with a
-lightmap, so a metal shows black) and the lightmap is sampled bilinearly (clamped, as the
-writer's sampler says) at the hit's lightmap UV — the TEXCOORD set named by
+(``surface.viewer_diffuse_weight_at``, metallic read from its texture at the point as viewers
+read it: viewers light only a material's diffuse part with a lightmap, so a metal shows black)
+and the lightmap is sampled bilinearly (clamped, as the writer's sampler says) at the hit's lightmap UV — the TEXCOORD set named by
 ``MOZ_lightmap.texCoord`` — decoded by ``asset.extras.baker.lightmap_encoding`` (linear when
 absent) and scaled by ``MOZ_lightmap.intensity``. The emissive carrier's surfaces show their
 emission (the bake itself, base colour black); the occlusion carrier's visibility is shaded as a
@@ -41,7 +41,7 @@ import numpy as np
 
 from baker.errors import InputError, OutputError, SettingsError
 from baker.geometry.surface import (LUMINANCE, SRGB_TO_LINEAR, albedo, base_colour, emission,
-                                    viewer_diffuse_weight)
+                                    viewer_diffuse_weight_at)
 from baker.geometry.world import World, build_world
 from baker.gltf.load import _Context, _decode_image, load, resolve_buffers, trs_matrices
 from baker.gltf.scene import Scene
@@ -102,7 +102,10 @@ class Picture:
     ``lightmap`` mode, checker shade in ``checker`` mode, albedo + emission in ``unlit`` mode).
     triangle: (H, W) int64 world triangle seen at the pixel, −1 for the background.
     lightmapped: (H, W) bool, pixels showing a lightmapped surface. exposure: the factor
-    applied before the sRGB curve.
+    applied before the sRGB curve. from_lightmap: (H, W, 3) float64 the part of ``radiance``
+    the lightmap gives (diffuse colour × lightmap / π in ``lit`` mode, the lightmap in
+    ``lightmap`` mode, zero in the others): what a viewer's picture loses when it leaves the
+    lightmap out (tests/test_browser.py compares the two).
     """
 
     rgb: np.ndarray
@@ -111,6 +114,7 @@ class Picture:
     lightmapped: np.ndarray
     exposure: float
     position: np.ndarray
+    from_lightmap: np.ndarray
     checker_texels: int = 1
 
 
@@ -366,7 +370,8 @@ def render(scene: Scene, mode: str = "lit", size: tuple[int, int] | None = None,
         triangle[rows], bary[rows] = _first_front_hits(scene, world, tracer, origins[rows],
                                                        directions[rows])
     cell = _checker_cell(lightmaps, triangle, bary, width, height) if mode == "checker" else 1
-    radiance, lightmapped = _shade(scene, world, lightmaps, mode, triangle, bary, directions, cell)
+    radiance, lightmapped, from_lightmap = _shade(scene, world, lightmaps, mode, triangle, bary,
+                                                  directions, cell)
     if exposure is None:
         exposure = 1.0
         shown = radiance[lightmapped] @ LUMINANCE
@@ -379,7 +384,7 @@ def render(scene: Scene, mode: str = "lit", size: tuple[int, int] | None = None,
                    triangle=triangle.reshape(height, width),
                    lightmapped=lightmapped.reshape(height, width), exposure=float(exposure),
                    position=_points(world, triangle, bary).reshape(height, width, 3),
-                   checker_texels=cell)
+                   from_lightmap=from_lightmap.reshape(height, width, 3), checker_texels=cell)
 
 
 def _points(world: World, triangle: np.ndarray, bary: np.ndarray) -> np.ndarray:
@@ -422,11 +427,13 @@ def _checker_cell(lightmaps: SceneLightmaps, triangle: np.ndarray, bary: np.ndar
 
 def _shade(scene: Scene, world: World, lightmaps: SceneLightmaps, mode: str, triangle: np.ndarray,
            bary: np.ndarray, directions: np.ndarray,
-           cell: int = 1) -> tuple[np.ndarray, np.ndarray]:
-    """Linear pixel values (n, 3) and which pixels show a lightmap (n,), for ``mode``;
-    ``cell`` is the checker square's side in texels."""
+           cell: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Linear pixel values (n, 3), which pixels show a lightmap (n,), and the part of the
+    values the lightmap gives (n, 3), for ``mode``; ``cell`` is the checker square's side in
+    texels."""
     n = len(triangle)
     radiance = np.zeros((n, 3))
+    from_lightmap = np.zeros((n, 3))
     hit = np.flatnonzero(triangle >= 0)
     tris, b = triangle[hit], bary[hit]
     page, texel = _lightmap_texel_coords(lightmaps, tris, b)
@@ -446,20 +453,23 @@ def _shade(scene: Scene, world: World, lightmaps: SceneLightmaps, mode: str, tri
     if mode == "checker":
         light[~baked] = _UNBAKED_CHECKER
         radiance[hit] = light
-        return radiance, np.isin(np.arange(n), hit[baked])
+        return radiance, np.isin(np.arange(n), hit[baked]), from_lightmap
     unlit = np.array([m.unlit for m in scene.materials], bool)[world.tri_material[tris]]
     flat = np.where(unlit, 1.0, cosine * level)[:, None]
     if mode == "lightmap":
         radiance[hit] = np.where(baked[:, None], light, flat * 0.5)
+        from_lightmap[hit[baked]] = light[baked]
     else:
-        weight = viewer_diffuse_weight(scene)[world.tri_material[tris]]
+        weight = viewer_diffuse_weight_at(scene, world, tris, b)
         diffuse = base_colour(scene, world, tris, b) * weight[:, None]
         shaded = diffuse * (1.0 if mode == "unlit" else light / np.pi)
         radiance[hit] = (np.where(baked[:, None], shaded, albedo(scene, world, tris, b) * flat)
                          + emission(scene, world, tris, b))
+        if mode == "lit":
+            from_lightmap[hit[baked]] = shaded[baked]
     lightmapped = np.zeros(n, bool)
     lightmapped[hit[baked]] = True
-    return radiance, lightmapped
+    return radiance, lightmapped, from_lightmap
 
 
 def preview(input: str | os.PathLike, output: str | os.PathLike, mode: str = "lit",

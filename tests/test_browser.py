@@ -1,20 +1,32 @@
-"""The bake as a real browser shows it (issue 20): three.js in headless Chromium, through the page
-``baker view`` serves (our MOZ_lightmap plugin, the shipped three.js), against ``baker preview``
-from the same camera at the same exposure.
+"""The bake as real browsers show it (issue 20), each picture against ``baker preview`` from the
+same camera at the same exposure, in headless Chromium:
+- three.js 0.187 through the page ``baker view`` serves (our MOZ_lightmap plugin);
+- Babylon.js 9.28 with its own glTF loader and no code of ours (tests/babylon);
+- ``<model-viewer>`` 4.4 with no code of ours (tests/modelviewer), its camera set through its own
+  attributes, no image based lighting (a black environment image) but for the occlusion carrier,
+  shown under a uniform white sky;
+- Hubs: three.js r141 and Hubs' MOZ_lightmap loader extension (tests/hubs).
 
-For every carrier of the demo Cornell box and the carriers of two shared scenes that show their
-bake in plain three.js, over the pixels that show a lightmapped surface (one pixel in from every
-silhouette, where a rasteriser and a ray caster may see different triangles):
+For every carrier a viewer reads, over the pixels that show a lightmapped surface (one pixel in
+from every silhouette, where a rasteriser and a ray caster may see different triangles):
 - the log luminances correlate (≥ 0.98) and their median ratio is within 5 % of 1;
-- no pixel the preview shows lit (luminance above 1 % of white) is black in the browser;
-and the Khronos validator finds no error in any file shown.
+- no pixel the preview shows lit (luminance above 1 % of white) is black in the browser.
+A carrier a viewer does not read shows nothing of the bake there: every pixel the preview shows
+lit is black. Transmissive surfaces are left out of every comparison (viewers draw them with the
+scene behind them, the preview with nothing). The moz carrier of the shared scenes (MultiUVTest,
+LightsPunctualLamp) lies on metals, whose pictures are mostly their emission: there what the
+lightmap adds alone (the viewer's picture less its picture without the lightmap) is compared with
+the preview's lightmap term, by the same measures. The Khronos validator finds no error in any
+file shown.
 
-Chromium is Debian's package: installed with apt-get when missing and running as root (CI);
-the tests are skipped only where it cannot be installed, and say so.
+Chromium is Debian's package: installed with apt-get when missing and running as root (CI); the
+pinned npm packages of each page are installed with ``npm ci`` when missing. The tests are
+skipped only where Chromium or npm cannot be had, and say so.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import shutil
 import subprocess
@@ -40,15 +52,15 @@ import gltf_validator
 from chromium import Browser, find_chromium
 
 SIZE = (200, 150)
-BABYLON = Path(__file__).resolve().parent / "babylon"  # the page and its pinned npm packages
-# Left out: the moz carrier on the shared scenes. MultiUVTest's cube is metal: black in both but
-# for its emissive logos, which have nothing of the bake and which three.js samples through
-# mipmaps and the preview at full resolution (measured at 640 × 480: median ratio 1.27 and
-# log correlation 0.81 over the 1,690 pixels that emit, the logos in the same places);
-# LightsPunctualLamp's shade is transmissive, which three.js draws with the scene behind it and
-# the preview does not.
+PAGES = Path(__file__).resolve().parent  # tests/<viewer>/page.html and its pinned npm packages
+# (scene, carrier) shown through baker view's three.js page. BY_TERM: compared by what the
+# lightmap adds alone (``_assert_same_lightmap_term``): the shared scenes' moz carrier lies on
+# metals (MultiUVTest's cube; LightsPunctualLamp's stand, metal but where its texture says not),
+# whose pictures are mostly their emission, which viewers sample through mipmaps.
 CASES = [("cornell", "moz"), ("cornell", "emissive"), ("cornell", "occlusion"),
-         ("MultiUVTest", "emissive"), ("LightsPunctualLamp", "emissive")]
+         ("MultiUVTest", "emissive"), ("LightsPunctualLamp", "emissive"),
+         ("MultiUVTest", "moz"), ("LightsPunctualLamp", "moz")]
+BY_TERM = {("MultiUVTest", "moz"), ("LightsPunctualLamp", "moz")}
 
 
 @pytest.fixture(scope="module")
@@ -107,14 +119,33 @@ def _interior(mask: np.ndarray) -> np.ndarray:
 
 
 def _view_and_preview(out: Path):
-    """The camera the preview takes of ``out``, and its picture at its own exposure."""
+    """The camera the preview takes of ``out``, and its picture, whose ``lightmapped`` mask
+    leaves out transmissive surfaces: viewers draw them with the scene behind them (three.js
+    shows LightsPunctualLamp's lit bulb through its shade), the preview with nothing behind.
+    Its exposure is the preview's automatic one over the pixels left (the 99th percentile of
+    their luminance at 0.85), not over the glass left out."""
     scene = load(out)
-    view = scene_camera(scene) or default_view(build_world(scene))
-    return view, render(scene, "lit", SIZE, view=view)
+    world = build_world(scene)
+    view = scene_camera(scene) or default_view(world)
+    preview = render(scene, "lit", SIZE, view=view, exposure=1.0)
+    clear = np.array([m.transmission > 0 or m.diffuse_transmission > 0 for m in scene.materials])
+    seen = preview.triangle >= 0
+    see_through = np.zeros_like(seen)
+    see_through[seen] = clear[world.tri_material[preview.triangle[seen]]]
+    if not see_through.any():
+        return view, render(scene, "lit", SIZE, view=view)
+    shown = preview.radiance[preview.lightmapped & ~see_through] @ LUMINANCE
+    exposure = 0.85 / np.percentile(shown[shown > 0], 99)
+    preview = render(scene, "lit", SIZE, view=view, exposure=exposure)
+    return view, dataclasses.replace(preview, lightmapped=preview.lightmapped & ~see_through)
 
 
 def _query(view, exposure: float) -> str:
     return f"size={SIZE[0]}x{SIZE[1]}&exposure={exposure:.9g}&camera={_camera_parameter(view)}"
+
+
+def _png(data: bytes) -> np.ndarray:
+    return np.asarray(Image.open(io.BytesIO(data)).convert("RGB"))
 
 
 def _compare(shown: np.ndarray, preview, label: str, folder: Path) -> dict:
@@ -127,7 +158,7 @@ def _compare(shown: np.ndarray, preview, label: str, folder: Path) -> dict:
     assert shown.shape == preview.rgb.shape
     pixels = _interior(preview.lightmapped)
     pixels &= (shown.max(axis=-1) < 254) & (preview.rgb.max(axis=-1) < 254)  # not clipped
-    assert pixels.mean() > 0.05, "too few lightmapped pixels to compare"
+    assert pixels.sum() >= 500, "too few lightmapped pixels to compare"
     browser_lum, preview_lum = _luminance(shown)[pixels], _luminance(preview.rgb)[pixels]
     lit = preview_lum > 0.01
     both = lit & (browser_lum > 0.002)
@@ -151,35 +182,96 @@ def _assert_same(shown: np.ndarray, preview, label: str, folder: Path) -> None:
     assert found["correlation"] >= 0.98, found
 
 
+def _assert_shows_nothing(shown: np.ndarray, preview, label: str, folder: Path) -> None:
+    """A carrier the viewer does not read: every pixel the preview shows lit is black."""
+    found = _compare(shown, preview, label, folder)
+    assert found["lit"] > 1000 and found["black"] == found["lit"], found
+
+
+def _assert_same_lightmap_term(with_map: np.ndarray, without_map: np.ndarray, preview,
+                               label: str, folder: Path) -> None:
+    """What the lightmap adds, alone: the viewer's picture less its picture without the
+    lightmap (linear luminance, both unclipped) against the preview's ``from_lightmap`` at its
+    exposure, over the lightmapped pixels. Emission cancels out of the viewer's difference,
+    and with it how a viewer samples an emissive texture (through mipmaps: MultiUVTest's logos
+    and LightsPunctualLamp's stand, whose emission is most of what shows). Where the preview's
+    term is lit (above 1 % of white) the viewer's must be too, within 5 % (median ratio) and
+    correlated (≥ 0.98 in log). Where no term is lit (a metal), the viewer's is dark too but on
+    at most 5 % of the pixels: LightsPunctualLamp's stand is metal but for some texels of its
+    metallic texture, which three.js samples through mipmaps (measured: 28 of its 1,443 pixels
+    lit, by up to 9 % of white, where the preview's term is dark everywhere)."""
+    _compare(with_map, preview, label, folder)  # printed: what the whole pictures do
+    pixels = _interior(preview.lightmapped)
+    pixels &= (with_map.max(axis=-1) < 254) & (without_map.max(axis=-1) < 254)
+    assert pixels.sum() >= 500, "too few lightmapped pixels to compare"
+    viewer = (_luminance(with_map) - _luminance(without_map))[pixels]
+    expected = np.minimum((preview.from_lightmap @ LUMINANCE)[pixels] * preview.exposure, 1.0)
+    lit = expected > 0.01
+    both = lit & (viewer > 0.002)
+    found = {"pixels": int(pixels.sum()), "lit": int(lit.sum()),
+             "black": int(np.count_nonzero(lit & ~both)), "viewer lit": int((viewer > 0.01).sum()),
+             "viewer median": float(np.median(viewer)), "viewer brightest": float(viewer.max())}
+    if both.any():
+        found["ratio"] = float(np.median(viewer[both] / expected[both]))
+        found["correlation"] = float(np.corrcoef(np.log(viewer[both]),
+                                                 np.log(expected[both]))[0, 1])
+    print(f"{label}, the lightmap's term: {found}")
+    if not lit.any():
+        assert found["viewer lit"] <= 0.05 * found["pixels"], found
+        return
+    assert found["black"] == 0, found
+    assert abs(found["ratio"] - 1) <= 0.05 and found["correlation"] >= 0.98, found
+
+
 @pytest.mark.parametrize("name, carrier", CASES)
 def test_three_js_shows_what_the_preview_shows(browser, baked, name, carrier, tmp_path):
     out = baked(name, carrier)
     view, preview = _view_and_preview(out)
     server, url = start(out)
+    page = f"{url}?bare=1&{_query(view, preview.exposure)}"
     try:
-        png = browser.canvas_png(f"{url}?bare=1&{_query(view, preview.exposure)}")
+        shown = _png(browser.canvas_png(page))
+        without = _png(browser.canvas_png(page, _click("lightmap"))) \
+            if (name, carrier) in BY_TERM else None
     finally:
         server.shutdown()
         server.server_close()
-    _assert_same(np.asarray(Image.open(io.BytesIO(png)).convert("RGB")), preview,
-                 f"three.js {name} {carrier}", tmp_path)
+    label = f"three.js {name} {carrier}"
+    if without is None:
+        _assert_same(shown, preview, label, tmp_path)
+    else:
+        _assert_same_lightmap_term(shown, without, preview, label, tmp_path)
 
 
-@pytest.fixture(scope="module")
-def babylon(tmp_path_factory):
-    """The address of a folder served on 127.0.0.1 holding tests/babylon/page.html and the
-    pinned Babylon.js (``npm ci --prefix tests/babylon`` when missing), and the folder, where
-    ``model`` links to the folder of the file to show."""
-    if not (BABYLON / "node_modules" / "babylonjs").is_dir():
+def _write_skies(folder: Path) -> None:
+    """black.hdr and white.hdr in ``folder``: uniform equirectangular Radiance images of
+    radiance 0 and 1 (flat RGBE pixels; 256 × 128, as smaller ones filter to black in three.js's
+    PMREM) for tests/modelviewer/page.html."""
+    header = b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 128 +X 256\n"
+    for name, rgbe in (("black", (0, 0, 0, 0)), ("white", (128, 128, 128, 129))):
+        (folder / f"{name}.hdr").write_bytes(header + bytes(rgbe) * (256 * 128))
+
+
+def _served_page(tmp_path_factory, viewer: str, package: str, skies: bool = False):
+    """The address of tests/<viewer>/page.html served on 127.0.0.1 from a folder holding a copy
+    of the page and its scripts and a link to its pinned npm packages (``npm ci --prefix
+    tests/<viewer>`` when ``package`` is missing), and the folder, where ``model`` links to the
+    folder of the file to show (``_viewer_picture``), and the ``skies`` when asked for. A
+    generator: the fixture's body."""
+    source = PAGES / viewer
+    if not (source / "node_modules" / package).is_dir():
         npm = shutil.which("npm")
         if npm is None:
-            pytest.skip("no npm: Babylon.js cannot be installed (the README's test command "
+            pytest.skip(f"no npm: {package} cannot be installed (the README's test command "
                         "needs Node.js and npm)")
-        subprocess.run([npm, "ci", "--prefix", str(BABYLON), "--no-audit", "--no-fund"],
+        subprocess.run([npm, "ci", "--prefix", str(source), "--no-audit", "--no-fund"],
                        check=True, capture_output=True, timeout=600)
-    folder = tmp_path_factory.mktemp("babylon")
-    shutil.copy(BABYLON / "page.html", folder)
-    (folder / "node_modules").symlink_to(BABYLON / "node_modules", target_is_directory=True)
+    folder = tmp_path_factory.mktemp(viewer)
+    for script in [source / "page.html", *source.glob("*.js")]:
+        shutil.copy(script, folder)
+    (folder / "node_modules").symlink_to(source / "node_modules", target_is_directory=True)
+    if skies:
+        _write_skies(folder)
     server = ThreadingHTTPServer(("127.0.0.1", 0), partial(_QuietFiles, directory=str(folder)))
     threading.Thread(target=server.serve_forever, daemon=True).start()
     yield f"http://127.0.0.1:{server.server_address[1]}/page.html", folder
@@ -187,20 +279,37 @@ def babylon(tmp_path_factory):
     server.server_close()
 
 
+@pytest.fixture(scope="module")
+def babylon(tmp_path_factory):
+    yield from _served_page(tmp_path_factory, "babylon", "babylonjs")
+
+
+@pytest.fixture(scope="module")
+def model_viewer(tmp_path_factory):
+    yield from _served_page(tmp_path_factory, "modelviewer", "@google/model-viewer", skies=True)
+
+
+@pytest.fixture(scope="module")
+def hubs(tmp_path_factory):
+    yield from _served_page(tmp_path_factory, "hubs", "three")
+
+
 class _QuietFiles(SimpleHTTPRequestHandler):
     def log_message(self, format, *args) -> None:
         pass
 
 
-def _babylon_picture(browser, babylon, out: Path, view, exposure: float) -> np.ndarray:
-    """Babylon's picture of ``out``, served from its own folder (with the images beside it)."""
-    url, folder = babylon
+def _viewer_picture(browser, page, out: Path, view, exposure: float,
+                    extra: str = "") -> np.ndarray:
+    """A served page's picture of ``out``, served from its own folder (with the images beside
+    it); ``extra`` adds URL parameters."""
+    url, folder = page
     served = folder / "model"
     if served.is_symlink():
         served.unlink()
     served.symlink_to(out.parent, target_is_directory=True)
-    png = browser.canvas_png(f"{url}?model=model/{out.name}&{_query(view, exposure)}")
-    return np.asarray(Image.open(io.BytesIO(png)).convert("RGB"))
+    return _png(browser.canvas_png(
+        f"{url}?model=model/{out.name}&{_query(view, exposure)}{extra}", timeout=60.0))
 
 
 @pytest.mark.parametrize("name", ["cornell", "MultiUVTest", "LightsPunctualLamp"])
@@ -209,18 +318,52 @@ def test_babylon_shows_the_emissive_carrier(browser, baked, babylon, name, tmp_p
     as the preview does."""
     out = baked(name, "emissive")
     view, preview = _view_and_preview(out)
-    _assert_same(_babylon_picture(browser, babylon, out, view, preview.exposure), preview,
+    _assert_same(_viewer_picture(browser, babylon, out, view, preview.exposure), preview,
                  f"Babylon {name} emissive", tmp_path)
 
 
-def test_babylon_shows_nothing_of_the_moz_carrier(browser, baked, babylon, tmp_path):
-    """Babylon's loader reads no lightmap extension: every surface the preview shows lit by the
-    moz carrier is black there (docs/output.md says so; this test notices if that changes)."""
+@pytest.mark.parametrize("carrier", ["emissive", "occlusion"])
+def test_model_viewer_shows_what_the_preview_shows(browser, baked, model_viewer, carrier,
+                                                   tmp_path):
+    """<model-viewer> 4.4 with no code of ours shows the emissive carrier with no environment,
+    and the occlusion carrier under a uniform sky of radiance 1: there a diffuse surface sends
+    albedo × visibility, π times what the preview shades (visibility as a lightmap of
+    intensity 1, diffuse colour × V / π), so it is shown at the preview's exposure / π. (Its
+    loader is three.js's GLTFLoader, which the three.js cases measure on the shared scenes.)"""
+    out = baked("cornell", carrier)
+    view, preview = _view_and_preview(out)
+    sky = "white" if carrier == "occlusion" else "black"
+    exposure = preview.exposure / (np.pi if carrier == "occlusion" else 1.0)
+    shown = _viewer_picture(browser, model_viewer, out, view, exposure, f"&environment={sky}")
+    _assert_same(shown, preview, f"model-viewer cornell {carrier}", tmp_path)
+
+
+@pytest.mark.parametrize("viewer", ["babylon", "model_viewer"])
+def test_viewers_without_moz_lightmap_show_nothing_of_it(browser, baked, viewer, request,
+                                                         tmp_path):
+    """Babylon's loader and model-viewer's read no lightmap extension: every surface the
+    preview shows lit by the moz carrier is black there, with no environment (docs/output.md
+    says so; this test notices if that changes)."""
     out = baked("cornell", "moz")
     view, preview = _view_and_preview(out)
-    found = _compare(_babylon_picture(browser, babylon, out, view, preview.exposure), preview,
-                     "Babylon cornell moz", tmp_path)
-    assert found["lit"] > 1000 and found["black"] == found["lit"]
+    shown = _viewer_picture(browser, request.getfixturevalue(viewer), out, view,
+                            preview.exposure, "&environment=black")
+    _assert_shows_nothing(shown, preview, f"{viewer} cornell moz", tmp_path)
+
+
+@pytest.mark.parametrize("name", ["cornell", "MultiUVTest", "LightsPunctualLamp"])
+def test_hubs_shows_the_moz_carrier(browser, baked, hubs, name, tmp_path):
+    """three.js r141 with Hubs' MOZ_lightmap loader extension (TEXCOORD_1, linear texels) shows
+    the moz carrier as the preview does (on the shared scenes: what the lightmap adds alone)."""
+    out = baked(name, "moz")
+    view, preview = _view_and_preview(out)
+    shown = _viewer_picture(browser, hubs, out, view, preview.exposure)
+    label = f"Hubs {name} moz"
+    if (name, "moz") not in BY_TERM:
+        _assert_same(shown, preview, label, tmp_path)
+        return
+    without = _viewer_picture(browser, hubs, out, view, preview.exposure, "&lightmap=off")
+    _assert_same_lightmap_term(shown, without, preview, label, tmp_path)
 
 
 def _click(element: str) -> str:

@@ -25,6 +25,7 @@ LUMINANCE = np.array([0.2126, 0.7152, 0.0722])  # Rec. 709 weights of linear RGB
 # sRGB transfer function, decoded once for every 8-bit value.
 _levels = np.arange(256) / 255.0
 SRGB_TO_LINEAR = np.where(_levels <= 0.04045, _levels / 12.92, ((_levels + 0.055) / 1.055) ** 2.4)
+LINEAR_LEVELS = _levels  # a data texture's 8-bit levels, as values in [0, 1]
 
 
 def _wrap(coord: np.ndarray, size: int, mode: int) -> np.ndarray:
@@ -37,8 +38,11 @@ def _wrap(coord: np.ndarray, size: int, mode: int) -> np.ndarray:
     return np.mod(coord, size)
 
 
-def sample_texture(image: Image, ref: TextureRef, uv: np.ndarray) -> np.ndarray:
+def sample_texture(image: Image, ref: TextureRef, uv: np.ndarray,
+                   decode: np.ndarray = SRGB_TO_LINEAR) -> np.ndarray:
     """Bilinear lookup of an sRGB colour texture at glTF UVs (k, 2); returns linear RGB (k, 3).
+    ``decode`` maps the 8-bit levels to values: SRGB_TO_LINEAR for colour, LINEAR_LEVELS for
+    data textures (metallic-roughness).
 
     UV (0, 0) is the top-left corner of the image; texel centres sit at half-integers.
     """
@@ -54,7 +58,7 @@ def sample_texture(image: Image, ref: TextureRef, uv: np.ndarray) -> np.ndarray:
     ys = [_wrap(y0, h, ref.wrap_t), _wrap(y0 + 1, h, ref.wrap_t)]
 
     def tap(yy: np.ndarray, xx: np.ndarray) -> np.ndarray:
-        return SRGB_TO_LINEAR[pixels[yy, xx, :3]]
+        return decode[pixels[yy, xx, :3]]
 
     top = tap(ys[0], xs[0]) * (1 - fx) + tap(ys[0], xs[1]) * fx
     bottom = tap(ys[1], xs[0]) * (1 - fx) + tap(ys[1], xs[1]) * fx
@@ -78,8 +82,9 @@ def texture_uv(world: World, ref: TextureRef, tris: np.ndarray, bary: np.ndarray
 
 
 def _textured(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray,
-              factor: np.ndarray, texture_of) -> np.ndarray:
-    """factor[material] (k, 3) times each material's texture, looked up where it has one."""
+              factor: np.ndarray, texture_of, decode: np.ndarray = SRGB_TO_LINEAR) -> np.ndarray:
+    """factor[material] (k, 3) times each material's texture (its levels read by ``decode``),
+    looked up where it has one."""
     materials = world.tri_material[tris]
     result = factor[materials].copy()
     for m, material in enumerate(scene.materials):
@@ -90,7 +95,7 @@ def _textured(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray,
         if not mask.any():
             continue
         uv = texture_uv(world, ref, tris[mask], bary[mask])
-        result[mask] *= sample_texture(scene.images[ref.image], ref, uv)
+        result[mask] *= sample_texture(scene.images[ref.image], ref, uv, decode)
     return result
 
 
@@ -102,12 +107,27 @@ def diffuse_factors(scene: Scene) -> np.ndarray:
 
 def viewer_diffuse_weight(scene: Scene) -> np.ndarray:
     """(M,) the share of every material's base colour that a glTF viewer shades as diffuse,
-    (1 − metallic) × (1 − transmission), factors only (three.js's MeshPhysicalMaterial, and
+    (1 − metallic) × (1 − transmission), factors only (``viewer_diffuse_weight_at`` reads the
+    metallic texture at points) (three.js's MeshPhysicalMaterial, and
     every viewer that follows glTF's BRDF): the part that a lightmap lights. A metal or glass
     therefore shows little or nothing of a MOZ_lightmap, whatever the bake gave it."""
     return np.array([(1.0 - float(np.clip(m.metallic, 0.0, 1.0)))
                      * (1.0 - float(np.clip(m.transmission, 0.0, 1.0)))
                      for m in scene.materials], np.float64)
+
+
+def viewer_diffuse_weight_at(scene: Scene, world: World, tris: np.ndarray,
+                             bary: np.ndarray) -> np.ndarray:
+    """(k,) ``viewer_diffuse_weight`` at barycentric points (k, 3) of world triangles (k,), with
+    metallic the factor × the metallicRoughnessTexture's blue channel (linear) where there is
+    one: viewers sample it per pixel, so a textured metal's dielectric parts show a lightmap
+    (LightsPunctualLamp's stand)."""
+    factor = np.array([[m.metallic] * 3 for m in scene.materials], np.float64).reshape(-1, 3)
+    metallic = _textured(scene, world, tris, bary, factor, lambda m: m.metallic_roughness_texture,
+                         LINEAR_LEVELS)[:, 2]
+    transmission = np.array([m.transmission for m in scene.materials], np.float64)
+    return ((1.0 - np.clip(metallic, 0.0, 1.0))
+            * (1.0 - np.clip(transmission, 0.0, 1.0)[world.tri_material[tris]]))
 
 
 def base_colour(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray) -> np.ndarray:
