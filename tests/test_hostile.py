@@ -559,7 +559,7 @@ def deflate_bomb(name: bytes, gib: int) -> bytes:
 
 def test_a_deflate_bomb_in_the_state_is_not_inflated(case, capsys):
     """A 3 MB state whose header.json inflates to 3 GiB: refused from its directory entry (baker
-    writes its members stored), a full bake within the time and memory limits."""
+    writes its header stored), a full bake within the time and memory limits."""
     import zipfile
 
     code, err = case.bake(capsys)
