@@ -63,8 +63,9 @@ class Settings:
     threads: worker threads for ray casting (0: one per core; with ``cluster``, the CPUs each
         part takes on a worker, 0 counting as 1).
     cluster: the address ("host:port") of a running Ray cluster's head to run the bake's parts
-        on (cluster.py; needs ``pip install "baker[cluster]"``); None: on this machine. The
-        bytes are the same either way.
+        on, or an incremental rebake's traced texels (cluster.py, rebake/retrace.py; needs
+        ``pip install "baker[cluster]"``); None: on this machine. The bytes are the same
+        either way.
     chunk_texels: texels per work unit; bounds memory, never changes the result.
     carrier: how the bake reaches a viewer (docs/output.md): "moz" (MOZ_lightmap: three.js with
         a plugin, Hubs, ``baker view``), "emissive" (the lit surface's radiance in the emission

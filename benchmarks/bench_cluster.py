@@ -5,9 +5,10 @@ For the Cornell room (``--page-size``, ``--rays``) cut into parts of ``--part`` 
 for the local bake (every core, and one thread) and for each cluster: the median wall time of
 ``--repeat`` bakes after one warm-up, texels/s, and per part the driver's own time (texels made
 again, composing, spilling) and the bytes sent each way, as pickled (Ray's serialisation is
-pickle 5 with the arrays out of band: the same bytes within its framing); then the time and the
-resident memory of starting the cluster (``ray start`` head and workers, every process of
-theirs). The workers share this machine's cores with the driver, so past its core count more
+pickle 5 with the arrays out of band: the same bytes within its framing); the same for a rebake
+after the short block moved (median of ``--repeat``, each from the first bake's state), against
+the local rebake; then the time and the resident memory of starting the cluster (``ray
+start`` head and workers, every process of theirs). The workers share this machine's cores with the driver, so past its core count more
 workers only add overhead: the figures read the cost of distribution, and the scaling holds
 for workers on machines of their own.
 
@@ -19,6 +20,7 @@ from __future__ import annotations
 import argparse
 import os
 import pickle
+import shutil
 import statistics
 import sys
 import tempfile
@@ -62,6 +64,53 @@ def _timed_bakes(source: Path, out: Path, settings: baker.Settings, repeat: int)
     return statistics.median(seconds), result
 
 
+def _timed_rebakes(edited: Path, baked: Path, out: Path, settings: baker.Settings, repeat: int):
+    """``repeat`` rebakes of ``edited`` into ``out``, each from a fresh copy of the output and
+    bake state at ``baked`` (the scene before the edit): (median seconds, the last result)."""
+    seconds = []
+    for _ in range(max(1, repeat)):
+        for suffix in ("", ".bake"):
+            shutil.copyfile(f"{baked}{suffix}", f"{out}{suffix}")
+        started = time.perf_counter()
+        result = baker.bake(edited, out, settings, incremental=True)
+        seconds.append(time.perf_counter() - started)
+        assert result.rebake["incremental"], result.rebake
+    return statistics.median(seconds), result
+
+
+def _short_block_moved():
+    """The Cornell room with its short block moved 0.3 m towards the middle (as
+    tests/test_cluster.py moves it)."""
+    scene = cornell_box()
+    node = scene._nodes[scene.info["nodes"]["short_block"]]
+    node.translation = [node.translation[0] - 0.3, *node.translation[1:]]
+    return scene
+
+
+def _measure_parts() -> dict[str, list[int]]:
+    """Record the pickled bytes (Ray's serialisation is pickle 5 with the arrays out of band:
+    the same bytes within its framing) of what each cluster run ships once ("shipped"), each
+    part's input ("to") and its result ("from"), bake or rebake: ``cluster.run_parts``
+    wrapped."""
+    sizes: dict[str, list[int]] = {"to": [], "from": [], "shipped": []}
+    real = cluster.run_parts
+
+    def measured(work, counts, item, times, advance):
+        sizes["shipped"].append(len(pickle.dumps(work, protocol=5)))
+
+        def sized(k):
+            given = item(k)
+            sizes["to"].append(len(pickle.dumps(given, protocol=5)))
+            return given
+
+        for value in real(work, counts, sized, times, advance):
+            sizes["from"].append(len(pickle.dumps(value, protocol=5)))
+            yield value
+
+    cluster.run_parts = measured
+    return sizes
+
+
 def _row(label: str, seconds: float, texels: int, baseline: float, extra: str = "") -> None:
     print(f"  {label:<22} {seconds:7.2f} s  {texels / seconds:>10,.0f} texels/s  "
           f"×{baseline / seconds:5.2f} of local{extra}")
@@ -91,23 +140,13 @@ def main() -> None:
     _row("local, one thread", one, texels, local)
     local_driver = sum(result.report["stage_seconds"].get(k, 0.0) for k in ("compose", "spill"))
 
-    sizes: dict[str, list[int]] = {"to": [], "from": []}
-    real_received = cluster._received
-
-    def measured(baking, rows, returned, times, account):  # the pickled bytes of each part
-        sizes["from"].append(len(pickle.dumps(returned, protocol=5)))
-        sizes["to"].append(len(pickle.dumps((baking.coverage.key[rows],
-                                              baking.coverage.triangle[rows]), protocol=5)))
-        return real_received(baking, rows, returned, times, account)
-
-    real_shipped = cluster._shipped
-
-    def shipped(baking, part):  # the pickled bytes of what each worker fetches once
-        out = real_shipped(baking, part)
-        sizes["shipped"] = [len(pickle.dumps(out, protocol=5))]
-        return out
-
-    cluster._received, cluster._shipped = measured, shipped
+    sizes = _measure_parts()
+    edited = _short_block_moved().save(folder / "moved.glb")
+    rebake_local, rebaked = _timed_rebakes(edited, folder / "local.glb", folder / "rebake.glb",
+                                           settings, args.repeat)
+    dirty = rebaked.rebake["dirty_texels"]
+    print(f"  rebake after the short block moved: {dirty:,} dirty texels, "
+          f"{len(parts.part_slices(dirty))} parts; local, every core {rebake_local:.2f} s")
     starts = []
     for workers in args.workers:
         started = time.perf_counter()
@@ -131,6 +170,23 @@ def main() -> None:
                  f"out, {statistics.mean(sizes['from']) / 1e3:,.0f} kB back a part; "
                  f"{len(on['workers'])} worker processes, each {receive:.2f} s to receive the "
                  "bake and build Embree's scene")
+            bake_sizes = {k: list(v) for k, v in sizes.items()}
+            for measured in sizes.values():
+                measured.clear()
+            again, done = _timed_rebakes(edited, folder / "local.glb",
+                                         folder / f"rebake{workers}.glb", clustered, args.repeat)
+            assert (folder / f"rebake{workers}.glb").read_bytes() == \
+                (folder / "rebake.glb").read_bytes(), "not the local rebake's bytes"
+            a_part = dirty / done.report["cluster"]["parts"]  # parts of equal size
+            print(f"    its rebake: {again:.2f} s (×{rebake_local / again:.2f} of the local "
+                  f"rebake); {statistics.mean(sizes['to']) / 1e3:,.0f} kB out, "
+                  f"{statistics.mean(sizes['from']) / 1e3:,.0f} kB back a part: "
+                  f"{statistics.mean(sizes['to']) / a_part:.1f} B out, "
+                  f"{statistics.mean(sizes['from']) / a_part:.1f} B back a dirty texel; "
+                  f"shipped once {sizes['shipped'][0] / 1e3:,.0f} kB; driver's "
+                  + ", ".join(f"{k} {v:.2f}" for k, v in done.report["stage_seconds"].items())
+                  + " s")
+            sizes.update(bake_sizes)
     print(f"  shipped once per worker: {sizes['shipped'][0] / 1e3:,.0f} kB (pickled); "
           f"per texel: {statistics.mean(sizes['to']) / (texels / count):.1f} B out, "
           f"{statistics.mean(sizes['from']) / (texels / count):.1f} B back")

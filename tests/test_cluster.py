@@ -1,6 +1,7 @@
 """A bake whose parts run on a real Ray cluster (cluster.py) gives the bytes of a local bake:
 the output and the bake state, whatever the workers, their threads, the order the parts end in,
-and a worker killed in the middle of a part. A cluster that cannot bake (unreachable, another
+and a worker killed in the middle of a part; so does a rebake whose dirty texels run there
+(rebake/retrace.py), which is also a full bake's bytes. A cluster that cannot bake (unreachable, another
 baker on a node, no Ray) is a clear error before any work, and Ctrl-C leaves it as it was.
 
 One cluster for the module (``tests/ray_cluster.py``: a head with no CPUs and two one-CPU
@@ -105,6 +106,55 @@ def test_the_command_line_says_which_worker_baked_what(ray_cluster, small_parts,
         assert f"{name} {worker['texels']:,} texels" in line
 
 
+def _short_block_moved():
+    """The demo scene with its short block moved 0.3 m towards the middle of the room."""
+    scene = cornell_box()
+    node = scene._nodes[scene.info["nodes"]["short_block"]]
+    node.translation = [node.translation[0] - 0.3, *node.translation[1:]]
+    return scene
+
+
+def _rebakes(folder: Path, settings: dict) -> tuple[Path, Path, Path]:
+    """The demo scene baked here into ``folder``/local, its bake copied to ``folder``/cluster,
+    and the edited scene (``_short_block_moved``): (its path, the local and the cluster
+    outputs, each with the state of the first bake beside it)."""
+    local, remote = _outputs(folder)
+    baker.bake(cornell_box().save(folder / "cornell.glb"), local, baker.Settings(**settings))
+    for made in local.parent.iterdir():
+        shutil.copyfile(made, remote.parent / made.name)
+    return _short_block_moved().save(folder / "moved.glb"), local, remote
+
+
+def test_a_rebake_on_the_cluster_is_the_local_rebake_and_a_full_bake(ray_cluster, monkeypatch,
+                                                                      tmp_path, capsys):
+    """``baker rebake --cluster`` after a move: the local rebake's bytes and a full bake's of
+    the edited scene, its dirty texels traced in parts by the workers and counted once."""
+    from baker.cli.main import main
+
+    monkeypatch.setattr(parts, "PART_TEXELS", 500)  # the 2,566 dirty texels make 6 parts
+    settings = dict(rays=16, page_size=128)
+    edited, local, remote = _rebakes(tmp_path, settings)
+    here = baker.bake(edited, local, baker.Settings(**settings), incremental=True)
+    assert main(["rebake", str(edited), "-o", str(remote), "--cluster", ray_cluster.address,
+                 "--report", str(tmp_path / "report.json")]) == 0
+    _same_bake(local, remote)
+    full = tmp_path / "full" / "baked.glb"
+    baker.bake(edited, full, baker.Settings(**settings))
+    assert full.read_bytes() == remote.read_bytes()
+    assert Path(f"{full}.bake").read_bytes() == Path(f"{remote}.bake").read_bytes()
+    report = json.loads((tmp_path / "report.json").read_text())
+    dirty = report["rebake"]["dirty_texels"]
+    assert report["rebake"]["incremental"] and dirty == here.rebake["dirty_texels"] > 4 * 500
+    assert report["rebake"]["rays"] == here.rebake["rays"]
+    on = report["cluster"]
+    assert on["parts"] == len(parts.part_slices(dirty))  # no light placed anew: the dirty rows
+    assert sum(w["texels"] for w in on["workers"].values()) == dirty
+    assert {"receive", "trace", "direct"} <= set(on["worker_stage_seconds"])
+    line = next(line for line in capsys.readouterr().out.splitlines() if "on the cluster" in line)
+    for name, worker in on["workers"].items():
+        assert f"{name} {worker['texels']:,} texels" in line
+
+
 def test_more_threads_a_part_than_a_worker_has_is_a_clear_error(ray_cluster, tmp_path):
     source = cornell_box().save(tmp_path / "cornell.glb")
     with pytest.raises(baker.SettingsError, match="largest node of the cluster has 1"):
@@ -125,25 +175,45 @@ def _kill_first_part(killed: list, stop: threading.Event) -> None:
         time.sleep(0.02)
 
 
+def _with_a_worker_killed(bake) -> "baker.BakeResult":
+    """``bake()``'s result, the first worker process seen running a part SIGKILLed meanwhile
+    (``_kill_first_part``); asserts that one was and that it is counted for no texel."""
+    killed, stop = [], threading.Event()
+    killer = threading.Thread(target=_kill_first_part, args=(killed, stop))
+    killer.start()
+    try:
+        result = bake()
+    finally:
+        stop.set()
+        killer.join()
+    assert killed, "no worker was seen running a part"
+    assert not any(f" pid {killed[0]}" in name and w["texels"]
+                   for name, w in result.report["cluster"]["workers"].items())
+    return result
+
+
 def test_a_worker_killed_in_a_part_leaves_the_bytes_as_they_were(ray_cluster, small_parts,
                                                                    tmp_path):
     source = cornell_box().save(tmp_path / "cornell.glb")
     settings = dict(rays=256, page_size=128)
     local, remote = _outputs(tmp_path)
     baker.bake(source, local, baker.Settings(**settings))
-    killed, stop = [], threading.Event()
-    killer = threading.Thread(target=_kill_first_part, args=(killed, stop))
-    killer.start()
-    try:
-        result = baker.bake(source, remote, baker.Settings(cluster=ray_cluster.address,
-                                                            **settings))
-    finally:
-        stop.set()
-        killer.join()
-    assert killed, "no worker was seen running a part"
+    _with_a_worker_killed(lambda: baker.bake(source, remote, baker.Settings(
+        cluster=ray_cluster.address, **settings)))
     _same_bake(local, remote)
-    assert not any(f" pid {killed[0]}" in name and w["texels"]
-                   for name, w in result.report["cluster"]["workers"].items())
+
+
+def test_a_worker_killed_in_a_rebake_leaves_the_bytes_as_they_were(ray_cluster, small_parts,
+                                                                     tmp_path):
+    settings = dict(rays=256, page_size=128)
+    edited, local, remote = _rebakes(tmp_path, settings)
+    baker.bake(edited, local, baker.Settings(**settings), incremental=True)
+    result = _with_a_worker_killed(lambda: baker.bake(edited, remote, baker.Settings(
+        cluster=ray_cluster.address, **settings), incremental=True))
+    assert result.rebake["incremental"]
+    _same_bake(local, remote)
+    on = result.report["cluster"]
+    assert sum(w["texels"] for w in on["workers"].values()) == result.rebake["dirty_texels"]
 
 
 def test_ctrl_c_leaves_no_output_and_the_cluster_as_it_was(ray_cluster, tmp_path):
@@ -203,6 +273,17 @@ def test_an_unreachable_cluster_is_a_clear_error_before_any_work(tmp_path):
     with pytest.raises(baker.SettingsError, match=f"no Ray cluster answers at {address}"):
         baker.bake(source, tmp_path / "baked.glb", baker.Settings(cluster=address))
     assert sorted(p.name for p in tmp_path.iterdir()) == ["cornell.glb"]
+
+
+def test_an_unreachable_cluster_stops_a_rebake_before_any_work(tmp_path, capsys):
+    from baker.cli.main import main
+
+    edited, local, _ = _rebakes(tmp_path, dict(rays=4, page_size=128))
+    before = {p.name: p.read_bytes() for p in local.parent.iterdir()}
+    address = f"127.0.0.1:{free_port()}"
+    assert main(["rebake", str(edited), "-o", str(local), "--cluster", address]) == 1
+    assert f"no Ray cluster answers at {address}" in capsys.readouterr().err
+    assert {p.name: p.read_bytes() for p in local.parent.iterdir()} == before
 
 
 def test_foliage_on_a_cluster_is_refused_before_any_work(tmp_path):

@@ -10,8 +10,8 @@ The mapping from the README to this test, and nothing else, is:
   Cornell box that the README's first line makes; ``draco.glb`` is it Draco-compressed by glTF
   Transform (tests/gltf_transform.py), ``ktx2.glb`` the textured floor of assets/ with its
   texture as KTX 2 (KHR_texture_basisu, encoded by alktx2).
-- ``--cluster 10.0.0.1:6379`` names a local Ray cluster of one worker started for it
-  (tests/ray_cluster.py), at its own address.
+- ``--cluster 10.0.0.1:6379`` names a local Ray cluster of one worker (tests/ray_cluster.py),
+  at its own address, started for the first command that names it and kept for the others.
 - Small settings, so the whole README runs in about a minute: ``--rays N`` becomes ``--rays 4``
   and ``rays=N`` ``rays=4``; each ``baker bake`` and ``baker watch`` gets ``--page-size 128``
   and each ``baker.Settings(`` ``page_size=128`` (about 9,000 texels instead of 530,000).
@@ -178,10 +178,11 @@ def test_readme_lists_the_commands_this_test_runs():
 def test_every_readme_command_runs_as_written(newcomer):
     folder, env = newcomer
     failures = []
+    cluster = None
     with contextlib.ExitStack() as stack:
         for kind, command in commands(README.read_text()):
             if README_CLUSTER in command:
-                cluster = stack.enter_context(LocalCluster(workers=1, cpus=1))
+                cluster = cluster or stack.enter_context(LocalCluster(workers=1, cpus=1))
                 command = command.replace(README_CLUSTER, cluster.address)
             failures += _failures(kind, command, folder, env)
     assert not failures, "\n\n".join(failures)

@@ -185,15 +185,20 @@ def add_parser(commands) -> None:
     running = bake.add_argument_group("running")
     running.add_argument("--threads", type=int, default=d.threads,
                          help="ray-casting threads (default: one per core)")
-    running.add_argument("--cluster", metavar="HOST:PORT",
-                         help="run the bake's parts on the Ray cluster whose head is at "
-                              "HOST:PORT (`ray start --head`); the same bytes as a local bake. "
-                              "--threads is then the CPUs of a worker each part takes "
-                              "(default 1). Needs pip install \"baker[cluster]\" here and on "
-                              "every machine; see docs/cluster.md")
+    add_cluster_option(running)
     running.add_argument("--quiet", action="store_true", help="print nothing but errors")
     add_state_options(running)
     add_debug(running)
+
+
+def add_cluster_option(group) -> None:
+    """``--cluster HOST:PORT`` (``Settings.cluster``), for ``bake`` and ``rebake``."""
+    group.add_argument("--cluster", metavar="HOST:PORT",
+                       help="trace the bake's parts (a rebake's: its dirty texels) on the Ray "
+                            "cluster whose head is at HOST:PORT (`ray start --head`); the same "
+                            "bytes as on this machine. --threads is then the CPUs of a worker "
+                            "each part takes (default 1). Needs pip install \"baker[cluster]\" "
+                            "here and on every machine; see docs/cluster.md")
 
 
 def settings_from(args: argparse.Namespace) -> baker.Settings:

@@ -7,13 +7,14 @@ import sys
 from pathlib import Path
 
 import baker
-from baker.cli.bake import print_summary
+from baker.cli.bake import add_cluster_option, print_summary
 from baker.cli.common import exit_code
 from baker.cli.state import add_update_options, print_rebake
 
 EPILOG = """examples:
   baker rebake level.glb -o level_baked.glb
   baker rebake level.glb -o level_baked.glb --moved crate_03 lamp
+  baker rebake level.glb -o level_baked.glb --cluster 10.0.0.1:6379
 
 The settings are those of the bake that wrote the state (OUTPUT.bake, or --state). The scene is
 diffed against the state, so the result is always the same as a full bake of the scene;
@@ -38,6 +39,7 @@ def add_parser(commands) -> None:
                              "against")
     parser.add_argument("--threads", type=int, default=0,
                         help="ray-casting threads (default: one per core)")
+    add_cluster_option(parser)
     add_update_options(parser)
 
 
@@ -47,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
     from baker.rebake.incremental import asked_settings
 
     state = args.state or baker.rebake.state.default_path(args.output)
-    settings = asked_settings(state, threads=args.threads)
+    settings = asked_settings(state, threads=args.threads, cluster=args.cluster)
     result = baker.bake(args.scene, args.output, settings, report_path=args.report,
                         quiet=args.quiet, incremental=True, state=state)
     if not args.quiet:

@@ -1,15 +1,22 @@
-"""A full bake's parts run as Ray tasks on a running cluster (``baker bake --cluster ADDRESS``).
+"""A bake's parts, or a rebake's traced texels, run as Ray tasks on a running cluster
+(``baker bake --cluster ADDRESS``, ``baker rebake --cluster ADDRESS``).
 
 A bake is cut into parts of at most ``parts.PART_TEXELS`` texels whose results depend only on
-their texels' keys (``parts.py``): that is the unit sent to the cluster. The driver (the process
-that runs ``baker bake``) loads, unwraps and rasterises the scene as a local bake does, puts what
-every part needs (``_shipped``: scene, world, resolved settings, light sources, I_A, atlas and
-the texels' owners) into Ray's object store once, and sends each part only its texels' coverage
-rows. A worker process fetches the shipped bake once (``_ready``), builds Embree's scene from it,
-and runs the same part function as a local bake (``full._bake_part``) on each part it is given.
-It sends back the part's results less what the driver can make itself (``_Returned``); the
-driver takes the parts in order, whatever order they finish in, so that it composes, spills and
-writes exactly as a local bake does: the same bytes whatever the workers and their threads.
+their texels' keys (``parts.py``): that is the unit sent to the cluster. ``run_parts`` is the
+one dispatcher: it puts a ``Work`` (what every part needs) into Ray's object store once, asks
+for the parts as tasks, each carrying only its own input, and gives their results back in
+order, whatever order they finish in, counting which worker made what (``Session``). A worker
+process fetches the shipped work once (``_ready``), makes it ready (Embree's scene, built from
+the shipped scene and world) and runs the part function on each part it is given.
+
+A full bake (``parts``): the driver (the process that runs ``baker``) loads, unwraps and
+rasterises the scene as a local bake does, ships what every part needs (``_shipped``: scene,
+world, resolved settings, light sources, I_A, atlas and the texels' owners) and sends each
+part only its texels' coverage rows; the worker runs the same part function as a local bake
+(``full._bake_part``) and sends back the part's results less what the driver can make itself
+(``_BakedRemotely``), so that the driver composes, spills and writes exactly as a local bake
+does: the same bytes whatever the workers and their threads. A rebake's parts are its dirty
+texels (``rebake.retrace``), through the same dispatcher.
 
 Faults: a part whose worker process dies (SIGKILL, a machine lost) is run again by Ray on another
 worker (``_RETRIES``); Ctrl-C on the driver cancels the parts not done and leaves the cluster
@@ -84,16 +91,17 @@ class Session:
     """A connection to a Ray cluster at ``address``, whose nodes run the driver's baker, and
     the account of the parts run on it (``report``).
 
-    workers: per worker ("host ip pid"), texels and parts it baked; worker_seconds: the stages'
-    seconds summed over the workers (``full._bake_part``'s stages, "receive": fetching the
-    shipped bake and building Embree's scene); sent/received: array bytes to and from the
-    workers per part (the shipped bake once: ``shipped_bytes``); parts_run: parts the driver
-    took, retries not counted (Ray's own)."""
+    threads: the CPUs each part takes on a worker; workers: per worker ("host ip pid"), texels
+    and parts it baked; worker_seconds: the stages' seconds summed over the workers (the part
+    functions' stages, "receive": fetching the shipped work and building Embree's scene);
+    sent/received: array bytes to and from the workers per part (the shipped work once:
+    ``shipped_bytes``); parts_run: parts the driver took, retries not counted (Ray's own)."""
 
     address: str
     cpus: int
     nodes: int
     connected_here: bool
+    threads: int
     workers: dict[str, dict[str, int]] = field(default_factory=dict)
     worker_seconds: dict[str, float] = field(default_factory=dict)
     shipped_bytes: int = 0
@@ -108,6 +116,17 @@ class Session:
                 "worker_stage_seconds": self.worker_seconds,
                 "shipped_bytes": self.shipped_bytes, "bytes_to_workers": self.sent,
                 "bytes_from_workers": self.received}
+
+    def took(self, returned: "_Returned", texels: int) -> None:
+        """Count a part of ``texels`` texels the driver took: its worker's texels and parts,
+        its stages' seconds there, and the bytes it sent back."""
+        worker = self.workers.setdefault(returned.worker, {"texels": 0, "parts": 0})
+        worker["texels"] += texels
+        worker["parts"] += 1
+        for name, seconds in returned.seconds.items():
+            self.worker_seconds[name] = self.worker_seconds.get(name, 0.0) + seconds
+        self.received += _array_bytes(returned.value)
+        self.parts_run += 1
 
 
 _current: Session | None = None
@@ -173,7 +192,7 @@ def connect(address: str, threads: int, identity: Callable[[], dict[str, str]]) 
             ray.shutdown()
         raise
     return Session(address, sum(int(n["Resources"]["CPU"]) for n in nodes), len(nodes),
-                   connected_here)
+                   connected_here, threads)
 
 
 def _check_nodes(ray, address: str, nodes: list[dict], identity: Callable) -> None:
@@ -213,59 +232,67 @@ def current() -> Session:
 
 
 @dataclass(frozen=True)
-class _Returned:
-    """What a worker sends back of one part: the part function's ``BakedPart`` less its texels
-    and points, which the driver makes again from the coverage (``texels_of``, as
-    ``parts.PerTexel`` does), with the sample points the probes moved. moved: (m,) int64 rows
-    within the part whose sample point moved, to ``moved_position`` (m, 3) world; worker:
-    "host ip pid"; seconds: the part's stages on the worker."""
+class Work:
+    """What a cluster runs, part by part, for a bake or a rebake: ``shipped`` goes into the
+    object store once and each worker process makes it ready once (``ready(shipped)``: what
+    is not shipped, such as Embree's scene, built there from what is); then each part is
+    ``run(ready, item, seconds)``, ``item`` the part's own input, ``seconds`` the worker's
+    stages. ``ready`` and ``run`` are module-level functions, which Ray sends by name."""
 
-    part: object
-    moved: np.ndarray
-    moved_position: np.ndarray
+    shipped: object
+    ready: Callable[[object], object]
+    run: Callable[[object, object, dict[str, float]], object]
+
+
+@dataclass(frozen=True)
+class _Returned:
+    """A part's result as a worker sends it back: ``Work.run``'s ``value``, with the worker
+    that made it ("host ip pid") and the part's stages there (seconds)."""
+
+    value: object
     worker: str
     seconds: dict[str, float]
 
 
-def parts(part: Callable, baking, slices: list[slice], times: dict[str, float],
-          advance: Callable[[int], None], units: int) -> Iterator:
-    """``part``'s results (``full.BakedPart``) for the texels ``slices`` of ``baking``
-    (``full.Baking``), in order, each made on a worker of the current session.
-    ``advance(units × texels)`` as each part ends, in any order (the progress bar). ``times``
-    gets the driver's own stages: "trace", the time it waited for parts (so rays/s are the
-    cluster's); "ship", putting the bake in the object store; "rasterise", making each part's
-    texels again."""
+def run_parts(work: Work, sizes: list[int], item: Callable[[int], object],
+              times: dict[str, float], advance: Callable[[int], None]) -> Iterator:
+    """``work.run``'s results for the parts ``item(k)`` of ``sizes[k]`` texels, in order, each
+    made on a worker of the current session with ``Settings.threads`` CPUs (the ``threads``
+    the session was opened with). ``advance(texels)`` as each part ends, in any order (the
+    progress bar). At most two parts per CPU of the cluster are asked for and not yet taken,
+    so the driver holds what a local run holds and a part's result at a time. ``times`` gets
+    the driver's "trace", the time it waited for parts (so rays/s are the cluster's), and
+    "ship", putting ``work.shipped`` in the object store. A part whose worker dies runs again
+    (``_RETRIES``); an error or Ctrl-C cancels the parts not taken."""
     ray, account = _ray(), current()
-    threads = max(1, baking.settings.threads)
-    task = ray.remote(num_cpus=threads, max_retries=_RETRIES)(_run_part)
+    task = ray.remote(num_cpus=account.threads, max_retries=_RETRIES)(_run_part)
     start = time.perf_counter()
-    shipped = _shipped(baking, part)
-    box = [ray.put(shipped)]  # in a list: Ray hands the reference over, not the value
-    account.shipped_bytes += _array_bytes(shipped)
+    box = [ray.put(work)]  # in a list: Ray hands the reference over, not the value
+    account.shipped_bytes += _array_bytes(work.shipped)
     _add_seconds(times, "ship", start)
-    window = max(2, 2 * account.cpus // threads)  # parts asked for and not yet taken, at most
-    coverage, asked, pending = baking.coverage, {}, {}
+    window = max(2, 2 * account.cpus // account.threads)
+    asked, pending = {}, {}
     try:
-        for index, rows in enumerate(slices):
-            while len(asked) < window and len(asked) + index < len(slices):
+        for index in range(len(sizes)):
+            while len(asked) < window and len(asked) + index < len(sizes):
                 k = index + len(asked)
-                rows_k = slices[k]
-                item = (coverage.key[rows_k], coverage.triangle[rows_k])
-                account.sent += sum(a.nbytes for a in item)
-                asked[k] = task.remote(box, item)
-                pending[asked[k]] = rows_k.stop - rows_k.start
+                given = item(k)
+                account.sent += _array_bytes(given)
+                asked[k] = task.remote(box, given)
+                pending[asked[k]] = sizes[k]
             waited = time.perf_counter()
-            _wait_for(ray, asked[index], pending, advance, units)
+            _wait_for(ray, asked[index], pending, advance)
             returned = ray.get(asked.pop(index))
             _add_seconds(times, "trace", waited)
-            yield _received(baking, rows, returned, times, account)
-    except BaseException:  # an error or Ctrl-C: no part of this bake goes on running
+            account.took(returned, sizes[index])
+            yield returned.value
+    except BaseException:  # an error or Ctrl-C: no part of this run goes on running
         for ref in asked.values():
             ray.cancel(ref, force=True)
         raise
 
 
-def _wait_for(ray, wanted, pending: dict, advance: Callable[[int], None], units: int) -> None:
+def _wait_for(ray, wanted, pending: dict, advance: Callable[[int], None]) -> None:
     """Wait for the part ``wanted``, advancing the progress by the texels of every part that
     ends meanwhile (``pending``: part reference → its texels, not yet counted). The results
     stay on the nodes that made them until the driver takes them (``ray.get``)."""
@@ -273,14 +300,66 @@ def _wait_for(ray, wanted, pending: dict, advance: Callable[[int], None], units:
         done, _ = ray.wait(list(pending), num_returns=1, timeout=_WAIT_SECONDS,
                            fetch_local=False)
         for ref in done:
-            advance(units * pending.pop(ref))
+            advance(pending.pop(ref))
 
 
-def _received(baking, rows: slice, returned: _Returned, times: dict[str, float],
-              account: Session) -> tuple:
-    """A worker's ``_Returned`` part as ``full._bake_part`` gives it locally: the texels made
-    again from their coverage and their moved points put back, with what the state keeps of
-    them (``TexelPoints``); the part counted in ``account``."""
+_READY: dict = {}  # in a worker process: the shipped work's reference → (work, its ready value)
+
+
+def _ready(box: list, seconds: dict[str, float]) -> tuple[Work, object]:
+    """In a worker, the shipped ``Work`` of the reference ``box[0]`` and its ready value, made
+    once per process and kept for the next parts; a new run's replaces the last one's (a
+    worker holds one scene)."""
+    key = box[0].hex()
+    if key not in _READY:
+        started = time.perf_counter()
+        _READY.clear()
+        work = _ray().get(box[0])
+        _READY[key] = work, work.ready(work.shipped)
+        seconds["receive"] = time.perf_counter() - started
+    return _READY[key]
+
+
+def _run_part(box: list, item) -> _Returned:
+    """A Ray task: one part, ``item``, of the shipped work ``box[0]`` (``run_parts``)."""
+    seconds: dict[str, float] = {}
+    work, ready = _ready(box, seconds)
+    value = work.run(ready, item, seconds)
+    worker = f"{socket.gethostname()} {_ray().util.get_node_ip_address()} pid {os.getpid()}"
+    return _Returned(value, worker, seconds)
+
+
+def parts(part: Callable, baking, slices: list[slice], times: dict[str, float],
+          advance: Callable[[int], None]) -> Iterator:
+    """A full bake's parts: ``part``'s results (``full.BakedPart``) for the texels ``slices``
+    of ``baking`` (``full.Baking``), in order, each made on a worker (``run_parts``); each
+    part sends only its texels' coverage rows and gets back the part less its texels, which
+    the driver makes again (``_received``: "rasterise" in ``times``)."""
+    coverage = baking.coverage
+    work = Work((part, _shipped(baking)), _ready_bake, _bake_part)
+    made = run_parts(work, [s.stop - s.start for s in slices],
+                     lambda k: (coverage.key[slices[k]], coverage.triangle[slices[k]]),
+                     times, advance)
+    for rows, returned in zip(slices, made):
+        yield _received(baking, rows, returned, times)
+
+
+@dataclass(frozen=True)
+class _BakedRemotely:
+    """What a worker sends back of a full bake's part: the part function's ``BakedPart`` less
+    its texels and points, which the driver makes again from the coverage (``texels_of``, as
+    ``parts.PerTexel`` does), with the sample points the probes moved. moved: (m,) int64 rows
+    within the part whose sample point moved, to ``moved_position`` (m, 3) world."""
+
+    part: object
+    moved: np.ndarray
+    moved_position: np.ndarray
+
+
+def _received(baking, rows: slice, returned: _BakedRemotely, times: dict[str, float]):
+    """A worker's part as ``full._bake_part`` gives it locally: the texels made again from
+    their coverage and their moved points put back, with what the state keeps of them
+    (``TexelPoints``)."""
     start = time.perf_counter()
     made = texels_of(baking.atlas, baking.world, baking.coverage, rows, baking.owned)
     position = made.position.copy()
@@ -288,60 +367,43 @@ def _received(baking, rows: slice, returned: _Returned, times: dict[str, float],
     texels = replace(made, position=position)
     points = TexelPoints.of(texels, made.position)
     _add_seconds(times, "rasterise", start)
-    worker = account.workers.setdefault(returned.worker, {"texels": 0, "parts": 0})
-    worker["texels"] += len(made.key)
-    worker["parts"] += 1
-    for name, seconds in returned.seconds.items():
-        account.worker_seconds[name] = account.worker_seconds.get(name, 0.0) + seconds
-    account.received += _array_bytes(returned)
-    account.parts_run += 1
     return replace(returned.part, texels=texels, points=points)
 
 
-def _shipped(baking, part: Callable):
-    """What every worker needs of ``baking`` (``full.Baking``) and the part function, once:
-    without Embree's scene, the back faces and the surfaces, which a worker builds from the
-    scene and world (``_ready``), and without the texels' coverage, whose rows each part
-    carries (the per-triangle texel counts stay)."""
+def _shipped(baking):
+    """What every worker needs of ``baking`` (``full.Baking``), once: without Embree's scene,
+    the back faces and the surfaces, which a worker builds from the scene and world
+    (``_ready_bake``), and without the texels' coverage, whose rows each part carries (the
+    per-triangle texel counts stay)."""
     coverage = baking.coverage
     empty = Coverage(coverage.key[:0], coverage.triangle[:0], coverage.triangle_texels)
-    return part, replace(baking, lit=replace(baking.lit, tracer=None), faces=None,
-                         surfaces=None, coverage=empty)
+    return replace(baking, lit=replace(baking.lit, tracer=None), faces=None, surfaces=None,
+                   coverage=empty)
 
 
-_READY: dict = {}  # in a worker process: the shipped bake's reference → (part, ready bake)
-
-
-def _ready(box: list, seconds: dict[str, float]):
-    """In a worker, the part function and the bake of the shipped reference ``box[0]``, made
-    ready once per process (Embree's scene, back faces, surfaces) and kept for the next parts;
-    a new bake's replaces the last one's (a worker holds one scene)."""
-    key = box[0].hex()
-    if key not in _READY:
-        started = time.perf_counter()
-        _READY.clear()
-        part, shipped = _ray().get(box[0])
-        scene, world = shipped.scene, shipped.world
-        _READY[key] = part, replace(shipped, lit=replace(shipped.lit, tracer=Tracer(world)),
-                                    faces=Faces(scene, world), surfaces=surfaces_of(scene, world))
-        seconds["receive"] = time.perf_counter() - started
-    return _READY[key]
-
-
-def _run_part(box: list, item: tuple[np.ndarray, np.ndarray]) -> _Returned:
-    """A Ray task: the part whose texels have the coverage rows ``item`` (keys (k,) uint64,
-    owning triangles (k,) int64) of the shipped bake ``box[0]``, made by the same part
-    function as a local bake, with the task's CPUs as threads."""
-    seconds: dict[str, float] = {}
-    part, baking = _ready(box, seconds)
+def _ready_bake(shipped: tuple):
+    """In a worker: the part function and the shipped bake with Embree's scene, the back
+    faces and the surfaces built from its scene and world, with the task's CPUs as threads."""
+    part, baking = shipped
+    scene, world = baking.scene, baking.world
     threads = max(1, baking.settings.threads)
-    coverage = Coverage(item[0], item[1], baking.coverage.triangle_texels)
-    baking = replace(baking, coverage=coverage, settings=replace(baking.settings, threads=threads))
+    return part, replace(baking, lit=replace(baking.lit, tracer=Tracer(world)),
+                         faces=Faces(scene, world), surfaces=surfaces_of(scene, world),
+                         settings=replace(baking.settings, threads=threads))
+
+
+def _bake_part(ready: tuple, item: tuple[np.ndarray, np.ndarray], seconds: dict[str, float]
+               ) -> _BakedRemotely:
+    """In a worker: the full bake's part whose texels have the coverage rows ``item`` (keys
+    (k,) uint64, owning triangles (k,) int64), made by the same part function as a local
+    bake."""
+    part, baking = ready
+    baking = replace(baking, coverage=Coverage(item[0], item[1],
+                                               baking.coverage.triangle_texels))
     baked = part(baking, slice(None), seconds, None)  # no progress bar on a worker
     moved = np.flatnonzero(baked.points.moved)
-    worker = f"{socket.gethostname()} {_ray().util.get_node_ip_address()} pid {os.getpid()}"
-    return _Returned(replace(baked, texels=None, points=None), moved,
-                     baked.texels.position[moved], worker, seconds)
+    return _BakedRemotely(replace(baked, texels=None, points=None), moved,
+                          baked.texels.position[moved])
 
 
 def _array_bytes(value, seen: set | None = None) -> int:

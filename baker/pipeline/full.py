@@ -329,7 +329,7 @@ def _bake_parts(baking: Baking, spill: Spill | None, times: dict[str, float], qu
     with bar("baking", wanted(quiet)) as meter:
         stages = _Stages.of(meter, baking, count)
         made = (cluster.parts(_bake_part, baking, part_slices(count), times,
-                              stages.whole_parts(), 1)
+                              stages.whole_parts())
                 if baking.settings.cluster is not None else
                 (_bake_part(baking, rows, times, stages) for rows in part_slices(count)))
         for part in made:

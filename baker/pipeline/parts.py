@@ -10,7 +10,7 @@ do not depend on the parts (its rays are a function of its key), so neither do t
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from functools import cached_property
 
 import numpy as np
@@ -39,6 +39,21 @@ def part_slices(count: int) -> list[slice]:
     ``PART_TEXELS`` as will do, of equal size (no small last part, whose threads would idle;
     one empty part for none)."""
     return even_slices(count, PART_TEXELS) or [slice(0, 0)]
+
+
+def texel_rows(texels, rows: np.ndarray | slice) -> dict[str, np.ndarray]:
+    """The per-texel arrays of ``texels`` (Texels, Terms: a dataclass of per-texel arrays) at
+    ``rows``, by field name: every array field but the per-triangle ``triangle_*`` ones and
+    empty ones (an absent terminator_push)."""
+    return {f.name: value[rows] for f in fields(texels)
+            if isinstance(value := getattr(texels, f.name), np.ndarray)
+            and not f.name.startswith("triangle_") and len(value)}
+
+
+def take(texels, rows: np.ndarray | slice):
+    """The texels ``rows`` (k,) of ``texels`` (as ``texel_rows``) as one of k rows (the
+    per-triangle fields and empty ones kept whole)."""
+    return replace(texels, **texel_rows(texels, rows))
 
 
 @dataclass(frozen=True)

@@ -47,18 +47,14 @@ from baker.atlas.layout import Atlas
 from baker.atlas.rasterise import Coverage, Texels, texels_of
 from baker.atlas.validity import Faces, Validity, check_texels
 from baker.errors import SettingsError
-from baker.geometry.surface import LUMINANCE
 from baker.geometry.world import World, build_world
 from baker.gltf.load import read_document
 from baker.gltf.materials import SPECULAR, TRANSPARENT, material_table
 from baker.gltf.scene import Scene
-from baker.image.compose import effective_r_ave
 from baker.jit import inline, jit
 from baker.light.direct import (
     Direct,
     direct_light,
-    punctual_irradiance,
-    texel_receivers,
 )
 from baker.light.hemisphere import (
     EXACT_RAYS,
@@ -68,7 +64,6 @@ from baker.light.hemisphere import (
     world_rays,
 )
 from baker.light.inner import other_side_rays, translucent
-from baker.light.integrate import integrate
 from baker.pipeline.full import (
     Computed,
     Lighting,
@@ -77,8 +72,8 @@ from baker.pipeline.full import (
     lighting,
     timed,
 )
-from baker.pipeline.parts import PerTexel, TexelPoints, part_slices
-from baker.rays.dimensions import OBSCURANCE, light_dimension
+from baker.pipeline.parts import PerTexel, TexelPoints, part_slices, take
+from baker.rays.dimensions import OBSCURANCE
 from baker.rays.sampling import (
     concentric_hemisphere,
     fill_cosine,
@@ -97,6 +92,7 @@ from baker.rebake.state_check import (
 )
 from baker.rebake.diff import Diff, diff, fingerprints
 from baker.rebake.exact_sums import changed_terms, ray_changes
+from baker.rebake.retrace import Retracing, retraced
 from baker.rebake.sobol_cells import cap_boxes, net_solve, sobol_cell_sample
 from baker.run.parallel import cores, even_slices, run_chunks
 from baker.run.progress import StageLines
@@ -152,15 +148,6 @@ class Rebaked:
     dirty: Dirty
     fingerprints: dict
     rays: int
-
-
-def take(texels, rows: np.ndarray):
-    """The texels ``rows`` (k,) of ``texels`` (Texels, Terms: a dataclass of per-texel arrays)
-    as one of k rows (the per-triangle ``triangle_*`` fields and empty ones kept whole)."""
-    return replace(texels, **{f.name: value[rows] for f in fields(texels)
-                              if isinstance(value := getattr(texels, f.name), np.ndarray)
-                              and not f.name.startswith("triangle_")
-                              and len(value)})  # an absent terminator_push
 
 
 def _absent(value) -> bool:
@@ -957,21 +944,6 @@ def _shadow_dirty(scene, world, recorder_tracer: RayCaster, texels: Texels, rows
     return meets, rays
 
 
-def _relight(texels: Texels, tracer: Tracer, sources, settings, light: int,
-             rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Light ``light``'s unit-intensity irradiance and variance at the texels ``rows``, with the
-    same estimator, samples and chunks as ``direct.direct_light``."""
-    value, variance = np.zeros(len(rows)), np.zeros(len(rows))
-    step = max(1, settings.chunk_texels)
-    for start in range(0, len(rows), step):
-        part = rows[start:start + step]
-        receivers = texel_receivers(take(texels, part), slice(0, len(part)), tracer.center)
-        value[start:start + len(part)], variance[start:start + len(part)] = punctual_irradiance(
-            sources.lights[light], float(sources.spread[light]), int(sources.samples[light]),
-            receivers, tracer, settings.seed, light_dimension(light))
-    return value, variance
-
-
 def _by_ray(stored: Terms, judge: _HitsCompared, surfaces, settings
             ) -> tuple[tuple[Terms, np.ndarray], np.ndarray]:
     """The new terms of the texels whose rays the move changed (``judge.changed``), from their
@@ -1003,10 +975,7 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
         stored = _stored_texels(scene, start, lit, times)
         search = _dirty_search(scene, start, lit, stored, times)
     with log.stage("rays"):
-        with timed(times, "trace"):
-            terms, obscurance_rays = _traced_again(scene, start, lit, stored, search)
-        with timed(times, "direct"):
-            direct, direct_rays = _lit_again(scene, start, lit, stored, search)
+        terms, direct, rays = _traced_again(scene, start, lit, stored, search, times)
     per_texel = PerTexel.held(search.texels, stored.texels, search.validity, terms, direct)
     with log.stage("post-process"):
         done = finish(scene, start.world, start.resolved, lit, stored.atlas, per_texel, times,
@@ -1015,7 +984,7 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
     dirty = Dirty(rows=rows, reason=search.reason, tested_rays=search.tested,
                   relit=tuple(start.change.lights_placed))
     return Rebaked(computed=done, diff=start.change, dirty=dirty, fingerprints=start.fingerprint,
-                   rays=obscurance_rays + direct_rays)
+                   rays=rays)
 
 
 @dataclass(frozen=True)
@@ -1223,46 +1192,44 @@ def _moved_reach(scene: Scene, start: _Compared, lit: Lighting, stored: _Stored,
 
 
 def _traced_again(scene: Scene, start: _Compared, lit: Lighting, stored: _Stored,
-                  search: _Search) -> tuple[Terms, int]:
-    """The terms of every texel after the change, and the obscurance rays cast for them: the
-    dirty texels' changed rays only (``_by_ray``) where that is exact, the rest traced whole."""
-    resolved, ambient, reason = start.resolved, lit.ambient, search.reason
+                  search: _Search, times: dict[str, float]) -> tuple[Terms, Direct, int]:
+    """The terms and direct light of every texel after the change, and the rays cast for them
+    (``retrace.retraced``, here or on the cluster): the dirty texels' obscurance rays (only the
+    changed rays, ``_by_ray``, where that is exact) and direct light, and every clean texel's
+    shadow rays of each light placed anew. Each part's rows are written into the stored terms
+    and direct light as it comes, in place."""
+    resolved, sources, reason = start.resolved, lit.sources, search.reason
     rows = np.flatnonzero(reason >= 0)
-    traced, updated, by_ray_rays = rows, None, 0
+    traced, updated, rays = rows, None, 0
     if search.by_ray and search.judge is not None:
         updated, retrace = _by_ray(stored.terms, search.judge, search.surfaces, resolved)
         # Shadow-dirty texels' obscurance rays met nothing that changed.
         kept = np.isin(reason[rows], [REASONS.index("obscurance"), REASONS.index("shadow")])
         traced = np.union1d(rows[~kept], retrace)
-        by_ray_rays = search.judge.cast
-    error_scale = (effective_r_ave(ambient, resolved.rho), float(ambient.intensity @ LUMINANCE))
-    fresh = integrate(scene, start.world, lit.tracer, search.texels, resolved, None, rows=traced,
-                      error_scale=error_scale, surfaces=search.surfaces)
-    terms = merge(stored.terms, fresh, traced)
+        rays = search.judge.cast
+    relit = tuple(start.change.lights_placed)
+    todo = np.arange(len(reason)) if relit else rows  # a light placed anew: every texel's rays
+    terms = stored.terms
+    direct = replace(stored.direct, light_colours=sources.light_colours(),
+                     rays_per_texel=sources.rays_per_texel())
+    work = Retracing(scene, start.world, resolved, lit, search.surfaces, relit,
+                     take(search.texels, np.zeros(0, np.int64)))
+    for stage in ("trace", "direct"):  # the report's stages, also when nothing is traced
+        times.setdefault(stage, 0.0)
+    obscurance, dirty = np.isin(todo, traced), reason[todo] >= 0
+    for part, done in retraced(work, search.texels, todo, obscurance, dirty, times):
+        rows, dirty_rows = todo[part], dirty[part]
+        terms = merge(terms, done.terms, rows[obscurance[part]])
+        direct = merge(direct, done.direct, rows[dirty_rows], light_colours=direct.light_colours,
+                       rays_per_texel=direct.rays_per_texel)
+        rays += done.rays
+        if relit:
+            clean = np.ix_(rows[~dirty_rows], relit)
+            direct.punctual[clean], direct.punctual_var[clean] = done.relit, done.relit_var
+            rays += int((~dirty_rows).sum()) * int(sources.samples[list(relit)].sum())
     if updated is not None:
         terms = merge(terms, *updated)
-    return terms, fresh.rays + by_ray_rays
-
-
-def _lit_again(scene: Scene, start: _Compared, lit: Lighting, stored: _Stored,
-               search: _Search) -> tuple[Direct, int]:
-    """The direct light of every texel after the change, and the shadow rays cast: the dirty
-    texels' anew, and every texel's for each light that was placed anew."""
-    resolved, sources, tracer, texels = start.resolved, lit.sources, lit.tracer, search.texels
-    rows = np.flatnonzero(search.reason >= 0)
-    fresh = direct_light(scene, start.world, tracer, take(texels, rows), sources, resolved)
-    direct = merge(stored.direct, fresh, rows, light_colours=sources.light_colours(),
-                   rays_per_texel=sources.rays_per_texel())
-    clean = np.flatnonzero(search.reason < 0)
-    relit_rays = 0
-    if start.change.lights_placed and len(clean):
-        punctual, punctual_var = direct.punctual.copy(), direct.punctual_var.copy()
-        for light in start.change.lights_placed:
-            punctual[clean, light], punctual_var[clean, light] = _relight(
-                texels, tracer, sources, resolved, light, clean)
-            relit_rays += len(clean) * int(sources.samples[light])
-        direct = replace(direct, punctual=punctual, punctual_var=punctual_var)
-    return direct, fresh.rays + relit_rays
+    return terms, direct, rays
 
 
 def bake_state_writer(scene: Scene, world: World, resolved, atlas, per_texel,
