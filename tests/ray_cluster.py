@@ -71,6 +71,11 @@ class LocalCluster:
         _stop(process)
         self.workers.remove(process)
 
+    def sessions(self) -> set[int]:
+        """The session ids of the cluster's processes: each node's ``ray start`` leads its own,
+        which its raylet and worker processes belong to."""
+        return {p.pid for p in [self._head, *self.workers] if p is not None}
+
     def stop(self) -> None:
         """Stop the workers, then the head, and remove the cluster's folder."""
         for process in list(self.workers):

@@ -163,10 +163,11 @@ def test_more_threads_a_part_than_a_worker_has_is_a_clear_error(ray_cluster, tmp
     assert sorted(p.name for p in tmp_path.iterdir()) == ["cornell.glb"]
 
 
-def _kill_first_part(killed: list, stop: threading.Event) -> None:
-    """SIGKILL the first worker process seen running a part (``_part_processes``)."""
+def _kill_first_part(cluster: LocalCluster, killed: list, stop: threading.Event) -> None:
+    """SIGKILL the first worker process of ``cluster`` seen running a part
+    (``_part_processes``)."""
     while not stop.is_set():
-        running = _part_processes()
+        running = _part_processes(cluster)
         if running:
             time.sleep(0.2)  # well into the part
             os.kill(running[0], signal.SIGKILL)
@@ -175,11 +176,12 @@ def _kill_first_part(killed: list, stop: threading.Event) -> None:
         time.sleep(0.02)
 
 
-def _with_a_worker_killed(bake) -> "baker.BakeResult":
-    """``bake()``'s result, the first worker process seen running a part SIGKILLed meanwhile
-    (``_kill_first_part``); asserts that one was and that it is counted for no texel."""
+def _with_a_worker_killed(cluster: LocalCluster, bake) -> "baker.BakeResult":
+    """``bake()``'s result, the first worker process of ``cluster`` seen running a part
+    SIGKILLed meanwhile (``_kill_first_part``); asserts that one was and that it is counted
+    for no texel."""
     killed, stop = [], threading.Event()
-    killer = threading.Thread(target=_kill_first_part, args=(killed, stop))
+    killer = threading.Thread(target=_kill_first_part, args=(cluster, killed, stop))
     killer.start()
     try:
         result = bake()
@@ -198,7 +200,7 @@ def test_a_worker_killed_in_a_part_leaves_the_bytes_as_they_were(ray_cluster, sm
     settings = dict(rays=256, page_size=128)
     local, remote = _outputs(tmp_path)
     baker.bake(source, local, baker.Settings(**settings))
-    _with_a_worker_killed(lambda: baker.bake(source, remote, baker.Settings(
+    _with_a_worker_killed(ray_cluster, lambda: baker.bake(source, remote, baker.Settings(
         cluster=ray_cluster.address, **settings)))
     _same_bake(local, remote)
 
@@ -208,7 +210,7 @@ def test_a_worker_killed_in_a_rebake_leaves_the_bytes_as_they_were(ray_cluster, 
     settings = dict(rays=256, page_size=128)
     edited, local, remote = _rebakes(tmp_path, settings)
     baker.bake(edited, local, baker.Settings(**settings), incremental=True)
-    result = _with_a_worker_killed(lambda: baker.bake(edited, remote, baker.Settings(
+    result = _with_a_worker_killed(ray_cluster, lambda: baker.bake(edited, remote, baker.Settings(
         cluster=ray_cluster.address, **settings), incremental=True))
     assert result.rebake["incremental"]
     _same_bake(local, remote)
@@ -227,7 +229,7 @@ def test_ctrl_c_leaves_no_output_and_the_cluster_as_it_was(ray_cluster, tmp_path
          "--rays", "4096", "--page-size", "128", "--cluster", ray_cluster.address],
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 120
-    while not _part_processes():
+    while not _part_processes(ray_cluster):
         assert process.poll() is None, process.communicate()
         assert time.monotonic() < deadline
         time.sleep(0.05)
@@ -240,16 +242,17 @@ def test_ctrl_c_leaves_no_output_and_the_cluster_as_it_was(ray_cluster, tmp_path
     while _free_cpus(ray_cluster.address) != (2, 2.0):
         assert time.monotonic() < deadline, _free_cpus(ray_cluster.address)
         time.sleep(0.5)
-    assert not _part_processes()
+    assert not _part_processes(ray_cluster)
 
 
-def _part_processes() -> list[int]:
-    """The worker processes on this machine running a part (Ray names them
-    ``ray::_run_part`` while they do)."""
+def _part_processes(cluster: LocalCluster) -> list[int]:
+    """The worker processes of ``cluster`` running a part (Ray names them ``ray::_run_part``
+    while they do; other clusters on this machine, of other test runs, are left out)."""
     pids = []
     for pid in filter(str.isdigit, os.listdir("/proc")):
         try:
-            if Path(f"/proc/{pid}/cmdline").read_bytes().startswith(b"ray::_run_part"):
+            running = Path(f"/proc/{pid}/cmdline").read_bytes().startswith(b"ray::_run_part")
+            if running and os.getsid(int(pid)) in cluster.sessions():
                 pids.append(int(pid))
         except OSError:
             pass
