@@ -13,6 +13,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import baker.pipeline.full as full
@@ -38,8 +39,74 @@ def test_a_stage_is_re_estimated_from_its_mean_so_far():
     assert meter.done() == meter.total() == 800 + 50 * 14 + 3
 
 
-class _Recorded(progress.tqdm):
-    """tqdm drawing into a string, recording (rays done, total) at every update."""
+class _Fake:
+    """A clock (``now``) and the seconds spent compiling by then (``compiled``), set by hand."""
+
+    def __init__(self):
+        self.now, self.compiled = 0.0, 0.0
+
+    def meter(self) -> Meter:
+        return Meter(clock=lambda: self.now, compiled=lambda: self.compiled)
+
+
+def test_each_stage_s_rays_to_come_are_priced_at_its_own_seconds_per_ray():
+    """A GI-like stage at 0.03 s a ray, then an obscurance-like one at 0.01: while only the
+    first has reported, the second's rays are priced at the first's cost; once both have,
+    each at its own. A compile (100 s) during a report's interval is left out."""
+    clock = _Fake()
+    meter = clock.meter()
+    gi, obscurance = meter.stage(100, 10), meter.stage(100, 4)
+    assert meter.seconds_left() is None  # nothing to go by yet
+    meter.start()
+    for chunk in range(5):
+        clock.now += 3.0 + (100.0 if chunk == 0 else 0.0)
+        clock.compiled += 100.0 if chunk == 0 else 0.0
+        gi(10, 100)
+    assert meter.seconds_left() == pytest.approx(500 * 0.03 + 400 * 0.03)
+    for _ in range(5):
+        clock.now += 3.0
+        gi(10, 100)
+    for _ in range(2):
+        clock.now += 0.8
+        obscurance(20, 80)
+    assert meter.seconds_left() == pytest.approx(240 * 0.01)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_once_every_stage_has_reported_the_time_left_is_the_time_left(seed):
+    """Generated bakes: 2–4 stages of random costs per ray and rays per texel, in 1–4 parts of
+    random chunks (each part runs the stages in turn, as ``full._bake_part``), compiles here
+    and there, threads none: once every stage has reported, the time left is exact while each
+    stage's cost stays as it was (each stage's rays to come × its seconds per ray)."""
+    rng = np.random.default_rng(seed)
+    stages, parts = int(rng.integers(2, 5)), int(rng.integers(1, 5))
+    cost = rng.uniform(0.1, 5.0, stages)  # seconds per ray
+    per_texel = rng.integers(1, 20, stages)
+    clock = _Fake()
+    meter = clock.meter()
+    reports = [meter.stage(60 * parts, rng.uniform(1, 20)) for _ in range(stages)]
+    events = []  # (stage, texels) in order
+    for _ in range(parts):
+        for s in range(stages):
+            cuts = np.sort(rng.choice(np.arange(1, 60), int(rng.integers(0, 5)), replace=False))
+            events += [(s, int(count)) for count in np.diff(np.r_[0, cuts, 60])]
+    left = sum(count * per_texel[s] * cost[s] for s, count in events)
+    meter.start()
+    seen = set()
+    for s, count in events:
+        compile_seconds = float(rng.uniform(0, 30)) if rng.random() < 0.2 else 0.0
+        clock.now += count * per_texel[s] * cost[s] + compile_seconds
+        clock.compiled += compile_seconds
+        left -= count * per_texel[s] * cost[s]
+        reports[s](count, int(count * per_texel[s]))
+        seen.add(s)
+        if len(seen) == stages:
+            assert meter.seconds_left() == pytest.approx(left, rel=1e-9, abs=1e-9)
+    assert meter.seconds_left() == pytest.approx(0.0, abs=1e-9)
+
+
+class _Recorded(progress.Bar):
+    """The bar drawing into a string, recording (rays done, total) at every update."""
 
     updates: list[tuple[int, int]] = []
 
@@ -52,12 +119,11 @@ class _Recorded(progress.tqdm):
 
 
 @pytest.mark.parametrize("method", ["obscurance", "gi"])
-def test_the_eta_after_a_tenth_of_the_work_is_within_a_quarter(tmp_path, monkeypatch, method):
-    """On a fake clock where time is the rays cast (a steady rate), the bar's ETA when a tenth
-    of the rays are cast, elapsed × (total − done)/done, is within 25 % of the time left; it
-    is off only by the total's estimate (GI's path lengths are guessed until its first chunk).
+def test_the_total_after_a_tenth_of_the_work_is_within_a_quarter(tmp_path, monkeypatch, method):
+    """When a tenth of the rays are cast, the rays the bar says are left, total − done, are
+    within 25 % of those really left (GI's path lengths are guessed until its first chunk).
     The bar ends at its total, advancing with every stage, GI included."""
-    monkeypatch.setattr(progress, "tqdm", _Recorded)
+    monkeypatch.setattr(progress, "Bar", _Recorded)
     monkeypatch.setattr(full, "wanted", lambda quiet: True)
     _Recorded.updates = []
     done = computed(cornell_box(), tmp_path, rays=16, page_size=128, method=method)
@@ -68,9 +134,7 @@ def test_the_eta_after_a_tenth_of_the_work_is_within_a_quarter(tmp_path, monkeyp
     cast = done.tally.rays + done.tally.shadow_rays  # obscurance and direct light's rays
     assert final > cast if method == "gi" else final == cast
     n, total = next((n, total) for n, total in updates if n >= 0.1 * final)
-    # In rays, on this clock: elapsed = n, rate 1, ETA = elapsed × (total − n) / n.
-    eta, left = total - n, final - n
-    assert 0.75 <= eta / left <= 1.25, (n, total, final)
+    assert 0.75 <= (total - n) / (final - n) <= 1.25, (n, total, final)
 
 
 def _bake_with_stderr_on(stderr, env, tmp_path, *more: str) -> subprocess.Popen:

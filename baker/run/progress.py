@@ -10,8 +10,16 @@ of a 4-ray obscurance bake. Each stage (obscurance, direct light, GI) is registe
 texels and an estimate of the rays a texel casts (``Meter.stage``); as it reports the texels
 done and the rays they cast, its remaining rays are re-estimated from its mean so far, and the
 bar's total follows (GI's paths end by Russian roulette: their length is known only by casting
-them). tqdm draws it, with the average rate (``smoothing=0``): ETA = elapsed × to do / done;
-only on a terminal, not in CI (a log would get every redraw).
+them). tqdm draws it, only on a terminal, not in CI (a log would get every redraw).
+
+Its time left is the Meter's (``Meter.seconds_left``), not tqdm's elapsed × to do / done: a
+ray's cost differs by stage (a GI path's ray, shaded in numpy, costs 3.6–4.6 times an
+obscurance ray in its numba kernel, benchmarks/bench_progress.py), so each stage's remaining rays are priced at that stage's
+own seconds per ray so far — the wall time between reports, each interval put to the stage that
+reports at its end (texel set-up between parts goes to the stage that follows it) — and a
+stage not yet begun at the mean of those that have. The clock leaves out the seconds numba
+spends compiling kernels (``compile_clock``: a first bake's compile is paid once; counted,
+it made a cold GI bake's ETA 1.15–2 times the time left at 10–50 % of its rays).
 """
 
 from __future__ import annotations
@@ -27,6 +35,7 @@ from typing import Callable, Iterator
 from tqdm import tqdm
 
 _DEFAULT_SIZE = (80, 24)  # columns and rows of a terminal that gives no size
+CLOCK: Callable[[], float] = time.perf_counter  # the Meter's clock, in seconds (wall time)
 
 
 def wanted(quiet: bool) -> bool:
@@ -36,12 +45,14 @@ def wanted(quiet: bool) -> bool:
 
 @dataclass
 class _Stage:
-    """One stage's texels, its first estimate of rays per texel, and what it reported done."""
+    """One stage's texels, its first estimate of rays per texel, what it reported done, and the
+    seconds (compile excluded) put to it."""
 
     texels: int
     per_texel: float
     texels_done: int = 0
     rays_done: int = 0
+    seconds: float = 0.0
 
     def expected(self) -> float:
         """The stage's rays in all: those cast, and the rest at the mean so far per texel (at
@@ -53,18 +64,24 @@ class _Stage:
 
 
 class Meter:
-    """The work of a bake's stages, in rays, drawn as one bar (``bar``: a tqdm, or None)."""
+    """The work of a bake's stages, in rays, drawn as one bar (``bar``: a tqdm, or None).
 
-    def __init__(self, bar: tqdm | None = None):
+    ``clock()``: seconds (by default ``CLOCK``); ``compiled()``: the seconds spent compiling
+    so far, left out of the stages' times (none by default)."""
+
+    def __init__(self, bar: tqdm | None = None, clock: Callable[[], float] | None = None,
+                 compiled: Callable[[], float] = lambda: 0.0):
         self._bar = bar
         self._stages: list[_Stage] = []
-        self._lock = threading.Lock()  # the stages report from their worker threads
+        self._lock = threading.RLock()  # the stages report from their worker threads
         self._started = False
+        self._clock, self._compiled = clock or (lambda: CLOCK()), compiled
+        self._last: float | None = None  # the clock, compile excluded, at the last report
 
     def stage(self, texels: int, rays_per_texel: float) -> Callable[[int, int], None]:
         """Register a stage of ``texels`` texels casting about ``rays_per_texel`` rays each;
         return its ``report(texels, rays)``: that many more texels done, casting that many
-        rays."""
+        rays (the time since the last report, or since ``start``, is the stage's)."""
         stage = _Stage(int(texels), float(rays_per_texel))
         with self._lock:
             self._stages.append(stage)
@@ -72,6 +89,10 @@ class Meter:
 
         def report(texels_done: int, rays: int) -> None:
             with self._lock:
+                now = self._now()
+                if self._last is not None:
+                    stage.seconds += max(0.0, now - self._last)
+                self._last = now
                 stage.texels_done += int(texels_done)
                 stage.rays_done += int(rays)
                 self._show(int(rays))
@@ -86,18 +107,51 @@ class Meter:
         """The rays the stages reported cast."""
         return sum(stage.rays_done for stage in self._stages)
 
+    def seconds_left(self) -> float | None:
+        """Seconds until the stages' rays are all cast: each stage's rays to come at its own
+        seconds per ray so far, a stage with none cast yet at the mean of the others' (None
+        before any time was put to a stage)."""
+        with self._lock:
+            begun = [stage for stage in self._stages if stage.rays_done]
+            seconds = sum(stage.seconds for stage in begun)
+            if seconds <= 0:
+                return None
+            mean = seconds / sum(stage.rays_done for stage in begun)
+            return sum(max(0.0, stage.expected() - stage.rays_done)
+                       * (stage.seconds / stage.rays_done if stage.rays_done else mean)
+                       for stage in self._stages)
+
     def start(self) -> None:
         """The first rays are about to be cast: the bar's clock (its rate, its ETA) starts now
         (the first time only), not with the texels' set-up before them."""
         with self._lock:
-            if self._bar is not None and not self._started:
-                self._bar.reset(self._bar.total)
+            if not self._started:
+                if self._bar is not None:
+                    self._bar.reset(self._bar.total)
+                self._last = self._now()
             self._started = True
+
+    def _now(self) -> float:
+        return self._clock() - self._compiled()
 
     def _show(self, rays: int) -> None:
         if self._bar is not None:
             self._bar.total = max(self.total(), self.done())
             self._bar.update(rays)
+
+
+class Bar(tqdm):
+    """tqdm showing the ``meter``'s time left (``Meter.seconds_left``) in place of its own."""
+
+    FORMAT = "{l_bar}{bar}| {n_fmt}/{total_fmt} [{elapsed}<{left}, {rate_fmt}]"
+    meter: Meter | None = None
+
+    @property
+    def format_dict(self) -> dict:
+        values = super().format_dict
+        left = self.meter.seconds_left() if self.meter is not None else None
+        values["left"] = "?" if left is None else self.format_interval(left)
+        return values
 
 
 @contextmanager
@@ -106,11 +160,16 @@ def bar(label: str, show: bool) -> Iterator[Meter]:
     if not show:
         yield Meter()
         return
+    from baker.run.compile_clock import CompileClock  # numba: not for ``import baker.cli``
+
     sized = _has_size()
-    with tqdm(total=0, desc=label, unit="ray", unit_scale=True, leave=False, smoothing=0,
-              dynamic_ncols=sized, ncols=None if sized else _DEFAULT_SIZE[0],
-              nrows=None if sized else _DEFAULT_SIZE[1]) as drawn:
-        yield Meter(drawn)
+    with CompileClock() as compiling, Bar(
+            total=0, desc=label, unit="ray", unit_scale=True, leave=False, smoothing=0,
+            bar_format=Bar.FORMAT, dynamic_ncols=sized,
+            ncols=None if sized else _DEFAULT_SIZE[0],
+            nrows=None if sized else _DEFAULT_SIZE[1]) as drawn:
+        drawn.meter = Meter(drawn, compiled=lambda: compiling.seconds)
+        yield drawn.meter
 
 
 def _has_size() -> bool:
