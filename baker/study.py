@@ -95,9 +95,9 @@ def _luminance(done: Computed, terms: Terms) -> np.ndarray:
     return (w @ LUMINANCE) * float(done.ambient.intensity @ LUMINANCE)
 
 
-def _estimated_rmse(done: Computed, terms: Terms, technique: str) -> float:
+def _estimated_rmse(done: Computed, terms: Terms) -> float:
     """The RMSE a bake would report for these terms (obscurance part, lightmap units)."""
-    rmse = terms.rmse(effective_r_ave(done.ambient, done.settings.rho), technique)
+    rmse = terms.rmse(effective_r_ave(done.ambient, done.settings.rho))
     return rmse * float(done.ambient.intensity @ LUMINANCE)
 
 
@@ -129,7 +129,7 @@ def run_study(done: Computed, rays: tuple[int, ...] = DEFAULT_RAYS,
                 progress(f"{technique}, {count} rays per texel")
             terms, seconds = estimate(technique, count)
             rmse = float(np.sqrt(np.mean((_luminance(done, terms) - reference) ** 2)))
-            rows.append(Row(technique, count, seconds, rmse, _estimated_rmse(done, terms, technique)))
+            rows.append(Row(technique, count, seconds, rmse, _estimated_rmse(done, terms)))
     return Study(tuple(rows), len(done.texels), reference_rays, reference_seconds)
 
 

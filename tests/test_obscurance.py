@@ -70,7 +70,7 @@ def test_standard_error_of_a_known_variance():
     """Half the rays hit a white surface at ρ = 1 and half escape with R_ave = 0: var = 1/4."""
     terms = Terms(w_hit=np.full((1, 3), 0.5), escaped=np.array([0.5]),
                   hit_sq=np.array([0.5]), counts=np.array([100]),
-                  half_split=np.zeros((1, 2)), quarter_split=np.zeros((1, 2)))
+                  half_split=np.zeros((1, 2)))
     stderr = terms.standard_error(np.zeros(3))
     assert np.isclose(stderr[0], np.sqrt(0.25 * 100 / 99 / 100))
 
@@ -103,7 +103,7 @@ def test_texel_sums_are_exact_in_any_order_and_recovered_from_the_means():
     _accumulate_kernel(rays, primitive[shuffled], distance[shuffled], *shade, any_order,
                        shuffled // rays, shuffled % rays, 1.0)
     assert np.array_equal(in_order, any_order)
-    assert (in_order[:, 5] > 0).any() and (in_order[:, 8] > 0).any()  # halves, quarters
+    assert (in_order[:, 5] > 0).any() and (in_order[:, 6] > 0).any()  # the first halves
     counts = np.full(texels, rays, np.int64)
     assert np.array_equal(_sums_of(_means(in_order, counts)), in_order)
 
@@ -136,7 +136,7 @@ def test_a_rays_change_replaces_its_value_in_the_sums_exactly():
     terms, exact = changed_terms(_means(before, counts), changes)
     assert exact.all()
     fresh = _means(after, counts)
-    for name in ("w_hit", "escaped", "hit_sq", "half_split", "quarter_split"):
+    for name in ("w_hit", "escaped", "hit_sq", "half_split"):
         assert np.array_equal(getattr(terms, name), getattr(fresh, name)), name
     assert not np.array_equal(fresh.w_hit, _means(before, counts).w_hit)
 

@@ -76,7 +76,10 @@ def test_core_carriers_survive_optimize(tmp_path, name, carrier):
 @pytest.mark.parametrize("carrier", ["emissive", "occlusion"])
 def test_core_carriers_survive_gltfpack(tmp_path, carrier):
     """gltfpack quantizes the UVs (KHR_mesh_quantization with KHR_texture_transform): the bake
-    stays, the picture within a few per cent in the median."""
+    stays, the picture within a few per cent in the median: 1 %, or 3 standard errors of the
+    median (1.253·σ/√n, σ from the ratios' interquartile range) where the pixels' ratios
+    spread widely (the occlusion texture's: a quarter of them off by 18 % or more), so that
+    the bound does not hang on one draw of the bake's random numbers."""
     out, packed = _optimized(saved(cornell_box(), tmp_path), tmp_path, "cornell", carrier,
                              "gltfpack")
     before = render(load(out), "lit", SIZE, exposure=2.0)
@@ -84,7 +87,9 @@ def test_core_carriers_survive_gltfpack(tmp_path, carrier):
     assert after.lightmapped.sum() == before.lightmapped.sum() > 0
     a, b = (p.radiance[before.lightmapped] @ LUMINANCE for p in (before, after))
     lit = a > 1e-3
-    assert abs(np.median(b[lit] / a[lit]) - 1) < 0.01
+    ratio = b[lit] / a[lit]
+    spread = np.subtract(*np.percentile(ratio, [75, 25])) / 1.349  # σ of a normal's IQR
+    assert abs(np.median(ratio) - 1) < max(0.01, 3 * 1.253 * spread / np.sqrt(len(ratio)))
 
 
 @pytest.mark.parametrize("tool", ["gltf-transform", "gltfpack"])

@@ -19,44 +19,42 @@ from baker.image.compose import effective_r_ave
 from baker.image.hdr import hdr_bytes
 
 
-POOL_RADIUS = 2  # the direct light's per-texel variances are pooled over (2r + 1)² texels
+POOL_RADIUS = 2  # the per-texel variances are pooled over (2r + 1)² texels
 
 
 def texel_errors(done) -> np.ndarray:
     """(N,) standard error of each texel's lightmap luminance, lightmap units (``done``: a
     ``bake.Computed``), in quadrature:
 
-    - the obscurance's, I_A·W: the rays' sample variance, scaled so that its RMS over the
-      texels is ``obscurance_rmse`` (the halves' estimate); with ``--method gi`` the paths'
-      variance instead (``gi.Indirect.variance``, independent paths: no scaling);
+    - the obscurance's, I_A·W: each texel's e² from its rays' two independent halves
+      (``Terms.split_errors``), or with ``--method gi`` its paths' variance
+      (``gi.Indirect.variance``); and the direct light's, from its rays' halves too
+      (``direct.mean_and_variance``). A texel's halves give one degree of freedom, so these
+      are averaged over the baked texels of the (2·``POOL_RADIUS`` + 1)² window about it on
+      its page, whose light is alike (rescaled to keep their sum: the map's mean square is
+      the report's), and a texel's error is not judged from two numbers;
     - I_A's own, common to every texel: I_A·W × I_A's relative standard error
-      (``ambient.Ambient.relative_variance``, the power estimate's);
-    - the direct light's: each texel's estimate from its rays' two independent halves
-      (``direct.mean_and_variance``) has one degree of freedom, so it is averaged over the
-      baked texels of the (2·``POOL_RADIUS`` + 1)² window about it on its page, whose light
-      is alike (rescaled to keep their sum: the map's mean square is the report's), and a
-      texel's error is not judged from two numbers.
+      (``ambient.Ambient.relative_variance``, the power estimate's).
     """
     texels = done.texels
+    if not len(texels):
+        return np.zeros(0)
     r_ave = effective_r_ave(done.ambient, done.settings.rho)
     intensity = done.ambient.intensity
     if done.settings.method == "gi":
-        indirect = done.indirect_variance
+        own = done.indirect_variance
     else:
-        scale = float(intensity @ LUMINANCE)
-        sample = done.terms.standard_error(r_ave) * scale
-        rms = float(np.sqrt(np.mean(sample ** 2))) if len(sample) else 0.0
-        indirect = (sample * (done.obscurance_rmse() / rms if rms > 0 else 0.0)) ** 2
+        own = done.terms.split_errors(r_ave) * float(intensity @ LUMINANCE) ** 2
+    if done.direct is not None:
+        own = own + done.direct.variance()
+    around = pooled(own, texels.pixels(),
+                    (done.atlas.page_count, done.atlas.height, done.atlas.width))
+    total = float(around.sum())
+    variance = around * (float(own.sum()) / total if total > 0 else 0.0)
+    if done.settings.method != "gi":
         shared = (done.terms.obscurance(r_ave) * intensity) @ LUMINANCE
-        indirect = indirect + done.ambient.relative_variance * shared ** 2
-    direct = 0.0
-    if done.direct is not None and len(texels):
-        own = done.direct.variance()
-        direct = pooled(own, texels.pixels(),
-                        (done.atlas.page_count, done.atlas.height, done.atlas.width))
-        total = float(direct.sum())
-        direct = direct * (float(own.sum()) / total if total > 0 else 0.0)
-    return np.sqrt(indirect + direct)
+        variance = variance + done.ambient.relative_variance * shared ** 2
+    return np.sqrt(variance)
 
 
 def pooled(values: np.ndarray, pixels: tuple[np.ndarray, np.ndarray, np.ndarray],

@@ -333,8 +333,7 @@ def foliage_terms(foliage: Foliage, scene: Scene, world: World, texels: Texels,
     w_hit = occluded * colour
     lum = colour @ LUMINANCE
     terms = Terms(w_hit=w_hit, escaped=visibility, hit_sq=(1.0 - visibility) * lum * lum,
-                  counts=np.zeros(k, np.int64), half_split=np.zeros((k, 2)),
-                  quarter_split=np.zeros((k, 2)))
+                  counts=np.zeros(k, np.int64), half_split=np.zeros((k, 2)))
     table = translucent(scene)
     if not table.any:
         return terms
@@ -382,7 +381,7 @@ def shade_by_crowns(foliage: Foliage, texels: Texels, rows: np.ndarray, terms: T
 
     return replace(terms, w_hit=w_hit, escaped=escaped * visibility,
                    hit_sq=terms.hit_sq + escaped * occluded * lum * lum,
-                   half_split=split(terms.half_split), quarter_split=split(terms.quarter_split))
+                   half_split=split(terms.half_split))
 
 
 def integrate_with_foliage(foliage: Foliage, scene: Scene, world: World, texels: Texels,

@@ -46,7 +46,7 @@ from baker.rays.trace import LocalHits, Tracer, ray_lift
 from baker.run.parallel import cores, even_slices, run_chunks, texels_per_chunk
 from baker.settings import TECHNIQUES, Resolved
 
-_SPLIT_MAX = 1e100  # |half/quarter differences| beyond this (garbage albedos) are clipped, so
+_SPLIT_MAX = 1e100  # |halves' differences| beyond this (garbage albedos) are clipped, so
 # that their mean square cannot overflow float64: such an estimate is meaningless anyway
 
 
@@ -59,8 +59,8 @@ class Terms:
     hit_sq: (N,) mean over rays of the squared luminance of R(Q)·ρ(d) (0 for escaped rays),
     for the sample variance. counts: (N,) int64 rays cast per texel (all equal unless adaptive).
     half_split: (N, 2) mean over the first half of the texel's rays minus the mean over the
-    second half, in luminance of R·ρ and in escaped fraction; quarter_split: (N, 2) the same
-    within the first half (first quarter minus second quarter). See ``rmse``. chain_rays: (N,)
+    second half, in luminance of R·ρ and in escaped fraction (the halves are independent
+    estimates: ``sampling.fill_points``; see ``rmse``). chain_rays: (N,)
     int64 rays cast beyond the texel's own, along mirror and glass chains (§3.1–3.2), and for
     leaves and closed translucent objects their back-face and inner rays (§4); capped:
     (N,) int64 of its rays whose chain the depth cap stopped (both empty when not counted).
@@ -78,7 +78,6 @@ class Terms:
     hit_sq: np.ndarray
     counts: np.ndarray
     half_split: np.ndarray
-    quarter_split: np.ndarray
     chain_rays: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     capped: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     through_hit: np.ndarray | None = None
@@ -119,49 +118,55 @@ class Terms:
         ``binomial_floor``: a fraction p ~ 1/n of the texel's directions may still escape
         unseen, and an error of 0 would claim W exact. (A texel whose every ray escaped, an
         open floor's, keeps 0: there the rays' value R_ave is usually exact.)"""
+        variance = self._sample_variance(r_ave)
+        n = np.maximum(self.counts, 1)
+        return np.where(self._unseen(variance), binomial_floor(self.counts, r_ave),
+                        np.sqrt(variance / n))
+
+    def _sample_variance(self, r_ave: np.ndarray) -> np.ndarray:
+        """(N,) the rays' sample variance of the luminance of R·ρ (or R_ave when escaped)."""
         mean = self._front(r_ave) @ LUMINANCE
         second = self.hit_sq + self.escaped * float(r_ave @ LUMINANCE) ** 2
         n = np.maximum(self.counts, 1)
-        variance = np.maximum(second - mean * mean, 0.0) * n / np.maximum(n - 1, 1)
-        unseen = (variance <= 0) & (self.escaped <= 0)
-        return np.where(unseen, binomial_floor(self.counts, r_ave), np.sqrt(variance / n))
+        return np.maximum(second - mean * mean, 0.0) * n / np.maximum(n - 1, 1)
 
-    def rmse(self, r_ave: np.ndarray, technique: str) -> float:
+    def _unseen(self, variance: np.ndarray) -> np.ndarray:
+        """(N,) bool: every ray gave one value and none escaped (``standard_error``)."""
+        return (variance <= 0) & (self.escaped <= 0)
+
+    def split_errors(self, r_ave: np.ndarray) -> np.ndarray:
+        """(N,) e² per texel, e = half the difference of the means of its two halves of rays
+        in luminance of W (clipped to ±``_SPLIT_MAX``): the halves are independent estimates
+        (``sampling.fill_points``), so e² estimates the variance of the texel's W without bias
+        (one degree of freedom; see ``rmse``). Where ``standard_error`` takes the
+        ``binomial_floor``, at least its square."""
+        lum = float(r_ave @ LUMINANCE)
+        e = np.clip(0.5 * (self.half_split[:, 0] + lum * self.half_split[:, 1]),
+                    -_SPLIT_MAX, _SPLIT_MAX)
+        unseen = self._unseen(self._sample_variance(r_ave))
+        return np.where(unseen, np.maximum(e * e, binomial_floor(self.counts, r_ave) ** 2),
+                        e * e)
+
+    def rmse(self, r_ave: np.ndarray) -> float:
         """Estimated RMSE over the texels of W's luminance, from the rays alone.
 
         The sample variance assumes independent samples, so it overstates the error of
         stratified and low-discrepancy points (4–8× for Owen-scrambled Sobol at 64–1024 rays,
         3–6× for stratified, measured by ``baker study``). Instead: e = half the difference of
-        the means of the two halves of each texel's rays. ``stratified`` lays its grid twice,
-        once per half (sampling.py), so the halves are independent estimates of equal variance
-        and E[e²] is the variance of the full mean. A scrambled Sobol net's halves are nets
-        themselves, but anti-correlated (correlation c): E[e²] = var·(1 − c)/(1 + c). The same
-        split one level down (quarters of the first half) measures the convergence: the ratio
-        r = E[e_half²] / E[e_quarter²] = 2^(−2α) for error ∝ N^(−α), and (1 + c)/2 = r, so
-        var = E[e²]·r/(1 − r) — exact for independent samples (r = ½), and measured within
-        1.5× of the true RMSE for Sobol at 64 rays and more. r is averaged over all texels
-        (one texel's is far too noisy) and kept within [0.05, 0.5].
+        the means of the two halves of each texel's rays. Every technique draws the halves
+        independently (``sobol`` as two scrambled nets, ``stratified`` as its grid laid twice:
+        ``sampling.fill_points``), so with equal halves E[e²] is the variance of the whole
+        mean, whatever the points' convergence; a single net's halves are anti-correlated,
+        and the correction for it that baker once made from the quarters' split was 3× off
+        where the error's fall from one level to the next is uneven (``--rho step`` under a
+        ceiling). The mean of e² over the texels (``split_errors``) is the mean squared error.
         """
-        return rmse_of(self.split_squares(r_ave), len(self.counts), technique)
+        return rmse_of(self.split_square(r_ave), len(self.counts))
 
-    def split_squares(self, r_ave: np.ndarray) -> np.ndarray:
-        """(2,) the sums over the texels of e² for the halves and for the quarters (see
-        ``rmse``), in luminance of W: what ``rmse_of`` needs, added up part by part when a
+    def split_square(self, r_ave: np.ndarray) -> float:
+        """The sum of ``split_errors``: what ``rmse_of`` needs, added up part by part when a
         bake makes its texels a part at a time."""
-        escaped_lum = float(r_ave @ LUMINANCE)
-        return np.array([_split_square_sum(split, escaped_lum)
-                         for split in (self.half_split, self.quarter_split)])
-
-
-@jit
-def _split_square_sum(split, escaped_lum):
-    """Σ over rows of e², e = ½ (split[:, 0] + escaped_lum · split[:, 1]) clipped to
-    ±``_SPLIT_MAX`` (``Terms.split_squares``; split (N, 2))."""
-    total = 0.0
-    for i in range(len(split)):
-        e = min(max(0.5 * (split[i, 0] + escaped_lum * split[i, 1]), -_SPLIT_MAX), _SPLIT_MAX)
-        total += e * e
-    return total
+        return float(np.sum(self.split_errors(r_ave)))
 
 
 def binomial_floor(counts: np.ndarray, r_ave: np.ndarray) -> np.ndarray:
@@ -174,15 +179,9 @@ def binomial_floor(counts: np.ndarray, r_ave: np.ndarray) -> np.ndarray:
     return bound / (np.asarray(counts, np.float64) + 2.0)
 
 
-def rmse_of(squares: np.ndarray, count: int, technique: str) -> float:
-    """``Terms.rmse`` of ``count`` texels from their ``Terms.split_squares`` ``squares`` (2,)."""
-    if not count:
-        return 0.0
-    half, quarter = squares / count
-    if technique == "stratified":
-        return float(np.sqrt(half))
-    ratio = float(np.clip(half / quarter, 0.05, 0.5)) if quarter > 0 else 0.5
-    return float(np.sqrt(half * ratio / (1.0 - ratio)))
+def rmse_of(square: float, count: int) -> float:
+    """``Terms.rmse`` of ``count`` texels from their ``Terms.split_square``."""
+    return float(np.sqrt(square / count)) if count else 0.0
 
 
 @inline
@@ -298,8 +297,8 @@ def world_rays(texels: Texels, rows: np.ndarray | slice, rays: int, x: np.ndarra
 
 # Columns of the per-texel sums the kernel accumulates.
 _RGB, _ESCAPED, _SQUARE = slice(0, 3), 3, 4
-_HALF, _QUARTER = slice(5, 7), slice(7, 9)  # (hit luminance, escaped) over the first ½, ¼
-_COLUMNS = 9
+_HALF = slice(5, 7)  # (hit luminance, escaped) over the first half of the rays
+_COLUMNS = 7
 
 
 _CONSTANT, _VARYING, _SPECIAL = 0, 1, 2  # per-triangle kinds of ``_accumulate_kernel``
@@ -328,10 +327,10 @@ _TEXEL_MAJOR = (np.zeros(0, np.int64), np.zeros(0, np.int64))
 @jit
 def _accumulate_kernel(rays, primitive, distance, d_max, rho_kind, table, kind, ray_albedo,
                        luminance, sums, target, sample, sign):
-    """Add each ray's values to its texel's sums (k, 9): R(Q)·ρ(d) (RGB), escaped weight (1 for
-    a miss), squared luminance of R·ρ; then, for the rays among the first ⌊rays/2⌋ and the
-    first ⌊rays/4⌋ of their texel, luminance of R·ρ and escaped weight (for the split error
-    estimate, see ``Terms.rmse``). Every value is rounded to the grid (``_on_grid``) first, so
+    """Add each ray's values to its texel's sums (k, 7): R(Q)·ρ(d) (RGB), escaped weight (1 for
+    a miss), squared luminance of R·ρ; then, for the rays among the first ⌊rays/2⌋ of their
+    texel, luminance of R·ρ and escaped weight (for the split error estimate, see
+    ``Terms.rmse``). Every value is rounded to the grid (``_on_grid``) first, so
     the sums are exact: the same bits in any order.
 
     primitive/distance: the rays' hit triangle (−1: no hit within d_max) and distance (``LocalHits``), laid
@@ -345,7 +344,7 @@ def _accumulate_kernel(rays, primitive, distance, d_max, rho_kind, table, kind, 
     R·ρ itself and ray_albedo[r, 3] its escaped weight, R_ave·ρ = 1 counting that fraction).
     ray_albedo: one row of 4 per ray, or (0, 4) when every kind is ``_CONSTANT``.
     """
-    half, quarter = rays // 2, rays // 4
+    half = rays // 2
     indexed = len(target) > 0
     for r in range(len(primitive)):
         i, s = (target[r], sample[r]) if indexed else (r // rays, r % rays)
@@ -376,9 +375,6 @@ def _accumulate_kernel(rays, primitive, distance, d_max, rho_kind, table, kind, 
         if s < half:
             sums[i, 5] += sign * lum
             sums[i, 6] += sign * escape
-        if s < quarter:
-            sums[i, 7] += sign * lum
-            sums[i, 8] += sign * escape
 
 
 @dataclass(frozen=True)
@@ -634,7 +630,7 @@ def _shading(surfaces: Surfaces, settings: Resolved, hits: LocalHits
 
 def _chunk_sums(surfaces: Surfaces, tracer: Tracer, texels: Texels, rows: np.ndarray,
                 first: int, rays: int, settings: Resolved) -> tuple[np.ndarray, _Chains]:
-    """(k, 9) sums over samples ``first`` … ``first + rays − 1`` of the texels ``rows``, as
+    """(k, 7) sums over samples ``first`` … ``first + rays − 1`` of the texels ``rows``, as
     ``_accumulate_kernel`` lays them out, and the chunk's chain counts."""
     sub = (sub_positions(tracer, texels, rows, settings.supersample, settings.seed)
            if settings.supersample > 1 else None)
@@ -662,7 +658,8 @@ def hemisphere_terms(scene: Scene, world: World, tracer: Tracer, texels: Texels,
 
     Without ``settings.target_error`` every texel gets ``settings.rays`` rays. With it, rays come
     in rounds — ``rays``, then doubling each texel's count while it stays within ``max_rays``
-    (so counts are rays·2^k, and halves of a count are whole nets) — and a texel stops
+    (so counts are rays·2^k, and a round's batch, the second half of the new count, is a net
+    independent of the first: ``sampling.fill_points``) — and a texel stops
     once the standard error of its lightmap luminance, ``error_scale[1]`` × the standard error
     of W's luminance with R_ave = ``error_scale[0]``, is at most ``target_error``. The rounds
     are the same whatever the chunking, so the result is too. ``progress(texels, rays)`` is told
@@ -680,8 +677,7 @@ def hemisphere_terms(scene: Scene, world: World, tracer: Tracer, texels: Texels,
     active = np.arange(len(rows))
     first, batch = 0, settings.rays
     while len(active):
-        if first:  # doubling: the samples so far become the first half, their half the quarter
-            sums[active, _QUARTER] = sums[active, _HALF]
+        if first:  # doubling: the samples so far become the first half
             sums[active, _HALF] = _luminance_and_escaped(sums[active])
 
         def work(chunk: np.ndarray, first=first, batch=batch) -> None:
@@ -714,7 +710,7 @@ def hemisphere_terms(scene: Scene, world: World, tracer: Tracer, texels: Texels,
 
 
 def _luminance_and_escaped(sums: np.ndarray) -> np.ndarray:
-    """(k, 2) summed luminance of R·ρ and escaped rays, from sums (k, 9)."""
+    """(k, 2) summed luminance of R·ρ and escaped rays, from sums (k, 7)."""
     return np.column_stack([sums[:, _RGB] @ LUMINANCE, sums[:, _ESCAPED]])
 
 
@@ -730,16 +726,15 @@ _MEAN_ROWS = 1 << 16  # texels ``_means`` works on at once
 
 
 def _means(sums: np.ndarray, counts: np.ndarray) -> Terms:
-    """Terms from per-texel sums (k, 9) over ``counts`` (k,) rays, ``_MEAN_ROWS`` rows at a time
-    (the splits' temporaries for every texel at once would be larger than the terms)."""
+    """Terms from per-texel sums (k, 7) over ``counts`` (k,) rays, ``_MEAN_ROWS`` rows at a time
+    (the split's temporaries for every texel at once would be larger than the terms)."""
     means = np.empty((len(counts), _HALF.start))
-    first_half, first_quarter = np.empty((len(counts), 2)), np.empty((len(counts), 2))
+    first_half = np.empty((len(counts), 2))
     for start in range(0, len(counts), _MEAN_ROWS):
         rows = slice(start, start + _MEAN_ROWS)
         part, count = sums[rows], counts[rows]
         means[rows] = part[:, :_HALF.start] / np.maximum(count, 1)[:, None]
-        half, quarter = count // 2, count // 4
-        first_half[rows] = _split(part[:, _HALF], half, _luminance_and_escaped(part), count)
-        first_quarter[rows] = _split(part[:, _QUARTER], quarter, part[:, _HALF], half)
+        first_half[rows] = _split(part[:, _HALF], count // 2, _luminance_and_escaped(part),
+                                  count)
     return Terms(w_hit=means[:, _RGB], escaped=means[:, _ESCAPED], hit_sq=means[:, _SQUARE],
-                 counts=counts, half_split=first_half, quarter_split=first_quarter)
+                 counts=counts, half_split=first_half)

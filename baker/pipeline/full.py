@@ -124,7 +124,7 @@ class Computed:
 
     def obscurance_rmse(self) -> float:
         """RMSE of the luminance of I_A·W estimated from the rays (``Terms.rmse``)."""
-        return self.tally.obscurance_rmse(self.settings.sampling) * float(
+        return self.tally.obscurance_rmse() * float(
             self.ambient.intensity @ LUMINANCE)
 
     def rmse_estimate(self) -> float:

@@ -110,7 +110,7 @@ class Tally:
     """What the report needs of every texel, added up part by part (``add``).
 
     texels: how many; rays: obscurance rays cast; shadow_rays: shadow and sky rays cast;
-    states: texels in each validity state, by name; split_squares: (2,) ``Terms.split_squares``
+    states: texels in each validity state, by name; split_square: ``Terms.split_square``
     summed; direct_variance: the sum over texels of the variance of D's luminance; with
     ``--method gi``, indirect_variance the same of E_ind's, the paths' rays (gi_rays) and the
     paths cut at ``gi.MAX_BOUNCES`` (gi_capped); ambient_squares: the sum over texels of the
@@ -121,7 +121,7 @@ class Tally:
     rays: int = 0
     shadow_rays: int = 0
     states: dict[str, int] = field(default_factory=lambda: dict.fromkeys(STATE_NAMES, 0))
-    split_squares: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    split_square: float = 0.0
     direct_variance: float = 0.0
     indirect_variance: float = 0.0
     gi_rays: int = 0
@@ -135,7 +135,7 @@ class Tally:
         I_A (3,), for ``ambient_squares``)."""
         self.texels += len(terms.counts)
         self.rays += terms.rays
-        self.split_squares = self.split_squares + terms.split_squares(r_ave)
+        self.split_square += terms.split_square(r_ave)
         if intensity is not None:
             self.ambient_squares += float(np.sum(((terms.obscurance(r_ave) * intensity)
                                                   @ LUMINANCE) ** 2))
@@ -149,9 +149,9 @@ class Tally:
         for name, count in validity.counts().items():
             self.states[name] += count
 
-    def obscurance_rmse(self, technique: str) -> float:
+    def obscurance_rmse(self) -> float:
         """``Terms.rmse`` over every texel (of W's luminance, R_ave as in ``add``)."""
-        return rmse_of(self.split_squares, self.texels, technique)
+        return rmse_of(self.split_square, self.texels)
 
 
 class PerTexel:

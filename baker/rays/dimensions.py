@@ -9,7 +9,10 @@ lights or bounces.
 The numbers come from three streams, whose hashes never take the same words:
 
 - ``sobol``: ``sampling.sample_2d`` / ``fill_points``, Owen-scrambled points whose scrambles are
-  ``hash4(seed, key, dimension, j)`` with j = 0, 1, 2 (and jitters ``hash4(·, sample, ·, 3 or 4)``).
+  ``hash4(seed, key, dimension, j)`` with j = 0, 1, 2 (and jitters ``hash4(·, sample, ·, 3 or 4)``);
+  a texel's second net, or an adaptive round's, from sample f takes the word
+  ``sampling.net_word(dimension, f)`` = dimension + f·2³² in place of the dimension (f > 0:
+  above every dimension of this table).
 - ``uniform``: ``hash4(seed, key, sample, dimension)`` (``hemisphere._uniform``), one number per
   ray; its dimensions start above 4, so its last word never equals a ``sobol`` scramble's j.
 - ``ray``: the alpha-blend coin, a hash of the ray's own float32 bits and its continuation step

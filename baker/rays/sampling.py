@@ -8,7 +8,11 @@ Three techniques (``TECHNIQUES``), all pure functions of those four numbers:
 - ``sobol`` (default): the first two dimensions of the Sobol sequence (a (0, 2)-sequence in
   base 2), Owen-scrambled per texel with the hash of Burley, "Practical Hash-based Owen
   Scrambling" (JCGT 2020); the sample index is Owen-scrambled too, so every texel walks its own
-  permutation of a Sobol net. Error falls faster than 1/sqrt(N) on smooth integrands.
+  permutation of a Sobol net. Error falls faster than 1/sqrt(N) on smooth integrands. A
+  texel's N samples are two such nets, independently scrambled (the first ⌊N/2⌋ and the rest),
+  and each adaptive round's batch a net of its own (``fill_points``): like the stratified
+  grid's two layers, independent halves make the error measurable without a model of how it
+  falls (``hemisphere.Terms.rmse``, ``direct.mean_and_variance``).
 - ``stratified``: a jittered grid of ⌊N/2⌋ cells (rows × columns, as square as N allows) laid
   twice: the first half of the texel's N samples puts one point in every cell and so does the
   second, independently (an odd last sample is independent). Two samples per stratum are what
@@ -197,22 +201,45 @@ def point(technique, sample, count, scrambles):
     return _hashed_point(technique, sample, sample, cells, columns, shuffle, sx, sy)
 
 
+REPLICA = 1 << 32  # the net of a dimension d's samples from sample f on: scrambles of word
+# d + f·REPLICA (``net_word``; no dimension reaches 2^32)
+
+
+@jit
+def net_word(dimension, start):
+    """The scramble word of the ``sobol`` net of ``dimension``'s samples that starts at sample
+    ``start`` (``fill_points``): the dimension itself for the net from sample 0."""
+    return _U64(dimension) + _U64(start) * _U64(REPLICA)
+
+
 @jit
 def fill_points(technique, seed, keys, first, count, dimension, u, v):
     """Samples ``first`` … ``first + count − 1`` of every texel in ``keys`` (k,) into ``u``, ``v``
-    (k·count,), texel-major, as ``point`` gives them; for ``stratified`` these samples form one
-    grid of their own (``_grid(count)``).
+    (k·count,), texel-major; for ``stratified`` these samples form one grid of their own
+    (``_grid(count)``), as ``point`` gives them.
+
+    ``sobol``: independent scrambled nets, so that the error of a texel's mean can be measured
+    from its halves (``hemisphere.Terms.rmse``, ``direct.mean_and_variance``): from
+    ``first`` = 0, samples 0 … ⌊count/2⌋ − 1 are the first points of one net and the rest the
+    first points of another; from ``first`` > 0 (an adaptive round) the ``count`` samples are
+    one net. The net that starts at sample f takes the scrambles of ``net_word(dimension, f)``
+    (``point`` with a net's own sample numbers gives its points). One net's halves would be
+    anti-correlated, and no estimate from them holds on every integrand.
 
     The technique is chosen once per texel, outside the inner loop, so that the compiler
     vectorises the Sobol case.
     """
     cells, columns = _grid(count)
+    split = first if first > 0 else count // 2  # where the (second) net starts
     for i in range(len(keys)):
         shuffle, sx, sy = texel_scrambles(seed, keys[i], dimension)
         base = i * count - first
         if technique == 0:
-            for s in range(first, first + count):
+            for s in range(first, split):  # the first net, from sample 0 (word ``dimension``)
                 u[base + s], v[base + s] = _sobol_point(s, shuffle, sx, sy)
+            shuffle, sx, sy = texel_scrambles(seed, keys[i], net_word(dimension, split))
+            for s in range(split, first + count):
+                u[base + s], v[base + s] = _sobol_point(s - split, shuffle, sx, sy)
         else:
             for s in range(first, first + count):
                 u[base + s], v[base + s] = _hashed_point(technique, s, s - first, cells, columns,
@@ -244,24 +271,16 @@ def sample_2d(seed: int, keys: np.ndarray, samples: np.ndarray, dimension: int,
     return out
 
 
-REPLICA = 1 << 32  # replica r of a dimension d draws from the scrambles of word d + r·REPLICA
-
-
 def split_samples(seed: int, keys: np.ndarray, n: int, dimension: int) -> np.ndarray:
-    """(k, n, 2) points for ``n`` samples of each of the (k,) ``keys`` in two independent
-    replicas: samples 0 … ⌈n/2⌉ − 1 are the first points of ``dimension``'s scrambled Sobol
-    sequence (``sample_2d``), samples ⌈n/2⌉ … n − 1 the first points of another scramble
-    (word ``dimension + REPLICA``; no dimension reaches 2^32). Each half is stratified in
-    itself (a net when its size is a power of two) and the halves are independent, so
-    the difference of their means measures the error of the whole mean without bias
-    (``direct.mean_and_variance``); a single net's halves are anti-correlated and would not.
-    n = 1 gives sample 0 of ``dimension``, as ``sample_2d`` does."""
-    keys = np.asarray(keys, np.uint64).reshape(-1, 1)
-    first = (n + 1) // 2
-    halves = [sample_2d(seed, keys, np.arange(first)[None, :], dimension)]
-    if n > first:
-        halves.append(sample_2d(seed, keys, np.arange(n - first)[None, :], dimension + REPLICA))
-    return np.concatenate(halves, axis=1)
+    """(k, n, 2) ``sobol`` points for ``n`` samples of each of the (k,) ``keys``, as
+    ``fill_points`` draws them from sample 0: two independent nets, samples 0 … ⌊n/2⌋ − 1 and
+    ⌊n/2⌋ … n − 1, so that the difference of their means measures the error of the whole mean
+    without bias (``direct.mean_and_variance``). n = 1 gives sample 0 of ``dimension``, as
+    ``sample_2d`` does."""
+    keys = np.ascontiguousarray(np.asarray(keys, np.uint64).reshape(-1))
+    u, v = np.empty(len(keys) * n), np.empty(len(keys) * n)
+    fill_points(0, _U64(seed), keys, 0, n, _U64(dimension), u, v)
+    return np.stack([u, v], axis=1).reshape(len(keys), n, 2)
 
 
 @jit

@@ -17,7 +17,6 @@ from baker.light.hemisphere import (
     _COLUMNS,
     _ESCAPED,
     _HALF,
-    _QUARTER,
     _RGB,
     _SHIFT,
     _SQUARE,
@@ -36,7 +35,7 @@ from baker.settings import Resolved
 def ray_changes(surfaces: Surfaces, settings: Resolved, target: np.ndarray,
                 sample: np.ndarray, before: LocalHits, after: LocalHits,
                 count: int) -> np.ndarray:
-    """(count, 9) what some rays' change adds to their texels' sums (``_accumulate_kernel``'s
+    """(count, 7) what some rays' change adds to their texels' sums (``_accumulate_kernel``'s
     columns, exact): rays of no mirror, glass or translucent surface (``Surfaces.special``),
     ray j being sample ``sample[j]`` (m,) of texel ``target[j]`` (m,) (rows 0 … count − 1),
     whose hits went from ``before`` to ``after`` (within d_max)."""
@@ -55,7 +54,7 @@ def _grid(x: np.ndarray) -> np.ndarray:
 
 
 def _sums_of(terms: Terms) -> np.ndarray:
-    """(k, 9) the sums ``_means`` made ``terms`` from (of one round of rays), worked back from
+    """(k, 7) the sums ``_means`` made ``terms`` from (of one round of rays), worked back from
     the means: each is a multiple of 2^-40 far smaller than float64's precision can tell apart,
     so rounding recovers it. ``changed_terms`` checks the result."""
     n = terms.counts.astype(np.float64)
@@ -63,10 +62,8 @@ def _sums_of(terms: Terms) -> np.ndarray:
     sums[:, _RGB] = _grid(terms.w_hit * n[:, None])
     sums[:, _ESCAPED] = _grid(terms.escaped * n)
     sums[:, _SQUARE] = _grid(terms.hit_sq * n)
-    half, quarter = terms.counts // 2, terms.counts // 4
-    sums[:, _HALF] = _part_sums(terms.half_split, half, _luminance_and_escaped(sums),
-                                terms.counts)
-    sums[:, _QUARTER] = _part_sums(terms.quarter_split, quarter, sums[:, _HALF], half)
+    sums[:, _HALF] = _part_sums(terms.half_split, terms.counts // 2,
+                                _luminance_and_escaped(sums), terms.counts)
     return sums
 
 
@@ -83,14 +80,14 @@ def _part_sums(split: np.ndarray, part: np.ndarray, whole: np.ndarray,
 
 
 def changed_terms(terms: Terms, changes: np.ndarray) -> tuple[Terms, np.ndarray]:
-    """The terms (k rows) of texels whose rays' values changed by ``changes`` (k, 9)
+    """The terms (k rows) of texels whose rays' values changed by ``changes`` (k, 7)
     (``ray_changes``), and (k,) bool: the rows whose old sums were recovered exactly (the
     others must be traced anew). ``terms``: the texels' terms from one round of rays (no
     adaptive rounds, no light through translucent surfaces)."""
     sums = _sums_of(terms)
     again = _means(sums, terms.counts)
     exact = np.ones(len(sums), bool)
-    for name in ("w_hit", "escaped", "hit_sq", "half_split", "quarter_split"):
+    for name in ("w_hit", "escaped", "hit_sq", "half_split"):
         mine, theirs = getattr(again, name), getattr(terms, name)
         same = mine == theirs
         exact &= same.all(axis=tuple(range(1, same.ndim)))

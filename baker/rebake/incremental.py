@@ -78,6 +78,7 @@ from baker.rays.sampling import (
     concentric_hemisphere,
     fill_cosine,
     fill_points,
+    net_word,
     point,
     tangent_frames,
     texel_scrambles,
@@ -420,7 +421,8 @@ def _drawn_near_rays(technique: int, seed, keys: np.ndarray, rays: int, starts: 
     ``world_rays`` folds them). Texels that cannot reach a sphere (``_reachable``) draw
     nothing. With ``sobol`` points (and ``cells``; False draws every ray, for the tests), a
     texel whose spheres subtend narrow cones draws only the rays that may lie in them
-    (``_cell_candidates``); the others' directions are drawn (``sampling.fill_points``,
+    (``_cell_candidates``, in each of the texel's two nets: ``sampling.fill_points``); the
+    others' directions are drawn (``sampling.fill_points``,
     ``fill_cosine``) a few texels at a time into small buffers, so that no (k·rays,) arrays
     are made. Either way each drawn ray meets the same test."""
     k = len(starts)
@@ -433,14 +435,17 @@ def _drawn_near_rays(technique: int, seed, keys: np.ndarray, rays: int, starts: 
     u, v = np.empty(block * rays), np.empty(block * rays)
     x, y, z = np.empty(block * rays), np.empty(block * rays), np.empty(block * rays)
     flags = np.empty(block * rays, np.bool_)
-    bits = 0
-    while (1 << bits) < rays:
-        bits += 1
+    half = rays // 2  # the texel's two nets: samples 0 … half − 1, half … rays − 1
+    sizes = np.array([half, rays - half], np.int64)
+    nets_bits = np.zeros(2, np.int64)
+    for net in range(2):
+        while (1 << nets_bits[net]) < sizes[net]:
+            nets_bits[net] += 1
     boxes, counts = np.empty((2 * spheres, 8, 4)), np.empty(2 * spheres, np.int64)
     grids = np.empty((2 * spheres, 8), np.int64)
     marks, candidates = np.zeros(rays, np.uint8), np.empty(rays, np.int64)
-    cells = cells and technique == 0 and bits <= 24  # (a point has 24 bits: ``_unit``)
-    solve = net_solve(min(bits, 24))
+    cells = cells and technique == 0 and nets_bits[1] <= 24  # (a point has 24 bits: ``_unit``)
+    solves = (net_solve(min(nets_bits[0], 24)), net_solve(min(nets_bits[1], 24)))
     texel = np.empty(k * rays, np.int64)  # room for every ray: only the pages written are
     sample = np.empty(k * rays, np.int64)  # touched, and no test to grow them slows the loops
     near = np.empty((k * rays, 3))
@@ -452,19 +457,27 @@ def _drawn_near_rays(technique: int, seed, keys: np.ndarray, rays: int, starts: 
             _mirrored_locals(t1, t2, normals, geometric, i, spheres, local, distance_sq)
             if not _reachable(local, distance_sq, radii, length):
                 continue
-            found = -1
-            if cells:
-                scrambles = texel_scrambles(seed, keys[i], np.uint64(0))
-                found = _cell_candidates(local, distance_sq, radii, length, rays, bits,
-                                         scrambles, solve, boxes, counts, grids, marks,
-                                         candidates)
+            found = 0 if cells else -1
+            for net in range(2 if cells else 0):  # each net's candidates, then their points
+                if sizes[net] == 0:
+                    continue
+                start = 0 if net == 0 else half
+                scrambles = texel_scrambles(seed, keys[i], net_word(OBSCURANCE, start))
+                got = _cell_candidates(local, distance_sq, radii, length, sizes[net],
+                                       nets_bits[net], scrambles, solves[net], boxes, counts,
+                                       grids, marks, candidates[found:])
+                if got < 0:
+                    found = -1
+                    break
+                for c in range(found, found + got):
+                    pu, pv = point(0, candidates[c], sizes[net], scrambles)
+                    x[c], y[c], z[c] = concentric_hemisphere(pu, pv)
+                    candidates[c] += start
+                found += got
             if found < 0:  # drawn with the block's other texels, below
                 todo[count], todo_keys[count] = i, keys[i]
                 count += 1
                 continue
-            for c in range(found):
-                pu, pv = point(0, candidates[c], rays, scrambles)
-                x[c], y[c], z[c] = concentric_hemisphere(pu, pv)
             if not _near_flags(x, y, z, 0, found, local, distance_sq, radii, length, flags):
                 continue
             for r in range(found):

@@ -41,7 +41,6 @@ _PER_TEXEL = {
               "hit_sq": ("<f8", (), False, 0.0, None),
               "counts": ("<i8", (), False, 0, None),
               "half_split": ("<f8", (2,), False, None, None),
-              "quarter_split": ("<f8", (2,), False, None, None),
               "chain_rays": ("<i8", (), True, 0, None),
               "capped": ("<i8", (), True, 0, None),
               "through_hit": ("<f8", (3,), True, None, None),
