@@ -33,19 +33,27 @@ from __future__ import annotations
 
 import importlib
 
-from baker.errors import BakerError, InputError, OutputError, SettingsError
-from baker.settings import Settings
-
 __all__ = ["bake", "BakeResult", "Settings", "BakerError", "InputError", "OutputError",
            "SettingsError"]
 __version__ = "0.1.0"
 
+_LIGHT = {"Settings": "baker.settings", "BakerError": "baker.errors",
+          "InputError": "baker.errors", "OutputError": "baker.errors",
+          "SettingsError": "baker.errors"}
+"""Public names of modules that import no more than the standard library's small modules."""
+
 
 def __getattr__(name: str):
-    """``bake``, ``BakeResult`` and the subpackages, imported on first use (after ``import
-    baker``, ``baker.preview.render(baker.gltf.load.load(...))`` works): ``import baker`` stays
-    light (numpy, numba, Embree are loaded by the first bake), so that the command line can say
-    "interrupted" for a Ctrl-C while they load (``cli.main.entry``)."""
+    """The public names and the subpackages, imported on first use: ``import baker`` runs
+    nothing, so that the command line sets its Ctrl-C handler (``baker.cli``) before anything
+    else of baker loads. ``Settings`` and the errors come from their small modules; ``bake``,
+    ``BakeResult`` and any subpackage (after ``import baker``,
+    ``baker.preview.render(baker.gltf.load.load(...))`` works) load the whole pipeline first,
+    as ``import baker`` once did (numpy, numba, Embree: most of a second)."""
+    if name in _LIGHT:
+        return getattr(importlib.import_module(_LIGHT[name]), name)
+    if name.startswith("__"):  # dunder lookups (copy, pickle, pydoc): none of ours
+        raise AttributeError(f"module 'baker' has no attribute {name!r}")
     api = importlib.import_module("baker.api")  # the whole pipeline, as ``import baker`` was
     if name in ("bake", "BakeResult"):
         return getattr(api, name)

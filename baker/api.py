@@ -184,7 +184,8 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
     loading: dict[str, float] = {}
     log = StageLines(not quiet)
     with timed(loading, "load"), log.stage("load"):
-        scene = load(input_path, settings.mirror_roughness, settings.animated)
+        scene = load(input_path, settings.mirror_roughness, settings.animated,
+                     settings.allow_hard_links)
     check_input_kept(scene, output, overwrite)
     with ThreadPoolExecutor(1) as beside, CompileClock() as compiling, \
             cluster.session(settings.cluster, settings.threads, cluster_identity) as on_cluster:

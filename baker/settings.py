@@ -32,6 +32,12 @@ INSTALL_FIX = ('pip install "baker[denoise]" (or pip install ".[denoise]" from a
                'baker), or leave out --denoise')
 
 
+MAX_TOTAL_RAYS = 10 ** 10
+"""``Settings.max_total_rays`` by default: 10¹⁰ rays, about half an hour at the 5 M rays/s of
+Embree on 2 cores (an 8192² page at 64 rays a texel is 4.3·10⁹); a scene of 3 KB can otherwise
+ask for years (100,000 lights × 16 shadow rays on each texel)."""
+
+
 @dataclass(frozen=True)
 class Settings:
     """What the user asks for. Lengths in scene units (metres for glTF).
@@ -116,6 +122,13 @@ class Settings:
         and shaded by them in closed form (light/foliage.py).
     foliage_density: αρ (per cubic world unit) of every crown in ``foliage`` "approx" whose
         node's extras give none; None fits it to a few traced texels.
+    allow_hard_links: read files a ``.gltf`` names that have other names too (hard links); by
+        default they are refused, as a link to a file outside the scene's folder would be
+        read (gltf/files.py).
+    max_total_rays: the most rays one bake may cast: its texels × their rays (obscurance,
+        direct light, GI paths, validity probes), checked once the texels are known and before
+        any ray is cast; a bake that would need more is refused with its figures
+        (``pipeline.full.check_ray_budget``). Raise it for a larger bake.
     escape: what obscurance rays that meet nothing within d_max count: "scene" (R_ave, the
         scene's mean albedo: the rest of a closed level), "white" (a neutral environment; with
         no punctual light or sky, I_A = 1), or "auto" (white for an open scene without lights,
@@ -166,6 +179,8 @@ class Settings:
     escape: str = "auto"
     animated: str = "bake"
     uv: int | None = None
+    max_total_rays: int = MAX_TOTAL_RAYS
+    allow_hard_links: bool = False
 
     def check(self) -> None:
         """Raise SettingsError for a value that cannot work, saying which values can."""
@@ -188,7 +203,8 @@ class Settings:
                     "chunk_texels": (self.chunk_texels, 1), "padding": (self.padding, 0),
                     "threads": (self.threads, 0), "seed": (self.seed, 0),
                     "shadow_rays": (self.shadow_rays, 1), "emissive_rays": (self.emissive_rays, 1),
-                    "sky_rays": (self.sky_rays, 1), "supersample": (self.supersample, 1)}
+                    "sky_rays": (self.sky_rays, 1), "supersample": (self.supersample, 1),
+                    "max_total_rays": (self.max_total_rays, 1)}
         for name, (value, low) in integers.items():
             if int(value) != value or value < low:
                 raise SettingsError(f"{name} must be a whole number of at least {low}, not {value}",

@@ -124,6 +124,26 @@ def test_a_buffer_outside_the_scenes_folder_is_refused(case, capsys, spelling):
     case.assert_no_secret()
 
 
+@pytest.mark.parametrize("kind", ["buffer", "image"])
+def test_a_hard_link_to_a_file_outside_the_folder_is_refused_unless_allowed(case, capsys, kind):
+    """A file inside the folder that is a hard link to the decoy beside it (the same inode: the
+    resolved-path rule cannot see it) is refused, naming it and the setting; nothing of the
+    decoy reaches an output. With ``--allow-hard-links`` the same scene bakes, as a copy does."""
+    link = case.folder / ("linked.bin" if kind == "buffer" else "linked.png")
+    os.link(case.root / ("secret.bin" if kind == "buffer" else "secret.png"), link)
+    if kind == "buffer":
+        case.json["buffers"][0]["uri"] = link.name
+    else:
+        case.with_texture(link.name)
+    code, err = case.bake(capsys)
+    assert code == 1, err
+    where = "buffers[0].uri" if kind == "buffer" else "images[0].uri"
+    case.assert_refused(err, where, link.name, "2 names", "--allow-hard-links")
+    case.assert_no_secret()
+    code, err = case.bake(capsys, "--allow-hard-links")
+    assert code == 0, err
+
+
 @pytest.mark.parametrize("slot", ["baseColorTexture", "normalTexture"])
 @pytest.mark.parametrize("spelling", ESCAPES)
 def test_an_image_outside_the_scenes_folder_is_refused(case, capsys, spelling, slot):
@@ -674,6 +694,39 @@ def test_importing_baker_loads_no_pipeline():
     assert out.stdout.strip() == "[]", out
 
 
+def _started_as(tmp_path, name: str, ignore_sigint: bool = False):
+    """A process that starts as the ``baker`` console script does, from a file named ``name``,
+    and gets a Ctrl-C once ``baker.cli`` is imported, before the rest of the command line is:
+    its exit code and stderr."""
+    import signal
+    import subprocess
+    import sys
+
+    script = tmp_path / name
+    script.write_text("import os, signal, sys\nimport baker.cli\n"
+                      "os.kill(os.getpid(), signal.SIGINT)  # Ctrl-C while the rest loads\n"
+                      "from baker.cli.main import entry\nsys.exit(entry())\n")
+    root = Path(__file__).resolve().parents[1]
+    done = subprocess.run(
+        [sys.executable, str(script), "--version"], cwd=root, capture_output=True, text=True,
+        env=dict(os.environ, PYTHONPATH=str(root)),
+        preexec_fn=(lambda: signal.signal(signal.SIGINT, signal.SIG_IGN)) if ignore_sigint else None)
+    return done.returncode, done.stderr
+
+
+def test_ctrl_c_while_the_command_line_loads_exits_130_with_one_line(tmp_path):
+    """From the moment ``baker.cli`` is imported (the first of baker the command runs, as
+    ``import baker`` runs nothing) a Ctrl-C exits 130 with the one line, before ``entry``'s own
+    handler; a program named otherwise that imports ``baker.cli`` keeps Python's handler (a
+    KeyboardInterrupt), and a command started with SIGINT ignored keeps ignoring it."""
+    code, err = _started_as(tmp_path, "baker")
+    assert (code, err) == (130, "baker: interrupted; no output was changed\n")
+    code, err = _started_as(tmp_path, "other_program.py")
+    assert code != 0 and "KeyboardInterrupt" in err
+    code, err = _started_as(tmp_path, "baker", ignore_sigint=True)
+    assert code == 0 and err == "", err
+
+
 # ------------------------------------------------------------------------------------------------
 # baker watch: every file the scene uses
 
@@ -706,6 +759,38 @@ def test_watch_rebakes_when_the_bin_or_an_image_alone_changes(case):
     finally:
         watchdog.cancel()
         child.kill()
+
+
+def test_a_bake_beyond_its_ray_budget_is_refused_before_any_ray(case, capsys, tmp_path):
+    """A few bytes a light in the JSON multiply every texel's rays (a 3 KB file can ask for
+    years): the bake's texels × rays a texel is checked against ``max_total_rays`` before any
+    ray. Refused: exit 1 with the figures (texels, the rays of each, the lights); the figures
+    are the bake's own (the report of the same bake allowed counts as many texels), and a
+    budget of exactly that many rays bakes while one ray less is refused."""
+    import re
+
+    lights = 300
+    case.json.setdefault("extensionsUsed", []).append("KHR_lights_punctual")
+    case.json["extensions"] = {"KHR_lights_punctual": {"lights": [
+        {"type": "point", "intensity": 1.0}] * lights}}
+    first = len(case.json["nodes"])
+    case.json["nodes"] += [{"translation": [0.01 * i, 1.0, 0.0],
+                            "extensions": {"KHR_lights_punctual": {"light": i}}}
+                           for i in range(lights)]
+    case.json["scenes"][0]["nodes"] += list(range(first, first + lights))
+    code, err = case.bake(capsys, "--max-total-rays", "1000")
+    assert code == 1, err
+    case.assert_refused(err, "max_total_rays", f"{lights} lights", "--max-total-rays")
+    texels, per_texel = (int(x.replace(",", "")) for x in
+                         re.search(r"([\d,]+) texels × ([\d,]+) rays each", err).groups())
+    assert per_texel == 2 + lights + 36  # --rays 2, a hard shadow ray a light, the probes
+    code, err = case.bake(capsys, "--max-total-rays", str(texels * per_texel - 1))
+    assert code == 1 and "max_total_rays" in err, err
+    report = tmp_path / "report.json"
+    code, err = case.bake(capsys, "--max-total-rays", str(texels * per_texel), "--report",
+                          str(report))
+    assert code == 0, err
+    assert json.loads(report.read_text())["texels"] == texels
 
 
 @pytest.mark.parametrize("accessors, count", [(6, 1 << 25), (1, 1 << 27)])

@@ -30,7 +30,7 @@ LAYERS = (
     ("baker.rebake",),  # the bake state, what changed, the incremental rebake
     ("baker.api", "baker.preview", "baker.study", "baker.view"),  # what a user calls
     ("baker",),  # the package's public names (its __init__)
-    ("baker.cli",),  # the command line, a user of those names
+    ("baker.cli", "baker.__main__"),  # the command line, a user of those names; python -m baker
 )
 
 

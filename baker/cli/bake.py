@@ -7,6 +7,7 @@ import dataclasses
 from pathlib import Path
 
 import baker
+import baker.settings
 from baker.cli.common import add_debug, exit_code, positive_float
 from baker.cli.state import add_state_options, print_rebake, state_arguments
 
@@ -183,6 +184,12 @@ def add_parser(commands) -> None:
     out.add_argument("--report", type=Path, metavar="FILE",
                      help="write a JSON report: settings used, plan, stage times, rays/s")
     running = bake.add_argument_group("running")
+    running.add_argument("--allow-hard-links", action="store_true",
+                         help="read files the scene names that have other names too (hard "
+                              "links; refused by default: one may be outside its folder)")
+    running.add_argument("--max-total-rays", type=int, default=d.max_total_rays, metavar="N",
+                         help="refuse, before any ray, a bake that would cast more rays than N "
+                              "(texels × rays a texel; default %(default).0e)")
     running.add_argument("--threads", type=int, default=d.threads,
                          help="ray-casting threads (default: one per core)")
     add_cluster_option(running)

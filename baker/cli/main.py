@@ -18,6 +18,7 @@ from contextlib import contextmanager
 from typing import Iterator
 
 import baker
+from baker.cli import INTERRUPTED, started
 
 SUBCOMMANDS = ("bake", "rebake", "relight", "watch", "hook", "preview", "view", "study")
 
@@ -77,7 +78,7 @@ def main(argv: list[str] | None = None) -> int:
         sys.stderr.close()
         return 0
     except KeyboardInterrupt:
-        print("baker: interrupted; no output was changed", file=sys.stderr)
+        print(INTERRUPTED, file=sys.stderr)
         return 130
     except Terminated:
         print("baker: terminated; the bake under way, if any, changed no output", file=sys.stderr)
@@ -94,14 +95,16 @@ def main(argv: list[str] | None = None) -> int:
 def entry() -> int:
     """The ``baker`` command: ``main`` on the process's arguments. A Ctrl-C while the pipeline's
     modules are imported (by the subcommand that runs: numpy, numba and Embree take most of a
-    second) exits 130 with one line, as one during the bake does. Once ``main`` has returned, a second Ctrl-C (an
-    impatient user presses it twice) has nothing left to stop: it is ignored while Python waits
+    second) exits 130 with one line, as one during the bake does (before, while the command line
+    loads, ``baker.cli``'s handler does the same). Once ``main`` has returned, a second Ctrl-C
+    (an impatient user presses it twice) has nothing left to stop: it is ignored while Python waits
     for the worker threads to end their chunk, rather than printing a traceback from the
     interpreter's shutdown."""
+    started()
     try:
         return main()
     except KeyboardInterrupt:
-        print("baker: interrupted; no output was changed", file=sys.stderr)
+        print(INTERRUPTED, file=sys.stderr)
         return 130
     finally:
         signal.signal(signal.SIGINT, signal.SIG_IGN)

@@ -14,8 +14,12 @@ percent-decoded once (glTF 2.0 §3.3.2: URIs are RFC 3986 references) and then:
   refused unless it is a regular file (no FIFO, socket or device such as ``/dev/zero``);
 - read for at most ``limit`` bytes, its size checked against ``limit`` first.
 
-A hard link inside the folder to a file elsewhere is indistinguishable from the file itself; the
-folder's owner made it.
+- refused when it has other names (hard links, ``st_nlink`` > 1), unless the bake allows them
+  (``Settings.allow_hard_links``): a hard link inside the folder to a file elsewhere (a key, a
+  secret of another user's, made by whoever could write to the folder) is the file itself, and
+  where its other names are cannot be known (Linux keeps no list of them). Files that git,
+  exporters and copies make have one name; deduplicating stores (``cp -al``, rsync
+  ``--link-dest``, some package caches) make several.
 """
 
 from __future__ import annotations
@@ -62,10 +66,12 @@ def inside(uri: str, folder: Path, file: str, where: str) -> Path:
     return Path(target)
 
 
-def read_inside(uri: str, folder: Path, limit: int, file: str, where: str) -> bytes:
+def read_inside(uri: str, folder: Path, limit: int, file: str, where: str,
+                hard_links: bool = False) -> bytes:
     """At most ``limit`` bytes of the regular file inside ``folder`` that the relative ``uri``
     names (see the module's docstring); an ``InputError`` naming ``where`` and the URI when it
-    is outside the folder, missing, not a regular file or unreadable."""
+    is outside the folder, missing, not a regular file, unreadable, or (unless ``hard_links``)
+    a file with other names too."""
     target = inside(uri, folder, file, where)
     at = f"{where}.uri"
     flags = os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_BINARY", 0)
@@ -81,6 +87,12 @@ def read_inside(uri: str, folder: Path, limit: int, file: str, where: str) -> by
             kind = _KINDS.get(stat.S_IFMT(info.st_mode), "not a regular file")
             raise InputError(f'"{uri}" is {kind} ({target}), not a regular file: baker reads '
                              "only regular files", file=file, where=at, fix=_KEEP)
+        if info.st_nlink > 1 and not hard_links:
+            raise InputError(f'"{uri}" ({target}) is a file with {info.st_nlink} names (hard '
+                             "links): another may be outside the scene's folder, which cannot be "
+                             "known, so baker reads only files with one name", file=file, where=at,
+                             fix="copy the file into the folder (cp, not ln), or bake with "
+                                 "--allow-hard-links if every name it has is yours")
         stream = open(descriptor, "rb", buffering=0, closefd=False)
         with stream:
             return _read_at_most(stream, min(info.st_size, limit), uri, target, file, at)

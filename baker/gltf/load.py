@@ -199,6 +199,7 @@ class _Context:
     buffers: list[bytes]
     file: str
     folder: Path
+    hard_links: bool = False  # files with several names may be read (``files.read_inside``)
     skipped: list[Skipped] = field(default_factory=list)
     decoded: dict[int, np.ndarray] = field(default_factory=dict)  # image index → (h, w, 4) uint8
 
@@ -214,7 +215,7 @@ class _Context:
 
 
 def load(path: str | Path, mirror_roughness: float = MIRROR_ROUGHNESS,
-         animated: str = "bake") -> Scene:
+         animated: str = "bake", hard_links: bool = False) -> Scene:
     """Read a ``.gltf`` or ``.glb`` file into a ``Scene`` (see ``baker.gltf.scene``).
 
     Geometry stays in each mesh's local space (glTF units, metres); ``Instance.world`` is the
@@ -225,15 +226,16 @@ def load(path: str | Path, mirror_roughness: float = MIRROR_ROUGHNESS,
     of their node or of an ancestor): "bake" them in their rest pose with a warning, keep them
     as "occlude"rs only (rest pose, no texels), or "skip" them (no instance at all: neither
     baked nor casting shadows); each is listed with its reason in ``Scene.skipped``.
+    ``hard_links``: read files the URIs name that have other names too (``files.read_inside``).
     """
     path = Path(path)
     document = read_document(path)
-    buffers = resolve_buffers(document, path)
+    buffers = resolve_buffers(document, path, hard_links)
     kept = None
     if compressed(document):
         document, buffers = decompressed(document, buffers, str(path))
         kept = tuple(buffers)
-    ctx = _Context(document, buffers, str(path), path.parent)
+    ctx = _Context(document, buffers, str(path), path.parent, hard_links)
     materials = _read_materials(ctx)
     placements = _walk_nodes(ctx)
     images = _images(ctx)
@@ -252,6 +254,7 @@ def load(path: str | Path, mirror_roughness: float = MIRROR_ROUGHNESS,
         lights=lights,
         mirror_roughness=float(mirror_roughness),
         buffers=kept,
+        hard_links=hard_links,
     )
 
 
@@ -539,11 +542,12 @@ def _unsupported_kind(name: str) -> str:
 # Buffers and URIs
 
 
-def resolve_buffers(document: pygltflib.GLTF2, path: str | Path) -> list[bytes]:
+def resolve_buffers(document: pygltflib.GLTF2, path: str | Path,
+                    hard_links: bool = False) -> list[bytes]:
     """The bytes of every ``document.buffers[i]``, exactly ``byteLength`` of them.
 
     A buffer without ``uri`` is the GLB binary chunk; a ``data:`` URI is decoded; any other URI is
-    a file path relative to the folder of ``path``, percent-decoded.
+    a file path relative to the folder of ``path``, percent-decoded (``hard_links``: as ``load``).
     """
     path = Path(path)
     file = str(path)
@@ -552,11 +556,12 @@ def resolve_buffers(document: pygltflib.GLTF2, path: str | Path) -> list[bytes]:
     for i, buffer in enumerate(document.buffers):
         where = f"buffers[{i}]"
         with _schema(file, where):
-            out.append(_buffer_bytes(buffer, blob if i == 0 else None, path, where))
+            out.append(_buffer_bytes(buffer, blob if i == 0 else None, path, where, hard_links))
     return out
 
 
-def _buffer_bytes(buffer: pygltflib.Buffer, blob: bytes | None, path: Path, where: str) -> bytes:
+def _buffer_bytes(buffer: pygltflib.Buffer, blob: bytes | None, path: Path, where: str,
+                  hard_links: bool) -> bytes:
     """The ``byteLength`` bytes of one buffer: ``blob`` (GLB binary chunk) when it has no uri; of
     a file, at most ``byteLength`` bytes are read (``scene_files.read_inside``)."""
     file = str(path)
@@ -573,7 +578,7 @@ def _buffer_bytes(buffer: pygltflib.Buffer, blob: bytes | None, path: Path, wher
             raise _invalid("buffer has no uri and the file has no GLB binary chunk for it", file, where)
         data = blob
     else:
-        data = _read_uri(buffer.uri, path.parent, file, where, length)
+        data = _read_uri(buffer.uri, path.parent, file, where, length, hard_links)
     if len(data) < length:
         raise InputError(
             f"buffer holds {len(data)} bytes but its byteLength is {length}",
@@ -584,12 +589,13 @@ def _buffer_bytes(buffer: pygltflib.Buffer, blob: bytes | None, path: Path, wher
     return bytes(data[:length])
 
 
-def _read_uri(uri: str, folder: Path, file: str, where: str, limit: int) -> bytes:
+def _read_uri(uri: str, folder: Path, file: str, where: str, limit: int,
+              hard_links: bool) -> bytes:
     """The bytes a glTF ``uri`` points to, at most ``limit`` of a file: a data URI, or a regular
     file inside ``folder`` (``scene_files.read_inside``)."""
     if isinstance(uri, str) and uri.startswith("data:"):
         return _decode_data_uri(uri, file, where)
-    return read_inside(uri, folder, limit, file, where)
+    return read_inside(uri, folder, limit, file, where, hard_links)
 
 
 def _decode_data_uri(uri: str, file: str, where: str) -> bytes:
@@ -1001,7 +1007,8 @@ def _decode_image(ctx: _Context, index: int, extension: str | None = None) -> np
         view, _ = _buffer_view(ctx.document, ctx.buffers, image.bufferView, ctx.file, f"{where}.bufferView")
         data, label = bytes(view), f"the image in bufferViews[{image.bufferView}]"
     elif image.uri is not None:
-        data = _read_uri(image.uri, ctx.folder, ctx.file, where, MAX_IMAGE_FILE_BYTES)
+        data = _read_uri(image.uri, ctx.folder, ctx.file, where, MAX_IMAGE_FILE_BYTES,
+                         ctx.hard_links)
         label = "the embedded image" if image.uri.startswith("data:") else f'"{image.uri}"'
     else:
         raise _invalid("image has neither uri nor bufferView", ctx.file, where)
@@ -1020,7 +1027,7 @@ def _check_image_files(ctx: _Context) -> None:
         uri = image.uri
         if i in ctx.decoded or not isinstance(uri, str) or uri.startswith("data:"):
             continue
-        read_inside(uri, ctx.folder, 0, ctx.file, f"images[{i}]")
+        read_inside(uri, ctx.folder, 0, ctx.file, f"images[{i}]", ctx.hard_links)
 
 
 def _images(ctx: _Context) -> tuple[Image, ...]:

@@ -178,3 +178,6 @@ class Scene:
     # The buffers of a compressed file as decoded (decompress.py), for the writer, which reads
     # the file's buffers again otherwise (a decoded document's cannot be read from the file).
     buffers: tuple[bytes, ...] | None = None
+    # Files with several names (hard links) were allowed (a setting: files.read_inside), for the
+    # writer, which reads the buffers and image files again.
+    hard_links: bool = False

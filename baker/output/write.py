@@ -269,7 +269,8 @@ class _Builder:
         self.base = Path(scene.path).parent
         self.data = _document_data(scene.document)
         self.source_buffers = (list(scene.buffers) if scene.buffers is not None
-                               else resolve_buffers(scene.document, scene.path))
+                               else resolve_buffers(scene.document, scene.path,
+                                                    scene.hard_links))
         self.blob = bytearray()
         self._merge_buffers()
         self.source_cache: dict[int, np.ndarray] = {}
@@ -637,7 +638,8 @@ class _Builder:
             if same_folder:
                 inside(uri, self.base, str(self.scene.path), where)
                 continue
-            data = read_inside(uri, self.base, MAX_IMAGE_FILE_BYTES, str(self.scene.path), where)
+            data = read_inside(uri, self.base, MAX_IMAGE_FILE_BYTES, str(self.scene.path), where,
+                               self.scene.hard_links)
             name = image_file_name(self.output, i, uri)
             image["uri"] = quote(name)
             files.append((target / name, data))

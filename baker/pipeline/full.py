@@ -8,6 +8,7 @@ them, and gathers the report.
 
 from __future__ import annotations
 
+import math
 import os
 import time
 from contextlib import contextmanager
@@ -27,7 +28,8 @@ from baker.atlas.rasterise import (
 )
 from baker.atlas.authored import authored_atlas
 from baker.atlas.unwrap import PageTooSmall, baked_instances, frame_area, unwrap
-from baker.atlas.validity import Faces, Validity, check_texels
+from baker.atlas.validity import (HEMISPHERE_RAYS, TANGENT_RAYS, TANGENT_ROUNDS, Faces, Validity,
+                                  check_texels)
 from baker.geometry.surface import LUMINANCE
 from baker.geometry.world import World, build_world
 from baker.gltf.scene import Scene
@@ -55,6 +57,7 @@ from baker.pipeline.plan import Plan, make_plan
 from baker.rays.trace import Tracer
 from baker.run.progress import Meter, StageLines, bar, wanted
 from baker.run.spill import Spill
+from baker.errors import SettingsError
 from baker.settings import Resolved, Settings, resolve
 
 
@@ -251,6 +254,7 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True,
     spill = Spill(spill_folder) if len(part_slices(count)) > 1 else None
     baking = Baking(scene, world, resolved, lit, atlas, coverage, owned, Faces(scene, world),
                     surfaces_of(scene, world))
+    check_ray_budget(baking, count)
     if resolved.foliage == "approx":
         with timed(times, "foliage fit"), log.stage("foliage fit"):
             baking = replace(baking, foliage=prepare_foliage(
@@ -285,6 +289,45 @@ def _unwrapped(scene: Scene, world: World, settings: Settings, resolved: Resolve
     return atlas, replace(resolved, texel_density=atlas.texel_density)
 
 
+def rays_per_texel(baking: Baking) -> tuple[float, float | None, float | None]:
+    """The first estimates of rays a texel casts in each ray stage: obscurance (``rays``),
+    direct light (shadow and sky rays; None without a source) and GI paths' rays (None
+    without ``--method gi``); the progress bar's starting figures and the ray budget's."""
+    s, sources = baking.settings, baking.sources
+    direct = sources.rays_per_texel() if sources.any() else None
+    gi = s.rays * rays_per_path(sources, baking.ambient.r_ave) if s.method == "gi" else None
+    return s.rays, direct, gi
+
+
+PROBE_RAYS = HEMISPHERE_RAYS + TANGENT_RAYS * TANGENT_ROUNDS
+"""The most validity probes a texel casts (``atlas.validity``)."""
+
+
+def check_ray_budget(baking: Baking, texels: int) -> None:
+    """SettingsError, before any ray is cast, when ``texels`` × the rays each casts (obscurance
+    — up to ``max_rays`` with ``target_error`` —, direct light, GI, validity probes) exceeds
+    ``max_total_rays``: the message gives the figures and what makes them (the lights, for a
+    scene of many), the fix the setting that would allow it and what makes fewer."""
+    s, sources = baking.settings, baking.sources
+    obscurance, direct, gi = rays_per_texel(baking)
+    if s.target_error is not None:
+        obscurance = max(obscurance, s.max_rays)
+    parts = {"obscurance": obscurance, "direct light": direct or 0, "GI paths": gi or 0,
+             "validity probes": PROBE_RAYS}
+    per_texel = sum(parts.values())
+    total = texels * per_texel
+    if total <= s.max_total_rays:
+        return
+    shown = ", ".join(f"{name} {value:,.0f}" for name, value in parts.items() if value)
+    lights = (f"; the scene's {len(sources.lights):,} lights cast {int(sources.samples.sum()):,}"
+              if len(sources.lights) else "")
+    raise SettingsError(
+        f"this bake would cast about {total:.3g} rays, more than max_total_rays "
+        f"{s.max_total_rays:.3g}: {texels:,} texels × {per_texel:,.0f} rays each ({shown}"
+        f"{lights})", fix=f"use --max-total-rays {math.ceil(total):d} if the time is yours to "
+                          "spend, or fewer --rays, a lower --texel-density or fewer lights")
+
+
 @dataclass(frozen=True)
 class _Stages:
     """The progress reports ``(texels, rays)`` of a bake's ray-casting stages, registered on
@@ -299,12 +342,9 @@ class _Stages:
 
     @classmethod
     def of(cls, meter: Meter, baking: Baking, count: int) -> "_Stages":
-        s, sources = baking.settings, baking.sources
-        direct = sources.rays_per_texel() if sources.any() else None
-        gi = s.rays * rays_per_path(sources, baking.ambient.r_ave) if s.method == "gi" else None
-        stages = [None if per is None else meter.stage(count, per) for per in (s.rays, direct, gi)]
-        return cls(meter, *stages,
-                   estimates=tuple(per for per in (s.rays, direct, gi) if per is not None))
+        estimates = rays_per_texel(baking)
+        stages = [None if per is None else meter.stage(count, per) for per in estimates]
+        return cls(meter, *stages, estimates=tuple(per for per in estimates if per is not None))
 
     def whole_parts(self) -> Callable[[int], None]:
         """For parts made elsewhere (``cluster.parts``), which say only their texels when done:

@@ -35,8 +35,8 @@ from baker.gltf.scene import Scene
 from baker.rebake.state import digest
 from baker.settings import Resolved
 
-# Settings that never change the result (how the work is split).
-_NO_EFFECT = ("threads", "chunk_texels", "cluster")
+# Settings that never change the result (how the work is split, how much of it is allowed).
+_NO_EFFECT = ("threads", "chunk_texels", "cluster", "max_total_rays", "allow_hard_links")
 # Settings that only the composition, post-processing or encoding read: a recomposition.
 RECOMPOSE_SETTINGS = ("ambient", "encoding", "occlusion", "carrier", "baked_lights")
 # Settings that change the atlas.
