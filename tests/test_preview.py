@@ -13,7 +13,7 @@ from assets.make_scenes import cornell_box
 from baker.geometry.world import build_world
 from baker.gltf.load import load
 from baker.preview import View, primary_rays, render
-from baker.geometry.surface import LUMINANCE, viewer_diffuse_weight
+from baker.geometry.surface import LUMINANCE, viewer_diffuse_weight, viewer_diffuse_weight_at
 from baker.cli.main import main
 from tests.bakehelp import REAL_SCENES, saved
 
@@ -215,3 +215,34 @@ def test_command_previews_every_scene(name, cornell, small_bake, tmp_path):
     alone = render(scene, "lightmap", (96, 72)).radiance[shown] @ LUMINANCE
     spread = alone.std() / alone.mean()
     assert spread < 0.01 if name in _UNIFORM else spread > 0.05, spread
+
+
+def test_the_viewer_weight_reads_the_metallic_texture_at_texel_centres():
+    """LightsPunctualLamp's stand and shade take their metallic from a texture (blue channel,
+    linear): at points whose UV is a texel centre, the diffuse weight a viewer shades is
+    1 − metallicFactor × texel / 255 (× (1 − transmission)), whatever the texel."""
+    scene = load(REAL_SCENES["LightsPunctualLamp"])
+    world = build_world(scene)
+    textured = [m for m, material in enumerate(scene.materials)
+                if material.metallic_roughness_texture is not None]
+    assert textured
+    tris = np.flatnonzero(np.isin(world.tri_material, textured))
+    ref = scene.materials[textured[0]].metallic_roughness_texture
+    assert all(scene.materials[m].metallic_roughness_texture == ref for m in textured)
+    pixels = scene.images[ref.image].pixels
+    size = np.array(pixels.shape[1::-1], np.float64)
+    corners = world.texcoords[ref.texcoord][world.triangles[tris]]  # (k, 3, 2)
+    texel = np.floor(corners.mean(axis=1) * size)
+    centre = (texel + 0.5) / size
+    edges = np.stack([corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]], axis=2)
+    keep = (np.abs(np.linalg.det(edges)) > 1e-12) & np.all((texel >= 0) & (texel < size), axis=1)
+    st = np.linalg.solve(edges[keep], (centre - corners[:, 0])[keep][..., None])[..., 0]
+    bary = np.column_stack([1 - st.sum(axis=1), st])
+    column, row = texel[keep].astype(int).T
+    blue = pixels[row, column, 2] / 255.0
+    material = [scene.materials[m] for m in world.tri_material[tris[keep]]]
+    expected = np.array([(1 - m.metallic * b) * (1 - m.transmission)
+                         for m, b in zip(material, blue)])
+    assert len(expected) > 100 and len(np.unique(blue)) > 1
+    np.testing.assert_allclose(viewer_diffuse_weight_at(scene, world, tris[keep], bary),
+                               expected, atol=1e-9)
