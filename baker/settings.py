@@ -376,6 +376,7 @@ def resolve(settings: Settings, surface_area: float, diagonal: float) -> Resolve
             f"texel density {values['texel_density']:g} needs about {texels:.3g} lightmap texels "
             f"for {surface_area:.4g} square units of surface; one bake holds at most "
             f"{MAX_TEXELS:,} texels", fix=f"use --texel-density {_round_down(most):g} or less")
+    values["texel_density"] = float(values["texel_density"])  # one type, one fingerprint
     if values["d_max"] is None:
         values["d_max"] = settings.d_max_fraction * quarter_octave(diagonal) if diagonal > 0 else 1.0
     if values["baked_lights"] is None:
