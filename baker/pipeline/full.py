@@ -286,8 +286,6 @@ def _unwrapped(scene: Scene, world: World, settings: Settings, resolved: Resolve
             raise
         resolved = replace(resolved, texel_density=error.texel_density)  # derived: shrink it
         atlas = unwrap(scene, world, resolved, fit_one_page=True)
-    if atlas.texel_density == resolved.texel_density:  # kept as given (an int stays an int:
-        return atlas, resolved                        # the fingerprints hash its JSON)
     return atlas, replace(resolved, texel_density=atlas.texel_density)
 
 
