@@ -37,8 +37,8 @@ def _no_xatlas(monkeypatch):
     monkeypatch.setattr(unwrap_module, "call_forked_together", refuse)
 
 
-def _bake(scene, out):
-    baker.bake(scene, out, SETTINGS, state=False)
+def _bake(scene, out, settings=SETTINGS):
+    baker.bake(scene, out, settings, state=False)
     return out.read_bytes()
 
 
@@ -174,3 +174,84 @@ def test_the_unwrappers_time_limit_grows_with_the_texels_it_packs(tmp_path, monk
         _unwrapped(path, page_size=8192, texel_density=500.0, threads=1)
     texels = 100.0 * 500.0 ** 2
     assert given and given[0] >= 5.0 + 1e-5 * texels
+
+
+def _charts(place):
+    folder = place / "unwrap" / unwrap_cache.CHARTS
+    return sorted(folder.glob("*.npz")) if folder.is_dir() else []
+
+
+def _counting_charts(monkeypatch, tmp_path):
+    """From here on every mesh charted (in whichever forked child) adds a line to the file
+    returned."""
+    log = tmp_path / "charted"
+    log.write_text("")
+    real = unwrap_module._chart
+
+    def counted(mesh):
+        with open(log, "a") as out:
+            out.write(f"{len(mesh[1])}\n")
+        return real(mesh)
+
+    monkeypatch.setattr(unwrap_module, "_chart", counted)
+    return log
+
+
+def test_instances_stretched_alike_are_charted_once_and_each_gets_its_own_texels(
+        tmp_path, cache, monkeypatch):
+    """Six boxes of one unit mesh, scaled alike and turned and placed apart: one charting of
+    the box (and one of the room); each box still has its own place, about the same texels."""
+    from baker.atlas.rasterise import cover
+
+    boxes = [dict(spec, size=(0.3, 0.4, 0.5)) for spec in grid_boxes(6)]
+    path = box_room(boxes).save(tmp_path / "alike.glb")
+    log = _counting_charts(monkeypatch, tmp_path)
+    scene, world, _, atlas = _unwrapped(path, page_size=256, threads=2)
+    assert len(log.read_text().split()) == 2 and len(_charts(cache)) == 2
+    coverage = cover(atlas, world)
+    instance_of = np.searchsorted(world.tri_start, coverage.triangle, side="right") - 1
+    counts = np.bincount(instance_of, minlength=len(scene.instances))[1:]  # 0: the room
+    assert len(counts) == 6 and counts.min() > 0.9 * counts.max() > 0
+
+
+def test_a_bake_with_one_mesh_edited_charts_only_that_mesh_again(tmp_path, cache, monkeypatch):
+    """Box 2 stretched: its unwrap input is new, the room's and the other boxes' are not (at a
+    texel density given: one derived from the scene's area changes with it, and with it every
+    mesh's input); the bake's bytes are those of a bake without any cache."""
+    settings = baker.Settings(page_size=128, rays=4, shadow_rays=1, threads=1,
+                              texel_density=12.0)
+    boxes = grid_boxes(6)
+    _bake(box_room(boxes).save(tmp_path / "before.glb"), tmp_path / "before_baked.glb", settings)
+    grown = box_room(moved(boxes, "box2", size=(0.5, 0.3, 0.3))).save(tmp_path / "grown.glb")
+    with monkeypatch.context() as m:
+        log = _counting_charts(m, tmp_path)
+        cached = _bake(grown, tmp_path / "grown_baked.glb", settings)
+        assert log.read_text().split() == ["12"]  # the unit box's 12 triangles, once
+    monkeypatch.setenv("BAKER_CACHE_DIR", "off")
+    assert _bake(grown, tmp_path / "uncached.glb", settings) == cached
+
+
+def test_the_atlas_does_not_depend_on_the_cores_or_on_which_charts_were_cached(
+        tmp_path, monkeypatch):
+    """Charted by one child or by two (the meshes dealt differently), or packed from charts
+    read back from the cache: the same atlas, bit for bit."""
+    path = box_room(grid_boxes(12)).save(tmp_path / "boxes.glb")
+    monkeypatch.setenv("BAKER_CACHE_DIR", "off")
+    *_, alone = _unwrapped(path, page_size=256, threads=1)
+    monkeypatch.setattr(unwrap_module, "cores", lambda: 3)
+    *_, beside = _unwrapped(path, page_size=256, threads=3)
+    place = tmp_path / "cache"
+    monkeypatch.setenv("BAKER_CACHE_DIR", str(place))
+    _unwrapped(path, page_size=256, threads=2)
+    for entry in _entries(place):  # the whole unwrap gone: packed again from cached charts
+        entry.unlink()
+    with monkeypatch.context() as m:
+        log = _counting_charts(m, tmp_path)
+        *_, from_charts = _unwrapped(path, page_size=256, threads=2)
+        assert log.read_text() == ""
+    for other in (beside, from_charts):
+        assert (alone.width, alone.height, alone.page_count) == (
+            other.width, other.height, other.page_count)
+        for a, b in zip(alone.instances, other.instances, strict=True):
+            assert np.array_equal(a.vertices, b.vertices) and np.array_equal(a.uv, b.uv)
+            assert np.array_equal(a.triangles, b.triangles) and np.array_equal(a.pages, b.pages)

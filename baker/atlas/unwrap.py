@@ -1,9 +1,16 @@
 """Lay every baked instance out in lightmap pages with xatlas.
 
-All baked instances go into one xatlas run, so that one texel covers about 1 / texel_density
-world units everywhere and every instance of a shared mesh gets its own area. Each instance goes
-in its own rigid-free frame (``frame_positions``: local positions × the stretch part of its world
-matrix), so moving or turning a node leaves the atlas bit for bit as it was (incremental rebake).
+Two steps. Charts: each distinct mesh, in its instance's rigid-free frame (``frame_positions``:
+local positions × the stretch part of its world matrix, in texel units), is charted alone by
+xatlas (``_chart``), in forked children beside each other (one per core), each result cached by
+the mesh's content (``unwrap_cache.CHARTS``): instances of one mesh whose world matrices stretch
+it alike (the same texels per metre) share one charting, and a bake with one mesh edited charts
+only that one again. Packing: the charts of every baked instance, each instance its own copy,
+go into one xatlas run as UV meshes (``_pack``), so that one texel covers about
+1 / texel_density world units everywhere and every instance gets its own area. Both steps are
+pure functions of their input, so the atlas does not depend on the cores, the order the
+children end in, or the cache; and moving or turning a node leaves it bit for bit as it was
+(incremental rebake).
 """
 
 from __future__ import annotations
@@ -55,8 +62,12 @@ def baked_instances(scene: Scene) -> list[int]:
 
 
 def _pack_options(settings: Resolved, resolution: int) -> xatlas.PackOptions:
-    """Packing settings; positions reach xatlas in texel units, so one texel per unit."""
+    """Settings of the packing of every instance's charts (``_pack``); positions reach xatlas
+    in texel units, so one texel per unit. The charts were turned to their best axis when
+    charted (``_chart``): turned again, a chart under a texel wide would be made a texel wide
+    once more (xatlas's least chart size), and a 0.1-texel triangle would own 5 texels."""
     options = xatlas.PackOptions()
+    options.rotate_charts_to_axis = False
     options.texels_per_unit = 1.0
     options.padding = int(settings.padding)
     options.bilinear = True
@@ -134,33 +145,151 @@ class _Packed:
     meshes: tuple[tuple[np.ndarray, ...], ...]
 
 
-def _generate(scene: Scene, world: World, instances: list[int], settings: Resolved,
-              resolutions: tuple[int, ...]) -> list[_Packed]:
-    """xatlas runs over the instances' triangles in their rigid-free frames
-    (``frame_positions``), scaled to texel units, one per pack resolution of ``resolutions``:
-    each read from the cache (``unwrap_cache.py``) or run in a forked child, all at once
-    (``forked.py``: xatlas's threads can crash it, and a crashed run is run again).
+# xatlas's input for one mesh: positions (n, 3) float32 in texel units, triangles (m, 3) uint32
+_Mesh = tuple[np.ndarray, np.ndarray]
+_Charted = tuple[tuple[int, ...], tuple[np.ndarray, ...]]  # a run's header and one mesh's arrays
 
-    xatlas takes float32 and ignores faces with an area under about 1e-7 of its units; in texel
-    units only faces far below a texel's size fall under that, not merely small ones.
-    """
+
+def xatlas_meshes(scene: Scene, world: World, instances: list[int], settings: Resolved
+                   ) -> list[_Mesh]:
+    """The instances' triangles in their rigid-free frames (``frame_positions``), scaled to
+    texel units, as xatlas takes them (float32 positions, uint32 triangles).
+
+    xatlas ignores faces with an area under about 1e-7 of its units; in texel units only faces
+    far below a texel's size fall under that, not merely small ones."""
     meshes = []
     for i in instances:
         positions = frame_positions(scene, i) * settings.texel_density
         local = world.triangles[world.instance_triangles(i)] - world.vertex_start[i]
         meshes.append((positions.astype(np.float32), local.astype(np.uint32)))
+    return meshes
 
-    def run(resolution: int) -> _Packed:
-        atlas = xatlas.Atlas()
-        for positions, triangles in meshes:
-            atlas.add_mesh(positions, triangles)
-        atlas.generate(xatlas.ChartOptions(), _pack_options(settings, resolution))
-        return _Packed(width=int(atlas.width), height=int(atlas.height),
-                       atlas_count=int(atlas.atlas_count), chart_count=int(atlas.chart_count),
-                       meshes=tuple(tuple(atlas[m]) + tuple(atlas.get_mesh_vertex_assignment(m))
-                                    for m in range(len(meshes))))
 
-    names = [unwrap_cache.key(meshes, (xatlas.__version__, _options_of(xatlas.ChartOptions()),
+def _chart_options() -> tuple[xatlas.ChartOptions, xatlas.PackOptions]:
+    """xatlas's settings for charting one mesh alone: its packing only places the charts for
+    ``_pack`` to pack again, so the cheapest: no bilinear margin, and a padding of one texel,
+    which ``_pack`` needs: xatlas joins into one chart UV meshes' faces that share a UV point
+    (charts moved to share a corner packed as one, overlapping)."""
+    options = xatlas.PackOptions()
+    options.texels_per_unit = 1.0
+    options.padding = 1
+    options.bilinear = False
+    options.resolution = 0
+    options.create_image = False
+    return xatlas.ChartOptions(), options
+
+
+def _chart(mesh: _Mesh) -> _Charted:
+    """One mesh charted alone: header (width, height, pages, charts) and xatlas's (vertices,
+    triangles, uv in texel units (k, 2) float32, page and chart of each vertex)."""
+    atlas = xatlas.Atlas()
+    atlas.add_mesh(*mesh)
+    atlas.generate(*_chart_options())
+    vertices, triangles, uv = atlas[0]
+    page, chart = atlas.get_mesh_vertex_assignment(0)
+    # Vertices of faces xatlas left out sit at 0 (NaN in an atlas of no texels, 0 / 0).
+    uv = np.where((page != _NO_PAGE)[:, None],
+                  uv * np.array([atlas.width, atlas.height], np.float32), 0).astype(np.float32)
+    return ((int(atlas.width), int(atlas.height), int(atlas.atlas_count), int(atlas.chart_count)),
+            (vertices, triangles, uv, page, chart))
+
+
+def _chart_all(meshes: list[_Mesh], settings: Resolved) -> list[_Charted]:
+    """Every mesh's charts (``_chart``), in order: each distinct mesh once, from the cache or
+    charted in forked children (``forked.py``), the meshes split by triangles among one per core
+    (``settings.threads``); the split changes only who charts what, not the charts."""
+    names = [chart_name(mesh) for mesh in meshes]
+    first = {name: m for m, name in reversed(list(enumerate(names)))}  # each distinct mesh's first
+    charted: dict[str, _Charted] = {}
+    for name, m in first.items():
+        stored = unwrap_cache.read(name, 1, unwrap_cache.CHARTS)
+        if stored is not None and _fits(stored, [meshes[m]]):
+            charted[name] = (stored[0], stored[1][0])
+    missing = sorted((m for name, m in first.items() if name not in charted),
+                     key=lambda m: (-len(meshes[m][1]), m))
+    if missing:
+        groups = _balanced(missing, [len(meshes[m][1]) for m in missing],
+                           min(settings.threads or cores(), cores()))
+        limit = max(_time_limit(sum(len(meshes[m][1]) for m in group),
+                                sum(_texels(meshes[m]) for m in group)) for group in groups)
+        runs = call_forked_together(
+            [functools.partial(_chart_group, meshes, group) for group in groups],
+            "the unwrapper (xatlas)", limit)
+        for group, results in zip(groups, runs):
+            for m, result in zip(group, results):
+                charted[names[m]] = result
+                unwrap_cache.write(names[m], result[0], (result[1],), unwrap_cache.CHARTS,
+                                   prune=False)
+        unwrap_cache.prune_kind(unwrap_cache.CHARTS)
+    return [charted[name] for name in names]
+
+
+def _charting() -> tuple[object, ...]:
+    """What besides a mesh decides its charts: xatlas's version and ``_chart_options``."""
+    return (xatlas.__version__, "charts", *map(_options_of, _chart_options()))
+
+
+def chart_name(mesh: _Mesh) -> str:
+    """The cache name of one mesh's charts (``unwrap_cache.CHARTS``)."""
+    return unwrap_cache.key([mesh], _charting())
+
+
+def _chart_group(meshes: list[_Mesh], group: list[int]) -> list[_Charted]:
+    """``_chart`` of the meshes ``group`` (indices into ``meshes``), in turn (one child's)."""
+    return [_chart(meshes[m]) for m in group]
+
+
+def _balanced(items: list[int], weights: list[int], count: int) -> list[list[int]]:
+    """``items`` (heaviest first) dealt into at most ``count`` non-empty groups of about equal
+    summed ``weights``: each to the lightest group so far (the first of equals)."""
+    groups: list[list[int]] = [[] for _ in range(max(1, min(count, len(items))))]
+    loads = [0] * len(groups)
+    for item, weight in zip(items, weights):
+        k = loads.index(min(loads))
+        groups[k].append(item)
+        loads[k] += weight
+    return groups
+
+
+def _texels(mesh: _Mesh) -> float:
+    """Texels a mesh's charts cover: its area in texel units²."""
+    p = mesh[0].astype(np.float64)
+    t = mesh[1].astype(np.int64)
+    if not len(t):
+        return 0.0
+    a, b, c = p[t[:, 0]], p[t[:, 1]], p[t[:, 2]]
+    return float(0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum())
+
+
+def _pack(charted: list[_Charted], settings: Resolved, resolution: int) -> _Packed:
+    """The instances' charts packed together (each instance's own copy, as a UV mesh; xatlas
+    finds its charts again from the triangles sharing vertices) into pages of ``resolution``
+    (0: one page of the size xatlas needs). Each mesh's arrays refer to the instance's own
+    vertices: xatlas's vertex map of the packing composed with that of the charting; a vertex
+    of a face the charting left out stays without a page."""
+    atlas = xatlas.Atlas()
+    for _header, (_vertices, triangles, uv, _page, _chart) in charted:
+        atlas.add_uv_mesh(uv, triangles)
+    atlas.generate(xatlas.ChartOptions(), _pack_options(settings, resolution))
+    meshes = []
+    for m, (_header, (vertices, _triangles, _uv, page, _chart)) in enumerate(charted):
+        again, triangles, uv = atlas[m]
+        packed_page, packed_chart = atlas.get_mesh_vertex_assignment(m)
+        packed_page = np.where(page[again] == _NO_PAGE, _NO_PAGE, packed_page).astype(np.uint32)
+        meshes.append((vertices[again], triangles, uv, packed_page, packed_chart))
+    return _Packed(width=int(atlas.width), height=int(atlas.height),
+                   atlas_count=int(atlas.atlas_count), chart_count=int(atlas.chart_count),
+                   meshes=tuple(meshes))
+
+
+def _generate(scene: Scene, world: World, instances: list[int], settings: Resolved,
+              resolutions: tuple[int, ...]) -> list[_Packed]:
+    """The instances unwrapped (``_chart_all``, ``_pack``), one atlas per pack resolution of
+    ``resolutions``: each read whole from the cache (``unwrap_cache.py``) or packed in a forked
+    child, all at once (``forked.py``: xatlas's threads can crash it, and a crashed run is run
+    again)."""
+    meshes = xatlas_meshes(scene, world, instances, settings)
+    names = [unwrap_cache.key(meshes, (*_charting(),
                                        _options_of(_pack_options(settings, resolution))))
              for resolution in resolutions]
     found: list[_Packed | None] = []
@@ -170,10 +299,10 @@ def _generate(scene: Scene, world: World, instances: list[int], settings: Resolv
                      and _fits(stored, meshes) else None)
     missing = [k for k, packed in enumerate(found) if packed is None]
     if missing:
-        limit = _time_limit(sum(len(t) for _, t in meshes),
-                            frame_area(scene, world, instances) * settings.texel_density ** 2)
-        runs = call_forked_together([functools.partial(run, resolutions[k]) for k in missing],
-                                    "the unwrapper (xatlas)", limit)
+        charted = _chart_all(meshes, settings)
+        limit = _time_limit(sum(len(t) for _, t in meshes), sum(map(_texels, meshes)))
+        runs = call_forked_together([functools.partial(_pack, charted, settings, resolutions[k])
+                                     for k in missing], "the unwrapper (xatlas)", limit)
         for k, packed in zip(missing, runs):
             found[k] = packed
             unwrap_cache.write(names[k], (packed.width, packed.height, packed.atlas_count,

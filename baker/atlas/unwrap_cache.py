@@ -7,11 +7,16 @@ instead of running xatlas: the result is the same arrays either way, so the bake
 depend on whether the cache was hit. A rigid move of a node leaves its unwrap input bit-identical
 (``unwrap.frame_positions``), so a rebake after moving objects hits.
 
+Two kinds of entry (``unwrap.py``): a whole unwrap (every baked instance, packed into pages),
+and one mesh's charts (``CHARTS``: charted alone, so that a bake with one mesh edited charts
+only that mesh again and packs the cached charts of the others with it).
+
 The folder is ``$BAKER_CACHE_DIR`` if set (``off`` or empty: no cache), else
-``$XDG_CACHE_HOME/baker`` or ``~/.cache/baker``; entries are ``unwrap/<hash>.npz`` (NumPy's zip
-of arrays, no pickle), written atomically, at most ``KEEP`` of them (the least recently used go
-first). An entry that cannot be read whole (truncated, a bad CRC, arrays of the wrong shape) is
-ignored, and the fresh result written over it. A cache that cannot be written (read-only, full)
+``$XDG_CACHE_HOME/baker`` or ``~/.cache/baker``; entries are ``unwrap/<hash>.npz`` and
+``unwrap/charts/<hash>.npz`` (NumPy's zip of arrays, no pickle), written atomically, at most
+``KEEP`` of each kind (the least recently used go first). An entry that cannot be read whole
+(truncated, a bad CRC, arrays of the wrong shape) is ignored, and the fresh result written over
+it. A cache that cannot be written (read-only, full)
 only costs the next bake the xatlas run.
 """
 
@@ -29,8 +34,10 @@ import numpy as np
 from baker.errors import BakerError
 from baker.run.atomic import write_atomically
 
-FORMAT = b"baker unwrap cache 2"  # bump when what an entry holds, or how it is keyed, changes
-KEEP = 256  # entries kept; one of the 100k-triangle test scene is ~4 MB
+FORMAT = b"baker unwrap cache 3"  # bump when what an entry holds, or how it is keyed, changes
+WHOLE, CHARTS = "unwrap", "charts"  # the kinds of entry
+KEEP = 256  # whole unwraps kept; one of the 100k-triangle test scene is ~4 MB
+KEEP_CHARTS = 16384  # meshes' charts kept (a scene has one per distinct mesh; most are small)
 PER_MESH = 5  # arrays per mesh: vertices, triangles, uv, page and chart of each vertex
 _NAMES = ("header", "lengths") + tuple(f"joined{k}" for k in range(PER_MESH))
 
@@ -57,15 +64,24 @@ def key(meshes: Iterable[tuple[np.ndarray, np.ndarray]], options: Iterable[objec
     return digest.hexdigest()
 
 
-def _path(name: str) -> Path | None:
+def _place(kind: str) -> Path | None:
+    """The folder of the entries of ``kind``, or None when caching is off."""
     place = folder()
-    return None if place is None else place / "unwrap" / f"{name}.npz"
+    if place is None:
+        return None
+    return place / "unwrap" if kind == WHOLE else place / "unwrap" / kind
 
 
-def read(name: str, mesh_count: int) -> tuple[tuple[int, ...], tuple[tuple[np.ndarray, ...], ...]] | None:
-    """The entry ``name``: (header ints, per mesh ``PER_MESH`` arrays), or None when there is
-    none or it cannot be read whole (it is then rewritten by the next ``write``)."""
-    path = _path(name)
+def _path(name: str, kind: str) -> Path | None:
+    place = _place(kind)
+    return None if place is None else place / f"{name}.npz"
+
+
+def read(name: str, mesh_count: int, kind: str = WHOLE
+         ) -> tuple[tuple[int, ...], tuple[tuple[np.ndarray, ...], ...]] | None:
+    """The entry ``name`` of ``kind``: (header ints, per mesh ``PER_MESH`` arrays), or None
+    when there is none or it cannot be read whole (it is then rewritten by the next ``write``)."""
+    path = _path(name, kind)
     if path is None or not path.is_file():
         return None
     try:
@@ -86,12 +102,13 @@ def read(name: str, mesh_count: int) -> tuple[tuple[int, ...], tuple[tuple[np.nd
     return header, tuple(tuple(parts[m] for parts in split) for m in range(mesh_count))
 
 
-def write(name: str, header: tuple[int, ...], meshes: tuple[tuple[np.ndarray, ...], ...]) -> None:
-    """Store an entry (atomically): the header, each array's length per mesh, and per kind of
-    array all meshes' joined (a few large arrays read much faster than thousands of small
-    ones). Then drop the least recently used beyond ``KEEP``. Any failure to write leaves the
-    cache as it was, and the bake goes on."""
-    path = _path(name)
+def write(name: str, header: tuple[int, ...], meshes: tuple[tuple[np.ndarray, ...], ...],
+          kind: str = WHOLE, prune: bool = True) -> None:
+    """Store an entry of ``kind`` (atomically): the header, each array's length per mesh, and
+    per kind of array all meshes' joined (a few large arrays read much faster than thousands of
+    small ones). Then (``prune``) drop the least recently used beyond ``KEEP``. Any failure to
+    write leaves the cache as it was, and the bake goes on."""
+    path = _path(name, kind)
     if path is None or not meshes:
         return
     arrays = {"header": np.asarray(header, np.int64),
@@ -103,16 +120,28 @@ def write(name: str, header: tuple[int, ...], meshes: tuple[tuple[np.ndarray, ..
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         write_atomically(path, buffer.getvalue())
-        _prune(path.parent)
     except (OSError, BakerError):
-        pass
+        return
+    if prune:
+        prune_kind(kind)
 
 
-def _prune(place: Path) -> None:
-    """Remove all but the ``KEEP`` most recently used entries of ``place``."""
+def prune_kind(kind: str) -> None:
+    """Remove all but the most recently used entries of ``kind`` (``KEEP``, ``KEEP_CHARTS``);
+    once after writing many entries, not after each (a folder scan each)."""
+    place = _place(kind)
+    if place is not None and place.is_dir():
+        try:
+            _prune(place, KEEP if kind == WHOLE else KEEP_CHARTS)
+        except OSError:
+            pass
+
+
+def _prune(place: Path, keep: int) -> None:
+    """Remove all but the ``keep`` most recently used entries of ``place``."""
     entries = sorted(((e.stat().st_mtime, e.path) for e in os.scandir(place)
                       if e.name.endswith(".npz")), reverse=True)
-    for _mtime, path in entries[KEEP:]:
+    for _mtime, path in entries[keep:]:
         try:
             os.unlink(path)
         except FileNotFoundError:
