@@ -8,6 +8,7 @@ import pytest
 
 import baker
 from assets.foliage_scenes import tree
+from assets.gltf_builder import GltfBuilder, box
 from assets.light_scenes import _add_light
 from baker.errors import InputError, SettingsError
 from baker.geometry.surface import LUMINANCE
@@ -148,22 +149,47 @@ def test_approx_bake_in_parts_gives_the_bytes_of_one_part(tmp_path, monkeypatch)
     assert split.report["foliage"] == whole.report["foliage"]
 
 
-def test_rebake_says_why_it_bakes_fully_and_relight_keeps_working(tmp_path):
+def _tree_and_boxes(moves: dict[str, tuple]) -> GltfBuilder:
+    """The small tree lit by a point light, with a box beside it ("near") and one in a far
+    corner ("far"); ``moves``: node name → translation."""
+    b = _tree()
+    _add_light(b, "point", (3.0, 6.0, 2.0), (0.0, -1.0, 0.0), intensity=20.0)
+    stone = b.material("stone", (0.6, 0.6, 0.6))
+    for name, at in (("near", (2.6, 0.25, 0.0)), ("far", (5.2, 0.25, -5.2))):
+        b.info["nodes"][name] = b.node(name, b.shape_mesh(name, box((0.5, 0.5, 0.5)),
+                                                          material=stone))
+        b._nodes[b.info["nodes"][name]].translation = list(at)
+    for name, at in moves.items():
+        b._nodes[b.info["nodes"][name]].translation = list(at)
+    return b
+
+
+@pytest.mark.parametrize("moves", [
+    {"crown": (0.4, 0.0, 0.2), "trunk": (0.4, 0.0, 0.2)},  # the tree: its crown refitted
+    {"near": (2.3, 0.25, 0.3)},  # an object within the crown's reach: the fit's texels see it
+    {"far": (5.0, 0.25, -5.0)},  # far from the tree
+], ids=["tree", "near", "far"])
+def test_a_rebake_in_foliage_mode_gives_the_bytes_of_a_full_bake(tmp_path, moves):
+    settings = baker.Settings(**{**SETTINGS, "rays": 16}, foliage="approx", shadow_rays=1)
+    baker.bake(saved(_tree_and_boxes({}), tmp_path, "base.glb"), tmp_path / "out.glb", settings)
+    edited = saved(_tree_and_boxes(moves), tmp_path, "edited.glb")
+    again = baker.bake(edited, tmp_path / "out.glb", settings, incremental=True)
+    assert again.rebake["incremental"] is True, again.rebake
+    full = baker.bake(edited, tmp_path / "full.glb", settings)
+    assert (tmp_path / "out.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()
+    assert default_path(tmp_path / "out.glb").read_bytes() == default_path(
+        tmp_path / "full.glb").read_bytes()
+    assert again.report["foliage"] == full.report["foliage"]
+
+
+def test_relight_keeps_working_in_foliage_mode(tmp_path):
     def lit(intensity):
         b = _tree()
         _add_light(b, "point", (3.0, 6.0, 2.0), (0.0, -1.0, 0.0), intensity=intensity)
         return b
 
     settings = baker.Settings(**{**SETTINGS, "rays": 16}, foliage="approx", shadow_rays=1)
-    base = saved(lit(20.0), tmp_path, "base.glb")
-    baker.bake(base, tmp_path / "out.glb", settings)
-    moved = lit(20.0)
-    moved._nodes[moved.info["nodes"]["crown"]].translation = [0.5, 0.0, 0.0]
-    again = baker.bake(saved(moved, tmp_path, "moved.glb"), tmp_path / "out.glb", settings,
-                       incremental=True)
-    assert again.rebake["incremental"] is False
-    assert "foliage" in again.rebake["full_bake_reason"]
-    baker.bake(base, tmp_path / "out.glb", settings)  # the state of the base scene again
+    baker.bake(saved(lit(20.0), tmp_path, "base.glb"), tmp_path / "out.glb", settings)
     brighter = saved(lit(35.0), tmp_path, "brighter.glb")
     relit = baker.bake(brighter, tmp_path / "out.glb", settings, relight=True)
     assert relit.rebake["incremental"] is True

@@ -159,6 +159,18 @@ class Foliage:
         """(k,) the crown of each texel ``rows`` (−1: traced)."""
         return self.group[texels.triangle[rows]]
 
+    def hidden(self) -> np.ndarray:
+        """(T,) bool: the world triangles obscurance rays pass through (the crowns' leaves;
+        grass stays), as ``tracer`` hides them."""
+        return hidden_leaves(self.group, [c.kind for c in self.crowns])
+
+
+def hidden_leaves(group: np.ndarray, kinds: list[str]) -> np.ndarray:
+    """(T,) bool: the triangles of ``group`` (T,) (crown index, −1: none) whose crown's kind
+    (``kinds``) is "crown"."""
+    crown = np.array([k == "crown" for k in kinds] + [False], bool)
+    return crown[group]  # −1 indexes the appended False
+
 
 def _node_kind(scene: Scene, node: int) -> tuple[str | None, float | None]:
     """(extras.foliage, extras.foliage_density) of glTF node ``node``; InputError for values
@@ -237,11 +249,9 @@ def prepare_foliage(scene: Scene, world: World, tracer: Tracer, settings: Resolv
     if not found:
         return None
     group = np.full(len(world.triangles), -1, np.int64)
-    hidden = np.zeros(len(world.triangles), bool)
     samples = []
     for j, (_, kind, tris, _) in enumerate(found):
         group[tris] = j
-        hidden[tris] = kind == "crown"
         wanted = np.zeros(len(world.triangles), bool)
         wanted[tris] = True
         samples.append(_ranked_rows(inputs.coverage, wanted, settings.seed)[:2 * FIT_TEXELS])
@@ -255,6 +265,7 @@ def prepare_foliage(scene: Scene, world: World, tracer: Tracer, settings: Resolv
     crowns = tuple(_fit_crown(scene, world, inputs, settings, node, kind, tris, density, texels,
                               traced, mine[j])
                    for j, (node, kind, tris, density) in enumerate(found))
+    hidden = hidden_leaves(group, [kind for _, kind, _, _ in found])
     foliage = Foliage(group, crowns, Tracer(world, hidden=hidden), {},
                       traced.rays + int(traced.chain_ray_counts().sum()))
     return _with_errors(foliage, scene, world, texels, traced, mine, inputs.r_ave)
@@ -384,17 +395,33 @@ def shade_by_crowns(foliage: Foliage, texels: Texels, rows: np.ndarray, terms: T
                    half_split=split(terms.half_split))
 
 
+def shaded(foliage: Foliage, texels: Texels, terms: Terms, d_max: float) -> Terms:
+    """The terms a texel's light is composed from: ``terms`` (as ``integrate_with_foliage``
+    gives them, and the bake state keeps them) with every traced texel shaded by the crowns
+    (``shade_by_crowns``), the foliage texels' closed forms as they are. Kept apart from the
+    tracing so that a rebake can trace a texel again and shade every texel by crowns that
+    moved or were fitted anew, in closed form."""
+    rows = np.flatnonzero(foliage.texel_groups(texels) < 0)
+    shading = ("w_hit", "escaped", "hit_sq", "half_split")  # what shade_by_crowns changes
+    mine = replace(terms, **{name: getattr(terms, name)[rows] for name in shading})
+    done = shade_by_crowns(foliage, texels, rows, mine, d_max)
+    columns = {}
+    for name in shading:
+        columns[name] = getattr(terms, name).copy()
+        columns[name][rows] = getattr(done, name)
+    return replace(terms, **columns)
+
+
 def integrate_with_foliage(foliage: Foliage, scene: Scene, world: World, texels: Texels,
                            settings: Resolved, progress=None, error_scale=None,
                            surfaces: Surfaces | None = None) -> Terms:
     """``integrate.integrate`` of every texel in foliage mode: the foliage texels' terms from
-    the closed forms, the others traced without the crowns' leaves and shaded by them
-    (``shade_by_crowns``), in ``texels`` order."""
+    the closed forms, the others traced without the crowns' leaves (not yet shaded by them:
+    ``shaded`` does that when their light is composed), in ``texels`` order."""
     group = foliage.texel_groups(texels)
     closed, traced_rows = np.flatnonzero(group >= 0), np.flatnonzero(group < 0)
     traced = integrate(scene, world, foliage.tracer, texels, settings, progress, traced_rows,
                        error_scale, surfaces=surfaces)
-    traced = shade_by_crowns(foliage, texels, traced_rows, traced, settings.d_max)
     approx = foliage_terms(foliage, scene, world, texels, closed)
     if progress is not None and len(closed):
         progress(len(closed), 0)  # closed forms: no ray

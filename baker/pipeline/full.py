@@ -47,7 +47,13 @@ from baker.light.direct import (
     direct_light,
     light_sources,
 )
-from baker.light.foliage import FitInputs, Foliage, integrate_with_foliage, prepare_foliage
+from baker.light.foliage import (
+    FitInputs,
+    Foliage,
+    integrate_with_foliage,
+    prepare_foliage,
+    shaded,
+)
 from baker.light.gi import Indirect, indirect_light, rays_per_path
 from baker.light.hemisphere import Surfaces, Terms, surfaces_of
 from baker.light.integrate import integrate
@@ -118,7 +124,11 @@ class Computed:
 
     @property
     def terms(self) -> Terms:
-        return self.per_texel.terms
+        """The terms the texels' light was composed from (with --foliage approx, the traced
+        texels shaded by the crowns: ``foliage.shaded``; the state keeps them unshaded)."""
+        if self.foliage is None:
+            return self.per_texel.terms
+        return shaded(self.foliage, self.texels, self.per_texel.terms, self.settings.d_max)
 
     @property
     def direct(self) -> Direct | None:
@@ -419,13 +429,13 @@ def _bake_part(baking: Baking, rows: slice, times: dict[str, float],
 
 def finish(scene: Scene, world: World, resolved: Resolved, lit: Lighting, atlas: Atlas,
            per_texel: PerTexel, times: dict[str, float], staging: StateSink | None = None,
-           fingerprint: dict | None = None) -> Computed:
+           fingerprint: dict | None = None, foliage: Foliage | None = None) -> Computed:
     """From the texels' results, all held in memory (``PerTexel.held``), to the post-processed
     float lightmaps: an incremental rebake (``rebake.incremental``) ends as a full bake does, so
     both give the same bytes (``staging`` and the scene's ``fingerprint``: the bake state, as in
-    ``compute``).
+    ``compute``; ``foliage``: the crowns that shade the traced texels, with --foliage approx).
     """
-    baking = Baking(scene, world, resolved, lit, atlas)
+    baking = Baking(scene, world, resolved, lit, atlas, foliage=foliage)
     with timed(times, "compose"):
         pages = _Pages.blank(baking)
         pages.add(baking, per_texel.texels, per_texel.validity, per_texel.terms,
@@ -456,6 +466,8 @@ class _Pages:
         "indirect" the punctual lights' direct light is left out (the viewer's lights give
         it); their power still sets I_A."""
         rho, ambient = baking.settings.rho, baking.ambient
+        if baking.foliage is not None:
+            terms = shaded(baking.foliage, texels, terms, baking.settings.d_max)
         colours = (np.zeros_like(direct.light_colours)
                    if baking.settings.baked_lights == "indirect" else None)
         compose_into(self.lightmaps, texels, terms, ambient, rho, direct, colours,

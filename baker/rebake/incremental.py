@@ -44,7 +44,7 @@ import numpy as np
 
 from baker.atlas import validity as validity_module
 from baker.atlas.layout import Atlas
-from baker.atlas.rasterise import Coverage, Texels, texels_of
+from baker.atlas.rasterise import Coverage, Texels, owners, texels_of
 from baker.atlas.validity import Faces, Validity, check_texels
 from baker.errors import SettingsError
 from baker.geometry.world import World, build_world
@@ -63,6 +63,8 @@ from baker.light.hemisphere import (
     surfaces_of,
     world_rays,
 )
+from baker.image.compose import effective_r_ave
+from baker.light.foliage import FitInputs, Foliage, foliage_terms, prepare_foliage
 from baker.light.inner import other_side_rays, translucent
 from baker.pipeline.full import (
     Computed,
@@ -986,13 +988,17 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
         lit = lighting(scene, start.world, start.resolved, times)
     with log.stage("changed texels"):
         stored = _stored_texels(scene, start, lit, times)
-        search = _dirty_search(scene, start, lit, stored, times)
+        foliage = None
+        if start.resolved.foliage == "approx":
+            with timed(times, "foliage fit"):
+                foliage = _foliage_again(scene, start, lit, stored)
+        search = _dirty_search(scene, start, lit, stored, times, foliage)
     with log.stage("rays"):
-        terms, direct, rays = _traced_again(scene, start, lit, stored, search, times)
+        terms, direct, rays = _traced_again(scene, start, lit, stored, search, times, foliage)
     per_texel = PerTexel.held(search.texels, stored.texels, search.validity, terms, direct)
     with log.stage("post-process"):
         done = finish(scene, start.world, start.resolved, lit, stored.atlas, per_texel, times,
-                      staging, start.fingerprint)  # exactly as a full bake goes on
+                      staging, start.fingerprint, foliage)  # exactly as a full bake goes on
     rows = np.flatnonzero(search.reason >= 0)
     dirty = Dirty(rows=rows, reason=search.reason, tested_rays=search.tested,
                   relit=tuple(start.change.lights_placed))
@@ -1052,9 +1058,6 @@ def _compared(scene: Scene, settings: Settings, path, relight: bool, times: dict
     if relight and (change.moved or change.recoloured or change.lights_placed):
         raise FullBake("more than light colours and intensities changed: "
                        + "; ".join(change.changes))
-    if resolved.foliage == "approx" and not relight:
-        raise FullBake("foliage approx fits every crown to texels traced in the whole scene: "
-                       "an edit changes the fit, which the rebake does not follow yet")
     if resolved.method != "obscurance":
         raise FullBake(f"method {resolved.method!r} traces paths through the whole scene from "
                        "every texel")
@@ -1102,6 +1105,19 @@ def _stored_texels(scene: Scene, start: _Compared, lit: Lighting, times: dict[st
     return _Stored(start.stored.atlas, raw, old_texels, old_validity, old_terms, old_direct)
 
 
+def _foliage_again(scene: Scene, start: _Compared, lit: Lighting, stored: _Stored) -> Foliage | None:
+    """--foliage approx: the crowns found and fitted in the scene as it is now, exactly as a
+    full bake of it fits them (``foliage.prepare_foliage``: a few hundred texels a crown,
+    chosen by the hash of their keys from the stored coverage, which a full bake remakes bit
+    for bit). Every closed form is then recomputed from it (``_traced_again``, ``finish``):
+    a crown that moved, or whose fit an edit changed, shades every texel anew."""
+    world, atlas = start.world, stored.atlas
+    coverage = Coverage(stored.texels.key, stored.texels.triangle, stored.texels.triangle_texels)
+    return prepare_foliage(scene, world, lit.tracer, start.resolved, FitInputs(
+        atlas, coverage, owners(atlas, world, coverage), Faces(scene, world),
+        surfaces_of(scene, world), effective_r_ave(lit.ambient, start.resolved.rho)))
+
+
 @dataclass
 class _Search:
     """What the dirty search found (``_dirty_search``), the one mutable record of a rebake:
@@ -1120,8 +1136,10 @@ class _Search:
 
 
 def _dirty_search(scene: Scene, start: _Compared, lit: Lighting, stored: _Stored,
-                  times: dict[str, float]) -> _Search:
-    """Which texels the change can reach, and why (``REASONS``)."""
+                  times: dict[str, float], foliage: Foliage | None = None) -> _Search:
+    """Which texels the change can reach, and why (``REASONS``). With ``foliage``, obscurance
+    rays are judged in the scene without the crowns' leaves, as they were traced."""
+    hidden = None if foliage is None else foliage.hidden()
     world, resolved, change, moved = start.world, start.resolved, start.change, start.moved
     surfaces = surfaces_of(scene, world)
     # Texels whose rays changed take only those rays' change (``_by_ray``) when each ray's part
@@ -1134,7 +1152,7 @@ def _dirty_search(scene: Scene, start: _Compared, lit: Lighting, stored: _Stored
     search = _Search(np.full(len(raw), -1, np.int8), texels, stored.validity, surfaces, by_ray)
     with timed(times, "dirty"):
         if len(moved):
-            _moved_reach(scene, start, lit, stored, search)
+            _moved_reach(scene, start, lit, stored, search, hidden)
         if change.recoloured:
             tris = np.flatnonzero(np.isin(world.tri_material, change.recoloured))
             a, b, c = world.corners(tris)
@@ -1142,8 +1160,9 @@ def _dirty_search(scene: Scene, start: _Compared, lit: Lighting, stored: _Stored
             box = [(corners.reshape(-1, 3).min(0), corners.reshape(-1, 3).max(0))] if len(tris) else []
             search.tested += _mark_seen(scene, world, _Changed([corners], world.center), box,
                                         search.texels, search.reason, "colour", resolved,
-                                        _NotStopped(lit.tracer, np.isin(world.tri_material,
-                                                                        change.recoloured)))
+                                        _NotStopped(_obscurance_tracer(lit, foliage),
+                                                    np.isin(world.tri_material,
+                                                            change.recoloured)))
         chains = _chain_corners(scene, world)
         if (len(moved) or change.recoloured) and len(chains):
             # A ray that meets a mirror or glass goes on where the searches above do not follow:
@@ -1154,10 +1173,17 @@ def _dirty_search(scene: Scene, start: _Compared, lit: Lighting, stored: _Stored
     return search
 
 
+def _obscurance_tracer(lit: Lighting, foliage: Foliage | None) -> Tracer:
+    """Embree's scene obscurance rays are traced in: without the crowns' leaves with
+    ``foliage`` (``foliage.Foliage.tracer``), else the whole scene."""
+    return lit.tracer if foliage is None else foliage.tracer
+
+
 def _moved_reach(scene: Scene, start: _Compared, lit: Lighting, stored: _Stored,
-                 search: _Search) -> None:
+                 search: _Search, hidden: np.ndarray | None = None) -> None:
     """Mark in ``search`` the texels moved nodes can reach: their own, those whose validity
-    probes, obscurance rays or shadow rays meet them at their old or new place."""
+    probes, obscurance rays or shadow rays meet them at their old or new place (obscurance
+    rays with the triangles ``hidden`` (T,) bool left out, as --foliage approx traced them)."""
     world, resolved, moved, tracer = start.world, start.resolved, start.moved, lit.tracer
     raw, texels, reason, old_validity = stored.raw, search.texels, search.reason, stored.validity
     own = np.isin(raw.instance(), moved)
@@ -1195,6 +1221,8 @@ def _moved_reach(scene: Scene, start: _Compared, lit: Lighting, stored: _Stored,
     search.validity = merge(old_validity, fresh, redo)
     changed = redo[~same]
     reason[changed[reason[changed] < 0]] = REASONS.index("validity")
+    if hidden is not None:
+        tracer, tracer_before = Tracer(world, hidden=hidden), Tracer(before, hidden=hidden)
     search.judge = _HitsCompared(tracer, tracer_before, resolved.d_max, keep=search.by_ray)
     search.tested += _mark_seen(scene, world, small, boxes, texels, reason, "obscurance",
                                 resolved, search.judge)
@@ -1205,12 +1233,15 @@ def _moved_reach(scene: Scene, start: _Compared, lit: Lighting, stored: _Stored,
 
 
 def _traced_again(scene: Scene, start: _Compared, lit: Lighting, stored: _Stored,
-                  search: _Search, times: dict[str, float]) -> tuple[Terms, Direct, int]:
+                  search: _Search, times: dict[str, float], foliage: Foliage | None = None
+                  ) -> tuple[Terms, Direct, int]:
     """The terms and direct light of every texel after the change, and the rays cast for them
     (``retrace.retraced``, here or on the cluster): the dirty texels' obscurance rays (only the
     changed rays, ``_by_ray``, where that is exact) and direct light, and every clean texel's
     shadow rays of each light placed anew. Each part's rows are written into the stored terms
-    and direct light as it comes, in place."""
+    and direct light as it comes, in place. With ``foliage``, every foliage texel's terms are
+    its closed form again (no ray), the others' obscurance rays are traced without the crowns'
+    leaves, and the fit's rays are counted."""
     resolved, sources, reason = start.resolved, lit.sources, search.reason
     rows = np.flatnonzero(reason >= 0)
     traced, updated, rays = rows, None, 0
@@ -1220,13 +1251,19 @@ def _traced_again(scene: Scene, start: _Compared, lit: Lighting, stored: _Stored
         kept = np.isin(reason[rows], [REASONS.index("obscurance"), REASONS.index("shadow")])
         traced = np.union1d(rows[~kept], retrace)
         rays = search.judge.cast
+    closed = np.zeros(0, np.int64)
+    if foliage is not None:
+        group = foliage.texel_groups(search.texels)
+        closed, traced = np.flatnonzero(group >= 0), traced[group[traced] < 0]
+        rays += foliage.rays
     relit = tuple(start.change.lights_placed)
     todo = np.arange(len(reason)) if relit else rows  # a light placed anew: every texel's rays
     terms = stored.terms
     direct = replace(stored.direct, light_colours=sources.light_colours(),
                      rays_per_texel=sources.rays_per_texel())
     work = Retracing(scene, start.world, resolved, lit, search.surfaces, relit,
-                     take(search.texels, np.zeros(0, np.int64)))
+                     take(search.texels, np.zeros(0, np.int64)),
+                     None if foliage is None else foliage.tracer)
     for stage in ("trace", "direct"):  # the report's stages, also when nothing is traced
         times.setdefault(stage, 0.0)
     obscurance, dirty = np.isin(todo, traced), reason[todo] >= 0
@@ -1242,6 +1279,9 @@ def _traced_again(scene: Scene, start: _Compared, lit: Lighting, stored: _Stored
             rays += int((~dirty_rows).sum()) * int(sources.samples[list(relit)].sum())
     if updated is not None:
         terms = merge(terms, *updated)
+    if len(closed):
+        terms = merge(terms, foliage_terms(foliage, scene, start.world, search.texels, closed),
+                      closed)
     return terms, direct, rays
 
 

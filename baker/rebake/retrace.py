@@ -40,8 +40,10 @@ class Retracing:
     """What every part of a rebake's traced work needs: the scene and its world now, the
     settings as the last bake resolved them, its ``Lighting`` (Embree's scene, sources, I_A),
     the shading of obscurance hits (``hemisphere.surfaces_of``), the lights placed anew
-    (``relit``: indices into ``sources.lights``) and ``texels``, the texels' per-triangle
-    arrays (a ``Texels`` of no rows, which each part's rows complete)."""
+    (``relit``: indices into ``sources.lights``), ``texels``, the texels' per-triangle
+    arrays (a ``Texels`` of no rows, which each part's rows complete), and ``obscurance``:
+    the Embree scene obscurance rays are traced in when it is not ``lit``'s (--foliage approx:
+    without the crowns' leaves; never on a cluster, which refuses that mode)."""
 
     scene: Scene
     world: World
@@ -50,6 +52,7 @@ class Retracing:
     surfaces: Surfaces | None
     relit: tuple[int, ...]
     texels: Texels
+    obscurance: Tracer | None = None
 
 
 @dataclass(frozen=True)
@@ -127,7 +130,8 @@ def _retrace_part(work: Retracing, rows: _Rows, seconds: dict[str, float]) -> Re
     with timed(seconds, "trace"):
         error_scale = (effective_r_ave(lit.ambient, s.rho),
                        float(lit.ambient.intensity @ LUMINANCE))
-        terms = integrate(scene, world, lit.tracer, texels, s, None,
+        tracer = lit.tracer if work.obscurance is None else work.obscurance
+        terms = integrate(scene, world, tracer, texels, s, None,
                           rows=np.flatnonzero(rows.obscurance), error_scale=error_scale,
                           surfaces=work.surfaces)
     with timed(seconds, "direct"):
