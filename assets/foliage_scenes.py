@@ -17,7 +17,8 @@ import numpy as np
 if __package__ in (None, ""):  # run as a script: make the repository root importable
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from assets.gltf_builder import GltfBuilder, cylinder, quad, transformed  # noqa: E402
+from assets.gltf_builder import GltfBuilder, box, cylinder, quad, transformed  # noqa: E402
+from assets.light_scenes import _add_light  # noqa: E402
 
 LEAF = (0.12, 0.35, 0.06)
 BARK = (0.30, 0.20, 0.12)
@@ -106,6 +107,25 @@ def tree(leaf_count: int = 2000, grass_count: int = 500, seed: int = 0,
             blades(grass_count, 3.0, 0.3, 0.03, seed + 1), translation=(4.0, 0.0, 0.0)),
             material=grass), extras={"foliage": "grass"})
     b.info["nodes"] = nodes
+    return b
+
+
+BOXES = {"near": (2.6, 0.25, 0.0), "far": (5.2, 0.25, -5.2)}
+"""Where ``tree_and_boxes`` puts its two 0.5 m boxes: one beside the crown, one far from it."""
+
+
+def tree_and_boxes(moves: dict[str, tuple], **tree_args) -> GltfBuilder:
+    """``tree(**tree_args)`` lit by a point light 6 m up, with the boxes of ``BOXES`` (nodes
+    "near" and "far"); ``moves``: node name → its translation instead (an edit to rebake)."""
+    b = tree(**tree_args)
+    _add_light(b, "point", (3.0, 6.0, 2.0), (0.0, -1.0, 0.0), intensity=20.0)
+    stone = b.material("stone", (0.6, 0.6, 0.6))
+    for name, at in BOXES.items():
+        b.info["nodes"][name] = b.node(name, b.shape_mesh(name, box((0.5, 0.5, 0.5)),
+                                                          material=stone))
+        b._nodes[b.info["nodes"][name]].translation = list(at)
+    for name, at in moves.items():
+        b._nodes[b.info["nodes"][name]].translation = list(at)
     return b
 
 

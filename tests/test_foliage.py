@@ -7,8 +7,7 @@ import numpy as np
 import pytest
 
 import baker
-from assets.foliage_scenes import tree
-from assets.gltf_builder import GltfBuilder, box
+from assets.foliage_scenes import tree, tree_and_boxes
 from assets.light_scenes import _add_light
 from baker.errors import InputError, SettingsError
 from baker.geometry.surface import LUMINANCE
@@ -149,19 +148,8 @@ def test_approx_bake_in_parts_gives_the_bytes_of_one_part(tmp_path, monkeypatch)
     assert split.report["foliage"] == whole.report["foliage"]
 
 
-def _tree_and_boxes(moves: dict[str, tuple]) -> GltfBuilder:
-    """The small tree lit by a point light, with a box beside it ("near") and one in a far
-    corner ("far"); ``moves``: node name → translation."""
-    b = _tree()
-    _add_light(b, "point", (3.0, 6.0, 2.0), (0.0, -1.0, 0.0), intensity=20.0)
-    stone = b.material("stone", (0.6, 0.6, 0.6))
-    for name, at in (("near", (2.6, 0.25, 0.0)), ("far", (5.2, 0.25, -5.2))):
-        b.info["nodes"][name] = b.node(name, b.shape_mesh(name, box((0.5, 0.5, 0.5)),
-                                                          material=stone))
-        b._nodes[b.info["nodes"][name]].translation = list(at)
-    for name, at in moves.items():
-        b._nodes[b.info["nodes"][name]].translation = list(at)
-    return b
+def _tree_and_boxes(moves: dict[str, tuple]):
+    return tree_and_boxes(moves, leaf_count=1500, grass_count=300)
 
 
 @pytest.mark.parametrize("moves", [
