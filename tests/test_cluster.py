@@ -220,6 +220,10 @@ def test_a_worker_killed_in_a_rebake_leaves_the_bytes_as_they_were(ray_cluster, 
 
 def test_ctrl_c_leaves_no_output_and_the_cluster_as_it_was(ray_cluster, tmp_path):
     source = cornell_box().save(tmp_path / "cornell.glb")
+    deadline = time.monotonic() + 60  # an earlier test's worker may still be named for its part:
+    while _part_processes(ray_cluster):  # the signal would then reach a driver still starting
+        assert time.monotonic() < deadline, _part_processes(ray_cluster)
+        time.sleep(0.2)
     script = ("import signal, sys\n"  # Ctrl-C as a terminal sends it
               "signal.signal(signal.SIGINT, signal.default_int_handler)\n"
               "from baker.cli.main import main\n"

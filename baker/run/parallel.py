@@ -8,6 +8,7 @@ size, thread count or order.
 from __future__ import annotations
 
 import os
+import threading
 from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
 from typing import Callable, Iterable, TypeVar
 
@@ -50,12 +51,26 @@ def run_chunks(work: Callable[[Chunk], None], chunks: Iterable[Chunk], threads: 
         for chunk in chunks:
             work(chunk)
         return
+    failed = threading.Event()
+
+    def guarded(chunk: Chunk) -> None:
+        """``work(chunk)``, skipped once any chunk has failed: a worker thread takes the next
+        chunk from the queue the instant its own ends, before this thread wakes to cancel it."""
+        if failed.is_set():
+            return
+        try:
+            work(chunk)
+        except BaseException:
+            failed.set()
+            raise
+
     pool = ThreadPoolExecutor(min(threads, len(chunks)))
     try:
-        futures = [pool.submit(work, chunk) for chunk in chunks]
+        futures = [pool.submit(guarded, chunk) for chunk in chunks]
         done, _ = wait(futures, return_when=FIRST_EXCEPTION)
         for future in futures:  # re-raise the first error, in chunk order
             if future in done:
                 future.result()
     finally:
+        failed.set()  # also on Ctrl-C while waiting: no chunk starts from here on
         pool.shutdown(wait=True, cancel_futures=True)
