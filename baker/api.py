@@ -274,7 +274,8 @@ def _report(input_path: Path, output: Path, done, info, pages, times: dict[str, 
         "denoise": done.denoised.as_dict() if done.denoised is not None else {"denoised": False},
         "carrier": done.settings.carrier, "baked_lights": done.settings.baked_lights,
         "notes": list(info.notes) + clipping_notes(pages) + viewer_notes(
-            done.scene, baked_materials(done), done.settings.carrier) + gi_notes(done),
+            done.scene, done.world, [u.instance for u in done.atlas.instances],
+            done.settings.carrier) + gi_notes(done),
         "warnings": input_warnings(done.scene, done.world),  # dropped or changed, counted
         "lightmap_pages": [{"intensity": page.intensity, "peak": page.peak,
                             "clipped_fraction": page.clipped} for page in pages],
@@ -297,13 +298,6 @@ def carried(done) -> Lightmaps:
         return done.lightmaps
     return emissive_lightmaps(done.scene, done.world, done.atlas, done.texels, done.lightmaps,
                               done.settings.padding)
-
-
-def baked_materials(done) -> set[int]:
-    """Indices into ``scene.materials`` of the baked primitive instances' materials."""
-    scene = done.scene
-    return {scene.primitives[scene.instances[unwrap.instance].primitive].material
-            for unwrap in done.atlas.instances}
 
 
 def gi_notes(done) -> list[str]:

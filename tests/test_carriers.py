@@ -163,3 +163,25 @@ def test_cli_carrier_error_writes_nothing(tmp_path, capsys):
                  "--encoding", "linear"]) == 1
     assert "sRGB" in capsys.readouterr().err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("metal_rows, noted", [(16, True), (4, False)])
+def test_the_metals_note_reads_the_metallic_texture(tmp_path, metal_rows, noted):
+    """A quad of metallicFactor 1 whose metallicRoughnessTexture is metal (blue 255) on
+    ``metal_rows`` of its 16 rows and dielectric (blue 0) on the rest, rough everywhere (green
+    255): viewers light the lightmap on 1 − metal_rows/16 of it, so it is noted as dark at 0 %
+    and not at 75 % (the factor alone says 0 % for both)."""
+    b = open_plane(size=2.0)
+    pixels = np.zeros((16, 16, 3), np.uint8)
+    pixels[..., 1] = 255  # rough (G): baker bakes a rough metal as diffuse
+    pixels[:metal_rows, :, 2] = 255
+    pbr = b._materials[0].pbrMetallicRoughness
+    pbr.metallicFactor = 1.0
+    pbr.metallicRoughnessTexture = pygltflib.TextureInfo(index=b._image_texture(pixels, "mr"))
+    source = b.save(tmp_path / "metal.glb")
+    done = baker.bake(source, tmp_path / "out.glb", baker.Settings(texel_density=8.0, rays=4),
+                      state=False)
+    notes = [note for note in done.report["notes"] if "diffuse part" in note]
+    assert bool(notes) == noted, done.report["notes"]
+    if noted:
+        assert "× its texture" in notes[0] and "0% of its base colour" in notes[0], notes

@@ -22,7 +22,7 @@ import numpy as np
 
 from baker.atlas.layout import Atlas
 from baker.atlas.rasterise import Texels, flat_pages, texel_barycentrics
-from baker.geometry.surface import albedo, emission, viewer_diffuse_weight
+from baker.geometry.surface import albedo, emission, viewer_diffuse_weight_at
 from baker.geometry.world import World
 from baker.gltf.scene import Scene
 from baker.image.compose import Lightmaps
@@ -55,22 +55,53 @@ def emissive_lightmaps(scene: Scene, world: World, atlas: Atlas, texels: Texels,
     return Lightmaps(light=radiance, visibility=lightmaps.visibility, covered=lightmaps.covered)
 
 
-def viewer_notes(scene: Scene, materials: set[int], carrier: str) -> list[str]:
-    """Report notes for the baked ``materials`` (indices into ``scene.materials``) that viewers
-    will show darker than the bake: a lightmap lights only the diffuse part of a material,
-    (1 − metallic) × (1 − transmission) of its base colour (``viewer_diffuse_weight``), so a
-    metal or glass shows little of it in moz; the emissive carrier shows the bake on them as
-    it is, and the occlusion carrier only darkens the viewer's own light."""
+def viewer_notes(scene: Scene, world: World, instances: list[int], carrier: str) -> list[str]:
+    """Report notes for the materials of the baked ``instances`` that viewers will show darker
+    than the bake: a lightmap lights only the diffuse part of a material, (1 − metallic) ×
+    (1 − transmission) of its base colour, metallic read from its texture where it has one
+    (``diffuse_shares``), so a metal or glass shows little of it in moz; the emissive carrier
+    shows the bake on them as it is, and the occlusion carrier only darkens the viewer's own
+    light."""
     if carrier != "moz":
         return []
-    weights = viewer_diffuse_weight(scene)
     notes = []
-    for m in sorted(materials):
+    for m, share in sorted(diffuse_shares(scene, world, instances).items()):
         material = scene.materials[m]
-        if weights[m] < _DARK_WEIGHT:
-            notes.append(f"material {material.name!r} (metallic {material.metallic:g}, "
+        if share < _DARK_WEIGHT:
+            textured = " × its texture" if material.metallic_roughness_texture is not None else ""
+            notes.append(f"material {material.name!r} (metallic {material.metallic:g}{textured}, "
                          f"transmission {material.transmission:g}): viewers light only its "
-                         f"diffuse part with the lightmap, {weights[m]:.0%} of its base colour, "
-                         "so it shows dark where the bake has light; --carrier emissive shows "
-                         "the bake on it")
+                         f"diffuse part with the lightmap, {share:.0%} of its base colour over "
+                         "its surface, so it shows dark where the bake has light; "
+                         "--carrier emissive shows the bake on it")
     return notes
+
+
+_SHARE_POINTS = 4096  # points per material that ``diffuse_shares`` averages over
+
+
+def diffuse_shares(scene: Scene, world: World, instances: list[int]) -> dict[int, float]:
+    """{material: the area-weighted mean of ``viewer_diffuse_weight_at`` over its triangles in
+    ``instances``}, measured at ``_SHARE_POINTS`` points per material laid by area: point k at
+    the cumulative-area fraction (k + ½)/K, its second coordinate k·(golden ratio) mod 1, so
+    the same scene gives the same figure every run."""
+    tris = np.flatnonzero(np.isin(world.tri_instance, instances))
+    a, b, c = world.corners(tris)
+    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    k = np.arange(_SHARE_POINTS)
+    shares = {}
+    for m in np.unique(world.tri_material[tris]):
+        own = world.tri_material[tris] == m
+        cumulative = np.cumsum(area[own])
+        if cumulative[-1] <= 0:
+            continue
+        at = (k + 0.5) / _SHARE_POINTS * cumulative[-1]
+        pick = np.minimum(np.searchsorted(cumulative, at, side="right"), len(cumulative) - 1)
+        before = np.where(pick > 0, cumulative[pick - 1], 0.0)
+        r1 = np.clip((at - before) / np.maximum(area[own][pick], 1e-300), 0.0, 1.0)
+        r2 = (k * 0.6180339887498949) % 1.0
+        root = np.sqrt(r1)  # uniform on the triangle (Osada et al. 2002)
+        bary = np.column_stack([1.0 - root, root * (1.0 - r2), root * r2])
+        weight = viewer_diffuse_weight_at(scene, world, tris[own][pick], bary)
+        shares[int(m)] = float(weight.mean())
+    return shares
