@@ -14,7 +14,10 @@ obscurance alone (no special materials) and each ``--rays`` n:
   anti-correlated) × a gain c measured on a seeded 1/``--every`` of the texels that get one
   more independent net of n (seed 3): c = Σ (m_net − m_extra)²/2 ÷ Σ e²; reported ÷ measured
   overall and in the four quarters of the texels (in ``Texels`` order: regions of the atlas),
-  which shows whether one c fits the whole scene.
+  which shows whether one c fits the whole scene;
+- per texel, the share within 2σ / 3σ of each design's error map (its e², c·e² for "net",
+  pooled over the 5 × 5 window as ``errormap.texel_errors`` pools them, the reference's
+  added in quadrature; obscurance alone, without I_A's error).
 
 Lightmap units (I_A · luminance of W). Costs 1/``--every`` more rays where used.
 
@@ -39,6 +42,7 @@ from bench_calibration import SCENES, _probe_only  # noqa: E402
 from baker.geometry.surface import LUMINANCE  # noqa: E402
 from baker.gltf.load import load  # noqa: E402
 from baker.image.compose import effective_r_ave  # noqa: E402
+from baker.image.errormap import pooled  # noqa: E402
 from baker.light.hemisphere import (  # noqa: E402
     _TEXEL_MAJOR, _accumulate_kernel, _shading, surfaces_of, world_rays)
 from baker.light.integrate import integrate  # noqa: E402
@@ -78,6 +82,16 @@ def net_values(done, tracer, surfaces, rows: np.ndarray, rays: int, seed: int, l
     return out
 
 
+def coverage(done, own: np.ndarray, error: np.ndarray) -> tuple[float, float]:
+    """Shares of texels with |``error``| (N,) within 2 and 3 of their error-map value, the
+    map pooled from the variances ``own`` (N,) as ``errormap.texel_errors`` pools them."""
+    atlas = done.atlas
+    around = pooled(own, done.texels.pixels(), (atlas.page_count, atlas.height, atlas.width))
+    sigma = np.sqrt(around * own.sum() / max(around.sum(), 1e-300))
+    return (float(np.mean(np.abs(error) <= 2 * sigma)),
+            float(np.mean(np.abs(error) <= 3 * sigma)))
+
+
 def compare(name: str, rays: int, factor: int, every: int, folder: Path) -> dict:
     """The figures of the module docstring for scene ``name`` at ``rays`` rays."""
     make, overrides = SCENES[name]
@@ -92,7 +106,9 @@ def compare(name: str, rays: int, factor: int, every: int, folder: Path) -> dict
         settings = replace(done.settings, rays=count, seed=seed, target_error=None)
         return integrate(done.scene, done.world, tracer, done.texels, settings)
 
-    reference = (bake(rays * factor, 2).obscurance(r_ave) @ LUMINANCE) * intensity
+    fine = bake(rays * factor, 2)
+    reference = (fine.obscurance(r_ave) @ LUMINANCE) * intensity
+    fine_e2 = fine.split_errors(r_ave) * intensity ** 2
     halves = bake(rays, 1)
     rows = np.arange(len(done.texels))
     values = net_values(done, tracer, surfaces, rows, rays, 1, lum) * intensity
@@ -108,13 +124,21 @@ def compare(name: str, rays: int, factor: int, every: int, folder: Path) -> dict
         return float(np.sqrt(np.mean(x)))
 
     measured_net = rmse((net - reference) ** 2)
-    measured_halves = rmse(((halves.obscurance(r_ave) @ LUMINANCE) * intensity - reference) ** 2)
+    halves_error = (halves.obscurance(r_ave) @ LUMINANCE) * intensity - reference
+    measured_halves = rmse(halves_error ** 2)
     quarters = [float(np.sqrt(gain * np.mean(e2[q]) / np.mean((net[q] - reference[q]) ** 2)))
                 for q in np.array_split(rows, 4)]
     return {"texels": len(rows), "subset": len(subset), "halves": measured_halves,
             "halves ratio": halves.rmse(r_ave) * intensity / measured_halves,
             "net": measured_net, "gain": gain,
-            "net ratio": rmse(gain * e2) / measured_net, "quarters": quarters}
+            "net ratio": rmse(gain * e2) / measured_net, "quarters": quarters,
+            "halves cover": coverage(done, halves.split_errors(r_ave) * intensity ** 2
+                                     + fine_e2, halves_error),
+            "net cover": coverage(done, gain * e2 + fine_e2, net - reference)}
+
+
+def _shares(pair: tuple[float, float]) -> str:
+    return f"{pair[0]:.1%}/{pair[1]:.1%}".replace("%", "", 1)
 
 
 def main() -> None:
@@ -128,14 +152,16 @@ def main() -> None:
     names = args.only or [n for n, (_, s) in SCENES.items() if s.get("method") != "gi"
                           and "light" not in n and "sky" not in n]
     print(f"{'scene':30} {'rays':>5} {'texels':>6} {'subset':>6} {'halves':>9} {'ratio':>6} "
-          f"{'net':>9} {'net/h':>6} {'gain c':>7} {'ratio':>6}  quarters' ratios")
+          f"{'net':>9} {'net/h':>6} {'gain c':>7} {'ratio':>6} {'h 2σ/3σ':>11} {'net 2σ/3σ':>11}"
+          "  quarters' ratios")
     with tempfile.TemporaryDirectory() as folder:
         for rays in args.rays or [64]:
             for name in names:
                 r = compare(name, rays, args.reference, args.every, Path(folder))
                 print(f"{name:30} {rays:5d} {r['texels']:6d} {r['subset']:6d} "
                       f"{r['halves']:9.3g} {r['halves ratio']:6.2f} {r['net']:9.3g} "
-                      f"{r['net'] / r['halves']:6.2f} {r['gain']:7.3f} {r['net ratio']:6.2f}  "
+                      f"{r['net'] / r['halves']:6.2f} {r['gain']:7.3f} {r['net ratio']:6.2f} "
+                      f"{_shares(r['halves cover']):>11} {_shares(r['net cover']):>11}  "
                       + " ".join(f"{q:.2f}" for q in r["quarters"]), flush=True)
 
 
