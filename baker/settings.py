@@ -53,9 +53,10 @@ class Settings:
     rays: obscurance rays per texel.
     sampling: how each texel's ray directions are drawn: "sobol" (Owen-scrambled Sobol, the
         default), "stratified" (jittered grid) or "random" (independent), see sampling.py.
-    target_error: adaptive sampling: give each texel rays in rounds (``rays``, then doubling)
-        until the standard error of its lightmap luminance is at most this, or it has
-        ``max_rays``; None: every texel gets ``rays``.
+    target_error: adaptive sampling: give each texel rays in rounds (``rays``, even, then
+        doubling) until its predicted lightmap luminance error is at most half this (so that
+        about 95 % of texels are within it), or it has ``max_rays``; None: every texel gets
+        ``rays`` (``hemisphere.hemisphere_terms``).
     max_rays: the most rays a texel gets with ``target_error``.
     method: "obscurance" (L = D + I_A·W, the product) or "gi": a full diffuse global
         illumination reference, L = D + path-traced indirect light with ``rays`` paths per
@@ -209,6 +210,10 @@ class Settings:
             if int(value) != value or value < low:
                 raise SettingsError(f"{name} must be a whole number of at least {low}, not {value}",
                                     fix=f"give --{name.replace('_', '-')} a whole number ≥ {low}")
+        if self.target_error is not None and self.rays % 2:
+            raise SettingsError(f"--target-error needs an even number of rays, not {self.rays}: "
+                                f"its rounds grow each texel's two nets of rays/2 points",
+                                fix=f"use --rays {self.rays + 1}")
         self._check_uv()
         self._check_lights()
         self._check_materials()

@@ -247,6 +247,25 @@ def fill_points(technique, seed, keys, first, count, dimension, u, v):
 
 
 @jit
+def extend_nets(seed, keys, have, more, second, dimension, u, v):
+    """The ``sobol`` points of an adaptive round: each texel of ``keys`` (k,) has points
+    0 … have − 1 of its two nets already; write points have … have + more − 1 of the first net
+    (word ``dimension``) then the same of the second (word ``second``: the ``net_word`` of the
+    sample where ``fill_points`` started it) into ``u``, ``v`` (k·2·more,), texel-major. Both
+    nets grow as one longer net would, so a texel with n rays holds two nets of n/2 points,
+    as a bake with n rays from the start does (Owen-scrambled Sobol prefixes are nets)."""
+    count = 2 * more
+    for i in range(len(keys)):
+        base = i * count
+        for net in range(2):
+            word = dimension if net == 0 else second
+            shuffle, sx, sy = texel_scrambles(seed, keys[i], word)
+            for s in range(more):
+                u[base + net * more + s], v[base + net * more + s] = _sobol_point(
+                    have + s, shuffle, sx, sy)
+
+
+@jit
 def _points_kernel(technique, seed, keys, samples, counts, dimension, out):
     for i in range(len(keys)):
         out[i, 0], out[i, 1] = point(technique, samples[i], counts[i],
