@@ -454,6 +454,14 @@ def surfaces_of(scene: Scene, world: World) -> Surfaces:
 
 # Russian roulette starts at this bounce of a chain (tests may raise it to switch it off).
 _ROULETTE_FROM = 2
+_SURVIVAL_CAP = 0.95  # a chain survives roulette with min(this, its max throughput)
+
+
+def most_escaped(max_depth: int) -> float:
+    """The highest escaped weight a texel can hold (``Terms.escaped``, a mean of its rays'):
+    1 for diffuse scenes, but a chain through clear glass or a white mirror keeps a throughput
+    of 1 and each roulette divides it by ``_SURVIVAL_CAP``: up to max_depth − 1 times."""
+    return _SURVIVAL_CAP ** -max(max_depth - 1, 0)
 
 
 def _uniform(seed: int, keys: np.ndarray, samples: np.ndarray, dimension: int) -> np.ndarray:
@@ -583,7 +591,7 @@ def _special_hits(surfaces: Surfaces, tracer: Tracer, origins: np.ndarray,
             tint[glass] = np.where(refracted[:, None], colour[glass], 1.0)
         throughput[live] *= tint
         if depth + 1 >= _ROULETTE_FROM:
-            survive = np.minimum(0.95, throughput[live].max(axis=1))
+            survive = np.minimum(_SURVIVAL_CAP, throughput[live].max(axis=1))
             kept = _uniform(settings.seed, key[live], sample[live], dim + 2) < survive
             throughput[live[kept]] /= survive[kept, None]
             live, hit_point, new, normal = live[kept], hit_point[kept], new[kept], normal[kept]

@@ -123,6 +123,12 @@ def _authored_uv(scene: Scene, instance: int, uv: int | None) -> tuple[np.ndarra
     return () if uv is None or len(sets) <= uv else (sets[uv],)
 
 
+def _as_json(value):
+    """A setting's value as JSON reads it back (a tuple, such as the sky colour, as a list),
+    so that the fingerprints of the scene compare with the stored ones member by member."""
+    return list(value) if isinstance(value, tuple) else value
+
+
 def fingerprints(scene: Scene, world: World, settings: Resolved, asked=None) -> dict:
     """Hashes of everything the bake's result depends on, JSON-able, grouped for ``diff``.
 
@@ -140,15 +146,15 @@ def fingerprints(scene: Scene, world: World, settings: Resolved, asked=None) -> 
                               *_authored_uv(scene, i, settings.uv)))
                             for i in baked])
     asked_values = None if asked is None else {
-        k: list(v) if isinstance(v, tuple) else v for k, v in asdict(asked).items()
-        if k not in _NO_EFFECT}
+        k: _as_json(v) for k, v in asdict(asked).items() if k not in _NO_EFFECT}
     return {
         "code": code_fingerprint(),
         "asked": asked_values,
         "settings": {"rays": digest(sorted(rays.items())),
                      "atlas": digest(*[values[k] for k in ATLAS_SETTINGS]),
                      "recompose": digest(*[values[k] for k in RECOMPOSE_SETTINGS]),
-                     "values": {k: values[k] for k in sorted(values) if k not in _NO_EFFECT}},
+                     "values": {k: _as_json(values[k]) for k in sorted(values)
+                                if k not in _NO_EFFECT}},
         "unwrap": unwrap_input,
         "center": world.center.tolist() + [world.scale],
         "triangles": int(len(world.triangles)),

@@ -1031,7 +1031,7 @@ def _compared(scene: Scene, settings: Settings, path, relight: bool, times: dict
     with timed(times, "load"):
         try:
             stored = state_file.load(path, state_classes())
-            check_state(stored)
+            check_state(stored, settings.max_depth)
             density = stored_density(stored.fingerprints)
         except state_file.StateUnusable as error:
             raise FullBake(str(error)) from None

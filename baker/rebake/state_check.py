@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from baker.atlas.validity import STATE_NAMES
+from baker.light.hemisphere import most_escaped
 from baker.rebake.state import BakeState, StateUnusable
 
 _ROUNDING = 1e-9  # fractions are means of values on a 2^-40 grid: at most 1 plus rounding
@@ -37,7 +38,7 @@ _PER_TEXEL = {
                  "back_fraction": ("<f8", (), False, 0.0, 1.0 + _ROUNDING),
                  "touching": ("|b1", (), False, None, None)},
     "terms": {"w_hit": ("<f8", (3,), False, 0.0, None),
-              "escaped": ("<f8", (), False, 0.0, 1.0 + _ROUNDING),
+              "escaped": ("<f8", (), False, 0.0, None),  # ≤ most_escaped: check_state
               "hit_sq": ("<f8", (), False, 0.0, None),
               "counts": ("<i8", (), False, 0, None),
               "half_split": ("<f8", (2,), False, None, None),
@@ -60,10 +61,12 @@ def unusable(what: str) -> StateUnusable:
     return StateUnusable(f"the bake state is unusable: {what}")
 
 
-def check_state(state: BakeState) -> None:
+def check_state(state: BakeState, max_depth: int) -> None:
     """Raise ``StateUnusable`` unless every member of ``state`` is as this build writes it:
     the atlas's scalars and per-instance arrays, the instances' world matrices, and every
-    per-texel array (``_PER_TEXEL``) with as many rows as there are texels."""
+    per-texel array (``_PER_TEXEL``) with as many rows as there are texels; ``escaped`` at most
+    what chains of ``max_depth`` bounces reach (``hemisphere.most_escaped``: above 1 through
+    glass and mirrors; a state of another max_depth is baked anew by the diff anyway)."""
     _check_atlas(state)
     world = state.instance_world
     _array("instance_world", world, "<f8", (4, 4))
@@ -83,6 +86,10 @@ def check_state(state: BakeState) -> None:
             if len(value) != count and not (may_be_empty and len(value) == 0):
                 raise unusable(f"{group}/{name} has {len(value)} rows for {count} texels")
     _check_texels(state, texels, count)
+    terms = state.groups.get("terms")
+    if terms is not None:
+        _array("terms/escaped", terms.escaped, "<f8", (), 0.0,
+               most_escaped(max_depth) + _ROUNDING)
     direct = state.groups.get("direct")
     if direct is not None:
         lights = direct.punctual.shape[1]
@@ -167,7 +174,8 @@ def check_fingerprints(stored: Any, current: dict) -> None:
     """Raise ``StateUnusable`` unless the stored fingerprints have the structure of those this
     build makes of the scene (``current``): the same keys in every object, lists of items like
     the current list's, numbers where numbers are, strings where strings are (``None`` stands
-    for any plain value: a setting left to its default). Values may differ: that is the diff."""
+    for any plain value or list of them: a setting left to its default, such as no sky). Values
+    may differ: that is the diff."""
     mismatch = _structure(stored, current, "fingerprints")
     if mismatch is not None:
         raise unusable(mismatch)
@@ -199,6 +207,8 @@ def _structure(stored: Any, current: Any, at: str) -> str | None:
             if found is not None:
                 return found
         return None
+    if stored is None and _plain_list(current) or current is None and _plain_list(stored):
+        return None  # a setting given on one bake, left to its default (None) on the other
     if isinstance(current, list):
         if not isinstance(stored, list):
             return f"{at} is not a list"
@@ -221,6 +231,11 @@ def _structure(stored: Any, current: Any, at: str) -> str | None:
     if isinstance(stored, type(current)):
         return None
     return f"{at} is {stored!r}, not a {type(current).__name__}"
+
+
+def _plain_list(value: Any) -> bool:
+    """Whether ``value`` is a list of plain values (no object or list in it)."""
+    return isinstance(value, list) and not any(isinstance(v, (dict, list)) for v in value)
 
 
 def _array(name: str, value: Any, dtype: str, row: tuple[int, ...], low=None, high=None) -> None:
