@@ -1,16 +1,24 @@
 """Rebake = full bake, as a property over generated rooms and edits.
 
 Each case draws a room (``assets.random_rooms``: props of every material kind, punctual lights,
-maybe sky, open or closed) and an edit of it (a prop moved, turned, scaled or recoloured, a
-light changed, or several at once), bakes the room, rebakes the edited room from that bake's
-state and bakes the edited room from scratch: the two outputs and the two bake states must be
-the same bytes. ``CASES`` rooms (3 edits each) run in the normal suite, about 55 s on the shared
-2 cores; ``BAKER_LONG=1`` runs ``LONG_CASES``. A case that fails is added to ``REGRESSIONS``
-(room seed, edit seed) once fixed, and runs in both modes. Rooms 0–59 (180 edits) and 30 rooms
-of ``rebake_scenes.grid_boxes`` with one box moved (16 or 64 rays, default d_max) found none.
-The same check runs with ``--foliage approx`` on the first ``FOLIAGE_CASES`` rooms that have an
-alpha-cut panel (a crown of one leaf: fitted, shading the room in closed form), or
-``LONG_FOLIAGE_CASES`` with ``BAKER_LONG=1``.
+emissive panels, maybe sky, open or closed) and edits of it (a prop moved, turned, scaled or
+recoloured, a light changed, or several at once), bakes the room once, and for each edit
+rebakes the edited room from that bake's state and bakes the edited room from scratch: the two
+outputs and the two bake states must be the same bytes. The bakes are small (3 or 5 texels a
+metre, 8 or 16 rays, few shadow, sky and emissive rays, chains of at most 4 bounces) so that
+``CASES`` rooms × ``EDITS_PER_ROOM`` edits run in the normal suite; ``BAKER_LONG=1`` runs
+``LONG_CASES`` rooms.
+
+An edit the rebake cannot follow (a scale: a new atlas; an emissive panel moved; the sky
+switched; supersampling) is a full bake on both sides, and equal bytes say little. So the
+rebakes that were incremental must be at least ``INCREMENTAL_SHARE`` of all (measured 0.63 over
+rooms 0–23, 144 edits), and a failure prints every fallback's reason. A case that fails is added
+to ``REGRESSIONS`` (room seed, edit seed) once fixed, and runs in both modes; the first two were
+rebakes of rooms with sky or with glass and mirrors that fell back to full bakes on every
+edit ("the bake state is unusable": a sky colour read back as a list; escaped weights above 1
+from Russian roulette). The same check runs with ``--foliage approx`` on the first
+``FOLIAGE_CASES`` rooms that have an alpha-cut panel (a crown of one leaf: fitted, shading the
+room in closed form), or ``LONG_FOLIAGE_CASES`` with ``BAKER_LONG=1``.
 """
 
 from __future__ import annotations
@@ -24,40 +32,43 @@ import baker
 from assets.random_rooms import build, random_edit, random_room
 from baker.rebake.state import default_path
 
-CASES, LONG_CASES, EDITS_PER_ROOM = 8, 200, 3
+LONG = bool(os.environ.get("BAKER_LONG"))
+CASES, LONG_CASES, EDITS_PER_ROOM = 24, 400, 6
 FOLIAGE_CASES, LONG_FOLIAGE_CASES = 2, 30
-REGRESSIONS: list[tuple[int, int]] = []
+INCREMENTAL_SHARE = 0.45
+REGRESSIONS: list[tuple[int, int]] = [(3, 3000), (12, 12000)]
 
 
 def _settings(spec, foliage: str = "none") -> baker.Settings:
-    return baker.Settings(rays=spec["rays"], page_size=256, shadow_rays=4, threads=1,
+    return baker.Settings(rays=spec["rays"], page_size=128, shadow_rays=2, sky_rays=8,
+                          emissive_rays=4, max_depth=4, threads=1,
                           texel_density=spec["density"], supersample=spec["supersample"],
                           sky=(0.2, 0.25, 0.3) if spec["sky"] else None, foliage=foliage)
 
 
-def _cases() -> list[tuple[int, list[int]]]:
-    """(room seed, edit seeds): the generated rooms, then each regression on its own."""
-    rooms = range(LONG_CASES if os.environ.get("BAKER_LONG") else CASES)
-    return ([(room, [1000 * room + e for e in range(EDITS_PER_ROOM)]) for room in rooms]
-            + [(room, [edit]) for room, edit in REGRESSIONS])
+def _rooms() -> list[tuple[int, list[int]]]:
+    """(room seed, edit seeds) of the generated rooms."""
+    return [(room, [1000 * room + e for e in range(EDITS_PER_ROOM)])
+            for room in range(LONG_CASES if LONG else CASES)]
 
 
 def _foliage_cases() -> list[tuple[int, list[int]]]:
     """(room seed, edit seeds) of the first rooms with an alpha-cut panel (a crown)."""
-    wanted = LONG_FOLIAGE_CASES if os.environ.get("BAKER_LONG") else FOLIAGE_CASES
+    wanted = LONG_FOLIAGE_CASES if LONG else FOLIAGE_CASES
     rooms = (room for room in range(10 * wanted)
              if any(p["kind"] == "alpha" for p in random_room(room)["props"]))
-    return [(room, [1000 * room + e for e in range(EDITS_PER_ROOM)])
-            for room, _ in zip(rooms, range(wanted))]
+    return [(room, [1000 * room + e for e in range(3)]) for room, _ in zip(rooms, range(wanted))]
 
 
-def check_case(folder, room_seed: int, edit_seeds, foliage: str = "none") -> list[str]:
+def check_case(folder, room_seed: int, edit_seeds, foliage: str = "none"
+               ) -> tuple[list[str], list[str]]:
     """Bake room ``room_seed``, then for each edit seed rebake and fully bake the edited room
-    (``foliage``: the --foliage mode); return a line per edit whose bytes differ."""
+    (``foliage``: the --foliage mode). Returns (a line per edit whose bytes differ, a line per
+    edit the rebake did as a full bake, with its reason)."""
     spec = random_room(room_seed)
     build(spec).save(folder / "room.glb")
     baker.bake(folder / "room.glb", folder / "base.glb", _settings(spec, foliage))
-    failures = []
+    failures, fallbacks = [], []
     for edit_seed in edit_seeds:
         what, edited = random_edit(spec, edit_seed)
         scene = build(edited).save(folder / "edited.glb")
@@ -68,21 +79,40 @@ def check_case(folder, room_seed: int, edit_seeds, foliage: str = "none") -> lis
         same_output = (folder / "incremental.glb").read_bytes() == (folder / "full.glb").read_bytes()
         same_state = (default_path(folder / "incremental.glb").read_bytes()
                       == default_path(folder / "full.glb").read_bytes())
-        if "foliage" in str(result.rebake.get("full_bake_reason", "")):
-            failures.append(f"room {room_seed}, edit {edit_seed} ({what}): a full bake for "
-                            f"foliage: {result.rebake['full_bake_reason']}")
+        line = f"room {room_seed}, edit {edit_seed} ({what})"
+        if not result.rebake["incremental"]:
+            fallbacks.append(f"{line}: {result.rebake['full_bake_reason']}")
         if not (same_output and same_state):
-            failures.append(f"room {room_seed}, edit {edit_seed} ({what}, incremental "
-                            f"{result.rebake['incremental']}): output same {same_output}, "
-                            f"state same {same_state}")
-    return failures
+            failures.append(f"{line}, incremental {result.rebake['incremental']}: output same "
+                            f"{same_output}, state same {same_state}")
+    return failures, fallbacks
 
 
-@pytest.mark.parametrize("room_seed, edit_seeds", _cases())
-def test_rebake_equals_a_full_bake_on_generated_rooms(tmp_path, room_seed, edit_seeds):
-    assert check_case(tmp_path, room_seed, edit_seeds) == []
+def test_rebake_equals_a_full_bake_on_generated_rooms(tmp_path):
+    """Every generated (room, edit): equal bytes; most of them rebaked incrementally."""
+    failures, fallbacks, edits = [], [], 0
+    for room_seed, edit_seeds in _rooms():
+        found, fell_back = check_case(tmp_path, room_seed, edit_seeds)
+        failures += found
+        fallbacks += fell_back
+        edits += len(edit_seeds)
+    share = 1 - len(fallbacks) / edits
+    print(f"{edits} edits of {edits // EDITS_PER_ROOM} rooms: {len(failures)} differ, "
+          f"{share:.0%} incremental")
+    assert failures == [] and share >= INCREMENTAL_SHARE, "\n".join(
+        failures + [f"incremental share {share:.2f} < {INCREMENTAL_SHARE}; full bakes:"]
+        + fallbacks)
+
+
+@pytest.mark.parametrize("room_seed, edit_seed", REGRESSIONS)
+def test_rebake_regressions(tmp_path, room_seed, edit_seed):
+    """Cases the property found: equal bytes, and rebaked incrementally (each did so once
+    fixed)."""
+    assert check_case(tmp_path, room_seed, [edit_seed]) == ([], [])
 
 
 @pytest.mark.parametrize("room_seed, edit_seeds", _foliage_cases())
 def test_foliage_rebake_equals_a_full_bake_on_generated_rooms(tmp_path, room_seed, edit_seeds):
-    assert check_case(tmp_path, room_seed, edit_seeds, "approx") == []
+    failures, fallbacks = check_case(tmp_path, room_seed, edit_seeds, "approx")
+    assert failures == [] and not [f for f in fallbacks if "foliage" in f], "\n".join(
+        failures + fallbacks)
