@@ -255,3 +255,27 @@ def test_the_atlas_does_not_depend_on_the_cores_or_on_which_charts_were_cached(
         for a, b in zip(alone.instances, other.instances, strict=True):
             assert np.array_equal(a.vertices, b.vertices) and np.array_equal(a.uv, b.uv)
             assert np.array_equal(a.triangles, b.triangles) and np.array_equal(a.pages, b.pages)
+
+
+def test_a_scene_of_one_large_mesh_is_charted_and_packed_in_one_run(tmp_path, cache,
+                                                                      monkeypatch):
+    """A terrain of 3,200 triangles in a room of 12: no mesh is charted alone (one xatlas run
+    charts and packs both), and the atlas is the same with one worker or two, and cached."""
+    from benchmarks.bench_million import terrain
+
+    path = terrain(40).save(tmp_path / "terrain.glb")
+    log = _counting_charts(monkeypatch, tmp_path)
+    scene, world, _, alone = _unwrapped(path, page_size=256, threads=1)
+    assert log.read_text() == "" and not _charts(cache)
+    assert sum(len(inst.triangles) for inst in alone.instances) == 3212
+    monkeypatch.setenv("BAKER_CACHE_DIR", "off")
+    *_, beside = _unwrapped(path, page_size=256, threads=2)
+    monkeypatch.setenv("BAKER_CACHE_DIR", str(cache))
+    with monkeypatch.context() as m:
+        _no_xatlas(m)
+        *_, cached = _unwrapped(path, page_size=256, threads=1)
+    for other in (beside, cached):
+        assert (alone.width, alone.height, alone.page_count) == (
+            other.width, other.height, other.page_count)
+        for a, b in zip(alone.instances, other.instances, strict=True):
+            assert np.array_equal(a.uv, b.uv) and np.array_equal(a.triangles, b.triangles)

@@ -10,7 +10,8 @@ go into one xatlas run as UV meshes (``_pack``), so that one texel covers about
 1 / texel_density world units everywhere and every instance gets its own area. Both steps are
 pure functions of their input, so the atlas does not depend on the cores, the order the
 children end in, or the cache; and moving or turning a node leaves it bit for bit as it was
-(incremental rebake).
+(incremental rebake). Where one instance holds most triangles, charting apart cannot win, and
+one xatlas run charts and packs everything (``_one_run``, ``_whole``).
 """
 
 from __future__ import annotations
@@ -45,6 +46,9 @@ _BESIDE = 0.25
 # fit in one, by the page side over the side xatlas needs, times this (packing is not exactly
 # proportional: padding stays), in at most this many rounds (``_fitted``).
 _FIT_MARGIN, _FIT_TRIES = 0.98, 3
+# One xatlas run charts and packs everything when one instance holds over this share of the
+# triangles (``_one_run``).
+_ONE_RUN = 0.5
 
 
 class PageTooSmall(SettingsError):
@@ -61,13 +65,15 @@ def baked_instances(scene: Scene) -> list[int]:
     return [i for i, inst in enumerate(scene.instances) if inst.baked]
 
 
-def _pack_options(settings: Resolved, resolution: int) -> xatlas.PackOptions:
+def _pack_options(settings: Resolved, resolution: int, turn: bool = False
+                  ) -> xatlas.PackOptions:
     """Settings of the packing of every instance's charts (``_pack``); positions reach xatlas
     in texel units, so one texel per unit. The charts were turned to their best axis when
     charted (``_chart``): turned again, a chart under a texel wide would be made a texel wide
-    once more (xatlas's least chart size), and a 0.1-texel triangle would own 5 texels."""
+    once more (xatlas's least chart size), and a 0.1-texel triangle would own 5 texels. ``turn``:
+    for the run that charts and packs at once (``_whole``), where the charts are turned once."""
     options = xatlas.PackOptions()
-    options.rotate_charts_to_axis = False
+    options.rotate_charts_to_axis = turn
     options.texels_per_unit = 1.0
     options.padding = int(settings.padding)
     options.bilinear = True
@@ -284,14 +290,16 @@ def _pack(charted: list[_Charted], settings: Resolved, resolution: int) -> _Pack
 
 def _generate(scene: Scene, world: World, instances: list[int], settings: Resolved,
               resolutions: tuple[int, ...]) -> list[_Packed]:
-    """The instances unwrapped (``_chart_all``, ``_pack``), one atlas per pack resolution of
-    ``resolutions``: each read whole from the cache (``unwrap_cache.py``) or packed in a forked
-    child, all at once (``forked.py``: xatlas's threads can crash it, and a crashed run is run
-    again)."""
+    """The instances unwrapped, one atlas per pack resolution of ``resolutions``: each read
+    whole from the cache (``unwrap_cache.py``) or made in a forked child, all at once
+    (``forked.py``: xatlas's threads can crash it, and a crashed run is run again). Made by
+    charting each mesh and packing (``_chart_all``, ``_pack``), or, where one instance holds
+    most triangles (``_one_run``), by one xatlas run that charts and packs (``_whole``)."""
     meshes = xatlas_meshes(scene, world, instances, settings)
-    names = [unwrap_cache.key(meshes, (*_charting(),
-                                       _options_of(_pack_options(settings, resolution))))
-             for resolution in resolutions]
+    whole = _one_run(meshes)
+    names = [unwrap_cache.key(meshes, _whole_charting(settings, resolution) if whole else (
+        *_charting(), _options_of(_pack_options(settings, resolution))))
+        for resolution in resolutions]
     found: list[_Packed | None] = []
     for name in names:
         stored = unwrap_cache.read(name, len(meshes))
@@ -299,15 +307,47 @@ def _generate(scene: Scene, world: World, instances: list[int], settings: Resolv
                      and _fits(stored, meshes) else None)
     missing = [k for k, packed in enumerate(found) if packed is None]
     if missing:
-        charted = _chart_all(meshes, settings)
         limit = _time_limit(sum(len(t) for _, t in meshes), sum(map(_texels, meshes)))
-        runs = call_forked_together([functools.partial(_pack, charted, settings, resolutions[k])
-                                     for k in missing], "the unwrapper (xatlas)", limit)
+        if whole:
+            calls = [functools.partial(_whole, meshes, settings, resolutions[k]) for k in missing]
+        else:
+            charted = _chart_all(meshes, settings)
+            calls = [functools.partial(_pack, charted, settings, resolutions[k]) for k in missing]
+        runs = call_forked_together(calls, "the unwrapper (xatlas)", limit)
         for k, packed in zip(missing, runs):
             found[k] = packed
             unwrap_cache.write(names[k], (packed.width, packed.height, packed.atlas_count,
                                           packed.chart_count), packed.meshes)
     return found
+
+
+def _one_run(meshes: list[_Mesh]) -> bool:
+    """Whether one xatlas run should chart and pack every mesh (``_whole``): when one instance
+    holds over ``_ONE_RUN`` of the triangles, charting the meshes apart gains little (that one
+    is charted alone on one core) and packing charts as UV meshes costs about as much again
+    (1M-triangle terrain: charting 9.9 s + packing 9.7 s against one run's 12.6 s)."""
+    counts = [len(t) for _, t in meshes]
+    return max(counts) > _ONE_RUN * sum(counts)
+
+
+def _whole_charting(settings: Resolved, resolution: int) -> tuple[object, ...]:
+    """What besides the meshes decides ``_whole``'s atlas (for the cache key)."""
+    return (xatlas.__version__, "whole", _options_of(xatlas.ChartOptions()),
+            _options_of(_pack_options(settings, resolution, turn=True)))
+
+
+def _whole(meshes: list[_Mesh], settings: Resolved, resolution: int) -> _Packed:
+    """Every mesh charted and packed in one xatlas run (charts turned to their best axis once),
+    into pages of ``resolution`` (0: one page of the size xatlas needs); per mesh xatlas's
+    (vertices, triangles, uv in 0–1, page and chart of each vertex), as ``_pack`` gives."""
+    atlas = xatlas.Atlas()
+    for mesh in meshes:
+        atlas.add_mesh(*mesh)
+    atlas.generate(xatlas.ChartOptions(), _pack_options(settings, resolution, turn=True))
+    return _Packed(width=int(atlas.width), height=int(atlas.height),
+                   atlas_count=int(atlas.atlas_count), chart_count=int(atlas.chart_count),
+                   meshes=tuple((*atlas[m], *atlas.get_mesh_vertex_assignment(m))
+                                for m in range(len(meshes))))
 
 
 def _time_limit(triangles: int, texels: float) -> float:
