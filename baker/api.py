@@ -224,7 +224,7 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
                 if staging is not None:
                     staging.stage_into(outputs)
                     record_full_bake(state_path, rebaked, time.perf_counter() - started
-                                     - compiling.seconds, outputs.stage)
+                                     - compiling.seconds, outputs.stage, times)
             seconds = time.perf_counter() - started
             report = _report(input_path, output, done, info, pages, times, seconds,
                              summary(rebaked, state_path, incremental, seconds,

@@ -73,12 +73,14 @@ def main() -> None:
                                                        settings))
                 fulls.append(seconds)
             info = again.rebake
-            if not info["incremental"]:
-                print(f"{name}: full bake instead of a rebake: {info['full_bake_reason']}")
-                continue
             same = ((folder / "out.glb").read_bytes() == (folder / "full.glb").read_bytes()
                     and state.read_bytes() == default_path(folder / "full.glb").read_bytes())
             rebake, full = statistics.median(rebakes), statistics.median(fulls)
+            if not info["incremental"]:
+                print(f"{name}: full bake instead of a rebake ({info['full_bake_reason']}): "
+                      f"{rebake:.2f} s, full bake {full:.2f} s = {100 * rebake / full:.0f} %; "
+                      f"identical bytes: {same}")
+                continue
             print(f"{name}: dirty {100 * info['dirty_fraction']:.1f} % "
                   f"({info['dirty_by_reason']}), {info['rays']:,} rays; rebake {rebake:.2f} s, "
                   f"full bake {full:.2f} s = {100 * rebake / full:.0f} %; "

@@ -3,10 +3,11 @@
 Bakes the demo Cornell box (assets/scenes/cornell_box.glb, default settings) and the 60-crate
 room of ``bench_rebake.py`` (page 1024², 64 rays), then writes each state again from memory
 (``state.write_state``, as a rebake does) and reads it back (``state.load``, as a rebake does)
-``--repeat`` times, in turns with its members stored (as format version 7 wrote them) and
-deflated (as this version does), and prints per member its bytes as an array (``.npy``) and
-deflated, and the median milliseconds spent writing and reading it each way, then the totals
-(whole write and read: the header, the directory, the checks as well).
+``--repeat`` times, in turns with its members stored (as format version 7 wrote them),
+deflated (as versions 8–12 did) and deflated where it pays (as this version does), and prints
+per member its bytes as an array (``.npy``) and as written each way, and the median
+milliseconds spent writing and reading it each way, then the totals (whole write and read: the
+header, the directory, the checks as well).
 
     python benchmarks/bench_state.py [--repeat 5] [--scenes demo crates] [--threads 2]
 """
@@ -43,13 +44,18 @@ def scene(name: str, folder: Path) -> tuple[Path, baker.Settings]:
             baker.Settings(page_size=1024, rays=64))
 
 
+MODES = {"stored": "every member stored, as format version 7 wrote them",
+         "deflated": "every .npy member deflated, as versions 8 to 12 wrote them",
+         "chosen": "deflated where it pays (state.MIN_RATIO), as this version writes them"}
+
+
 class Clock:
     """Seconds spent per member, summed over a run: ``ZipWriter.add`` (the write of one member)
-    and ``state._read_member`` (the read of one array) wrapped to time each call. ``stored``:
-    every member written stored, as format version 7 wrote them (the reader reads both)."""
+    and ``state._read_member`` (the read of one array) wrapped to time each call; members
+    written as ``mode`` (``MODES``) says (the reader reads them all)."""
 
-    def __init__(self, stored: bool):
-        self.stored = stored
+    def __init__(self, mode: str):
+        self.mode = mode
         self.seconds: dict[str, float] = defaultdict(float)
 
     def __enter__(self):
@@ -57,8 +63,10 @@ class Clock:
         clock = self
 
         def add(archive, name, write, most, deflate=True):
+            npy = name.endswith(".npy")
+            chosen = {"stored": False, "deflated": npy, "chosen": deflate}[clock.mode]
             start = time.perf_counter()
-            clock._add(archive, name, write, most, deflate and not clock.stored)
+            clock._add(archive, name, write, most, chosen)
             clock.seconds[name] += time.perf_counter() - start
 
         def read(archive, file, name):
@@ -74,11 +82,12 @@ class Clock:
         ZipWriter.add, state_file._read_member = self._add, self._read
 
 
-def rewrite(state, classes, copy: Path, stored: bool, times: dict) -> list[zipfile.ZipInfo]:
-    """Write ``state`` to ``copy`` and read it back, adding each member's seconds (and the
-    whole's, under "") to ``times[(stored, "write" or "read", name)]``; the members written."""
+def rewrite(state, classes, copy: Path, mode: str, times: dict) -> list[zipfile.ZipInfo]:
+    """Write ``state`` to ``copy`` as ``mode`` says and read it back, adding each member's
+    seconds (and the whole's, under "") to ``times[(mode, "write" or "read", name)]``; the
+    members written."""
     for what in ("write", "read"):
-        with Clock(stored) as clock:
+        with Clock(mode) as clock:
             start = time.perf_counter()
             if what == "write":
                 with open(copy, "wb") as file:
@@ -87,43 +96,41 @@ def rewrite(state, classes, copy: Path, stored: bool, times: dict) -> list[zipfi
                 state_file.load(copy, classes)
             clock.seconds[""] = time.perf_counter() - start
         for name, seconds in clock.seconds.items():
-            times[(stored, what, name)].append(seconds)
+            times[(mode, what, name)].append(seconds)
     with zipfile.ZipFile(copy) as archive:
         return archive.infolist()
 
 
 def measure(path: Path, repeat: int) -> None:
-    """Print the table of the state at ``path``: rewritten and read ``repeat`` times with its
-    members stored (as version 7) and deflated (this version), in turns."""
+    """Print the table of the state at ``path``: rewritten and read ``repeat`` times in each
+    of the ``MODES``, in turns."""
     classes = state_classes()
     state = state_file.load(path, classes)
     copy = path.with_name("again.bake")
     times: dict = defaultdict(list)
+    members: dict[str, list[zipfile.ZipInfo]] = {}
     for _ in range(repeat):
-        stored = rewrite(state, classes, copy, True, times)
-        deflated = rewrite(state, classes, copy, False, times)
-    same = copy.read_bytes() == path.read_bytes()
+        for mode in MODES:
+            members[mode] = rewrite(state, classes, copy, mode, times)
+    same = copy.read_bytes() == path.read_bytes()  # "chosen" was written last
 
-    def ms(stored: bool, what: str, name: str) -> str:
-        return f"{1e3 * statistics.median(times.get((stored, what, name), [0.0])):>7.1f}"
+    def ms(mode: str, what: str, name: str) -> str:
+        return f"{1e3 * statistics.median(times.get((mode, what, name), [0.0])):>7.1f}"
 
-    print(f"{'member':<32} {'array bytes':>12} {'stored':>15} {'deflated bytes':>15} "
-          f"{'ratio':>6} {'deflated':>15}")
-    print(f"{'':<32} {'':>12} {'write ms read':>15} {'':>15} {'':>6} {'write ms read':>15}")
-    for info in sorted(deflated, key=lambda i: -i.file_size):
+    print(f"{'member':<32} {'array bytes':>12} " + " ".join(
+        f"{mode + ' bytes':>15} {'write ms read':>15}" for mode in MODES))
+    sizes = {mode: {i.filename: i.compress_size for i in infos} for mode, infos in members.items()}
+    for info in sorted(members["stored"], key=lambda i: -i.file_size):
         name = info.filename
         if info.file_size >= 100_000:
-            print(f"{name:<32} {info.file_size:>12,} {ms(True, 'write', name)} "
-                  f"{ms(True, 'read', name)} {info.compress_size:>15,} "
-                  f"{info.file_size / max(info.compress_size, 1):>6.2f} "
-                  f"{ms(False, 'write', name)} {ms(False, 'read', name)}")
-    raw = sum(i.compress_size for i in stored)
-    small = sum(i.compress_size for i in deflated)
-    print(f"{'all ' + str(len(deflated)) + ' members':<32} {raw:>12,} {ms(True, 'write', '')} "
-          f"{ms(True, 'read', '')} {small:>15,} {raw / small:>6.2f} {ms(False, 'write', '')} "
-          f"{ms(False, 'read', '')}")
-    print(f"state file {copy.stat().st_size:,} bytes (format version {state_file.VERSION}), "
-          f"stored members: {sum(i.compress_size for i in stored):,}; rewritten from memory: "
+            print(f"{name:<32} {info.file_size:>12,} " + " ".join(
+                f"{sizes[mode][name]:>15,} {ms(mode, 'write', name)} {ms(mode, 'read', name)}"
+                for mode in MODES))
+    print(f"{'all ' + str(len(members['stored'])) + ' members':<32} {'':>12} " + " ".join(
+        f"{sum(sizes[mode].values()):>15,} {ms(mode, 'write', '')} {ms(mode, 'read', '')}"
+        for mode in MODES))
+    print(f"state file {copy.stat().st_size:,} bytes (format version {state_file.VERSION}); "
+          f"rewritten from memory: "
           f"{'the same bytes as the bake' if same else 'OTHER BYTES than the bake'}")
 
 

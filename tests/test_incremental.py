@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import shutil
 import zipfile
-from dataclasses import fields
+from dataclasses import fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -801,3 +801,43 @@ def test_far_texels_whose_probes_see_the_same_faces_keep_their_validity(tmp_path
         assert default_path(out).read_bytes() == default_path(tmp_path / "full.glb").read_bytes()
         monkeypatch.undo()
     assert probed["back faces compared"] < 0.8 * probed["every probe that meets it"], probed
+
+
+@pytest.mark.parametrize("dear", [True, False], ids=["probes dear", "tracing dear"])
+def test_a_rebake_dearer_than_a_full_bake_falls_back_to_one(tmp_path, dear):
+    """With d_max across the room, a moved box reaches every texel. Priced by a last full bake
+    that spent its time on validity probes (which the dirty search pays for each texel within
+    reach), the rebake would cost more than a full bake: it bakes fully, says why, and gives a
+    full bake's bytes. Priced by one that spent it tracing (which a rebake does only for the
+    box's own texels), it rebakes."""
+    settings = replace(SETTINGS, d_max=3.0)
+    before = _room().save(tmp_path / "before.glb")
+    after = EDITS["box moved across the room"]().save(tmp_path / "after.glb")
+    baker.bake(before, tmp_path / "incremental.glb", settings)
+    state = default_path(tmp_path / "incremental.glb")
+    stages = {"load": 0.01, "validity": 0.7 if dear else 0.1, "trace": 0.1 if dear else 0.7,
+              "direct": 0.1, "compose": 0.1}
+    baker.rebake.state.save_full_bake_seconds(state, 1.0, stages=stages)
+    result = baker.bake(after, tmp_path / "incremental.glb", settings, incremental=True)
+    baker.bake(after, tmp_path / "full.glb", settings)
+    assert (tmp_path / "incremental.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()
+    assert state.read_bytes() == default_path(tmp_path / "full.glb").read_bytes()
+    info = result.rebake
+    assert info["incremental"] is (not dear), info.get("full_bake_reason")
+    if dear:
+        assert "a rebake would cost more than a full bake" in info["full_bake_reason"]
+        assert "of the last full bake (1.00 s)" in info["full_bake_reason"]
+
+
+def test_rebake_cost_prices_the_texels_by_the_stages_of_a_full_bake():
+    """Half the texels redone whole at ``REDO_COST`` times their validity, trace and direct
+    light (0.8 of the full bake), the rest searched at ``SEARCH_COST`` times their probes
+    (validity 0.4), compose and write 0.1 both ways; the full bake redoes all but its 0.1 of
+    loading."""
+    stages = {"load": 1.0, "validity": 4.0, "trace": 3.0, "direct": 1.0, "compose": 0.5,
+              "write": 0.5}
+    cost, full = baker.rebake.incremental.rebake_cost(stages, 0.5, 0.5)
+    redo, search = baker.rebake.incremental.REDO_COST, baker.rebake.incremental.SEARCH_COST
+    assert cost == pytest.approx(0.5 * redo * 0.8 + 0.5 * search * 0.4 + 0.1)
+    assert full == pytest.approx(0.9)
+    assert baker.rebake.incremental.rebake_cost(stages, 0.0, 0.0)[0] == pytest.approx(0.1)

@@ -144,3 +144,22 @@ def test_a_member_declaring_another_size_than_its_array_is_not_read():
     with zipfile.ZipFile(io.BytesIO(huge)) as archive:
         with pytest.raises(EOFError, match="cut short|does not hold its array"):
             state._read_member(archive, io.BytesIO(huge), "x")
+
+
+def test_the_state_stores_arrays_that_hardly_deflate_and_reads_both_back():
+    """``state._member`` deflates an array whose bytes repeat (runs of keys) and stores one of
+    noise (uniform float64: about 1.1× deflated, under ``state.MIN_RATIO``); both read back
+    with their exact bits, dtype and shape."""
+    arrays = {"noise": RNG.random((200_000, 3)),
+              "runs": np.repeat(np.arange(2_000, dtype=np.int64), 300)}
+    file = io.BytesIO()
+    with ZipWriter(file) as archive:
+        for name, data in arrays.items():
+            state._member(archive, f"{name}.npy", Column.of(data))
+    with zipfile.ZipFile(file) as archive:
+        assert archive.getinfo("noise.npy").compress_type == zipfile.ZIP_STORED
+        assert archive.getinfo("runs.npy").compress_type == zipfile.ZIP_DEFLATED
+        for name, data in arrays.items():
+            back = state._read_member(archive, file, name)
+            assert back.dtype == data.dtype and back.shape == data.shape
+            assert back.tobytes() == data.tobytes()

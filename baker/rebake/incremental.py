@@ -1017,6 +1017,7 @@ class _Compared:
     resolved: Resolved
     fingerprint: dict
     change: Diff
+    full_bake: dict | None = None  # the last full bake's times (``state.last_full_bake``)
 
     @property
     def moved(self) -> np.ndarray:
@@ -1064,7 +1065,8 @@ def _compared(scene: Scene, settings: Settings, path, relight: bool, times: dict
     if getattr(resolved, "supersample", 1) > 1:
         raise FullBake("supersampled shadow and obscurance rays start from sub-texel points "
                        "the rebake does not track yet")
-    return _Compared(stored, world, resolved, fingerprint, change)
+    return _Compared(stored, world, resolved, fingerprint, change,
+                     state_file.last_full_bake(path))
 
 
 @dataclass(frozen=True)
@@ -1200,6 +1202,7 @@ def _moved_reach(scene: Scene, start: _Compared, lit: Lighting, stored: _Stored,
     # Validity: tangent probes reach a few texel sides; hemisphere probes d_max.
     close = own | _near(raw, boxes, 0.0)
     far = np.flatnonzero(near & ~close)
+    _afford(start.full_bake, int(close.sum()), len(far), len(raw))
     meets, n = _probes_meet(small, texels, far, resolved.d_max, resolved.threads,
                             _ProbesCompared((tracer, faces),
                                             (tracer_before, Faces(scene, before))))
@@ -1230,6 +1233,50 @@ def _moved_reach(scene: Scene, start: _Compared, lit: Lighting, stored: _Stored,
     shadow, n = _shadow_dirty(scene, world, small, texels, rest, lit.sources, resolved)
     search.tested += n
     reason[rest[shadow]] = REASONS.index("shadow")
+
+
+REDO_COST, SEARCH_COST = 3.5, 1.0
+"""What a rebake of a move costs per texel, in units of a full bake's: ``REDO_COST`` × its
+validity, trace and direct light for a texel of the moved nodes (or touching them: probed,
+traced and lit anew, and the larger a node, the more the search meets it at both places, in
+every texel's rays and shadows); ``SEARCH_COST`` × its validity probes for another texel within
+reach (its probes, and its rays that may meet the node, cast in the scene now and as it was).
+Calibrated on 2 shared cores (bench_rebake.py, bench_foliage_rebake.py): the 60 crates (0.2 %
+of the texels their own, 33 % more within reach) rebaked in 0.15–0.22 of a full bake, modelled
+0.12; the box near the tree (1 %, 41 %) in 0.36, modelled about 0.28; the tree (44 %, 39 %) in
+1.1–1.9, modelled 1.28 against 0.98 for a full bake."""
+
+
+def rebake_cost(stages: dict[str, float], redone: float, reached: float) -> tuple[float, float]:
+    """(a rebake's cost, a full bake's) from here on, as fractions of the last full bake, whose
+    ``stages`` (name → seconds) price the work: ``redone`` (fraction of the texels: the moved
+    nodes' own and those touching them) at ``REDO_COST`` × a full bake's validity, trace and
+    direct light per texel, ``reached`` (fraction: the others within reach) at ``SEARCH_COST``
+    × its validity per texel, and both compose and write. The full bake redoes all but loading
+    the scene."""
+    total = sum(stages.values())
+    share = {name: stages.get(name, 0.0) / total for name in
+             ("load", "validity", "trace", "direct", "compose", "spill", "write")}
+    per_texel = share["validity"] + share["trace"] + share["direct"]
+    tail = share["compose"] + share["spill"] + share["write"]
+    return (redone * REDO_COST * per_texel + reached * SEARCH_COST * share["validity"] + tail,
+            1.0 - share["load"])
+
+
+def _afford(full_bake: dict | None, redone: int, reached: int, texels: int) -> None:
+    """FullBake when a rebake of a move (``redone``, ``reached``: texel counts, as
+    ``rebake_cost`` takes their fractions of ``texels``) would cost more than a full bake, by
+    the last full bake's stage times (no record of them: the rebake goes on). A full bake's
+    bytes are the rebake's."""
+    if not full_bake or not texels or sum(full_bake["stage_seconds"].values()) <= 0:
+        return
+    redone, reached = redone / texels, reached / texels
+    cost, full = rebake_cost(full_bake["stage_seconds"], redone, reached)
+    if cost > full:
+        raise FullBake(
+            f"a rebake would cost more than a full bake: the move reaches {redone + reached:.0%} "
+            f"of the texels ({redone:.0%} redone whole), about {cost:.2f} of the last full "
+            f"bake ({full_bake['full_bake_seconds']:.2f} s) against {full:.2f} for a full one")
 
 
 def _traced_again(scene: Scene, start: _Compared, lit: Lighting, stored: _Stored,
@@ -1303,12 +1350,14 @@ def bake_state_writer(scene: Scene, world: World, resolved, atlas, per_texel,
     return lambda file: state_file.write_state(file, state)
 
 
-def record_full_bake(path, rebaked, seconds: float, write) -> None:
+def record_full_bake(path, rebaked, seconds: float, write,
+                     stages: dict[str, float] | None = None) -> None:
     """After a full bake, record beside its state at ``path`` the ``seconds`` it took without
-    numba's compile (``state.timing_path``), which the reports of the rebakes that follow compare with;
-    ``write(path, bytes)`` writes it (``run.atomic.Outputs.stage``)."""
+    numba's compile and its ``stages``' seconds (``state.timing_path``), which the rebakes that
+    follow compare with and price their work by (``_afford``); ``write(path, bytes)`` writes it
+    (``run.atomic.Outputs.stage``)."""
     if not isinstance(rebaked, Rebaked):
-        state_file.save_full_bake_seconds(path, seconds, write)
+        state_file.save_full_bake_seconds(path, seconds, write, stages)
 
 
 def summary(rebaked, state_path, incremental: bool, seconds: float | None = None,

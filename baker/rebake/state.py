@@ -4,10 +4,10 @@ Written next to the output (``<output>.bake`` by default) after every bake; read
 incremental rebake (``incremental.py``), which diffs the new scene against its fingerprints
 (``diff.py``). The format is documented in ``docs/bake_state.md``:
 
-- a ZIP archive (``zipwriter.py``: arrays deflated, the header stored) whose members have a
-  fixed timestamp, so the same bake gives the same bytes (docs/design.md §4: an incremental
-  rebake's state equals a full bake's);
-- ``header.json``: ``{"format": "baker-bake-state", "version": 8, "fingerprints": {...},
+- a ZIP archive (``zipwriter.py``: arrays deflated unless they hardly compress, the header
+  stored) whose members have a fixed timestamp, so the same bake gives the same bytes
+  (docs/design.md §4: an incremental rebake's state equals a full bake's);
+- ``header.json``: ``{"format": "baker-bake-state", "version": 13, "fingerprints": {...},
   "groups": {name: {"class": ..., "fields": {...}, "scalars": {...}}}, "zeros": {...},
   "repeated": {...}, "sparse": {...}}``;
 - one ``<group>/<field>.npy`` member per array (numpy's .npy format), so ``numpy.load`` of the
@@ -38,13 +38,13 @@ import numpy as np
 from isal import isal_zlib
 
 from baker.atlas.layout import Atlas, InstanceUV
-from baker.rebake.zipwriter import DEFLATED, STORED, ZipWriter
+from baker.rebake.zipwriter import BLOCK_BYTES, DEFLATED, LEVEL, STORED, ZipWriter
 from baker.run.atomic import write_atomically
 from baker.run.spill import Column, Group
 from baker.settings import MAX_TEXELS
 
 FORMAT = "baker-bake-state"
-VERSION = 12
+VERSION = 13
 SUFFIX = ".bake"
 _NPY_HEAD = 1 << 16  # bytes enough for any .npy header baker writes (version 1.0: < 64 KiB)
 
@@ -67,21 +67,36 @@ def timing_path(state_path: str | Path) -> Path:
 
 
 def save_full_bake_seconds(state_path: str | Path, seconds: float,
-                           write: Callable[[Path, bytes], None] = write_atomically) -> None:
-    """Record that a full bake for this state took ``seconds``, with ``write(path, bytes)``
-    (an atomic writer, or ``run.atomic.Outputs.stage``)."""
-    write(timing_path(state_path),
-          json.dumps({"full_bake_seconds": round(float(seconds), 3)}).encode())
+                           write: Callable[[Path, bytes], None] = write_atomically,
+                           stages: dict[str, float] | None = None) -> None:
+    """Record that a full bake for this state took ``seconds``, and ``stages`` (stage name →
+    seconds, as the bake's report has them) if given, with ``write(path, bytes)`` (an atomic
+    writer, or ``run.atomic.Outputs.stage``)."""
+    record: dict = {"full_bake_seconds": round(float(seconds), 3)}
+    if stages:
+        record["stage_seconds"] = {k: round(float(v), 4) for k, v in sorted(stages.items())}
+    write(timing_path(state_path), json.dumps(record).encode())
+
+
+def last_full_bake(state_path: str | Path) -> dict | None:
+    """The record of the last full bake beside the state: ``full_bake_seconds`` (> 0) and, if
+    it was recorded, ``stage_seconds`` (name → seconds ≥ 0); None if none or unreadable."""
+    try:
+        with _open_regular(timing_path(state_path)) as file:
+            record = json.loads(file.read(1 << 16))
+        seconds = float(record["full_bake_seconds"])
+        stages = {str(k): float(v) for k, v in record.get("stage_seconds", {}).items()}
+    except (OSError, ValueError, KeyError, TypeError, AttributeError, StateUnusable):
+        return None
+    if not seconds > 0 or not all(v >= 0 for v in stages.values()):
+        return None
+    return {"full_bake_seconds": seconds, "stage_seconds": stages}
 
 
 def last_full_bake_seconds(state_path: str | Path) -> float | None:
     """The seconds of the last full bake recorded beside the state (None if none or unreadable)."""
-    try:
-        with _open_regular(timing_path(state_path)) as file:
-            seconds = json.loads(file.read(4096))["full_bake_seconds"]
-        return float(seconds) if seconds > 0 else None
-    except (OSError, ValueError, KeyError, TypeError, StateUnusable):
-        return None
+    record = last_full_bake(state_path)
+    return None if record is None else record["full_bake_seconds"]
 
 
 def digest(*parts: Any) -> str:
@@ -116,15 +131,35 @@ class BakeState:
     instance_world: np.ndarray
 
 
+MIN_RATIO = 1.7
+"""An array is deflated only if ISA-L deflates its first ``zipwriter.BLOCK_BYTES`` to at most
+1/MIN_RATIO of their size, else stored: the terms' noisy means (``w_hit`` 1.39×, ``hit_sq``
+1.2–1.3× in the crates of bench_rebake.py) inflate at a fraction of a stored read's speed and
+are the bulk of a rebake's read, for a few MB saved."""
+
+
+def _deflates(column: Column) -> bool:
+    """Whether ``column``'s bytes deflate by ``MIN_RATIO`` or more, judged by their first
+    ``zipwriter.BLOCK_BYTES`` (by its bytes alone, so the same state gives the same file)."""
+    size = min(int(np.prod(column.shape, dtype=np.int64)) * column.dtype.itemsize, BLOCK_BYTES)
+    if not size:
+        return False
+    if column.array is not None:
+        sample = np.ascontiguousarray(column.array).reshape(-1).view(np.uint8)[:size]
+    else:
+        sample = np.fromfile(column.path, np.uint8, count=size)
+    return len(isal_zlib.compress(sample, LEVEL, wbits=-15)) * MIN_RATIO <= size
+
+
 def _member(archive: ZipWriter, name: str, data: bytes | Column) -> None:
     """Add one member: bytes as they are, stored; an array (``spill.Column``, in memory or
-    spilled to disk) as ``.npy``, deflated, streamed into the archive (no copy of its bytes in
-    memory)."""
+    spilled to disk) as ``.npy``, deflated if it deflates well (``_deflates``) else stored,
+    streamed into the archive (no copy of its bytes in memory)."""
     if isinstance(data, bytes):
         archive.add(name, lambda member: member.write(data), len(data), deflate=False)
         return
     nbytes = int(np.prod(data.shape)) * data.dtype.itemsize
-    archive.add(name, data.write_npy, nbytes + _NPY_HEAD)
+    archive.add(name, data.write_npy, nbytes + _NPY_HEAD, deflate=_deflates(data))
 
 
 # The per-instance arrays of the atlas, each as an empty array of its dtype and row shape.
