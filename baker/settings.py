@@ -54,10 +54,13 @@ class Settings:
     sampling: how each texel's ray directions are drawn: "sobol" (Owen-scrambled Sobol, the
         default), "stratified" (jittered grid) or "random" (independent), see sampling.py.
     target_error: adaptive sampling: give each texel rays in rounds (``rays``, even, then
-        doubling) until its predicted lightmap luminance error is at most half this (so that
-        about 95 % of texels are within it), or it has ``max_rays``; None: every texel gets
-        ``rays`` (``hemisphere.hemisphere_terms``).
-    max_rays: the most rays a texel gets with ``target_error``.
+        doubling; the direct light's noisy sources doubled likewise, and GI paths) until its
+        predicted lightmap luminance error is at most half this (so that about 95 % of texels
+        are within it), or it has ``max_rays``; None: every texel gets ``rays``
+        (``hemisphere.hemisphere_terms``, ``direct.adaptive_direct_light``,
+        ``gi.indirect_light``, ``light/adaptive.py``).
+    max_rays: the most rays of a kind (obscurance, towards one source, or GI paths) a texel
+        gets with ``target_error``.
     method: "obscurance" (L = D + I_A·W, the product) or "gi": a full diffuse global
         illumination reference, L = D + path-traced indirect light with ``rays`` paths per
         texel (gi.py; slower, for judging the obscurance approximation).

@@ -1,15 +1,15 @@
 """Benchmark: does ``--target-error E`` meet its target, with few rays? (issue 22 item 2)
 
-For each scene, at each ``--target E``: the adaptive bake's obscurance term of the lightmap
-(I_A · W, in luminance, over the baked texels) against a reference (the same scene at
-``--reference`` rays a texel, seed 2), and uniform bakes at 16, 32, … ``--max-rays`` rays
-(bisection over powers of two: the error falls with the rays, so the first count that passes
-is found in log₂ steps). Prints for each: the achieved RMSE, the share of texels with
-|error| ≤ E, the rays a texel, and the ratio of the adaptive bake's rays to those of the
+For each scene, at each ``--target E``: the adaptive bake's lightmap luminance over the baked
+texels (D + I_A · W, the direct light and the obscurance term) against a reference (the same
+scene at ``--reference`` rays a texel of every kind, seed 2), and uniform bakes at 16, 32, …
+``--max-rays`` rays of every kind (obscurance, shadow, emissive and sky rays alike; bisection
+over powers of two: the error falls with the rays, so the first count that passes is found in
+log₂ steps). Prints for each: the achieved RMSE, the share of texels with |error| ≤ E, the rays
+a texel (obscurance and direct), and the ratio of the adaptive bake's rays to those of the
 smallest uniform count meeting the same acceptance (RMSE ≤ E and ≥ 95 % of texels within E).
-The reference's own error is taken out of the RMSE as ``study.calibration`` does.
-
-Direct light is not adapted (see docs/model.md): the figures are the obscurance term's.
+The reference's own error is taken out of the RMSE as ``study.calibration`` does. The adaptive
+bake's first round is ``--rays`` of every kind.
 
     python benchmarks/bench_target_error.py [--target 0.004] [--max-rays 2048] [--only NAME]
 """
@@ -38,15 +38,22 @@ NAMES = ("ceiling sqrt", "ceiling step, h = 0.9 d_max", "ceiling step, h = 0.3 d
          "cornell (emissive lamp)", "soft light penumbra", "sky over a box")
 
 
-def ambient_term(scene, settings: dict, scale=None, **extra) -> tuple[np.ndarray, int, tuple]:
-    """(N,) luminance of I_A · W at the baked texels, the obscurance rays cast, and the
-    (R_ave, lum I_A) used: ``scale``, by default this bake's own (I_A's estimate depends on
-    the seed: every bake is judged at the reference's, so that only W's noise is measured)."""
-    done = compute(scene, Settings(**{**settings, **extra}))
+def lightmap_term(scene, settings: dict, scale=None, rays: int = 16,
+                  **extra) -> tuple[np.ndarray, int, tuple]:
+    """(N,) luminance of D + I_A · W at the baked texels with ``rays`` rays of every kind,
+    the rays cast (obscurance and direct), and the (R_ave, lum I_A) used: ``scale``, by
+    default this bake's own (I_A's estimate depends on the seed: every bake is judged at the
+    reference's, so that only the texels' noise is measured)."""
+    counts = dict(rays=rays, shadow_rays=rays, emissive_rays=rays, sky_rays=rays)
+    done = compute(scene, Settings(**{**settings, **counts, **extra}))
     if scale is None:
         scale = (effective_r_ave(done.ambient, done.settings.rho),
                  float(done.ambient.intensity @ LUMINANCE))
-    return done.terms.obscurance(scale[0]) @ LUMINANCE * scale[1], done.terms.rays, scale
+    value = done.terms.obscurance(scale[0]) @ LUMINANCE * scale[1]
+    if done.direct is not None:
+        value = value + done.direct.irradiance() @ LUMINANCE
+    rays = done.terms.rays + (done.direct.rays if done.direct is not None else 0)
+    return value, rays, scale
 
 
 def judged(value: np.ndarray, reference: np.ndarray, factor: float, target: float) -> dict:
@@ -57,19 +64,21 @@ def judged(value: np.ndarray, reference: np.ndarray, factor: float, target: floa
     return {"rmse": rmse, "within": within, "ok": rmse <= target and within >= 0.95}
 
 
-def best_uniform(scene, settings, scale, reference, factor, target, max_rays) -> tuple[int, dict]:
-    """The smallest power-of-two ray count ≤ max_rays meeting the acceptance (bisection)."""
+def best_uniform(scene, settings, scale, reference, factor, target, max_rays
+                 ) -> tuple[int, dict, int]:
+    """The smallest power-of-two ray count ≤ max_rays meeting the acceptance (bisection), its
+    judgement and the rays its bake cast."""
     low, high = 4, int(np.log2(max_rays))  # 16 … max_rays
     found = None
     while low <= high:
         mid = (low + high) // 2
-        value, _, _ = ambient_term(scene, settings, scale, rays=2 ** mid, seed=1)
+        value, rays, _ = lightmap_term(scene, settings, scale, rays=2 ** mid, seed=1)
         result = judged(value, reference, factor, target)
         if result["ok"]:
-            found, high = (2 ** mid, result), mid - 1
+            found, high = (2 ** mid, result, rays), mid - 1
         else:
             low = mid + 1
-    return found if found is not None else (0, {})
+    return found if found is not None else (0, {}, 0)
 
 
 def main() -> None:
@@ -88,16 +97,16 @@ def main() -> None:
         for name in args.only or NAMES:
             make, settings = SCENES[name]
             scene = _probe_only(load(make().save(Path(folder) / "scene.glb")))
-            reference, _, scale = ambient_term(scene, settings, rays=args.reference, seed=2)
+            reference, _, scale = lightmap_term(scene, settings, rays=args.reference, seed=2)
             for target in targets:
                 start = time.perf_counter()
                 factor = args.reference / args.max_rays
-                value, rays, _ = ambient_term(scene, settings, scale, rays=args.rays, seed=1,
+                value, rays, _ = lightmap_term(scene, settings, scale, rays=args.rays, seed=1,
                                            target_error=target, max_rays=args.max_rays)
                 got = judged(value, reference, factor, target)
-                count, uniform = best_uniform(scene, settings, scale, reference, factor, target,
-                                              args.max_rays)
-                ratio = rays / (count * len(value)) if count else float("nan")
+                count, uniform, uniform_rays = best_uniform(scene, settings, scale, reference,
+                                                            factor, target, args.max_rays)
+                ratio = rays / uniform_rays if count else float("nan")
                 shown = (f"{count} ({uniform['rmse']:.5f}, {100 * uniform['within']:.1f} %)"
                          if count else f"none ≤ {args.max_rays}")
                 print(f"| {name} | {target:g} | {got['rmse']:.5f} | {100 * got['within']:.1f} % "

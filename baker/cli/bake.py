@@ -83,10 +83,11 @@ def add_parser(commands) -> None:
                        help="how each texel's ray directions are drawn: sobol (Owen-scrambled, "
                             "least noise per ray), stratified or random (default sobol)")
     model.add_argument("--target-error", type=positive_float, metavar="E",
-                       help="adaptive obscurance sampling: rays in rounds (--rays, even, then "
-                            "doubling) until each texel's predicted error is at most E/2 in "
-                            "lightmap units (95 %% of texels within E), or it has --max-rays "
-                            "(default: every texel gets --rays; direct light is not adapted)")
+                       help="adaptive sampling: obscurance, shadow, emissive and sky rays (GI "
+                            "paths with --method gi) in rounds (--rays, even, then doubling) "
+                            "until each texel's predicted error is at most E/2 in lightmap "
+                            "units (95 %% of texels within E), or its rays of a kind reach "
+                            "--max-rays (default: every texel gets --rays)")
     model.add_argument("--method", choices=baker.settings.METHODS, default=d.method,
                        help="obscurance: direct light + I_A·W (fast, the default); gi: direct "
                             "light + path-traced indirect light, --rays paths per texel (a "

@@ -45,7 +45,7 @@ run on a thread pool and write only their own rows, so the result does not depen
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
@@ -56,6 +56,7 @@ from baker.geometry.surface import LUMINANCE, emission
 from baker.geometry.world import World
 from baker.gltf.scene import Light, Scene
 from baker.jit import jit
+from baker.light.adaptive import WITHIN, pooled_gain
 from baker.rays.dimensions import EMISSIVE, POWER, SKY, light_dimension
 from baker.rays.sampling import (
     cosine_hemisphere,
@@ -66,7 +67,7 @@ from baker.rays.sampling import (
     tangent_frames,
 )
 from baker.rays.trace import Tracer, ray_lift
-from baker.run.parallel import run_chunks
+from baker.run.parallel import run_chunks, texels_per_chunk
 from baker.settings import Resolved
 
 # Points over the scene's surfaces at which the power each source delivers is estimated.
@@ -139,10 +140,43 @@ class Sources:
             return np.zeros((0, 3))
         return np.array([light.colour * light.intensity for light in self.lights], np.float64)
 
-    def rays_per_texel(self) -> int:
-        """Shadow and sky rays every texel casts."""
-        return (int(self.samples.sum()) + (self.emissive_rays if self.emitters is not None else 0)
-                + (self.sky_rays if self.sky is not None else 0))
+    def counts(self, samples: int | None = None, scale: int = 1) -> np.ndarray:
+        """(L + 2,) int64 rays a receiver casts towards each light, the emitters and the sky
+        (0 for an absent source): each source's own, or ``samples`` for every source, with
+        the noisy ones' (``noisy``) times ``scale`` (an adaptive round)."""
+        own = np.concatenate([self.samples, [self.emissive_rays if self.emitters is not None
+                                             else 0, self.sky_rays if self.sky is not None else 0]])
+        present = np.concatenate([np.ones(len(self.lights), bool),
+                                  [self.emitters is not None, self.sky is not None]])
+        own = np.where(present, own if samples is None else samples, 0).astype(np.int64)
+        return np.where(self._noisy_sources(), own * scale, own)
+
+    def _noisy_sources(self) -> np.ndarray:
+        """(L + 2,) bool: which sources' estimates have noise — a light cast with several rays
+        (a soft one, or supersampled), the emitters and the sky when there are some."""
+        return np.concatenate([self.samples > 1, [self.emitters is not None,
+                                                  self.sky is not None]])
+
+    def noisy(self) -> bool:
+        """Whether any source's estimate has noise (``counts``): adaptive rounds can reduce it."""
+        return bool(self._noisy_sources().any())
+
+    def scales(self, max_rays: int) -> list[int]:
+        """The ray scales of the adaptive rounds (``counts``): 1, then doubling while the noisy
+        sources' rays stay within ``max_rays``; only 1 when no source is noisy."""
+        scales = [1]
+        while self.noisy() and self.counts(None, 2 * scales[-1]).max() <= max_rays:
+            scales.append(2 * scales[-1])
+        return scales
+
+    def most_rays_per_texel(self, max_rays: int) -> int:
+        """The shadow and sky rays a texel casts at most in all adaptive rounds (each round
+        estimates afresh: ``direct_light``)."""
+        return sum(self.rays_per_texel(self.counts(None, scale)) for scale in self.scales(max_rays))
+
+    def rays_per_texel(self, counts: np.ndarray | None = None) -> int:
+        """Shadow and sky rays every texel casts (at ``counts``, by default its own)."""
+        return int((self.counts() if counts is None else counts).sum())
 
     def any(self) -> bool:
         """Whether anything lights the scene directly."""
@@ -318,9 +352,17 @@ def punctual_irradiance(light: Light, spread: float, n: int, receivers: Receiver
     candela). ``spread`` > 0 makes the light a sphere of that radius (point/spot) or a disc of that
     angular radius (directional), sampled with ``n`` shadow rays per receiver; otherwise one ray.
     """
+    values, _ = punctual_samples(light, spread, n, receivers, tracer, seed, dimension)
+    return mean_and_variance(values)
+
+
+def punctual_samples(light: Light, spread: float, n: int, receivers: Receivers, tracer: Tracer,
+                     seed: int, dimension: int) -> tuple[np.ndarray, np.ndarray]:
+    """``punctual_irradiance``'s samples (k, n') and what each would give unoccluded (k, n'):
+    n' = ``n`` for a soft light or with supersampling, else 1."""
     k = len(receivers.position)
     if k == 0:
-        return np.zeros(0), np.zeros(0)
+        return np.zeros((0, 1)), np.zeros((0, 1))
     soft = spread > 0
     n = n if soft or receivers.sub is not None else 1
     u = split_samples(seed, receivers.key, n, dimension)  # (k, n, 2)
@@ -364,8 +406,8 @@ def punctual_irradiance(light: Light, spread: float, n: int, receivers: Receiver
         origins = receivers.origins(n)[flat]
         rays = directions.reshape(-1, 3)[flat]
         visible[flat] = ~tracer.occluded(origins, rays, lengths[flat])
-    values = cos * visible.reshape(k, n) * scale
-    return mean_and_variance(values)
+    unoccluded = np.broadcast_to(cos * scale, (k, n))
+    return unoccluded * visible.reshape(k, n), unoccluded
 
 
 @jit
@@ -420,9 +462,19 @@ def emissive_irradiance(scene: Scene, world: World, emitters: Emitters, n: int,
     it; the estimate is Le(q)·cosθ_p·cosθ_q / d² · V / (P_t / A_t), unbiased for the irradiance
     of every emitter (a triangle whose mean emission is 0 at the fixed points is never picked).
     """
+    value, _ = emissive_samples(scene, world, emitters, n, receivers, tracer, seed)
+    _, variance = mean_and_variance(value @ LUMINANCE)
+    return value.mean(axis=1), variance
+
+
+def emissive_samples(scene: Scene, world: World, emitters: Emitters, n: int,
+                     receivers: Receivers, tracer: Tracer, seed: int
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """``emissive_irradiance``'s samples (k, n, 3) and the luminance (k, n) each would give
+    unoccluded."""
     k = len(receivers.position)
     if k == 0:
-        return np.zeros((0, 3)), np.zeros(0)
+        return np.zeros((0, n, 3)), np.zeros((0, n))
     u = split_samples(seed, receivers.key, n, EMISSIVE).reshape(-1, 2)
     origins = receivers.origins(n)
     raised = np.zeros(k, bool) if receivers.raised is None else receivers.raised
@@ -432,14 +484,14 @@ def emissive_irradiance(scene: Scene, world: World, emitters: Emitters, n: int,
         receivers.geometric, raised)
     live = weight > 0
     value = np.zeros((k * n, 3))
+    unoccluded = np.zeros(k * n)
     if live.any():
         visible = ~tracer.occluded(origins[live], directions[live],
                                    distance[live] * (1.0 - SHADOW_SHORTEN))
         radiance = emitter_radiance(scene, world, emitters, chosen[live], bary[live])
+        unoccluded[live] = (radiance @ LUMINANCE) * weight[live]
         value[live] = radiance * (weight[live] * visible)[:, None]
-    value = value.reshape(k, n, 3)
-    _, variance = mean_and_variance(value @ LUMINANCE)
-    return value.mean(axis=1), variance
+    return value.reshape(k, n, 3), unoccluded.reshape(k, n)
 
 
 def emitter_radiance(scene: Scene, world: World, emitters: Emitters, picked: np.ndarray,
@@ -469,9 +521,18 @@ def sky_irradiance(sky: np.ndarray, n: int, receivers: Receivers, tracer: Tracer
     those below the front face folded above it (``sampling.fold``), as the obscurance's; a ray
     that meets nothing at any distance sees the sky, so the estimate is π · mean(L_sky(ω) · V(ω)).
     """
+    value, _ = sky_samples(sky, n, receivers, tracer, seed)
+    _, variance = mean_and_variance(value @ LUMINANCE)
+    return value.mean(axis=1), variance
+
+
+def sky_samples(sky: np.ndarray, n: int, receivers: Receivers, tracer: Tracer,
+                seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """``sky_irradiance``'s samples (k, n, 3) and the luminance (k, n) each would give
+    unoccluded."""
     k = len(receivers.position)
     if k == 0:
-        return np.zeros((0, 3)), np.zeros(0)
+        return np.zeros((0, n, 3)), np.zeros((0, n))
     local = cosine_hemisphere(split_samples(seed, receivers.key, n, SKY))
     normal = hemisphere_normals(receivers.normal, receivers.geometric)
     t1, t2 = tangent_frames(normal)
@@ -479,9 +540,9 @@ def sky_irradiance(sky: np.ndarray, n: int, receivers: Receivers, tracer: Tracer
                          + local[..., 2:] * normal[:, None]).reshape(-1, 3),
                         np.repeat(normal, n, axis=0), np.repeat(receivers.geometric, n, axis=0))
     escaped = ~tracer.occluded(receivers.origins(n), directions, np.inf)
-    value = (np.pi * sky_radiance(sky, directions) * escaped[:, None]).reshape(k, n, 3)
-    _, variance = mean_and_variance(value @ LUMINANCE)
-    return value.mean(axis=1), variance
+    unoccluded = np.pi * sky_radiance(sky, directions)
+    return ((unoccluded * escaped[:, None]).reshape(k, n, 3),
+            (unoccluded @ LUMINANCE).reshape(k, n))
 
 
 # ------------------------------------------------------------------------------------------------
@@ -509,7 +570,8 @@ class Direct:
     from emissive surfaces; sky: (N, 3) from the sky; emission_var, sky_var: (N,) variances of
     their luminance estimates — each empty (0 rows) when the scene has no such source (32 bytes
     a texel not held: 270 MB on a 4096² page). rays_per_texel: shadow and sky rays cast from
-    each texel (``rays`` in all).
+    each texel (``rays`` in all); texel_rays: (N,) int64 the rays each texel cast in all of
+    its adaptive rounds (``direct_light``), empty (0 rows) without them.
     """
 
     punctual: np.ndarray
@@ -520,10 +582,13 @@ class Direct:
     sky: np.ndarray
     sky_var: np.ndarray
     rays_per_texel: int
+    texel_rays: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
     @property
     def rays(self) -> int:
         """Shadow and sky rays cast in all."""
+        if len(self.texel_rays):
+            return int(self.texel_rays.sum())
         return len(self.punctual) * self.rays_per_texel
 
     def irradiance(self, light_colours: np.ndarray | None = None) -> np.ndarray:
@@ -553,7 +618,7 @@ def no_direct(count: int) -> Direct:
     return Direct(np.zeros((count, 0)), np.zeros((count, 0)), np.zeros((0, 3)), *none, *none, 0)
 
 
-def texel_receivers(texels: Texels, rows: slice, center: np.ndarray,
+def texel_receivers(texels: Texels, rows: slice | np.ndarray, center: np.ndarray,
                      tracer: Tracer | None = None, supersample: int = 1,
                      seed: int = 0) -> Receivers:
     """The texels ``rows`` as Receivers: their (moved, raised) sample points and, when
@@ -578,60 +643,202 @@ def direct_at(scene: Scene, world: World, tracer: Tracer, sources: Sources,
     ``samples``: shadow/sky rays per receiver for every source (None: each source's own count,
     as a bake uses them; the full-GI reference takes 1 at each bounce).
     """
+    return _direct_rows(scene, world, tracer, sources, receivers, seed, samples)[0]
+
+
+@dataclass(frozen=True)
+class _Noise:
+    """What adaptive rounds need to predict the error of k receivers' D, in luminance at the
+    baked colours, summed over the sources: iid (k,), the variance of the mean were the
+    samples independent (sample variance / n); floor (k,), the square of the error that a
+    source whose samples were all unoccluded, or all occluded, cannot rule out: the rule of
+    succession's p ≲ 1/(n + 2) of its unoccluded light (as ``hemisphere.binomial_floor``);
+    partial (k,) bool, some source's samples were occluded in part (a penumbra seen).
+
+    ``_predicted`` takes the floor only beside a texel that saw a penumbra: without it, a
+    floor beside a box under the sky, whose few rays all missed the box, stops at the first
+    round (75 % of the sky scene's texels within E where 95 % should be); with it everywhere,
+    a texel lit by a soft light with no occluder about spends rays on one that is not there
+    (9× the rays uniform sampling needs on the penumbra scene)."""
+
+    iid: np.ndarray
+    floor: np.ndarray
+    partial: np.ndarray
+
+
+def _noise_of(values: np.ndarray, unoccluded: np.ndarray, scale: float) -> tuple[np.ndarray, ...]:
+    """(iid, floor, partial) of one source's luminance samples ``values`` (k, n) (what each
+    would give unoccluded: (k, n)) at luminance per unit ``scale`` (``_Noise``)."""
+    n = values.shape[1]
+    if n < 2:
+        return np.zeros(len(values)), np.zeros(len(values)), np.zeros(len(values), bool)
+    iid = values.var(axis=1, ddof=1) / n * scale * scale
+    seen = (values == unoccluded) | (unoccluded <= 0)  # unoccluded, or giving nothing anyway
+    hidden = (values <= 0) | (unoccluded <= 0)
+    alike = seen.all(axis=1) | hidden.all(axis=1)
+    floor = np.where(alike, unoccluded.mean(axis=1) * scale / (n + 2), 0.0)
+    return iid, floor * floor, ~alike
+
+
+def _direct_rows(scene: Scene, world: World, tracer: Tracer, sources: Sources,
+                 receivers: Receivers, seed: int, samples: int | None = None,
+                 scale: int = 1) -> tuple[Direct, _Noise]:
+    """``direct_at``, with each noisy source's rays × ``scale`` (an adaptive round:
+    ``Sources.counts``), and its ``_Noise``."""
     k = len(receivers.position)
     punctual, punctual_var = np.zeros((k, len(sources.lights))), np.zeros((k, len(sources.lights)))
     emitted, emitted_var = _source_terms(k, sources.emitters is not None)
     sky, sky_var = _source_terms(k, sources.sky is not None)
+    noise = _Noise(np.zeros(k), np.zeros(k), np.zeros(k, bool))
+    counts = sources.counts(samples, scale)
+    colours = sources.light_colours() @ LUMINANCE
     for l, light in enumerate(sources.lights):
-        punctual[:, l], punctual_var[:, l] = punctual_irradiance(
-            light, float(sources.spread[l]), samples or int(sources.samples[l]), receivers,
-            tracer, seed, light_dimension(l))
+        values, unoccluded = punctual_samples(light, float(sources.spread[l]), int(counts[l]),
+                                              receivers, tracer, seed, light_dimension(l))
+        punctual[:, l], punctual_var[:, l] = mean_and_variance(values)
+        _add(noise, _noise_of(values, unoccluded, float(colours[l])))
     if sources.emitters is not None:
-        emitted, emitted_var = emissive_irradiance(
-            scene, world, sources.emitters, samples or sources.emissive_rays, receivers, tracer, seed)
+        values, unoccluded = emissive_samples(scene, world, sources.emitters, int(counts[-2]),
+                                              receivers, tracer, seed)
+        emitted, emitted_var = _rgb_mean_and_variance(values)
+        _add(noise, _noise_of(values @ LUMINANCE, unoccluded, 1.0))
     if sources.sky is not None:
-        sky, sky_var = sky_irradiance(sources.sky, samples or sources.sky_rays, receivers,
-                                      tracer, seed)
-    return Direct(punctual=punctual, punctual_var=punctual_var,
-                  light_colours=sources.light_colours(), emission=emitted,
-                  emission_var=emitted_var, sky=sky, sky_var=sky_var,
-                  rays_per_texel=(sources.rays_per_texel() if samples is None else
-                                  samples * (len(sources.lights) + (sources.emitters is not None)
-                                             + (sources.sky is not None))))
+        values, unoccluded = sky_samples(sources.sky, int(counts[-1]), receivers, tracer, seed)
+        sky, sky_var = _rgb_mean_and_variance(values)
+        _add(noise, _noise_of(values @ LUMINANCE, unoccluded, 1.0))
+    rays = sources.rays_per_texel(counts)
+    return (Direct(punctual=punctual, punctual_var=punctual_var,
+                   light_colours=sources.light_colours(), emission=emitted,
+                   emission_var=emitted_var, sky=sky, sky_var=sky_var, rays_per_texel=rays),
+            noise)
+
+
+def _add(noise: _Noise, source: tuple[np.ndarray, ...]) -> None:
+    """Add one source's (iid, floor, partial) to ``noise``, in place (independent sources)."""
+    noise.iid[:] += source[0]
+    noise.floor[:] += source[1]
+    noise.partial[:] |= source[2]
+
+
+def _rgb_mean_and_variance(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean (k, 3) of RGB samples (k, n, 3) and the variance (k,) of its luminance
+    (``mean_and_variance``)."""
+    _, variance = mean_and_variance(values @ LUMINANCE)
+    return values.mean(axis=1), variance
 
 
 def direct_light(scene: Scene, world: World, tracer: Tracer, texels: Texels, sources: Sources,
                  settings: Resolved, progress: Callable[[int, int], None] | None = None) -> Direct:
     """Estimate every texel's direct irradiance from every source (no ray when there is none);
-    ``progress(texels, rays)`` after each chunk (its shadow and sky rays, as ``rays_per_texel``)."""
+    ``progress(texels, rays)`` after each chunk (its shadow and sky rays)."""
+    return _rounds(scene, world, tracer, texels, sources, settings, progress, None)[0]
+
+
+def adaptive_direct_light(scene: Scene, world: World, tracer: Tracer, texels: Texels,
+                          sources: Sources, settings: Resolved, targets: np.ndarray,
+                          progress: Callable[[int, int], None] | None = None
+                          ) -> tuple[Direct, np.ndarray]:
+    """``direct_light`` in adaptive rounds, and each texel's predicted error σ (N,) after them.
+
+    A texel whose predicted error (``_predicted``) times ``adaptive.WITHIN`` is above its
+    target (``targets`` (N,)) is estimated again with twice the rays of every noisy source
+    (``Sources.counts``), from the start, until it is within or the rays would pass
+    ``settings.max_rays``: a texel with m times the rays holds what a bake with m times the
+    rays would give it, byte for byte. The rounds depend on the texels asked for (the error
+    model is pooled over them), not on the chunks.
+    """
+    return _rounds(scene, world, tracer, texels, sources, settings, progress, targets)
+
+
+def _rounds(scene: Scene, world: World, tracer: Tracer, texels: Texels, sources: Sources,
+            settings: Resolved, progress: Callable[[int, int], None] | None,
+            targets: np.ndarray | None) -> tuple[Direct, np.ndarray | None]:
+    """``adaptive_direct_light`` (one round when ``targets`` is None: no σ then)."""
     count = len(texels)
     if not sources.any():
-        return no_direct(count)
+        return no_direct(count), (None if targets is None else np.zeros(count))
     lights = len(sources.lights)
-    punctual = np.zeros((count, lights))
-    punctual_var = np.zeros((count, lights))
-    emitted, emitted_var = _source_terms(count, sources.emitters is not None)
-    sky, sky_var = _source_terms(count, sources.sky is not None)
-    step = max(1, settings.chunk_texels)
-    chunks = [slice(start, min(start + step, count)) for start in range(0, count, step)]
+    out = Direct(np.zeros((count, lights)), np.zeros((count, lights)), sources.light_colours(),
+                 *_source_terms(count, sources.emitters is not None),
+                 *_source_terms(count, sources.sky is not None), sources.rays_per_texel())
+    noise = _Noise(np.zeros(count), np.zeros(count), np.zeros(count, bool))
+    texel_rays = np.zeros(count, np.int64)
+    active = np.arange(count)
+    for scale in sources.scales(settings.max_rays) if targets is not None else [1]:
+        if scale > 1:
+            active = active[WITHIN * _predicted(out, noise, texels, active) > targets[active]]
+            if not len(active):
+                break
 
-    def work(rows: slice) -> None:
-        receivers = texel_receivers(texels, rows, tracer.center, tracer, settings.supersample,
-                                     settings.seed)
-        part = direct_at(scene, world, tracer, sources, receivers, settings.seed)
-        punctual[rows], punctual_var[rows] = part.punctual, part.punctual_var
-        if len(emitted):
-            emitted[rows], emitted_var[rows] = part.emission, part.emission_var
-        if len(sky):
-            sky[rows], sky_var[rows] = part.sky, part.sky_var
-        if progress is not None:
-            progress(rows.stop - rows.start, (rows.stop - rows.start) * sources.rays_per_texel())
+        def work(rows: np.ndarray, scale=scale) -> None:
+            receivers = texel_receivers(texels, rows, tracer.center, tracer, settings.supersample,
+                                         settings.seed)
+            part, part_noise = _direct_rows(scene, world, tracer, sources, receivers,
+                                            settings.seed, scale=scale)
+            _store(out, noise, rows, part, part_noise)
+            texel_rays[rows] += part.rays_per_texel
+            if progress is not None:
+                progress(len(rows) if scale == 1 else 0, len(rows) * part.rays_per_texel)
 
-    run_chunks(work, chunks, settings.threads)
-    return Direct(punctual=punctual, punctual_var=punctual_var,
-                  light_colours=sources.light_colours(), emission=emitted,
-                  emission_var=emitted_var, sky=sky, sky_var=sky_var,
-                  rays_per_texel=sources.rays_per_texel())
+        step = texels_per_chunk(settings.chunk_texels, int(sources.counts(None, scale).max()))
+        run_chunks(work, [active[start:start + step] for start in range(0, len(active), step)],
+                   settings.threads)
+    if targets is None:
+        return out, None
+    return (replace(out, texel_rays=texel_rays),
+            _predicted(out, noise, texels, np.arange(count)) if sources.noisy()
+            else np.zeros(count))
+
+
+def _store(out: Direct, noise: _Noise, rows: np.ndarray, part: Direct, part_noise: _Noise) -> None:
+    """Write one chunk's estimates into the rows ``rows`` of ``out`` and ``noise``, in place."""
+    out.punctual[rows], out.punctual_var[rows] = part.punctual, part.punctual_var
+    if len(out.emission):
+        out.emission[rows], out.emission_var[rows] = part.emission, part.emission_var
+    if len(out.sky):
+        out.sky[rows], out.sky_var[rows] = part.sky, part.sky_var
+    noise.iid[rows], noise.floor[rows] = part_noise.iid, part_noise.floor
+    noise.partial[rows] = part_noise.partial
+
+
+def _predicted(direct: Direct, noise: _Noise, texels: Texels, rows: np.ndarray) -> np.ndarray:
+    """(k,) the predicted error σ of D's luminance at the texels ``rows``, from their
+    neighbours' samples, not their own (``neighbour_mean``): the neighbours' iid variance
+    times the nets' gain pooled over these texels (``adaptive.pooled_gain``, the splits
+    ``Direct.variance`` against the iid variances), plus the texel's floor where a neighbour
+    saw a penumbra (``_Noise``).
+
+    A texel stopped by its own samples is biased: an emitter's estimate is heavy-tailed (1/d²
+    beside it), a texel whose samples missed the rare bright ones has a low mean and a low
+    variance together, and it is the one that stops (a glowing closed room's D came out 13 %
+    lower than uniform sampling's); one stopped by its neighbours' is not, its rounds being
+    independent of its own samples."""
+    iid = neighbour_mean(texels, noise.iid, rows)
+    gain = pooled_gain(noise.iid[rows], direct.variance()[rows], noise.iid[rows] > 0)
+    near = neighbour_mean(texels, noise.partial.astype(np.float64), rows) > 0
+    return np.sqrt(gain * iid + np.where(near, noise.floor[rows], 0.0))
+
+
+NEAR = 2  # texels: a texel's neighbours are those within this many rows and columns
+
+
+def neighbour_mean(texels: Texels, values: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """(k,) the mean of ``values`` (N,) over the neighbours of the texels ``rows`` — the
+    texels within ``NEAR`` rows and columns on their page, themselves left out — or their own
+    value where they have none (a lone texel of a tiny chart). The texels are sorted by key,
+    (page·height + y)·width + x; a row's last columns count as beside the next row's first
+    (the keys run on), which only adds a few."""
+    keys = texels.key[rows]
+    total, seen = np.zeros(len(rows)), np.zeros(len(rows))
+    for dy in range(-NEAR, NEAR + 1):
+        for dx in range(-NEAR, NEAR + 1):
+            if dy or dx:  # one vectorised pass per offset
+                shifted = keys + np.uint64((dy * texels.page_width + dx) % (1 << 64))
+                at = np.minimum(np.searchsorted(texels.key, shifted), len(texels.key) - 1)
+                hit = texels.key[at] == shifted
+                total += np.where(hit, values[at], 0.0)
+                seen += hit
+    return np.where(seen > 0, total / np.maximum(seen, 1), values[rows])
 
 
 # ------------------------------------------------------------------------------------------------

@@ -414,14 +414,17 @@ def shaded(foliage: Foliage, texels: Texels, terms: Terms, d_max: float) -> Term
 
 def integrate_with_foliage(foliage: Foliage, scene: Scene, world: World, texels: Texels,
                            settings: Resolved, progress=None, error_scale=None,
-                           surfaces: Surfaces | None = None) -> Terms:
+                           surfaces: Surfaces | None = None,
+                           targets: np.ndarray | None = None) -> Terms:
     """``integrate.integrate`` of every texel in foliage mode: the foliage texels' terms from
     the closed forms, the others traced without the crowns' leaves (not yet shaded by them:
-    ``shaded`` does that when their light is composed), in ``texels`` order."""
+    ``shaded`` does that when their light is composed), in ``texels`` order (``targets``:
+    every texel's adaptive target, as ``hemisphere.hemisphere_terms`` takes them)."""
     group = foliage.texel_groups(texels)
     closed, traced_rows = np.flatnonzero(group >= 0), np.flatnonzero(group < 0)
     traced = integrate(scene, world, foliage.tracer, texels, settings, progress, traced_rows,
-                       error_scale, surfaces=surfaces)
+                       error_scale, surfaces=surfaces,
+                       targets=None if targets is None else targets[traced_rows])
     approx = foliage_terms(foliage, scene, world, texels, closed)
     if progress is not None and len(closed):
         progress(len(closed), 0)  # closed forms: no ray

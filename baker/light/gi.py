@@ -48,6 +48,7 @@ from baker.atlas.rasterise import Texels
 from baker.geometry.surface import LUMINANCE, albedo, emission
 from baker.geometry.world import World
 from baker.gltf.scene import Scene
+from baker.light.adaptive import WITHIN
 from baker.light.direct import (
     SHADOW_SHORTEN,
     Emitters,
@@ -56,6 +57,7 @@ from baker.light.direct import (
     direct_at,
     emitter_radiance,
     emitter_samples,
+    neighbour_mean,
 )
 from baker.rays.dimensions import GI_BOUNCE, GI_EMITTER, GI_FIRST, GI_ROULETTE
 from baker.rays.sampling import (
@@ -85,10 +87,12 @@ class Indirect:
     capped: int = 0
 
 
-def _path_keys(keys: np.ndarray, paths: int) -> np.ndarray:
-    """(k·paths,) uint64 keys, one per (texel, path): a hash of both, texel-major."""
-    high = hash_u32(np.repeat(keys, paths), np.tile(np.arange(paths), len(keys)), 1)
-    low = hash_u32(np.repeat(keys, paths), np.tile(np.arange(paths), len(keys)), 2)
+def _path_keys(keys: np.ndarray, paths: int, first: int = 0) -> np.ndarray:
+    """(k·paths,) uint64 keys, one per (texel, path ``first`` … ``first + paths − 1``): a hash
+    of both, texel-major."""
+    numbers = np.tile(np.arange(first, first + paths), len(keys))
+    high = hash_u32(np.repeat(keys, paths), numbers, 1)
+    low = hash_u32(np.repeat(keys, paths), numbers, 2)
     return (high.astype(np.uint64) << np.uint64(32)) | low.astype(np.uint64)
 
 
@@ -109,17 +113,33 @@ def _cosine_directions(normals: np.ndarray, points: np.ndarray) -> np.ndarray:
     return local[:, :1] * t1 + local[:, 1:2] * t2 + local[:, 2:] * normals
 
 
+@dataclass(frozen=True)
+class _Paths:
+    """What k texels' paths ``first`` … ``first + count − 1`` gave: the mean (k, 3) of their
+    E_ind, the mean (k,) of its luminance and m2 (k,), the sum of that luminance's squared
+    deviations from its mean (so that rounds of paths combine exactly: ``_combined``); the
+    rays they cast and the paths cut at ``MAX_BOUNCES``."""
+
+    mean: np.ndarray
+    luminance: np.ndarray
+    m2: np.ndarray
+    count: int
+    rays: int
+    capped: int
+
+
 def _chunk(scene: Scene, world: World, tracer: Tracer, sources: Sources, texels: Texels,
-           rows: slice, settings: Resolved, paths: int, max_bounces: int) -> Indirect:
-    """E_ind of the texels ``rows`` (k of them)."""
+           rows: slice | np.ndarray, settings: Resolved, paths: int, max_bounces: int,
+           first: int = 0) -> _Paths:
+    """Paths ``first`` … ``first + paths − 1`` of the texels ``rows`` (k of them)."""
     keys = texels.key[rows]
     k = len(keys)
-    path_keys = _path_keys(keys, paths)
+    path_keys = _path_keys(keys, paths, first)
     position = np.repeat(texels.position[rows], paths, axis=0)
     normal = np.repeat(texels.geometric_normal(rows), paths, axis=0)
     frame = np.repeat(texels.hemisphere_normal(rows), paths, axis=0)  # the first rays'
     size = np.repeat(texels.size(rows), paths)
-    points = sample_2d(settings.seed, keys[:, None], np.arange(paths)[None, :],
+    points = sample_2d(settings.seed, keys[:, None], np.arange(first, first + paths)[None, :],
                        GI_FIRST).reshape(-1, 2)
     throughput = np.ones((k * paths, 3))
     total = np.zeros((k * paths, 3))
@@ -186,8 +206,26 @@ def _chunk(scene: Scene, world: World, tracer: Tracer, sources: Sources, texels:
             alive, position, normal, size = alive[keep], position[keep], normal[keep], size[keep]
     per_path = total.reshape(k, paths, 3)
     luminance = per_path @ LUMINANCE
-    variance = (luminance.var(axis=1, ddof=1) / paths if paths > 1 else np.zeros(k))
-    return Indirect(per_path.mean(axis=1), variance, rays, len(alive))
+    mean = luminance.mean(axis=1)
+    deviation = luminance - mean[:, None]
+    return _Paths(per_path.mean(axis=1), mean, np.add.reduce(deviation * deviation, axis=1),
+                  paths, rays, len(alive))
+
+
+def _combined(a: _Paths, b: _Paths) -> _Paths:
+    """Two rounds of paths of the same texels as one (Chan et al.'s pairwise update of m2)."""
+    n = a.count + b.count
+    gap = b.luminance - a.luminance
+    return _Paths((a.count * a.mean + b.count * b.mean) / n,
+                  (a.count * a.luminance + b.count * b.luminance) / n,
+                  a.m2 + b.m2 + gap * gap * (a.count * b.count / n), n,
+                  a.rays + b.rays, a.capped + b.capped)
+
+
+def _variance(m2: np.ndarray, count: np.ndarray) -> np.ndarray:
+    """(k,) the variance of a mean of ``count`` (k,) paths whose luminance has ``m2`` (k,)."""
+    count = np.asarray(count, np.float64)
+    return np.where(count > 1, m2 / np.maximum(count - 1, 1) / np.maximum(count, 1), 0.0)
 
 
 def _emitter_index(world: World, emitters: Emitters | None) -> np.ndarray:
@@ -263,22 +301,48 @@ def rays_per_path(sources: Sources, r_ave: np.ndarray) -> float:
 
 def indirect_light(scene: Scene, world: World, tracer: Tracer, sources: Sources, texels: Texels,
                    settings: Resolved, paths: int, max_bounces: int = MAX_BOUNCES,
-                   progress: Callable[[int, int], None] | None = None) -> Indirect:
+                   progress: Callable[[int, int], None] | None = None,
+                   targets: np.ndarray | None = None) -> Indirect:
     """E_ind at every texel from ``paths`` paths each (see the module's docstring);
-    ``progress(texels, rays)`` after each chunk, with the rays its paths cast."""
+    ``progress(texels, rays)`` after each chunk, with the rays its paths cast.
+
+    ``targets`` (N,) (``adaptive.what_is_left``; None: one round): adaptive rounds. A texel
+    whose neighbours' σ (``direct.neighbour_mean`` of ``Indirect.variance``, the paths being
+    independent) times ``adaptive.WITHIN`` is above its target gets as many paths again — the next
+    ones, paths n … 2n − 1 — while it would stay within ``settings.max_rays`` paths. The rounds
+    do not depend on the chunks.
+    """
     count = len(texels)
-    irradiance, variance = np.zeros((count, 3)), np.zeros(count)
-    rays, capped = np.zeros(count, np.int64), np.zeros(count, np.int64)
-    step = max(1, settings.chunk_texels // max(1, paths // 16))
-    chunks = [slice(start, min(start + step, count)) for start in range(0, count, step)]
+    state = _Paths(np.zeros((count, 3)), np.zeros(count), np.zeros(count), 0, 0, 0)
+    counts = np.zeros(count, np.int64)
+    active, rays, capped, first = np.arange(count), 0, 0, 0
+    while len(active):
+        batch = paths if first == 0 else first
+        step = max(1, settings.chunk_texels // max(1, batch // 16))
+        chunks = [active[start:start + step] for start in range(0, len(active), step)]
+        found: list[_Paths | None] = [None] * len(chunks)
 
-    def work(rows: slice) -> None:
-        part = _chunk(scene, world, tracer, sources, texels, rows, settings, paths, max_bounces)
-        irradiance[rows], variance[rows] = part.irradiance, part.variance
-        rays[rows.start], capped[rows.start] = part.rays, part.capped
-        if progress is not None:
-            progress(rows.stop - rows.start, part.rays)
+        def work(item: tuple[int, np.ndarray], batch=batch, first=first) -> None:
+            i, rows = item
+            found[i] = part = _chunk(scene, world, tracer, sources, texels, rows, settings,
+                                     batch, max_bounces, first)
+            if progress is not None:
+                progress(len(rows) if first == 0 else 0, part.rays)
 
-    run_chunks(work, chunks, settings.threads)
-    return Indirect(irradiance=irradiance, variance=variance, rays=int(rays.sum()),
-                    capped=int(capped.sum()))
+        run_chunks(work, list(enumerate(chunks)), settings.threads)
+        for rows, part in zip(chunks, found):
+            old = _Paths(state.mean[rows], state.luminance[rows], state.m2[rows], first, 0, 0)
+            new = part if first == 0 else _combined(old, part)
+            state.mean[rows], state.luminance[rows] = new.mean, new.luminance
+            state.m2[rows] = new.m2
+            rays, capped = rays + part.rays, capped + part.capped
+        counts[active] += batch
+        first += batch
+        if targets is None or 2 * first > settings.max_rays:
+            break
+        # By the neighbours' variance: a texel whose paths missed the rare bright ones has
+        # a low mean and a low variance together, and stopped by its own it stays too dark.
+        variance = neighbour_mean(texels, _variance(state.m2, counts), active)
+        active = active[WITHIN * np.sqrt(variance) > targets[active]]
+    return Indirect(irradiance=state.mean, variance=_variance(state.m2, counts), rays=rays,
+                    capped=capped)

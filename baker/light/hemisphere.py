@@ -39,6 +39,7 @@ from baker.gltf.materials import (
 )
 from baker.gltf.scene import Scene
 from baker.jit import inline, jit
+from baker.light.adaptive import WITHIN, pooled_gain
 from baker.light.obscurance import RHO_KINDS, UNIT_REFLECTIVITY, rho
 from baker.rays.dimensions import OBSCURANCE, material_dimension
 from baker.rays.sampling import (
@@ -678,14 +679,16 @@ def hemisphere_terms(scene: Scene, world: World, tracer: Tracer, texels: Texels,
                      settings: Resolved, progress: Callable[[int, int], None] | None = None,
                      rows: np.ndarray | None = None,
                      error_scale: tuple[np.ndarray, float] | None = None,
-                     surfaces: Surfaces | None = None) -> Terms:
+                     surfaces: Surfaces | None = None,
+                     targets: np.ndarray | None = None) -> Terms:
     """Estimate the obscurance terms of the texels ``rows`` (default: all), in that order.
 
     Without ``settings.target_error`` every texel gets ``settings.rays`` rays. With it, rays come
     in rounds — ``rays``, then doubling each texel's count while it stays within ``max_rays``
     (counts are rays·2^k; with ``sobol`` a round grows the texel's two nets, so a texel with n
     rays has what a bake with n rays would: ``cosine_directions``) — and a texel stops once
-    its predicted error (``unsettled``) is within the target. The rounds are the same whatever
+    its predicted error (``unsettled``) is within the target: ``targets`` (one per row:
+    ``adaptive.what_is_left``), by default ``settings.target_error``. The rounds are the same whatever
     the chunking, so the result is too (they depend on the rows asked for: the error model is
     pooled over them). ``progress(texels, rays)`` is told after each chunk how many texels it
     finished (in the first round; 0 after) and the rays it cast (``run.progress.Meter``).
@@ -722,7 +725,7 @@ def hemisphere_terms(scene: Scene, world: World, tracer: Tracer, texels: Texels,
         if settings.target_error is None or 2 * first > settings.max_rays:
             break
         active = active[unsettled(_means(sums[active], counts[active]), error_scale,
-                                  settings.target_error)]
+                                  settings.target_error if targets is None else targets[active])]
         batch = first
     terms = _means(sums, counts)
     if chaining:
@@ -730,20 +733,15 @@ def hemisphere_terms(scene: Scene, world: World, tracer: Tracer, texels: Texels,
     return terms
 
 
-WITHIN = 2.0  # a texel stops when WITHIN × its predicted error ≤ the target: 95.4 % of
-# normal errors lie within 2σ, and issue 22 asks for 95 % of texels within the target
-
-
-def unsettled(terms: Terms, error_scale: tuple[np.ndarray, float] | None,
-              target: float) -> np.ndarray:
-    """(N,) bool: the texels of ``terms`` whose predicted lightmap error is above
-    ``target`` / ``WITHIN``, so that they need another round.
+def predicted_error(terms: Terms, error_scale: tuple[np.ndarray, float] | None) -> np.ndarray:
+    """(N,) the predicted error σ of each texel of ``terms`` in lightmap luminance (I_A·W),
+    the quantity ``--target-error`` bounds (``adaptive.py``).
 
     The rays' sample variance assumes independent rays and overstates a scrambled net's error
     4–8×; one texel's split (``Terms.split_errors``) is unbiased but has one degree of freedom.
     The prediction is the sample variance times the gain g = Σ split / Σ sample variance over
-    the texels of like variance (the nets' measured advantage, pooled: ``_pooled_gain``; it
-    depends on the rows, not on chunks).
+    the texels of like variance (the nets' measured advantage, pooled: ``adaptive.pooled_gain``;
+    it depends on the rows, not on chunks).
     Where no ray escaped and all gave one value, ``binomial_floor`` (``standard_error``): the
     rays cannot tell a texel that is exact from one whose other value has p ≲ 1/n. A texel
     whose rays all escaped stops, as an open floor's should; under a ceiling at 0.9 d_max
@@ -755,33 +753,15 @@ def unsettled(terms: Terms, error_scale: tuple[np.ndarray, float] | None,
     iid = variance / np.maximum(terms.counts, 1)
     alike = terms._unseen(variance)
     split = terms.split_errors(r_ave)
-    gain = _pooled_gain(iid, split, ~alike)
-    predicted = np.where(alike, binomial_floor(terms.counts, r_ave),
-                         np.sqrt(gain * iid)) * scale
-    return WITHIN * predicted > target
+    gain = pooled_gain(iid, split, ~alike)
+    return np.where(alike, binomial_floor(terms.counts, r_ave), np.sqrt(gain * iid)) * scale
 
 
-GAIN_TEXELS = 256  # texels at least in each group that ``_pooled_gain`` measures a gain over
-GAIN_GROUPS = 8
-
-
-def _pooled_gain(iid: np.ndarray, split: np.ndarray, seen: np.ndarray) -> np.ndarray:
-    """(N,) each texel's gain: Σ split / Σ iid over its group of the ``seen`` texels, grouped
-    by their iid variance in up to ``GAIN_GROUPS`` equal groups of ``GAIN_TEXELS`` or more
-    (the gain differs between quiet texels and noisy ones: a smooth integrand gains more);
-    texels not seen take the gain of all. Sorted stably, so ties go in row order."""
-    order = np.flatnonzero(seen)[np.argsort(iid[seen], kind="stable")]
-    groups = max(1, min(GAIN_GROUPS, len(order) // GAIN_TEXELS))
-    gain = np.full(len(iid), _gain(iid[order], split[order]))
-    for part in np.array_split(order, groups):
-        gain[part] = _gain(iid[part], split[part])
-    return gain
-
-
-def _gain(iid: np.ndarray, split: np.ndarray) -> float:
-    """Σ split / Σ iid, 1 when there is no variance to measure it on."""
-    pooled = float(np.sum(iid))
-    return float(np.sum(split)) / pooled if pooled > 0 else 1.0
+def unsettled(terms: Terms, error_scale: tuple[np.ndarray, float] | None,
+              target: float) -> np.ndarray:
+    """(N,) bool: the texels of ``terms`` whose ``predicted_error`` is above ``target`` /
+    ``WITHIN``, so that they need another round."""
+    return WITHIN * predicted_error(terms, error_scale) > target
 
 
 def _luminance_and_escaped(sums: np.ndarray) -> np.ndarray:

@@ -103,8 +103,10 @@ def _instance_scale(scene: Scene) -> np.ndarray:
 
 def add_translucency(scene: Scene, world: World, tracer: Tracer, texels: Texels,
                      rows: np.ndarray, settings: Resolved, terms: Terms,
-                     error_scale: tuple[np.ndarray, float] | None = None) -> Terms:
-    """``terms`` (of the texels ``rows``) with the leaves' and inner obscurances' terms set.
+                     error_scale: tuple[np.ndarray, float] | None = None,
+                     targets: np.ndarray | None = None) -> Terms:
+    """``terms`` (of the texels ``rows``) with the leaves' and inner obscurances' terms set
+    (``targets``: the rows' adaptive targets, as ``hemisphere.hemisphere_terms`` takes them).
 
     ``through_hit``/``through_ave`` are (k, 3) when the scene has leaf or closed translucent
     materials, else left None (a scene without them pays nothing); ``chain_rays`` counts the
@@ -119,7 +121,8 @@ def add_translucency(scene: Scene, world: World, tracer: Tracer, texels: Texels,
     leaves = np.flatnonzero(table.leaf[material])
     if len(leaves):
         back = hemisphere_terms(scene, world, tracer, other_side(texels), settings,
-                                rows=rows[leaves], error_scale=error_scale)
+                                rows=rows[leaves], error_scale=error_scale,
+                                targets=None if targets is None else targets[leaves])
         t = table.factor[material[leaves]]
         hit[leaves] = t * back.w_hit
         ave[leaves] = t * back.escaped[:, None]

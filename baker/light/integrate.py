@@ -19,14 +19,16 @@ from baker.settings import Resolved
 def integrate(scene: Scene, world: World, tracer: Tracer, texels: Texels, settings: Resolved,
               progress: Callable[[int, int], None] | None = None, rows: np.ndarray | None = None,
               error_scale: tuple[np.ndarray, float] | None = None,
-              translucency: bool = True, surfaces: Surfaces | None = None) -> Terms:
+              translucency: bool = True, surfaces: Surfaces | None = None,
+              targets: np.ndarray | None = None) -> Terms:
     """The obscurance terms of the texels ``rows`` (default: all), in that order
     (``hemisphere.hemisphere_terms``: rays, rounds, ``progress``, ``error_scale``,
-    ``surfaces``). ``translucency``: add the leaves' back faces and the inner obscurances of
+    ``surfaces``, ``targets``). ``translucency``: add the leaves' back faces and the inner obscurances of
     closed translucent objects (``inner.add_translucency``, §4)."""
     terms = hemisphere_terms(scene, world, tracer, texels, settings, progress, rows, error_scale,
-                             surfaces)
+                             surfaces, targets)
     if not translucency:
         return terms
     rows = np.arange(len(texels)) if rows is None else np.asarray(rows, np.int64)
-    return add_translucency(scene, world, tracer, texels, rows, settings, terms, error_scale)
+    return add_translucency(scene, world, tracer, texels, rows, settings, terms, error_scale,
+                            targets)

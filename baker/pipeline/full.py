@@ -37,12 +37,19 @@ from baker.image.compose import Lightmaps, blank, compose_into, effective_r_ave
 from baker.image.denoise import DenoiseInfo, denoise
 from baker.image.postprocess import postprocess
 from baker.image.seams import find_seams
+from baker.light.adaptive import (
+    direct_goes_first,
+    first_target,
+    obscurance_settings,
+    what_is_left,
+)
 from baker.light.ambient import Ambient, ambient_terms
 from baker.light.environment import environment
 from baker.light.direct import (
     Direct,
     Power,
     Sources,
+    adaptive_direct_light,
     delivered_power,
     direct_light,
     light_sources,
@@ -55,7 +62,7 @@ from baker.light.foliage import (
     shaded,
 )
 from baker.light.gi import Indirect, indirect_light, rays_per_path
-from baker.light.hemisphere import Surfaces, Terms, surfaces_of
+from baker.light.hemisphere import Surfaces, Terms, predicted_error, surfaces_of
 from baker.light.integrate import integrate
 from baker.pipeline import cluster
 from baker.pipeline.parts import PerTexel, Tally, TexelPoints, part_slices
@@ -314,14 +321,16 @@ PROBE_RAYS = HEMISPHERE_RAYS + TANGENT_RAYS * TANGENT_ROUNDS
 
 
 def check_ray_budget(baking: Baking, texels: int) -> None:
-    """SettingsError, before any ray is cast, when ``texels`` × the rays each casts (obscurance
-    — up to ``max_rays`` with ``target_error`` —, direct light, GI, validity probes) exceeds
+    """SettingsError, before any ray is cast, when ``texels`` × the rays each casts (obscurance,
+    direct light, GI — their most with ``target_error`` —, validity probes) exceeds
     ``max_total_rays``: the message gives the figures and what makes them (the lights, for a
     scene of many), the fix the setting that would allow it and what makes fewer."""
     s, sources = baking.settings, baking.sources
     obscurance, direct, gi = rays_per_texel(baking)
     if s.target_error is not None:
         obscurance = max(obscurance, s.max_rays)
+        direct = sources.most_rays_per_texel(s.max_rays) if direct is not None else None
+        gi = gi * max(s.max_rays, s.rays) / s.rays if gi is not None else None
     parts = {"obscurance": obscurance, "direct light": direct or 0, "GI paths": gi or 0,
              "validity probes": PROBE_RAYS}
     per_texel = sum(parts.values())
@@ -407,24 +416,45 @@ def _bake_part(baking: Baking, rows: slice, times: dict[str, float],
         texels, validity = check_texels(scene, world, tracer, made, s.d_max, faces=baking.faces)
         points = TexelPoints.of(texels, made.position)
     stages.meter.start()
-    indirect = None
+    indirect, direct, targets = None, None, None
+    if s.target_error is not None:  # the first term's share of the target (adaptive.py)
+        targets = np.full(len(texels), first_target(s, baking.sources.noisy()))
+        if direct_goes_first(s):
+            direct, targets = _adaptive_direct(baking, texels, targets, times, stages)
     if s.method == "gi":  # the full-GI reference instead of I_A·W (gi.py); first, as it is
         with timed(times, "gi"):  # most of the work: the bar's rate is then its rate
             indirect = indirect_light(scene, world, tracer, baking.sources, texels, s, s.rays,
-                                      progress=stages.gi)
+                                      progress=stages.gi, targets=targets)
     with timed(times, "trace"):
         error_scale = (effective_r_ave(ambient, s.rho), float(ambient.intensity @ LUMINANCE))
+        traced = obscurance_settings(s)
         if baking.foliage is None:
-            terms = integrate(scene, world, tracer, texels, s, stages.obscurance,
-                              error_scale=error_scale,
-                              surfaces=baking.surfaces)
+            terms = integrate(scene, world, tracer, texels, traced, stages.obscurance,
+                              error_scale=error_scale, surfaces=baking.surfaces,
+                              targets=targets)
         else:
-            terms = integrate_with_foliage(baking.foliage, scene, world, texels, s,
-                                           stages.obscurance,
-                                           error_scale, baking.surfaces)
-    with timed(times, "direct"):
-        direct = direct_light(scene, world, tracer, texels, baking.sources, s, stages.direct)
+            terms = integrate_with_foliage(baking.foliage, scene, world, texels, traced,
+                                           stages.obscurance, error_scale, baking.surfaces,
+                                           targets)
+    if direct is None and s.target_error is not None:
+        left = what_is_left(s.target_error, predicted_error(terms, error_scale))
+        direct, _ = _adaptive_direct(baking, texels, left, times, stages)
+    elif direct is None:
+        with timed(times, "direct"):
+            direct = direct_light(scene, world, tracer, texels, baking.sources, s,
+                                  stages.direct)
     return BakedPart(texels, points, validity, terms, direct, indirect)
+
+
+def _adaptive_direct(baking: Baking, texels: Texels, targets: np.ndarray,
+                     times: dict[str, float], stages: "_Stages") -> tuple[Direct, np.ndarray]:
+    """The direct light in adaptive rounds to ``targets`` (N,), and what it leaves of the
+    target to the other term (``adaptive.what_is_left``)."""
+    with timed(times, "direct"):
+        direct, error = adaptive_direct_light(baking.scene, baking.world, baking.tracer, texels,
+                                              baking.sources, baking.settings, targets,
+                                              stages.direct)
+    return direct, what_is_left(baking.settings.target_error, error)
 
 
 def finish(scene: Scene, world: World, resolved: Resolved, lit: Lighting, atlas: Atlas,

@@ -51,7 +51,8 @@ _PER_TEXEL = {
                "emission": ("<f8", (3,), True, None, None),
                "emission_var": ("<f8", (), True, 0.0, None),
                "sky": ("<f8", (3,), True, None, None),
-               "sky_var": ("<f8", (), True, 0.0, None)},
+               "sky_var": ("<f8", (), True, 0.0, None),
+               "texel_rays": ("<i8", (), True, 0, None)},
 }
 """Every per-texel array of a state: N rows (or 0 where the field may be absent), its dtype,
 the shape of a row, and the range of its values (all finite)."""
