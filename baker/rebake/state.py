@@ -38,7 +38,7 @@ import numpy as np
 from isal import isal_zlib
 
 from baker.atlas.layout import Atlas, InstanceUV
-from baker.rebake.zipwriter import BLOCK_BYTES, DEFLATED, LEVEL, STORED, ZipWriter
+from baker.rebake.zipwriter import BLOCK_BYTES, DEFLATED, STORED, ZipWriter, deflate
 from baker.run.atomic import write_atomically
 from baker.run.spill import Column, Group
 from baker.settings import MAX_TEXELS
@@ -140,7 +140,8 @@ are the bulk of a rebake's read, for a few MB saved."""
 
 def _deflates(column: Column) -> bool:
     """Whether ``column``'s bytes deflate by ``MIN_RATIO`` or more, judged by their first
-    ``zipwriter.BLOCK_BYTES`` (by its bytes alone, so the same state gives the same file)."""
+    ``zipwriter.BLOCK_BYTES`` (by its bytes alone, so the same state gives the same file:
+    ``zipwriter.deflate``, never the one-shot compressor, whose output varies)."""
     size = min(int(np.prod(column.shape, dtype=np.int64)) * column.dtype.itemsize, BLOCK_BYTES)
     if not size:
         return False
@@ -148,7 +149,7 @@ def _deflates(column: Column) -> bool:
         sample = np.ascontiguousarray(column.array).reshape(-1).view(np.uint8)[:size]
     else:
         sample = np.fromfile(column.path, np.uint8, count=size)
-    return len(isal_zlib.compress(sample, LEVEL, wbits=-15)) * MIN_RATIO <= size
+    return len(deflate(sample)) * MIN_RATIO <= size
 
 
 def _member(archive: ZipWriter, name: str, data: bytes | Column) -> None:

@@ -42,14 +42,26 @@ def deflated_most(size: int) -> int:
     return size + 5 * (size // (1 << 16) + size // BLOCK_BYTES + 2) + 64
 
 
+def deflate(data) -> bytes:
+    """``data`` deflated (raw deflate, ``LEVEL``) as a member's contents are: through ISA-L's
+    streaming compressor. Its one-shot ``isal_zlib.compress`` is no pure function of its input:
+    24 bytes came out as 14, 15 or 16 from one process to the next (tests/test_zipwriter.py)."""
+    squeeze = _compressor()
+    return squeeze.compress(data) + squeeze.flush()
+
+
+def _compressor():
+    """A raw deflate stream at ``LEVEL`` (ISA-L)."""
+    return isal_zlib.compressobj(LEVEL, isal_zlib.DEFLATED, -15)
+
+
 class _Member:
     """What a member's contents are written to: counts its bytes and their CRC-32, and
     deflates them (``deflate``) a ``BLOCK_BYTES`` block at a time, or writes them as they are."""
 
     def __init__(self, file: BinaryIO, deflate: bool):
         self._file, self.size, self.crc, self.written = file, 0, 0, 0
-        self._squeeze = (isal_zlib.compressobj(LEVEL, isal_zlib.DEFLATED, -15) if deflate
-                         else None)
+        self._squeeze = _compressor() if deflate else None
         self._pending = bytearray()  # the start of the next block (less than BLOCK_BYTES)
 
     def write(self, data) -> int:
