@@ -463,8 +463,7 @@ def emissive_irradiance(scene: Scene, world: World, emitters: Emitters, n: int,
     of every emitter (a triangle whose mean emission is 0 at the fixed points is never picked).
     """
     value, _ = emissive_samples(scene, world, emitters, n, receivers, tracer, seed)
-    _, variance = mean_and_variance(value @ LUMINANCE)
-    return value.mean(axis=1), variance
+    return _rgb_mean_and_variance(value)
 
 
 def emissive_samples(scene: Scene, world: World, emitters: Emitters, n: int,
@@ -522,8 +521,7 @@ def sky_irradiance(sky: np.ndarray, n: int, receivers: Receivers, tracer: Tracer
     that meets nothing at any distance sees the sky, so the estimate is π · mean(L_sky(ω) · V(ω)).
     """
     value, _ = sky_samples(sky, n, receivers, tracer, seed)
-    _, variance = mean_and_variance(value @ LUMINANCE)
-    return value.mean(axis=1), variance
+    return _rgb_mean_and_variance(value)
 
 
 def sky_samples(sky: np.ndarray, n: int, receivers: Receivers, tracer: Tracer,

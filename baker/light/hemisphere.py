@@ -688,9 +688,9 @@ def hemisphere_terms(scene: Scene, world: World, tracer: Tracer, texels: Texels,
     (counts are rays·2^k; with ``sobol`` a round grows the texel's two nets, so a texel with n
     rays has what a bake with n rays would: ``cosine_directions``) — and a texel stops once
     its predicted error (``unsettled``) is within the target: ``targets`` (one per row:
-    ``adaptive.what_is_left``), by default ``settings.target_error``. The rounds are the same whatever
-    the chunking, so the result is too (they depend on the rows asked for: the error model is
-    pooled over them). ``progress(texels, rays)`` is told after each chunk how many texels it
+    ``adaptive.what_is_left``), by default ``settings.target_error``. The rounds are the same
+    whatever the chunking, so the result is too (they depend on the rows asked for: the error
+    model is pooled over them). ``progress(texels, rays)`` is told after each chunk how many texels it
     finished (in the first round; 0 after) and the rays it cast (``run.progress.Meter``).
     ``surfaces``: ``surfaces_of(scene, world)``, made here when not given. Light through
     translucent surfaces is not in these terms: ``light.integrate.integrate`` adds it

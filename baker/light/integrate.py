@@ -23,8 +23,8 @@ def integrate(scene: Scene, world: World, tracer: Tracer, texels: Texels, settin
               targets: np.ndarray | None = None) -> Terms:
     """The obscurance terms of the texels ``rows`` (default: all), in that order
     (``hemisphere.hemisphere_terms``: rays, rounds, ``progress``, ``error_scale``,
-    ``surfaces``, ``targets``). ``translucency``: add the leaves' back faces and the inner obscurances of
-    closed translucent objects (``inner.add_translucency``, §4)."""
+    ``surfaces``, ``targets``). ``translucency``: add the leaves' back faces and the inner
+    obscurances of closed translucent objects (``inner.add_translucency``, §4)."""
     terms = hemisphere_terms(scene, world, tracer, texels, settings, progress, rows, error_scale,
                              surfaces, targets)
     if not translucency:
