@@ -18,6 +18,7 @@ from pathlib import Path
 sys.path.append(str(Path(__file__).resolve().parent.parent))  # assets/, after the package to warm
 
 import baker  # noqa: E402
+from assets.foliage_scenes import tree  # noqa: E402
 from assets.make_scenes import cornell_box, vase_room  # noqa: E402
 from assets.rebake_scenes import box_room, grid_boxes, moved  # noqa: E402
 
@@ -35,6 +36,8 @@ def warm(folder: Path) -> None:
     if flowers.is_dir():  # alpha-cut leaves and glass (in a checkout)
         baker.bake(flowers / "GlassVaseFlowers.glb", folder / "flowers_baked.glb",
                    baker.Settings(**SMALL, occlusion="also"))
+    baker.bake(tree(leaf_count=200, grass_count=0).save(folder / "tree.glb"),  # flat charts
+               folder / "tree_baked.glb", baker.Settings(**SMALL))
     boxes, lamp = grid_boxes(6), {"intensity": 20.0, "radius": 0.1}
     room = box_room(boxes, lamp=lamp).save(folder / "room.glb")
     out = folder / "room_baked.glb"

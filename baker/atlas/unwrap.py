@@ -11,7 +11,9 @@ go into one xatlas run as UV meshes (``_pack``), so that one texel covers about
 pure functions of their input, so the atlas does not depend on the cores, the order the
 children end in, or the cache; and moving or turning a node leaves it bit for bit as it was
 (incremental rebake). Where one instance holds most triangles, charting apart cannot win, and
-one xatlas run charts and packs everything (``_one_run``, ``_whole``).
+one xatlas run charts and packs everything (``_one_run``, ``_whole``). A mesh of many small flat
+loose parts (a crown's leaf quads, grass) has those charted by projection and packed in blocks
+(``planar.py``, ``_split``); xatlas places one rectangle a block among the other charts.
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import xatlas
 
-from baker.atlas import unwrap_cache
+from baker.atlas import planar, unwrap_cache
 from baker.atlas.layout import Atlas, InstanceUV
 from baker.errors import SettingsError
 from baker.geometry.world import World
@@ -149,6 +151,7 @@ class _Packed:
     atlas_count: int
     chart_count: int
     meshes: tuple[tuple[np.ndarray, ...], ...]
+    least_texels: int = 0  # page texels the flat parts need at any density (``planar.py``)
 
 
 # xatlas's input for one mesh: positions (n, 3) float32 in texel units, triangles (m, 3) uint32
@@ -187,7 +190,11 @@ def _chart_options() -> tuple[xatlas.ChartOptions, xatlas.PackOptions]:
 
 def _chart(mesh: _Mesh) -> _Charted:
     """One mesh charted alone: header (width, height, pages, charts) and xatlas's (vertices,
-    triangles, uv in texel units (k, 2) float32, page and chart of each vertex)."""
+    triangles, uv in texel units (k, 2) float32, page and chart of each vertex); a mesh of no
+    triangles (every one charted by ``planar.py``) has none."""
+    if not len(mesh[1]):
+        empty = np.zeros(0, np.uint32)
+        return ((0, 0, 0, 0), (empty, mesh[1], np.zeros((0, 2), np.float32), empty, empty))
     atlas = xatlas.Atlas()
     atlas.add_mesh(*mesh)
     atlas.generate(*_chart_options())
@@ -267,25 +274,139 @@ def _texels(mesh: _Mesh) -> float:
     return float(0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum())
 
 
-def _pack(charted: list[_Charted], settings: Resolved, resolution: int) -> _Packed:
+def _pack(charted: list[_Charted], parts: list[_Split], settings: Resolved, resolution: int
+          ) -> _Packed:
     """The instances' charts packed together (each instance's own copy, as a UV mesh; xatlas
     finds its charts again from the triangles sharing vertices) into pages of ``resolution``
-    (0: one page of the size xatlas needs). Each mesh's arrays refer to the instance's own
-    vertices: xatlas's vertex map of the packing composed with that of the charting; a vertex
-    of a face the charting left out stays without a page."""
+    (0: one page of the size xatlas needs), with one rectangle for every block of flat parts
+    (``planar.py``), all in one UV mesh after the instances'. Each mesh's arrays refer to the
+    instance's own vertices: xatlas's vertex map of the packing composed with that of the
+    charting; a vertex of a face the charting left out stays without a page."""
     atlas = xatlas.Atlas()
-    for _header, (_vertices, triangles, uv, _page, _chart) in charted:
+    added = [m for m, (_header, arrays) in enumerate(charted) if len(arrays[1])]
+    for m in added:
+        _header, (_vertices, triangles, uv, _page, _chart) = charted[m]
         atlas.add_uv_mesh(uv, triangles)
+    sizes = [part.flats.sizes for part in parts if part.flats is not None]
+    if sizes:
+        atlas.add_uv_mesh(*_block_quads(np.concatenate(sizes)))
     atlas.generate(xatlas.ChartOptions(), _pack_options(settings, resolution))
-    meshes = []
-    for m, (_header, (vertices, _triangles, _uv, page, _chart)) in enumerate(charted):
-        again, triangles, uv = atlas[m]
-        packed_page, packed_chart = atlas.get_mesh_vertex_assignment(m)
+    rests = {}
+    for slot, m in enumerate(added):
+        vertices, _triangles, _uv, page, _chart = charted[m][1]
+        again, triangles, uv = atlas[slot]
+        packed_page, packed_chart = atlas.get_mesh_vertex_assignment(slot)
         packed_page = np.where(page[again] == _NO_PAGE, _NO_PAGE, packed_page).astype(np.uint32)
-        meshes.append((vertices[again], triangles, uv, packed_page, packed_chart))
+        rests[m] = (vertices[again], triangles, uv, packed_page, packed_chart)
+    blocks = _placed_blocks(atlas, len(added), np.concatenate(sizes)) if sizes else None
+    meshes, first = [], 0
+    for m, part in enumerate(parts):
+        rest = rests.get(m) or _no_charts()
+        if part.flats is None:
+            meshes.append(rest)
+            continue
+        count = len(part.flats.sizes)
+        meshes.append(_with_flats(rest, part, *(b[first:first + count] for b in blocks),
+                                  (atlas.width, atlas.height)))
+        first += count
     return _Packed(width=int(atlas.width), height=int(atlas.height),
                    atlas_count=int(atlas.atlas_count), chart_count=int(atlas.chart_count),
                    meshes=tuple(meshes))
+
+
+@dataclass(frozen=True)
+class _Split:
+    """One instance's mesh for ``_pack``: the triangles xatlas charts (``rest``: every vertex,
+    the other triangles; ``faces``: their indices in the mesh) and the flat parts charted by
+    ``planar.flat_parts`` (None when the mesh has too few)."""
+
+    rest: _Mesh
+    faces: np.ndarray
+    flats: planar.FlatParts | None
+
+
+def _split(meshes: list[_Mesh], settings: Resolved) -> list[_Split]:
+    """Each mesh's ``_Split``, worked out once per distinct mesh (instances share theirs)."""
+    room = settings.page_size - 2 * int(settings.padding)
+    done: dict[str, _Split] = {}
+    out = []
+    for mesh in meshes:
+        name = chart_name(mesh)
+        if name not in done:
+            flats = planar.flat_parts(*mesh, int(settings.padding), room)
+            faces = np.arange(len(mesh[1]))
+            if flats is not None:
+                faces = np.setdiff1d(faces, flats.faces)
+            done[name] = _Split(rest=(mesh[0], mesh[1][faces]), faces=faces, flats=flats)
+        out.append(done[name])
+    return out
+
+
+def _no_charts() -> tuple[np.ndarray, ...]:
+    """An instance's arrays in ``_Packed.meshes`` when xatlas charted none of its triangles."""
+    empty = np.zeros(0, np.uint32)
+    return empty, np.zeros((0, 3), np.uint32), np.zeros((0, 2), np.float32), empty, empty
+
+
+def _block_quads(sizes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """One UV mesh of a rectangle per block of flat parts, (w + 1) × (h + 1) texels for a block
+    of ``sizes`` w × h: the extra texel lets ``_placed_blocks`` move the parts onto whole texels
+    wherever xatlas puts the rectangle. Side by side along x, a texel apart: xatlas would take
+    rectangles sharing a UV point for one chart. (4b, 2) float32 corners, (2b, 3) uint32
+    triangles."""
+    w, h = sizes[:, 0] + 1.0, sizes[:, 1] + 1.0
+    x = np.cumsum(w + 1) - (w + 1)
+    zero = np.zeros_like(w)
+    corners = np.stack([np.stack([x, zero], 1), np.stack([x + w, zero], 1),
+                        np.stack([x + w, h], 1), np.stack([x, h], 1)], axis=1)
+    base = 4 * np.arange(len(sizes))[:, None]
+    triangles = np.concatenate([base + [0, 1, 2], base + [0, 2, 3]])
+    return corners.reshape(-1, 2).astype(np.float32), triangles.astype(np.uint32)
+
+
+def _placed_blocks(atlas: xatlas.Atlas, mesh: int, sizes: np.ndarray
+                   ) -> tuple[np.ndarray, ...]:
+    """Where xatlas put each block's rectangle (``_block_quads``, its UV mesh ``mesh``): per
+    block the page-texel point of its corner (b, 2), its steps along x and y (b, 2, 2: a
+    quarter turn or a mirror as xatlas chose), its page (b,) and chart (b,). The corner is
+    moved (less than a texel, within the rectangle) so that the parts' cells land on whole
+    texels, as ``planar.shelves`` laid them out."""
+    again, _triangles, uv = atlas[mesh]
+    page, chart = atlas.get_mesh_vertex_assignment(mesh)
+    corner = np.zeros((len(sizes) * 4, 2))
+    corner[again] = uv.astype(np.float64) * [atlas.width, atlas.height]
+    corner = corner.reshape(-1, 4, 2)
+    side = sizes + 1.0
+    step = np.stack([(corner[:, 1] - corner[:, 0]) / side[:, :1],
+                     (corner[:, 3] - corner[:, 0]) / side[:, 1:]], axis=1)
+    extent = step * sizes[:, :, None].astype(np.float64)  # (b, axis, 2): the parts' sides
+    low = corner[:, 0] + np.minimum(extent, 0).sum(axis=1)
+    high = corner[:, 0] + np.maximum(extent, 0).sum(axis=1)
+    bound_low, bound_high = corner.min(axis=1), corner.max(axis=1)
+    target = np.clip(np.round(low), np.ceil(bound_low - 1e-3),
+                     np.floor(bound_high - (high - low) + 1e-3))
+    vertex_of = np.zeros(len(sizes) * 4, np.int64)
+    vertex_of[again] = np.arange(len(again))
+    owner = vertex_of[4 * np.arange(len(sizes))]
+    return (corner[:, 0] + target - low, step, page[owner].astype(np.uint32),
+            chart[owner].astype(np.uint32))
+
+
+def _with_flats(rest: tuple[np.ndarray, ...], part: _Split, origin: np.ndarray,
+                step: np.ndarray, page: np.ndarray, chart: np.ndarray,
+                page_size: tuple[int, int]) -> tuple[np.ndarray, ...]:
+    """An instance's ``_Packed.meshes`` arrays: xatlas's for the triangles it charted (``rest``)
+    and the flat parts moved to their blocks' places, the triangles in the mesh's order."""
+    vertices, triangles, uv, pages, charts = rest
+    flats = part.flats
+    block = flats.block
+    where = origin[block] + step[block, 0] * flats.uv[:, :1] + step[block, 1] * flats.uv[:, 1:]
+    faces = np.zeros((len(part.faces) + len(flats.faces), 3), np.uint32)
+    faces[part.faces] = triangles
+    faces[flats.faces] = flats.triangles + len(vertices)
+    return (np.concatenate([vertices, flats.vertices.astype(np.uint32)]), faces,
+            np.concatenate([uv, (where / page_size).astype(np.float32)]),
+            np.concatenate([pages, page[block]]), np.concatenate([charts, chart[block]]))
 
 
 def _generate(scene: Scene, world: World, instances: list[int], settings: Resolved,
@@ -296,10 +417,12 @@ def _generate(scene: Scene, world: World, instances: list[int], settings: Resolv
     charting each mesh and packing (``_chart_all``, ``_pack``), or, where one instance holds
     most triangles (``_one_run``), by one xatlas run that charts and packs (``_whole``)."""
     meshes = xatlas_meshes(scene, world, instances, settings)
-    whole = _one_run(meshes)
+    parts = _split(meshes, settings)
+    flat = any(part.flats is not None for part in parts)
+    whole = not flat and _one_run(meshes)
     names = [unwrap_cache.key(meshes, _whole_charting(settings, resolution) if whole else (
-        *_charting(), _options_of(_pack_options(settings, resolution))))
-        for resolution in resolutions]
+        *_charting(), _options_of(_pack_options(settings, resolution)),
+        *(_planar_charting() if flat else ()))) for resolution in resolutions]
     found: list[_Packed | None] = []
     for name in names:
         stored = unwrap_cache.read(name, len(meshes))
@@ -311,14 +434,17 @@ def _generate(scene: Scene, world: World, instances: list[int], settings: Resolv
         if whole:
             calls = [functools.partial(_whole, meshes, settings, resolutions[k]) for k in missing]
         else:
-            charted = _chart_all(meshes, settings)
-            calls = [functools.partial(_pack, charted, settings, resolutions[k]) for k in missing]
+            charted = _chart_all([part.rest for part in parts], settings)
+            calls = [functools.partial(_pack, charted, parts, settings, resolutions[k])
+                     for k in missing]
         runs = call_forked_together(calls, "the unwrapper (xatlas)", limit)
         for k, packed in zip(missing, runs):
             found[k] = packed
             unwrap_cache.write(names[k], (packed.width, packed.height, packed.atlas_count,
                                           packed.chart_count), packed.meshes)
-    return found
+    least = planar.least_texels(sum(part.flats.parts for part in parts
+                                    if part.flats is not None), settings.padding)
+    return [replace(packed, least_texels=least) for packed in found]
 
 
 def _one_run(meshes: list[_Mesh]) -> bool:
@@ -328,6 +454,11 @@ def _one_run(meshes: list[_Mesh]) -> bool:
     (1M-triangle terrain: charting 9.9 s + packing 9.7 s against one run's 12.6 s)."""
     counts = [len(t) for _, t in meshes]
     return max(counts) > _ONE_RUN * sum(counts)
+
+
+def _planar_charting() -> tuple[object, ...]:
+    """What besides the meshes decides the flat parts' charts (``planar.py``; cache key)."""
+    return planar.KEY
 
 
 def _whole_charting(settings: Resolved, resolution: int) -> tuple[object, ...]:
@@ -442,14 +573,15 @@ def _fitted(scene: Scene, world: World, instances: list[int], settings: Resolved
     """The atlas in one page at a lower density when the charts' texels fit in one, else
     ``atlas`` (spilled onto several pages) at ``settings``' density as it was.
 
-    The charts fit when their texels (``_chart_texels``) are at most a page's; the density is
+    The charts fit when their texels (``_chart_texels``), and the least their flat parts need at
+    any density with their padding (``planar.least_texels``), are at most a page's; the density is
     then scaled by the page side over the side of the one page xatlas sized itself
     (``sized``), less ``_FIT_MARGIN``, and packed again; padding does not shrink with the
     charts, so up to ``_FIT_TRIES`` rounds. Deterministic: each round is a pure function of
     the last one's atlas (and each is kept in the unwrap cache).
     """
     page = settings.page_size
-    if _chart_texels(atlas) > page * page:
+    if max(_chart_texels(atlas), atlas.least_texels) > page * page:
         return atlas, settings
     if sized is None:
         [sized] = _generate(scene, world, instances, settings, (0,))
