@@ -74,15 +74,15 @@ def flat_parts(positions: np.ndarray, triangles: np.ndarray, padding: int, room:
     t = triangles.astype(np.int64)
     if len(t) < MIN_PARTS:
         return None
-    part = _loose_parts(t, len(p))
-    faces, part = _small_flat(p, t, part)
-    if faces is None:
+    found = _small_flat(p, t, _loose_parts(t, len(p)))
+    if found is None:
         return None
+    faces, part = found
     vertices, corners = np.unique(t[faces], return_inverse=True)
     corners = corners.reshape(-1, 3)
     owner = np.empty(len(vertices), np.int64)
     owner[corners.ravel()] = np.repeat(part, 3)
-    local, extent = _projected(p[vertices], corners, owner, len(np.unique(part)))
+    local, extent = _projected(p[vertices], corners, owner, int(part.max()) + 1)
     cells = np.floor(extent + 2 * _MARGIN).astype(np.int64) + 1  # texels each part touches
     block, at, sizes = shelves(cells, 2 * int(padding), min(BLOCK, int(room)))
     centred = at[owner] + (cells[owner] - extent[owner]) / 2  # the rectangle mid-cell
@@ -122,14 +122,14 @@ def _least_vertex(triangles, vertex_count):
 
 
 def _small_flat(p: np.ndarray, t: np.ndarray, part: np.ndarray
-                ) -> tuple[np.ndarray | None, np.ndarray]:
+                ) -> tuple[np.ndarray, np.ndarray] | None:
     """The triangles (ascending) of the loose parts that are flat, at most ``MAX_TRIANGLES``
-    and ``MAX_SIDE`` texels across, and their parts renumbered 0…; (None, _) when fewer than
+    and ``MAX_SIDE`` texels across, and their parts renumbered 0…; None when fewer than
     ``MIN_PARTS`` parts are."""
     _labels, part, size = np.unique(part, return_inverse=True, return_counts=True)
     keep = (size <= MAX_TRIANGLES)[part]
     if np.count_nonzero(size <= MAX_TRIANGLES) < MIN_PARTS:
-        return None, part
+        return None
     labels, part = np.unique(part[keep], return_inverse=True)
     faces = np.flatnonzero(keep)
     a, b, c = (p[t[faces, k]] for k in range(3))
@@ -145,12 +145,13 @@ def _small_flat(p: np.ndarray, t: np.ndarray, part: np.ndarray
         np.minimum.at(low, part, height)
         np.maximum.at(high, part, height)
     span = np.zeros(count)
+    anchor = a[_first_of(part, count)]
     for q in (a, b, c):  # an upper bound of the part's size: its corners' distances to one
-        np.maximum.at(span, part, np.linalg.norm(q - a[_first_of(part, count)], axis=1))
+        np.maximum.at(span, part, np.linalg.norm(q - anchor, axis=1))
     bad = ~(facing >= _FLAT_COS * area) | ~(area > 0)  # NaN positions are bad too
     ok = (np.bincount(part, bad, count) == 0) & (high - low <= _FLAT_DISTANCE) & (span <= MAX_SIDE)
     if ok.sum() < MIN_PARTS:
-        return None, part
+        return None
     chosen = ok[part]
     renumber = np.cumsum(ok) - 1
     return faces[chosen], renumber[part[chosen]]

@@ -193,8 +193,7 @@ def _chart(mesh: _Mesh) -> _Charted:
     triangles, uv in texel units (k, 2) float32, page and chart of each vertex); a mesh of no
     triangles (every one charted by ``planar.py``) has none."""
     if not len(mesh[1]):
-        empty = np.zeros(0, np.uint32)
-        return ((0, 0, 0, 0), (empty, mesh[1], np.zeros((0, 2), np.float32), empty, empty))
+        return (0, 0, 0, 0), _no_charts()
     atlas = xatlas.Atlas()
     atlas.add_mesh(*mesh)
     atlas.generate(*_chart_options())
@@ -422,7 +421,7 @@ def _generate(scene: Scene, world: World, instances: list[int], settings: Resolv
     whole = not flat and _one_run(meshes)
     names = [unwrap_cache.key(meshes, _whole_charting(settings, resolution) if whole else (
         *_charting(), _options_of(_pack_options(settings, resolution)),
-        *(_planar_charting() if flat else ()))) for resolution in resolutions]
+        *(planar.KEY if flat else ()))) for resolution in resolutions]
     found: list[_Packed | None] = []
     for name in names:
         stored = unwrap_cache.read(name, len(meshes))
@@ -454,11 +453,6 @@ def _one_run(meshes: list[_Mesh]) -> bool:
     (1M-triangle terrain: charting 9.9 s + packing 9.7 s against one run's 12.6 s)."""
     counts = [len(t) for _, t in meshes]
     return max(counts) > _ONE_RUN * sum(counts)
-
-
-def _planar_charting() -> tuple[object, ...]:
-    """What besides the meshes decides the flat parts' charts (``planar.py``; cache key)."""
-    return planar.KEY
 
 
 def _whole_charting(settings: Resolved, resolution: int) -> tuple[object, ...]:
