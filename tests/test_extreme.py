@@ -19,7 +19,7 @@ from baker.light.ambient import MAX_BOUNCES, bounce_factor
 from baker.image.compose import effective_r_ave
 from baker.geometry.world import build_world
 from baker.pipeline.input_warnings import input_warnings
-from baker.atlas.rasterise import INSET, degenerate
+from baker.atlas.rasterise import INSET
 from baker.gltf.scene import Skipped
 from baker.cli.bake import print_summary
 from tests.bakehelp import computed, loaded, saved
@@ -170,7 +170,7 @@ def test_mesh_defects_bake_to_open_sky_and_are_counted(tmp_path):
     assert per_node[nodes["coincident"]] == 2 * per_node[nodes["clean"]]
     assert (done.terms.escaped == 1.0).all()
     np.testing.assert_allclose(_w(done), effective_r_ave(done.ambient, done.settings.rho).mean(), rtol=1e-12)
-    assert not degenerate(done.world, done.texels.triangle).any()
+    assert not done.world.degenerate[done.texels.triangle].any()
     assert input_warnings(done.scene, done.world) == {
         "degenerate triangles (no area): given no texels": 3,
         "primitives without normals: flat normals computed": 1,

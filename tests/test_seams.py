@@ -166,16 +166,18 @@ def test_no_lookup_on_any_triangle_reads_an_empty_texel(scene, sphere, tmp_path)
     assert checked > 10_000
 
 
-def test_row_ranks_are_numpys_unique_inverse():
-    """``seams._row_ranks`` numbers rows as ``np.unique(axis=0)`` does, on many repeats, few
-    repeats, negative and huge coordinates, one row and none."""
-    from baker.image.seams import _row_ranks
+def test_row_groups_are_numpys_unique_index_and_inverse():
+    """``rows.row_groups`` finds the rows' first occurrences and numbers them as
+    ``np.unique(axis=0)`` does, on many repeats, few repeats, negative and huge coordinates,
+    one row and none."""
+    from baker.geometry.rows import row_groups
 
     rng = np.random.default_rng(3)
     cases = [rng.integers(-3, 3, (5000, 3)), rng.integers(-2**40, 2**40, (5000, 3)),
              np.repeat(rng.integers(-9, 9, (50, 3)), 40, axis=0)[rng.permutation(2000)],
              np.ones((1, 3), np.int64)]
     for rows in cases:
-        assert np.array_equal(_row_ranks(rows),
-                              np.unique(rows, axis=0, return_inverse=True)[1].reshape(-1))
-    assert _row_ranks(np.zeros((0, 3), np.int64)).shape == (0,)
+        _, first, inverse = np.unique(rows, axis=0, return_index=True, return_inverse=True)
+        got = row_groups(rows)
+        assert np.array_equal(got[0], first) and np.array_equal(got[1], inverse.reshape(-1))
+    assert [a.shape for a in row_groups(np.zeros((0, 3), np.int64))] == [(0,), (0,)]

@@ -53,6 +53,29 @@ def test_a_bake_from_the_cache_has_the_bytes_of_one_without(tmp_path, cache, mon
     assert _bake(scene, tmp_path / "off.glb") == cold
 
 
+def test_a_fit_to_one_page_is_read_back_without_the_layouts_on_its_way(tmp_path, cache,
+                                                                        monkeypatch):
+    """A derived density that spills onto two pages is lowered to fit one (``unwrap._fitted``),
+    and what that came to is kept (``unwrap_cache.FITS``): the next bake of the same meshes
+    reads the atlas and its density back without asking for any layout, with the same bytes,
+    as a bake without the cache has."""
+    room = (4.0, 3.0, 4.0)
+    scene = box_room(grid_boxes(16, room=room, size=0.4), room=room).save(tmp_path / "r.glb")
+    cold = _bake(scene, tmp_path / "cold.glb")
+    assert len(list((cache / "unwrap" / unwrap_cache.FITS).glob("*.npz"))) == 1
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("a layout was asked for although the fit was cached")
+
+    with monkeypatch.context() as m:
+        m.setattr(unwrap_module, "_packed", refuse)
+        done = baker.bake(scene, tmp_path / "hit.glb", SETTINGS, state=False)
+        assert done.report["atlas"]["pages"] == 1
+        assert (tmp_path / "hit.glb").read_bytes() == cold
+    monkeypatch.setenv("BAKER_CACHE_DIR", "off")
+    assert _bake(scene, tmp_path / "off.glb") == cold
+
+
 @pytest.mark.parametrize("damage", ["truncated", "flipped", "wrong arrays", "empty"])
 def test_a_damaged_entry_is_ignored_and_written_again(tmp_path, cache, damage):
     scene = cornell_box().save(tmp_path / "cornell.glb")

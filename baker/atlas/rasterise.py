@@ -142,21 +142,12 @@ class Texels:
         return self.triangle_axes[self.triangle[rows]]
 
 
-def degenerate(world: World, tris: np.ndarray) -> np.ndarray:
-    """(k,) bool: world triangles ``tris`` without a usable area — collinear or collapsed corners,
-    area at most 1e-12 of their longest edge squared (a sliver of aspect 10⁶ has 10⁻⁶). They
-    have no front face to cast rays from, so they own no texel (the report counts them)."""
-    a, b, c = world.corners(tris)
-    longest = np.max([np.sum((b - a) ** 2, 1), np.sum((c - b) ** 2, 1), np.sum((a - c) ** 2, 1)], 0)
-    return world.areas(tris) <= 1e-12 * longest
-
-
 def _baked_triangles(atlas: Atlas, world: World) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Texel-space corners (k, 3, 2), page (k,) and world triangle index (k,) of every baked
     triangle that xatlas placed on a page, degenerate ones left out."""
     corners, pages, tris = [], [], []
     scale = np.array([atlas.width, atlas.height], np.float64)
-    usable = ~degenerate(world, np.arange(len(world.triangles)))  # once, not per instance
+    usable = ~world.degenerate
     for unwrap in atlas.instances:
         own = world.instance_triangles(unwrap.instance)
         placed = (unwrap.pages >= 0) & usable[own]

@@ -236,8 +236,10 @@ def _chart_all(meshes: list[_Mesh], settings: Resolved) -> list[_Charted]:
     return [charted[name] for name in names]
 
 
+@functools.cache
 def _charting() -> tuple[object, ...]:
-    """What besides a mesh decides its charts: xatlas's version and ``_chart_options``."""
+    """What besides a mesh decides its charts: xatlas's version and ``_chart_options`` (made
+    once: every mesh's cache name asks for it)."""
     return (xatlas.__version__, "charts", *map(_options_of, _chart_options()))
 
 
@@ -522,9 +524,7 @@ def unwrap(scene: Scene, world: World, settings: Resolved, fit_one_page: bool = 
         return Atlas(width=0, height=0, page_count=0, texel_density=settings.texel_density,
                      padding=settings.padding, instances=())
     _check_triangles_fit(world, scene, instances, settings)
-    atlas, sized = _packed(scene, world, instances, settings)
-    if fit_one_page and atlas.atlas_count > 1:
-        atlas, settings = _fitted(scene, world, instances, settings, atlas, sized)
+    atlas, settings = _laid_out(scene, world, instances, settings, fit_one_page)
     if atlas.width == 0 or atlas.height == 0:
         raise SettingsError("no surface got any lightmap texels at this texel density",
                             fix="raise --texel-density, or check that the meshes have area")
@@ -542,12 +542,48 @@ def unwrap(scene: Scene, world: World, settings: Resolved, fit_one_page: bool = 
                  padding=int(settings.padding), instances=tuple(result))
 
 
-def _packed(scene: Scene, world: World, instances: list[int], settings: Resolved
-            ) -> tuple[_Packed, _Packed | None]:
+def _laid_out(scene: Scene, world: World, instances: list[int], settings: Resolved,
+              fit_one_page: bool) -> tuple[_Packed, Resolved]:
+    """The atlas (``_packed``, then ``_fitted`` where asked and the charts spill) and the
+    settings with the density it has. What a fit came to is kept in the unwrap cache
+    (``unwrap_cache.FITS``, named by ``_fit_name``): a bake of the same meshes reads it back
+    without the layouts the fit went through (three xatlas layouts read, for a scene of many
+    objects most of the cached unwrap's time)."""
+    area = frame_area(scene, world, instances)
+    if not fit_one_page:
+        return _packed(scene, world, instances, settings, area)[0], settings
+    meshes = xatlas_meshes(scene, world, instances, settings)
+    name = _fit_name(meshes, settings)
+    stored = unwrap_cache.read(name, len(meshes), unwrap_cache.FITS)
+    if stored is not None and len(stored[0]) == 5 and _fits((stored[0][:4], stored[1]), meshes):
+        density = float(np.int64(stored[0][4]).view(np.float64))
+        return _Packed(*stored[0][:4], stored[1]), replace(settings, texel_density=density)
+    atlas, sized = _packed(scene, world, instances, settings, area)
+    if atlas.atlas_count == 1:
+        return atlas, settings
+    atlas, fitted = _fitted(scene, world, instances, settings, area, atlas, sized)
+    density = int(np.float64(fitted.texel_density).view(np.int64))
+    unwrap_cache.write(name, (atlas.width, atlas.height, atlas.atlas_count, atlas.chart_count,
+                              density), atlas.meshes, unwrap_cache.FITS)
+    return atlas, fitted
+
+
+def _fit_name(meshes: list[_Mesh], settings: Resolved) -> str:
+    """The cache name of what ``_fitted`` makes of ``meshes`` (at ``settings``' density): every
+    option any layout on its way depends on, and its own constants."""
+    page = settings.page_size
+    return unwrap_cache.key(meshes, (
+        "fitted to one page", _FIT_MARGIN, _FIT_TRIES, _BESIDE, _ONE_RUN, *_charting(),
+        _options_of(_pack_options(settings, page)), _whole_charting(settings, page),
+        *planar.KEY))
+
+
+def _packed(scene: Scene, world: World, instances: list[int], settings: Resolved,
+            area: float) -> tuple[_Packed, _Packed | None]:
     """The atlas at ``settings.texel_density`` (see ``unwrap``), and the run in one page of
     the size xatlas chose itself when one was made (None otherwise): its size says how much
-    the charts must shrink to fit one page."""
-    expected = frame_area(scene, world, instances) * settings.texel_density ** 2
+    the charts must shrink to fit one page. ``area``: the instances' ``frame_area``."""
+    expected = area * settings.texel_density ** 2
     page = settings.page_size
     if expected > 0.5 * page ** 2:
         [atlas] = _generate(scene, world, instances, settings, (page,))
@@ -562,7 +598,7 @@ def _packed(scene: Scene, world: World, instances: list[int], settings: Resolved
     return (paged if max(sized.width, sized.height) > page else sized), sized
 
 
-def _fitted(scene: Scene, world: World, instances: list[int], settings: Resolved,
+def _fitted(scene: Scene, world: World, instances: list[int], settings: Resolved, area: float,
             atlas: _Packed, sized: _Packed | None) -> tuple[_Packed, Resolved]:
     """The atlas in one page at a lower density when the charts' texels fit in one, else
     ``atlas`` (spilled onto several pages) at ``settings``' density as it was.
@@ -572,7 +608,7 @@ def _fitted(scene: Scene, world: World, instances: list[int], settings: Resolved
     then scaled by the page side over the side of the one page xatlas sized itself
     (``sized``), less ``_FIT_MARGIN``, and packed again; padding does not shrink with the
     charts, so up to ``_FIT_TRIES`` rounds. Deterministic: each round is a pure function of
-    the last one's atlas (and each is kept in the unwrap cache).
+    the last one's atlas (and each is kept in the unwrap cache). ``area``: as ``_packed``.
     """
     page = settings.page_size
     if max(_chart_texels(atlas), atlas.least_texels) > page * page:
@@ -584,7 +620,7 @@ def _fitted(scene: Scene, world: World, instances: list[int], settings: Resolved
         side = max(sized.width, sized.height)
         trial = replace(trial, texel_density=_round_down(
             trial.texel_density * page / side * _FIT_MARGIN))
-        found, sized = _packed(scene, world, instances, trial)
+        found, sized = _packed(scene, world, instances, trial, area)
         if found.atlas_count == 1 and max(found.width, found.height) <= page:
             return found, trial
         if sized is None:  # the lower density still expects over half a page: give up
@@ -691,14 +727,13 @@ def _check_triangles_fit(world: World, scene: Scene, instances: list[int], setti
     can spin for ever instead. Checked on the longest edge of every baked triangle.
     """
     room = settings.page_size - 2 * settings.padding - 2
-    longest, owner = 0.0, -1
-    for i in instances:
-        a, b, c = world.corners(world.instance_triangles(i))
-        if not len(a):
-            continue
-        edge = max(float(np.linalg.norm(p - q, axis=1).max()) for p, q in ((a, b), (b, c), (c, a)))
-        if edge > longest:
-            longest, owner = edge, i
+    tris = np.concatenate([world.instance_triangles(i) for i in instances])
+    if not len(tris):
+        return
+    a, b, c = world.corners(tris)
+    edges = np.stack([np.linalg.norm(p - q, axis=1) for p, q in ((a, b), (b, c), (c, a))], 1)
+    worst = int(np.argmax(edges.max(axis=1)))
+    longest, owner = float(edges[worst].max()), int(world.tri_instance[tris[worst]])
     if longest * settings.texel_density <= room:
         return
     fits = _round_down(room / longest * 0.98)

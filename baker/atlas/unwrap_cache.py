@@ -7,14 +7,15 @@ instead of running xatlas: the result is the same arrays either way, so the bake
 depend on whether the cache was hit. A rigid move of a node leaves its unwrap input bit-identical
 (``unwrap.frame_positions``), so a rebake after moving objects hits.
 
-Two kinds of entry (``unwrap.py``): a whole unwrap (every baked instance, packed into pages),
-and one mesh's charts (``CHARTS``: charted alone, so that a bake with one mesh edited charts
-only that mesh again and packs the cached charts of the others with it).
+Three kinds of entry (``unwrap.py``): a whole unwrap (every baked instance, packed into pages),
+one mesh's charts (``CHARTS``: charted alone, so that a bake with one mesh edited charts only
+that mesh again and packs the cached charts of the others with it), and what fitting a derived
+density to one page came to (``FITS``: the last unwrap and, in its header, the density).
 
 The folder is ``$BAKER_CACHE_DIR`` if set (``off`` or empty: no cache), else
-``$XDG_CACHE_HOME/baker`` or ``~/.cache/baker``; entries are ``unwrap/<hash>.npz`` and
-``unwrap/charts/<hash>.npz`` (NumPy's zip of arrays, no pickle), written atomically, at most
-``KEEP`` of each kind (the least recently used go first). An entry that cannot be read whole
+``$XDG_CACHE_HOME/baker`` or ``~/.cache/baker``; entries are ``unwrap/<hash>.npz``,
+``unwrap/charts/<hash>.npz`` and ``unwrap/fits/<hash>.npz`` (NumPy's zip of arrays, no pickle),
+written atomically, at most ``KEEP`` (``KEEP_CHARTS``) of each kind (the least recently used go first). An entry that cannot be read whole
 (truncated, a bad CRC, arrays of the wrong shape) is ignored, and the fresh result written over
 it. A cache that cannot be written (read-only, full)
 only costs the next bake the xatlas run.
@@ -35,8 +36,8 @@ from baker.errors import BakerError
 from baker.run.atomic import write_atomically
 
 FORMAT = b"baker unwrap cache 3"  # bump when what an entry holds, or how it is keyed, changes
-WHOLE, CHARTS = "unwrap", "charts"  # the kinds of entry
-KEEP = 256  # whole unwraps kept; one of the 100k-triangle test scene is ~4 MB
+WHOLE, CHARTS, FITS = "unwrap", "charts", "fits"  # the kinds of entry
+KEEP = 256  # whole unwraps (and fits) kept; one of the 100k-triangle test scene is ~4 MB
 KEEP_CHARTS = 16384  # meshes' charts kept (a scene has one per distinct mesh; most are small)
 PER_MESH = 5  # arrays per mesh: vertices, triangles, uv, page and chart of each vertex
 _NAMES = ("header", "lengths") + tuple(f"joined{k}" for k in range(PER_MESH))
@@ -132,7 +133,7 @@ def prune_kind(kind: str) -> None:
     place = _place(kind)
     if place is not None and place.is_dir():
         try:
-            _prune(place, KEEP if kind == WHOLE else KEEP_CHARTS)
+            _prune(place, KEEP_CHARTS if kind == CHARTS else KEEP)
         except OSError:
             pass
 

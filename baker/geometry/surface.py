@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from baker.geometry.rows import row_groups
 from baker.gltf.materials import BLEND, MASK, material_table
 from baker.gltf.scene import CLAMP_TO_EDGE, MIRRORED_REPEAT, Image, Scene, TextureRef
 
@@ -143,6 +144,31 @@ def albedo(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray) -> np
     colour = _textured(scene, world, tris, bary, diffuse_factors(scene),
                        lambda m: m.base_color_texture)
     return colour * _interpolate(world.colors[:, :3], world, tris, bary)
+
+
+# Barycentric points (4, 3) at which each triangle's albedo and emission are averaged.
+MEAN_POINTS = np.array([[1 / 3, 1 / 3, 1 / 3], [2 / 3, 1 / 6, 1 / 6],
+                        [1 / 6, 2 / 3, 1 / 6], [1 / 6, 1 / 6, 2 / 3]])
+
+
+def triangle_means(scene: Scene, world: World, lookup, texture_of) -> np.ndarray:
+    """Mean (T, 3) of ``lookup`` (``albedo`` or ``emission``) over each world triangle's
+    ``MEAN_POINTS``.
+
+    Where a material has no texture for it (``texture_of(material)`` None), the lookup depends
+    only on the material and the corner colours: it is made at the first triangle of each
+    distinct pair and those bits given to the others (a scene of many objects has few pairs)."""
+    t = len(world.triangles)
+    if t == 0:
+        return np.zeros((0, 3))
+    textured = np.array([texture_of(m) is not None for m in scene.materials], bool)
+    own = np.where(textured[world.tri_material], np.arange(t), -1)  # textured: each its own
+    colours = np.ascontiguousarray(world.colors[world.triangles]).reshape(t, -1).view(np.int64)
+    first, group = row_groups(np.column_stack([world.tri_material, own, colours]))
+    tris = np.repeat(first, len(MEAN_POINTS))
+    bary = np.tile(MEAN_POINTS, (len(first), 1))
+    means = lookup(scene, world, tris, bary).reshape(len(first), len(MEAN_POINTS), 3).mean(axis=1)
+    return means[group]
 
 
 def sample_alpha(image: Image, ref: TextureRef, uv: np.ndarray) -> np.ndarray:

@@ -16,6 +16,7 @@ normal ``cross(b - a, c - a)`` points out of the front face.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 
 import numpy as np
 
@@ -56,6 +57,7 @@ class World:
 
     def __post_init__(self) -> None:
         read_only(self)  # a hand-off: later stages read it (frozen.py)
+
     def corners(self, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """World positions of the three corners of triangles ``tris`` (k,), each (k, 3)."""
         v = self.triangles[tris]
@@ -69,17 +71,41 @@ class World:
 
     def geometric_normals(self, tris: np.ndarray | None = None) -> np.ndarray:
         """Unit front-face normals (k, 3) of triangles ``tris`` (all when None); 0 for no area."""
-        tris = np.arange(len(self.triangles)) if tris is None else tris
-        a, b, c = self.corners(tris)
-        n = np.cross(b - a, c - a)
-        length = np.linalg.norm(n, axis=1, keepdims=True)
-        return np.divide(n, length, out=np.zeros_like(n), where=length > 0)
+        n = self._cross if tris is None else self._cross[tris]
+        length = self._cross_length if tris is None else self._cross_length[tris]
+        return np.divide(n, length[:, None], out=np.zeros_like(n), where=length[:, None] > 0)
 
     def areas(self, tris: np.ndarray | None = None) -> np.ndarray:
         """World areas (k,) of triangles ``tris`` (all when None)."""
-        tris = np.arange(len(self.triangles)) if tris is None else tris
-        a, b, c = self.corners(tris)
-        return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+        return 0.5 * (self._cross_length if tris is None else self._cross_length[tris])
+
+    @cached_property
+    def degenerate(self) -> np.ndarray:
+        """(T,) bool: triangles without a usable area — collinear or collapsed corners, area at
+        most 1e-12 of their longest edge squared (a sliver of aspect 10⁶ has 10⁻⁶). They have no
+        front face to cast rays from, so they own no texel (the report counts them)."""
+        a, b, c = self.corners(np.arange(len(self.triangles)))
+        longest = np.max([np.sum((b - a) ** 2, 1), np.sum((c - b) ** 2, 1),
+                          np.sum((a - c) ** 2, 1)], 0)
+        out = self.areas() <= 1e-12 * longest
+        out.flags.writeable = False
+        return out
+
+    @cached_property
+    def _cross(self) -> np.ndarray:
+        """(T, 3) cross(b − a, c − a) of every triangle, made once: areas and normals are asked
+        for by many stages (the same bits as made for the triangles asked)."""
+        a, b, c = self.corners(np.arange(len(self.triangles)))
+        cross = np.cross(b - a, c - a)
+        cross.flags.writeable = False
+        return cross
+
+    @cached_property
+    def _cross_length(self) -> np.ndarray:
+        """(T,) |``_cross``|: twice each triangle's area."""
+        length = np.linalg.norm(self._cross, axis=1)
+        length.flags.writeable = False
+        return length
 
     def instance_triangles(self, instance: int) -> np.ndarray:
         """The world triangle indices (k,) of one instance, in the primitive's order."""

@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from baker.atlas.layout import Atlas
+from baker.geometry.rows import row_groups
 from baker.geometry.world import World
 from baker.jit import jit
 
@@ -78,16 +79,20 @@ def find_seams(atlas: Atlas, world: World) -> Seams:
     placed = (page[ta] >= 0) & (page[tb] >= 0)
     split = (page[ta] != page[tb]) | (np.abs(uv_a0 - uv_b0).max(axis=1) > 1e-9) | (
         np.abs(uv_a1 - uv_b1).max(axis=1) > 1e-9)
+    cut = np.flatnonzero(placed & split)  # few: most shared edges lie inside a chart
+    ta, tb, lo_a, hi_a, lo_b, hi_b = ta[cut], tb[cut], lo_a[cut], hi_a[cut], lo_b[cut], hi_b[cut]
     vertices = world.triangles[tris]  # (m, 3) world vertex ids
-    normal, smooth = world.normals[vertices], world.smooth[vertices]  # (m, 3, 3), (m, 3)
-    same_normals = ((np.einsum("ij,ij->i", normal[ta, lo_a], normal[tb, lo_b]) > _SMOOTH_COS)
-                    & (np.einsum("ij,ij->i", normal[ta, hi_a], normal[tb, hi_b]) > _SMOOTH_COS))
-    is_smooth = smooth[ta, lo_a] & smooth[ta, hi_a] & smooth[tb, lo_b] & smooth[tb, hi_b]
-    keep = placed & split & same_normals & is_smooth
-    if not keep.any():
+    ends = [vertices[t, corner] for t, corner in ((ta, lo_a), (tb, lo_b), (ta, hi_a), (tb, hi_b))]
+    normal = [world.normals[v] for v in ends]  # (k, 3) each: A's and B's at either end
+    same_normals = ((np.einsum("ij,ij->i", normal[0], normal[1]) > _SMOOTH_COS)
+                    & (np.einsum("ij,ij->i", normal[2], normal[3]) > _SMOOTH_COS))
+    is_smooth = np.logical_and.reduce([world.smooth[v] for v in ends])
+    seam = same_normals & is_smooth
+    if not seam.any():
         return _empty()
+    keep = cut[seam]
     uv_a0, uv_a1, uv_b0, uv_b1 = uv_a0[keep], uv_a1[keep], uv_b0[keep], uv_b1[keep]
-    ta, tb = ta[keep], tb[keep]
+    ta, tb = ta[seam], tb[seam]
     scale = np.array([atlas.width, atlas.height], np.float64)
     length = np.maximum(np.linalg.norm((uv_a1 - uv_a0) * scale, axis=1),
                         np.linalg.norm((uv_b1 - uv_b0) * scale, axis=1))
@@ -109,9 +114,13 @@ def _shared_edges(world: World, tris: np.ndarray) -> tuple[np.ndarray, ...]:
     two triangles' positions in ``tris`` (first, second) and the corners (0–2) of its lower and
     higher end point in each (lo_a, hi_a, lo_b, hi_b): ends matched, whatever the windings.
     """
-    points = world.positions[world.triangles[tris].reshape(-1)]
+    corners = world.triangles[tris]  # (m, 3) world vertex ids
+    used = np.zeros(len(world.positions), bool)
+    used[corners.ravel()] = True  # each vertex once (np.unique's, without its sort)
+    points = world.positions[used]
     extent = max(float(np.abs(points).max()), 1e-30)
-    point_id = _row_ranks(np.round(points / (extent * 1e-7)).astype(np.int64)).reshape(-1, 3)
+    _first, ranks = row_groups(np.round(points / (extent * 1e-7)).astype(np.int64))
+    point_id = ranks[(np.cumsum(used) - 1)[corners]]  # (m, 3)
     m = len(tris)
     tri = np.repeat(np.arange(m), 3)
     ca, cb = np.tile([0, 1, 2], m), np.tile([1, 2, 0], m)
@@ -126,20 +135,6 @@ def _shared_edges(world: World, tris: np.ndarray) -> tuple[np.ndarray, ...]:
                           & ((np.r_[-1, key_sorted[:-2]] != key_sorted[:-1])))
     one, two = order[pair], order[pair + 1]  # edges shared by exactly two triangles
     return tri[one], tri[two], lo_c[one], hi_c[one], lo_c[two], hi_c[two]
-
-
-def _row_ranks(rows: np.ndarray) -> np.ndarray:
-    """(n,) rank of each row of ``rows`` (n, k) among the distinct rows in lexicographic order:
-    ``np.unique(rows, axis=0, return_inverse=True)[1]``, by one ``np.lexsort`` (a structured
-    sort of the rows, as ``np.unique`` makes, is ten times slower)."""
-    if not len(rows):
-        return np.zeros(0, np.int64)
-    order = np.lexsort(rows.T[::-1])
-    ordered = rows[order]
-    new = np.r_[True, (ordered[1:] != ordered[:-1]).any(axis=1)]
-    ranks = np.empty(len(rows), np.int64)
-    ranks[order] = np.cumsum(new) - 1
-    return ranks
 
 
 def _taps(page: np.ndarray, uv: np.ndarray, shape: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray]:

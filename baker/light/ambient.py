@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from baker.geometry.surface import albedo, emission
+from baker.geometry.surface import albedo, emission, triangle_means
 from baker.geometry.world import World
 from baker.gltf.scene import Scene
 
@@ -35,9 +35,6 @@ if TYPE_CHECKING:
 
 MAX_BOUNCES = 1000
 
-# Barycentric points at which each triangle's albedo and emission are averaged.
-_POINTS = np.array([[1 / 3, 1 / 3, 1 / 3], [2 / 3, 1 / 6, 1 / 6],
-                    [1 / 6, 2 / 3, 1 / 6], [1 / 6, 1 / 6, 2 / 3]])
 
 
 @dataclass(frozen=True)
@@ -64,14 +61,6 @@ def bounce_factor(r_ave: np.ndarray) -> tuple[np.ndarray, bool]:
     series = np.where(near_one, float(MAX_BOUNCES), (1.0 - safe ** MAX_BOUNCES) / (1.0 - safe))
     closed = np.divide(1.0, 1.0 - r, out=np.full_like(r, np.inf), where=~near_one)
     return series, bool(np.any(series < 0.999 * closed))
-
-
-def _triangle_means(scene: Scene, world: World, lookup) -> np.ndarray:
-    """Mean of ``lookup`` (albedo or emission) over each triangle's sample points, (T, 3)."""
-    t = len(world.triangles)
-    tris = np.repeat(np.arange(t), len(_POINTS))
-    bary = np.tile(_POINTS, (t, 1))
-    return lookup(scene, world, tris, bary).reshape(t, len(_POINTS), 3).mean(axis=1)
 
 
 def ambient_terms(scene: Scene, world: World, user_intensity: float | None,
@@ -101,8 +90,10 @@ def _ambient_terms(scene: Scene, world: World, user_intensity: float | None,
     if total <= 0:
         zero = np.zeros(3)
         return Ambient(zero, zero, np.ones(3), "none", False)
-    r_ave = (areas[:, None] * _triangle_means(scene, world, albedo)).sum(axis=0) / total
-    mean_emission = (areas[:, None] * _triangle_means(scene, world, emission)).sum(axis=0) / total
+    reflected = triangle_means(scene, world, albedo, lambda m: m.base_color_texture)
+    emitted = triangle_means(scene, world, emission, lambda m: m.emissive_texture)
+    r_ave = (areas[:, None] * reflected).sum(axis=0) / total
+    mean_emission = (areas[:, None] * emitted).sum(axis=0) / total
     series, truncated = bounce_factor(r_ave)
     if user_intensity is not None:
         return Ambient(r_ave, mean_emission, np.full(3, float(user_intensity)), "user", False)

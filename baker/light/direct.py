@@ -52,7 +52,7 @@ import numpy as np
 
 from baker.atlas.rasterise import Texels
 from baker.atlas.supersample import sub_positions
-from baker.geometry.surface import LUMINANCE, emission
+from baker.geometry.surface import LUMINANCE, emission, triangle_means
 from baker.geometry.world import World
 from baker.gltf.scene import Light, Scene
 from baker.jit import jit
@@ -78,9 +78,6 @@ _POWER_KEY_BASE = np.uint64(1 << 62)
 # Shadow rays stop this fraction short of the point they aim at (a light sample on a surface).
 SHADOW_SHORTEN = 1e-3
 
-# Barycentric points at which each triangle's emission is averaged (as ambient.py does).
-_POINTS = np.array([[1 / 3, 1 / 3, 1 / 3], [2 / 3, 1 / 6, 1 / 6],
-                    [1 / 6, 2 / 3, 1 / 6], [1 / 6, 1 / 6, 2 / 3]])
 
 
 # ------------------------------------------------------------------------------------------------
@@ -183,21 +180,11 @@ class Sources:
         return bool(self.lights) or self.emitters is not None or self.sky is not None
 
 
-def _triangle_emission(scene: Scene, world: World) -> np.ndarray:
-    """Mean emitted radiance (T, 3) of every world triangle over a few fixed points."""
-    t = len(world.triangles)
-    if t == 0:
-        return np.zeros((0, 3))
-    tris = np.repeat(np.arange(t), len(_POINTS))
-    bary = np.tile(_POINTS, (t, 1))
-    return emission(scene, world, tris, bary).reshape(t, len(_POINTS), 3).mean(axis=1)
-
-
 def find_emitters(scene: Scene, world: World) -> Emitters | None:
     """The triangles that emit (positive mean emission and area), None when there are none."""
     if len(world.triangles) == 0:
         return None
-    mean = _triangle_emission(scene, world)
+    mean = triangle_means(scene, world, emission, lambda m: m.emissive_texture)
     areas = world.areas()
     sides = np.where([m.double_sided for m in scene.materials], 2.0, 1.0)[world.tri_material]
     weight = areas * np.maximum(mean @ LUMINANCE, 0.0) * sides

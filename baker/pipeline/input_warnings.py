@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from baker.atlas.rasterise import degenerate
 from baker.geometry.world import World
 from baker.gltf.scene import Scene
 
@@ -21,7 +20,7 @@ def input_warnings(scene: Scene, world: World) -> dict[str, int]:
     baked = np.array([inst.baked for inst in scene.instances], bool)
     tris = np.flatnonzero(baked[world.tri_instance]) if len(world.triangles) else np.zeros(0, np.int64)
     counts = {
-        "degenerate triangles (no area): given no texels": int(degenerate(world, tris).sum()),
+        "degenerate triangles (no area): given no texels": int(world.degenerate[tris].sum()),
         "primitives without normals: flat normals computed": len(
             {inst.primitive for inst in scene.instances
              if inst.baked and scene.primitives[inst.primitive].normals is None}),

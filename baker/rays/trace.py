@@ -188,10 +188,14 @@ class Tracer:
         self.alpha = world.alpha  # materials.AlphaTest or None (nothing to let through)
         self._scene = rtcore_scene.EmbreeScene()
         if self.triangle_count:
-            corners = world.positions[world.triangles] - self.center  # (T, 3, 3)
+            # Shared vertices (embreex copies them one by one: fewer than 3 per triangle is
+            # faster), the same float32 corners as each triangle's own; hidden triangles
+            # point at one NaN vertex after the others.
+            vertices = np.vstack([world.positions - self.center, np.full((1, 3), np.nan)])
+            triangles = world.triangles.copy()
             if hidden is not None:
-                corners[hidden] = np.nan
-            TriangleMesh(self._scene, corners.astype(np.float32))
+                triangles[hidden] = len(world.positions)
+            TriangleMesh(self._scene, vertices.astype(np.float32), triangles.astype(np.int32))
             # The first run commits the scene; do it here, not from several threads at once.
             self._scene.run(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32),
                             dists=np.zeros(1, np.float32))
