@@ -469,3 +469,36 @@ def test_leaves_and_wax_survive_the_bake_state(tmp_path):
     again = baker.bake(edited, tmp_path / "out.glb", settings, incremental=True)
     assert again.rebake["incremental"] is True
     assert (tmp_path / "out.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()
+
+
+def test_triangle_means_are_each_triangles_own_to_the_bit(tmp_path):
+    """``surface.triangle_means`` evaluates untextured triangles once per distinct material and
+    corner colours: every triangle still gets the bits of its own evaluation at its points —
+    textured or not, with varying, uniform or no vertex colours, emissive or not."""
+    from assets.gltf_builder import GltfBuilder, quad
+    from assets.make_scenes import checker
+    from baker.geometry.surface import MEAN_POINTS, albedo, emission, triangle_means
+    from baker.gltf.load import load
+
+    b = GltfBuilder()
+    plain = b.material("plain", (0.7, 0.5, 0.3), emissive=(0.2, 0.1, 0.0))
+    textured = b.material("tex", (1.0, 1.0, 1.0), base_color_image=checker(16, 4))
+    positions, triangles, normals, uv0 = quad(1.0, 1.0)
+    rng = np.random.default_rng(2)
+    for k in range(6):
+        colors = rng.uniform(0.2, 1.0, (4, 4)) if k % 3 else np.ones((4, 4)) * 0.5
+        mesh = b.mesh(f"m{k}", positions, triangles, normals=normals, uv0=uv0, colors=colors,
+                      material=textured if k == 5 else plain)
+        b.node(f"n{k}", mesh, translation=(2.0 * k, 0.0, 0.0))
+    plain_mesh = b.mesh("bare", positions, triangles, normals=normals, material=plain)
+    b.node("bare", plain_mesh, translation=(0.0, 0.0, 3.0))
+    scene = load(b.save(tmp_path / "means.glb"))
+    world = build_world(scene)
+    t = len(world.triangles)
+    tris, bary = np.repeat(np.arange(t), len(MEAN_POINTS)), np.tile(MEAN_POINTS, (t, 1))
+    for lookup, texture_of in ((albedo, lambda m: m.base_color_texture),
+                               (emission, lambda m: m.emissive_texture)):
+        own = lookup(scene, world, tris, bary).reshape(t, len(MEAN_POINTS), 3).mean(axis=1)
+        assert np.array_equal(triangle_means(scene, world, lookup, texture_of), own)
+        distinct = len(np.unique(own, axis=0))
+        assert distinct > 8 if lookup is albedo else distinct == 2  # colours, texture: apart

@@ -27,8 +27,9 @@ import xatlas
 from baker.atlas import planar, unwrap_cache
 from baker.atlas.layout import Atlas, InstanceUV
 from baker.errors import SettingsError
-from baker.geometry.world import World
+from baker.geometry.world import World, triangle_cross
 from baker.gltf.scene import Scene
+from baker.jit import jit
 from baker.run.forked import call_forked_together
 from baker.run.parallel import cores
 from baker.settings import Resolved
@@ -133,10 +134,9 @@ def frame_area(scene: Scene, world: World, instances: list[int] | None = None) -
     total = 0.0
     for i in baked_instances(scene) if instances is None else instances:
         local = world.triangles[world.instance_triangles(i)] - world.vertex_start[i]
-        p = frame_positions(scene, i)
         if len(local):
-            a, b, c = p[local[:, 0]], p[local[:, 1]], p[local[:, 2]]
-            total += float(0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum())
+            cross = triangle_cross(frame_positions(scene, i), local)
+            total += float(0.5 * np.linalg.norm(cross, axis=1).sum())
     return total
 
 
@@ -267,12 +267,10 @@ def _balanced(items: list[int], weights: list[int], count: int) -> list[list[int
 
 def _texels(mesh: _Mesh) -> float:
     """Texels a mesh's charts cover: its area in texel units²."""
-    p = mesh[0].astype(np.float64)
-    t = mesh[1].astype(np.int64)
-    if not len(t):
+    if not len(mesh[1]):
         return 0.0
-    a, b, c = p[t[:, 0]], p[t[:, 1]], p[t[:, 2]]
-    return float(0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum())
+    cross = triangle_cross(mesh[0].astype(np.float64), mesh[1].astype(np.int64))
+    return float(0.5 * np.linalg.norm(cross, axis=1).sum())
 
 
 def _pack(charted: list[_Charted], parts: list[_Split], settings: Resolved, resolution: int
@@ -508,7 +506,8 @@ def _fits(stored: tuple[tuple[int, ...], tuple[tuple[np.ndarray, ...], ...]],
     return True
 
 
-def unwrap(scene: Scene, world: World, settings: Resolved, fit_one_page: bool = False) -> Atlas:
+def unwrap(scene: Scene, world: World, settings: Resolved, fit_one_page: bool = False,
+           area: float | None = None) -> Atlas:
     """Unwrap the baked instances into pages of at most ``settings.page_size`` texels a side.
 
     One page of the size xatlas needs is tried first; if it would exceed the page size, the
@@ -517,14 +516,16 @@ def unwrap(scene: Scene, world: World, settings: Resolved, fit_one_page: bool = 
 
     ``fit_one_page`` (the derived, default density): when the charts spill onto a second page
     although their texels would fit in one, the density is lowered until they fit
-    (``_fitted``); the atlas's ``texel_density`` is then the one used.
+    (``_fitted``); the atlas's ``texel_density`` is then the one used. ``area``: the baked
+    instances' ``frame_area`` where the caller has it (summed here otherwise).
     """
     instances = baked_instances(scene)
     if not instances:
         return Atlas(width=0, height=0, page_count=0, texel_density=settings.texel_density,
                      padding=settings.padding, instances=())
     _check_triangles_fit(world, scene, instances, settings)
-    atlas, settings = _laid_out(scene, world, instances, settings, fit_one_page)
+    area = frame_area(scene, world, instances) if area is None else area
+    atlas, settings = _laid_out(scene, world, instances, settings, fit_one_page, area)
     if atlas.width == 0 or atlas.height == 0:
         raise SettingsError("no surface got any lightmap texels at this texel density",
                             fix="raise --texel-density, or check that the meshes have area")
@@ -543,13 +544,12 @@ def unwrap(scene: Scene, world: World, settings: Resolved, fit_one_page: bool = 
 
 
 def _laid_out(scene: Scene, world: World, instances: list[int], settings: Resolved,
-              fit_one_page: bool) -> tuple[_Packed, Resolved]:
+              fit_one_page: bool, area: float) -> tuple[_Packed, Resolved]:
     """The atlas (``_packed``, then ``_fitted`` where asked and the charts spill) and the
     settings with the density it has. What a fit came to is kept in the unwrap cache
     (``unwrap_cache.FITS``, named by ``_fit_name``): a bake of the same meshes reads it back
     without the layouts the fit went through (three xatlas layouts read, for a scene of many
-    objects most of the cached unwrap's time)."""
-    area = frame_area(scene, world, instances)
+    objects most of the cached unwrap's time). ``area``: the instances' ``frame_area``."""
     if not fit_one_page:
         return _packed(scene, world, instances, settings, area)[0], settings
     meshes = xatlas_meshes(scene, world, instances, settings)
@@ -688,16 +688,9 @@ def _check_not_shrunk(atlas: _Packed, world: World, scene: Scene, instances: lis
     # Every instance at once; np.unique orders the charts by instance, then by chart.
     corners = np.concatenate(corners) * [atlas.width, atlas.height]
     ids, inverse = np.unique(np.concatenate(charts), return_inverse=True)
-    a, b, c = world.corners(np.concatenate(tris))
-    texels = sum(np.linalg.norm(corners[:, j] - corners[:, k], axis=1) for j, k in ((0, 1), (1, 2), (2, 0)))
-    metres = sum(np.linalg.norm(p - q, axis=1) for p, q in ((a, b), (b, c), (c, a)))
-    uv_length = np.bincount(inverse, texels, len(ids))
-    world_length = np.bincount(inverse, metres, len(ids))
-    low = np.full((len(ids), 2), np.inf)
-    high = np.full((len(ids), 2), -np.inf)
-    np.minimum.at(low, inverse, corners.min(axis=1))
-    np.maximum.at(high, inverse, corners.max(axis=1))
-    extent = (high - low).max(axis=1)
+    uv_length, world_length, extent = _chart_spans(
+        corners, world.positions, world.triangles, np.concatenate(tris),
+        inverse.reshape(-1), len(ids))
     label = np.asarray(label)[ids // atlas.chart_count]
     wanted = world_length * settings.texel_density
     scale = np.divide(uv_length, wanted, out=np.ones_like(uv_length), where=wanted > 0)
@@ -717,6 +710,33 @@ def _check_not_shrunk(atlas: _Packed, world: World, scene: Scene, instances: lis
         f"at texel density {settings.texel_density:g} a chart of {where} needs about "
         f"{need:.0f} texels a side, more than a page of {settings.page_size} holds",
         texel_density=fits, fix=f"use --texel-density {fits:g} or less{bigger}")
+
+
+@jit
+def _chart_spans(corners: np.ndarray, positions: np.ndarray, triangles: np.ndarray,
+                 tris: np.ndarray, chart: np.ndarray, count: int
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per chart of ``count``: the summed edge lengths of its triangles in texels (their page
+    ``corners`` (n, 3, 2)) and in world units (world triangles ``tris`` (n,)), and the larger
+    side of its bounds in texels, (count,) each; triangle i belongs to ``chart[i]``. One pass
+    (numpy's reductions over the three corners took most of ``_check_not_shrunk``'s time)."""
+    texels, metres = np.zeros(count), np.zeros(count)
+    low, high = np.full((count, 2), np.inf), np.full((count, 2), -np.inf)
+    for i in range(len(tris)):
+        k = chart[i]
+        for j in range(3):
+            e = (j + 1) % 3
+            du, dv = corners[i, j, 0] - corners[i, e, 0], corners[i, j, 1] - corners[i, e, 1]
+            texels[k] += np.sqrt(du * du + dv * dv)
+            p, q = triangles[tris[i], j], triangles[tris[i], e]
+            dx, dy, dz = (positions[p, 0] - positions[q, 0], positions[p, 1] - positions[q, 1],
+                          positions[p, 2] - positions[q, 2])
+            metres[k] += np.sqrt(dx * dx + dy * dy + dz * dz)
+            for axis in range(2):
+                low[k, axis] = min(low[k, axis], corners[i, j, axis])
+                high[k, axis] = max(high[k, axis], corners[i, j, axis])
+    extent = np.maximum(high[:, 0] - low[:, 0], high[:, 1] - low[:, 1])
+    return texels, metres, extent
 
 
 def _check_triangles_fit(world: World, scene: Scene, instances: list[int], settings: Resolved) -> None:

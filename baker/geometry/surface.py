@@ -156,15 +156,19 @@ def triangle_means(scene: Scene, world: World, lookup, texture_of) -> np.ndarray
     ``MEAN_POINTS``.
 
     Where a material has no texture for it (``texture_of(material)`` None), the lookup depends
-    only on the material and the corner colours: it is made at the first triangle of each
-    distinct pair and those bits given to the others (a scene of many objects has few pairs)."""
+    only on the material and the corner colours (alike everywhere without COLOR_0): it is made
+    at the first triangle of each distinct pair and those bits given to the others (a scene of
+    many objects has few pairs)."""
     t = len(world.triangles)
     if t == 0:
         return np.zeros((0, 3))
     textured = np.array([texture_of(m) is not None for m in scene.materials], bool)
     own = np.where(textured[world.tri_material], np.arange(t), -1)  # textured: each its own
-    colours = np.ascontiguousarray(world.colors[world.triangles]).reshape(t, -1).view(np.int64)
-    first, group = row_groups(np.column_stack([world.tri_material, own, colours]))
+    key = [world.tri_material[:, None], own[:, None]]
+    if not (world.colors == world.colors[0]).all():
+        corners = np.ascontiguousarray(world.colors[world.triangles])  # (T, 3, 4)
+        key.append(corners.reshape(t, -1).view(np.int64))
+    first, group = row_groups(np.concatenate(key, axis=1))
     tris = np.repeat(first, len(MEAN_POINTS))
     bary = np.tile(MEAN_POINTS, (len(first), 1))
     means = lookup(scene, world, tris, bary).reshape(len(first), len(MEAN_POINTS), 3).mean(axis=1)
