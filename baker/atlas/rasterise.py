@@ -160,20 +160,38 @@ def _baked_triangles(atlas: Atlas, world: World) -> tuple[np.ndarray, np.ndarray
 
 
 def _edge_terms(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Inward unit edge normals (k, 3, 2) and offsets (k, 3) of UV triangles.
+    """Inward unit edge normals (k, 3, 2) and offsets (k, 3) of UV triangles ``corners`` (k, 3, 2).
 
     For a point p, ``normals[e] · p - offsets[e]`` is its distance inside edge e (negative
-    outside). Degenerate triangles get zero normals, so only their bounding box counts.
+    outside), edge e running from corner e to corner e + 1. Degenerate triangles get zero
+    normals, so only their bounding box counts.
     """
-    a, b, c = corners[:, 0], corners[:, 1], corners[:, 2]
-    ab, ac = b - a, c - a
-    orientation = np.sign(ab[:, 0] * ac[:, 1] - ab[:, 1] * ac[:, 0])
-    edges = np.stack([b - a, c - b, a - c], axis=1)
-    normals = np.stack([-edges[..., 1], edges[..., 0]], axis=-1) * orientation[:, None, None]
-    length = np.linalg.norm(normals, axis=-1, keepdims=True)
-    normals = np.divide(normals, length, out=np.zeros_like(normals), where=length > 0)
-    starts = np.stack([a, b, c], axis=1)
-    return normals, np.einsum("kej,kej->ke", normals, starts)
+    corners = np.ascontiguousarray(corners, np.float64)
+    normals, offsets = np.empty((len(corners), 3, 2)), np.empty((len(corners), 3))
+    _edge_kernel(corners, normals, offsets)
+    return normals, offsets
+
+
+@jit
+def _edge_kernel(corners: np.ndarray, normals: np.ndarray, offsets: np.ndarray) -> None:
+    """``_edge_terms`` into ``normals`` and ``offsets``, one triangle at a time: numpy's
+    arithmetic of the vectorised form (its bits), without its (k, 3, 2) temporaries."""
+    for i in range(len(corners)):
+        ax, ay = corners[i, 0, 0], corners[i, 0, 1]
+        turn = (corners[i, 1, 0] - ax) * (corners[i, 2, 1] - ay) - (
+            corners[i, 1, 1] - ay) * (corners[i, 2, 0] - ax)
+        orientation = 1.0 if turn > 0 else (-1.0 if turn < 0 else 0.0)
+        for e in range(3):
+            f = (e + 1) % 3
+            ex, ey = corners[i, f, 0] - corners[i, e, 0], corners[i, f, 1] - corners[i, e, 1]
+            nx, ny = -ey * orientation, ex * orientation
+            length = np.sqrt(nx * nx + ny * ny)
+            if length > 0:
+                nx, ny = nx / length, ny / length
+            else:
+                nx, ny = 0.0, 0.0
+            normals[i, e, 0], normals[i, e, 1] = nx, ny
+            offsets[i, e] = nx * corners[i, e, 0] + ny * corners[i, e, 1]
 
 
 @jit
@@ -470,17 +488,30 @@ def _texel_axes(world: World, tri: np.ndarray, uv_corners: np.ndarray) -> np.nda
 
     Solves [P1 − P0, P2 − P0] = J · [uv1 − uv0, uv2 − uv0] for the (3, 2) Jacobian J (UV in
     texel units); zeros where the triangle has no UV area."""
-    a, b, c = world.corners(tri)
-    edges = np.stack([b - a, c - a], axis=2)  # (k, 3, 2) world edge columns
-    uv = np.stack([uv_corners[:, 1] - uv_corners[:, 0], uv_corners[:, 2] - uv_corners[:, 0]],
-                  axis=2)  # (k, 2, 2) UV edge columns
-    det = uv[:, 0, 0] * uv[:, 1, 1] - uv[:, 0, 1] * uv[:, 1, 0]
-    ok = np.abs(det) > 1e-12
-    safe = np.where(ok, det, 1.0)
-    inverse = np.stack([np.stack([uv[:, 1, 1], -uv[:, 0, 1]], axis=1),
-                        np.stack([-uv[:, 1, 0], uv[:, 0, 0]], axis=1)], axis=1) / safe[:, None, None]
-    jacobian = np.einsum("kce,kej->kcj", edges, inverse)  # (k, 3, 2)
-    return np.where(ok[:, None, None], np.swapaxes(jacobian, 1, 2), 0.0)
+    axes = np.empty((len(tri), 2, 3))
+    _axes_kernel(world.positions, world.triangles, tri,
+                 np.ascontiguousarray(uv_corners, np.float64), axes)
+    return axes
+
+
+@jit
+def _axes_kernel(positions: np.ndarray, triangles: np.ndarray, tri: np.ndarray,
+                 uv: np.ndarray, axes: np.ndarray) -> None:
+    """``_texel_axes`` into ``axes`` (k, 2, 3), a triangle at a time: J = E · U⁻¹, E the world
+    edges (3, 2), U the UV edges (2, 2) (numpy's arithmetic of the vectorised form)."""
+    for i in range(len(tri)):
+        u00, u10 = uv[i, 1, 0] - uv[i, 0, 0], uv[i, 1, 1] - uv[i, 0, 1]  # column 0: uv1 − uv0
+        u01, u11 = uv[i, 2, 0] - uv[i, 0, 0], uv[i, 2, 1] - uv[i, 0, 1]  # column 1: uv2 − uv0
+        det = u00 * u11 - u01 * u10
+        if not abs(det) > 1e-12:
+            axes[i] = 0.0
+            continue
+        inverse = ((u11 / det, -u01 / det), (-u10 / det, u00 / det))
+        a, b, c = triangles[tri[i], 0], triangles[tri[i], 1], triangles[tri[i], 2]
+        for d in range(3):
+            e0, e1 = positions[b, d] - positions[a, d], positions[c, d] - positions[a, d]
+            for j in range(2):
+                axes[i, j, d] = e0 * inverse[0][j] + e1 * inverse[1][j]
 
 
 def _triangle_terms(world: World, tri: np.ndarray, uv_corners: np.ndarray

@@ -77,8 +77,10 @@ def find_seams(atlas: Atlas, world: World) -> Seams:
     uv_a0, uv_a1 = uv[ta, lo_a], uv[ta, hi_a]
     uv_b0, uv_b1 = uv[tb, lo_b], uv[tb, hi_b]
     placed = (page[ta] >= 0) & (page[tb] >= 0)
-    split = (page[ta] != page[tb]) | (np.abs(uv_a0 - uv_b0).max(axis=1) > 1e-9) | (
-        np.abs(uv_a1 - uv_b1).max(axis=1) > 1e-9)
+    split = page[ta] != page[tb]
+    for a, b in ((uv_a0, uv_b0), (uv_a1, uv_b1)):  # column by column: no (k, 2) reductions
+        for axis in range(2):
+            split |= np.abs(a[:, axis] - b[:, axis]) > 1e-9
     cut = np.flatnonzero(placed & split)  # few: most shared edges lie inside a chart
     ta, tb, lo_a, hi_a, lo_b, hi_b = ta[cut], tb[cut], lo_a[cut], hi_a[cut], lo_b[cut], hi_b[cut]
     vertices = world.triangles[tris]  # (m, 3) world vertex ids
