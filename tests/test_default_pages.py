@@ -99,3 +99,24 @@ def test_a_fitted_default_bakes_one_page_and_rebakes_like_a_full_bake(tmp_path):
     baker.bake(edited, tmp_path / "full.glb", SETTINGS)
     assert again.rebake["incremental"] is True, again.rebake.get("full_bake_reason")
     assert (tmp_path / "again.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()
+
+
+def test_a_derived_density_too_small_for_any_texel_says_so(tmp_path):
+    """A stray vertex 10⁹ m away makes the derived density so small that xatlas places no
+    texel (zero pages, where the fit to one page starts from one page's size): the bake
+    stops with the clear error that no surface got texels, not a division by zero (found by
+    tests/test_fuzz.py)."""
+    from assets.gltf_builder import GltfBuilder, quad
+
+    b = GltfBuilder()
+    positions, triangles, normals, uv0 = quad(1.0, 1.0)
+    b.node("floor", b.mesh("floor", positions, triangles, normals=normals, uv0=uv0,
+                           material=b.material("floor")))
+    stray = positions.copy()
+    stray[0, 2] = 8.6e9
+    b.node("stray", b.mesh("stray", stray, triangles, normals=normals, uv0=uv0,
+                           material=b.material("stray")))
+    path = b.save(tmp_path / "stray.glb")
+    with pytest.raises(baker.BakerError, match="no surface got any lightmap texels"):
+        baker.bake(path, tmp_path / "out.glb", Settings(page_size=32, padding=1, rays=2))
+    assert not (tmp_path / "out.glb").exists()

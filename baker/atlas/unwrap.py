@@ -559,7 +559,7 @@ def _laid_out(scene: Scene, world: World, instances: list[int], settings: Resolv
         density = float(np.int64(stored[0][4]).view(np.float64))
         return _Packed(*stored[0][:4], stored[1]), replace(settings, texel_density=density)
     atlas, sized = _packed(scene, world, instances, settings, area)
-    if atlas.atlas_count == 1:
+    if atlas.atlas_count <= 1:  # one page, or none (no texels: ``unwrap`` says so)
         return atlas, settings
     atlas, fitted = _fitted(scene, world, instances, settings, area, atlas, sized)
     density = int(np.float64(fitted.texel_density).view(np.int64))
