@@ -15,9 +15,9 @@ density to one page came to (``FITS``: the last unwrap and, in its header, the d
 The folder is ``$BAKER_CACHE_DIR`` if set (``off`` or empty: no cache), else
 ``$XDG_CACHE_HOME/baker`` or ``~/.cache/baker``; entries are ``unwrap/<hash>.npz``,
 ``unwrap/charts/<hash>.npz`` and ``unwrap/fits/<hash>.npz`` (NumPy's zip of arrays, no pickle),
-written atomically, at most ``KEEP`` (``KEEP_CHARTS``) of each kind (the least recently used go first). An entry that cannot be read whole
-(truncated, a bad CRC, arrays of the wrong shape) is ignored, and the fresh result written over
-it. A cache that cannot be written (read-only, full)
+written atomically, at most ``KEEP`` (``KEEP_CHARTS``) of each kind (the least recently used go
+first). An entry that cannot be read whole (truncated, a bad CRC, arrays of the wrong shape) is
+ignored, and the fresh result written over it. A cache that cannot be written (read-only, full)
 only costs the next bake the xatlas run.
 """
 

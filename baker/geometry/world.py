@@ -140,8 +140,7 @@ def _texcoord_sets(scene: Scene) -> int:
 def _flat_normals(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """Per-vertex normals for a primitive without NORMAL: each vertex takes the normal of the
     last triangle that uses it (only used where ``smooth`` is False, i.e. never interpolated)."""
-    a, b, c = (positions[triangles[:, k]] for k in range(3))
-    n = np.cross(b - a, c - a)
+    n = triangle_cross(positions, triangles.astype(np.int64, copy=False))
     normals = np.zeros_like(positions)
     normals[triangles.reshape(-1)] = np.repeat(n, 3, axis=0)
     return normals

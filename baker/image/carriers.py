@@ -86,8 +86,7 @@ def diffuse_shares(scene: Scene, world: World, instances: list[int]) -> dict[int
     the cumulative-area fraction (k + ½)/K, its second coordinate k·(golden ratio) mod 1, so
     the same scene gives the same figure every run."""
     tris = np.flatnonzero(np.isin(world.tri_instance, instances))
-    a, b, c = world.corners(tris)
-    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    area = world.areas(tris)
     k = np.arange(_SHARE_POINTS)
     shares = {}
     for m in np.unique(world.tri_material[tris]):

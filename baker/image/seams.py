@@ -83,6 +83,7 @@ def find_seams(atlas: Atlas, world: World) -> Seams:
             split |= np.abs(a[:, axis] - b[:, axis]) > 1e-9
     cut = np.flatnonzero(placed & split)  # few: most shared edges lie inside a chart
     ta, tb, lo_a, hi_a, lo_b, hi_b = ta[cut], tb[cut], lo_a[cut], hi_a[cut], lo_b[cut], hi_b[cut]
+    uv_a0, uv_a1, uv_b0, uv_b1 = uv_a0[cut], uv_a1[cut], uv_b0[cut], uv_b1[cut]
     vertices = world.triangles[tris]  # (m, 3) world vertex ids
     ends = [vertices[t, corner] for t, corner in ((ta, lo_a), (tb, lo_b), (ta, hi_a), (tb, hi_b))]
     normal = [world.normals[v] for v in ends]  # (k, 3) each: A's and B's at either end
@@ -92,8 +93,7 @@ def find_seams(atlas: Atlas, world: World) -> Seams:
     seam = same_normals & is_smooth
     if not seam.any():
         return _empty()
-    keep = cut[seam]
-    uv_a0, uv_a1, uv_b0, uv_b1 = uv_a0[keep], uv_a1[keep], uv_b0[keep], uv_b1[keep]
+    uv_a0, uv_a1, uv_b0, uv_b1 = uv_a0[seam], uv_a1[seam], uv_b0[seam], uv_b1[seam]
     ta, tb = ta[seam], tb[seam]
     scale = np.array([atlas.width, atlas.height], np.float64)
     length = np.maximum(np.linalg.norm((uv_a1 - uv_a0) * scale, axis=1),
