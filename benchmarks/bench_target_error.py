@@ -11,6 +11,10 @@ smallest uniform count meeting the same acceptance (RMSE ≤ E and ≥ 95 % of t
 The reference's own error is taken out of the RMSE as ``study.calibration`` does. The adaptive
 bake's first round is ``--rays`` of every kind.
 
+The GI scene (``--method gi``: the lightmap is D + E_ind, rays counted are GI and shadow rays)
+is judged at its own targets (``GI_TARGETS``), with ``--reference`` / 4 paths and at most
+``--max-rays`` / 4 paths a texel (a path casts several rays).
+
     python benchmarks/bench_target_error.py [--target 0.004] [--max-rays 2048] [--only NAME]
 """
 
@@ -35,7 +39,9 @@ from baker.pipeline.full import compute  # noqa: E402
 from baker.settings import Settings  # noqa: E402
 
 NAMES = ("ceiling sqrt", "ceiling step, h = 0.9 d_max", "ceiling step, h = 0.3 d_max",
-         "cornell (emissive lamp)", "soft light penumbra", "sky over a box")
+         "cornell (emissive lamp)", "soft light penumbra", "sky over a box",
+         "gi, cornell (emissive lamp)")
+GI_TARGETS = (0.08, 0.04, 0.02)  # path-traced GI is far noisier: its own targets
 
 
 def lightmap_term(scene, settings: dict, scale=None, rays: int = 16,
@@ -43,9 +49,13 @@ def lightmap_term(scene, settings: dict, scale=None, rays: int = 16,
     """(N,) luminance of D + I_A · W at the baked texels with ``rays`` rays of every kind,
     the rays cast (obscurance and direct), and the (R_ave, lum I_A) used: ``scale``, by
     default this bake's own (I_A's estimate depends on the seed: every bake is judged at the
-    reference's, so that only the texels' noise is measured)."""
+    reference's, so that only the texels' noise is measured). With ``method="gi"``: D + E_ind,
+    ``rays`` paths, the GI and shadow rays cast (the obscurance's are not in the lightmap)."""
     counts = dict(rays=rays, shadow_rays=rays, emissive_rays=rays, sky_rays=rays)
     done = compute(scene, Settings(**{**settings, **counts, **extra}))
+    if settings.get("method") == "gi":  # L = D + E_ind: the baked texels of the pages
+        value = done.lightmaps.light[done.lightmaps.covered] @ LUMINANCE
+        return value, done.tally.gi_rays + done.tally.shadow_rays, ()
     if scale is None:
         scale = (effective_r_ave(done.ambient, done.settings.rho),
                  float(done.ambient.intensity @ LUMINANCE))
@@ -96,19 +106,22 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as folder:
         for name in args.only or NAMES:
             make, settings = SCENES[name]
+            gi = settings.get("method") == "gi"
+            most, most_reference = ((args.max_rays // 4, args.reference // 4) if gi
+                                    else (args.max_rays, args.reference))
             scene = _probe_only(load(make().save(Path(folder) / "scene.glb")))
-            reference, _, scale = lightmap_term(scene, settings, rays=args.reference, seed=2)
-            for target in targets:
+            reference, _, scale = lightmap_term(scene, settings, rays=most_reference, seed=2)
+            for target in GI_TARGETS if gi else targets:
                 start = time.perf_counter()
-                factor = args.reference / args.max_rays
+                factor = most_reference / most
                 value, rays, _ = lightmap_term(scene, settings, scale, rays=args.rays, seed=1,
-                                           target_error=target, max_rays=args.max_rays)
+                                               target_error=target, max_rays=most)
                 got = judged(value, reference, factor, target)
                 count, uniform, uniform_rays = best_uniform(scene, settings, scale, reference,
-                                                            factor, target, args.max_rays)
+                                                            factor, target, most)
                 ratio = rays / uniform_rays if count else float("nan")
                 shown = (f"{count} ({uniform['rmse']:.5f}, {100 * uniform['within']:.1f} %)"
-                         if count else f"none ≤ {args.max_rays}")
+                         if count else f"none ≤ {most}")
                 print(f"| {name} | {target:g} | {got['rmse']:.5f} | {100 * got['within']:.1f} % "
                       f"| {rays / len(value):.1f} | {shown} | {ratio:.2f} "
                       f"| {time.perf_counter() - start:.0f} |", flush=True)

@@ -87,7 +87,9 @@ def add_parser(commands) -> None:
                             "paths with --method gi) in rounds (--rays, even, then doubling) "
                             "until each texel's predicted error is at most E/2 in lightmap "
                             "units (95 %% of texels within E), or its rays of a kind reach "
-                            "--max-rays (default: every texel gets --rays)")
+                            "--max-rays; the first round is the least a texel gets, so "
+                            "a small one (--rays 16) lets quiet texels stop early (default: "
+                            "every texel gets --rays)")
     model.add_argument("--method", choices=baker.settings.METHODS, default=d.method,
                        help="obscurance: direct light + I_A·W (fast, the default); gi: direct "
                             "light + path-traced indirect light, --rays paths per texel (a "

@@ -23,10 +23,13 @@ from dataclasses import replace
 
 import numpy as np
 
+from baker.atlas.rasterise import Texels
 from baker.settings import Resolved
 
 WITHIN = 2.0  # a texel stops when WITHIN × its predicted error ≤ the target: 95.4 % of
 # normal errors lie within 2σ, and issue 22 asks for 95 % of texels within the target
+
+NEAR = 2  # texels: a texel's neighbours are those within this many rows and columns
 
 GAIN_TEXELS = 256  # texels at least in each group that ``pooled_gain`` measures a gain over
 GAIN_GROUPS = 8
@@ -91,3 +94,26 @@ def what_is_left(target: float, first_error: np.ndarray) -> np.ndarray:
     ``max_rays`` short of its share, the lightmap may miss E: the rays were not allowed)."""
     left = target * target - (WITHIN * np.asarray(first_error, np.float64)) ** 2
     return np.sqrt(np.maximum(left, (1.0 - FIRST_SHARE ** 2) * target * target))
+
+
+def neighbour_mean(texels: Texels, values: np.ndarray, rows: np.ndarray,
+                   known: np.ndarray | None = None) -> np.ndarray:
+    """(k,) the mean of ``values`` (N,) over the neighbours of the texels ``rows`` — the
+    texels within ``NEAR`` rows and columns on their page, themselves left out, and of those
+    only the ``known`` ones ((N,) bool, default all) — or their own value where they have none
+    (a lone texel of a tiny chart). The texels are sorted by key, (page·height + y)·width + x;
+    a row's last columns count as beside the next row's first (the keys run on), which only
+    adds a few."""
+    keys = texels.key[rows]
+    total, seen = np.zeros(len(rows)), np.zeros(len(rows))
+    for dy in range(-NEAR, NEAR + 1):
+        for dx in range(-NEAR, NEAR + 1):
+            if dy or dx:  # one vectorised pass per offset
+                shifted = keys + np.uint64((dy * texels.page_width + dx) % (1 << 64))
+                at = np.minimum(np.searchsorted(texels.key, shifted), len(texels.key) - 1)
+                hit = texels.key[at] == shifted
+                if known is not None:
+                    hit &= known[at]
+                total += np.where(hit, values[at], 0.0)
+                seen += hit
+    return np.where(seen > 0, total / np.maximum(seen, 1), values[rows])

@@ -56,7 +56,7 @@ from baker.geometry.surface import LUMINANCE, emission, triangle_means
 from baker.geometry.world import World
 from baker.gltf.scene import Light, Scene
 from baker.jit import jit
-from baker.light.adaptive import WITHIN, pooled_gain
+from baker.light.adaptive import WITHIN, neighbour_mean, pooled_gain
 from baker.rays.dimensions import EMISSIVE, POWER, SKY, light_dimension
 from baker.rays.sampling import (
     cosine_hemisphere,
@@ -748,10 +748,12 @@ def _rounds(scene: Scene, world: World, tracer: Tracer, texels: Texels, sources:
                  *_source_terms(count, sources.sky is not None), sources.rays_per_texel())
     noise = _Noise(np.zeros(count), np.zeros(count), np.zeros(count, bool))
     texel_rays = np.zeros(count, np.int64)
+    scales = np.ones(count)  # each texel's last round's ray scale
     active = np.arange(count)
     for scale in sources.scales(settings.max_rays) if targets is not None else [1]:
         if scale > 1:
-            active = active[WITHIN * _predicted(out, noise, texels, active) > targets[active]]
+            error = _predicted(out, noise, texels, active, scales)
+            active = active[WITHIN * error > targets[active]]
             if not len(active):
                 break
 
@@ -768,10 +770,11 @@ def _rounds(scene: Scene, world: World, tracer: Tracer, texels: Texels, sources:
         step = texels_per_chunk(settings.chunk_texels, int(sources.counts(None, scale).max()))
         run_chunks(work, [active[start:start + step] for start in range(0, len(active), step)],
                    settings.threads)
+        scales[active] = scale
     if targets is None:
         return out, None
     return (replace(out, texel_rays=texel_rays),
-            _predicted(out, noise, texels, np.arange(count)) if sources.noisy()
+            _predicted(out, noise, texels, np.arange(count), scales) if sources.noisy()
             else np.zeros(count))
 
 
@@ -786,10 +789,12 @@ def _store(out: Direct, noise: _Noise, rows: np.ndarray, part: Direct, part_nois
     noise.partial[rows] = part_noise.partial
 
 
-def _predicted(direct: Direct, noise: _Noise, texels: Texels, rows: np.ndarray) -> np.ndarray:
+def _predicted(direct: Direct, noise: _Noise, texels: Texels, rows: np.ndarray,
+               scales: np.ndarray) -> np.ndarray:
     """(k,) the predicted error σ of D's luminance at the texels ``rows``, from their
-    neighbours' samples, not their own (``neighbour_mean``): the neighbours' iid variance
-    times the nets' gain pooled over these texels (``adaptive.pooled_gain``, the splits
+    neighbours' samples, not their own (``neighbour_mean``): the neighbours' iid variance,
+    per sample (× their rounds' ray ``scales`` (N,)) over the texel's own samples (÷ its
+    scale: a neighbour that stopped has fewer), times the nets' gain pooled over these texels (``adaptive.pooled_gain``, the splits
     ``Direct.variance`` against the iid variances), plus the texel's floor where a neighbour
     saw a penumbra (``_Noise``).
 
@@ -798,32 +803,10 @@ def _predicted(direct: Direct, noise: _Noise, texels: Texels, rows: np.ndarray) 
     variance together, and it is the one that stops (a glowing closed room's D came out 13 %
     lower than uniform sampling's); one stopped by its neighbours' is not, its rounds being
     independent of its own samples."""
-    iid = neighbour_mean(texels, noise.iid, rows)
+    iid = neighbour_mean(texels, noise.iid * scales, rows) / scales[rows]
     gain = pooled_gain(noise.iid[rows], direct.variance()[rows], noise.iid[rows] > 0)
     near = neighbour_mean(texels, noise.partial.astype(np.float64), rows) > 0
     return np.sqrt(gain * iid + np.where(near, noise.floor[rows], 0.0))
-
-
-NEAR = 2  # texels: a texel's neighbours are those within this many rows and columns
-
-
-def neighbour_mean(texels: Texels, values: np.ndarray, rows: np.ndarray) -> np.ndarray:
-    """(k,) the mean of ``values`` (N,) over the neighbours of the texels ``rows`` — the
-    texels within ``NEAR`` rows and columns on their page, themselves left out — or their own
-    value where they have none (a lone texel of a tiny chart). The texels are sorted by key,
-    (page·height + y)·width + x; a row's last columns count as beside the next row's first
-    (the keys run on), which only adds a few."""
-    keys = texels.key[rows]
-    total, seen = np.zeros(len(rows)), np.zeros(len(rows))
-    for dy in range(-NEAR, NEAR + 1):
-        for dx in range(-NEAR, NEAR + 1):
-            if dy or dx:  # one vectorised pass per offset
-                shifted = keys + np.uint64((dy * texels.page_width + dx) % (1 << 64))
-                at = np.minimum(np.searchsorted(texels.key, shifted), len(texels.key) - 1)
-                hit = texels.key[at] == shifted
-                total += np.where(hit, values[at], 0.0)
-                seen += hit
-    return np.where(seen > 0, total / np.maximum(seen, 1), values[rows])
 
 
 # ------------------------------------------------------------------------------------------------

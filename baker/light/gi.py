@@ -28,10 +28,12 @@ a path from there gathers; ``Indirect.capped`` counts such paths and the report 
 The lightmap is then L(P) = D(P) + E_ind(P), what ``--method gi`` bakes and what
 ``baker study`` compares obscurances with.
 
-The error estimate: each texel's paths are independent estimates (their first directions are
-one scrambled Sobol net, which only makes them better than independent), so the variance of a
-texel's mean is the sample variance of its paths' luminance over the path count
-(``Indirect.variance``).
+The error estimate: the first directions of a texel's paths are two independently scrambled
+Sobol nets, half the paths each (as the obscurance's rays: ``sampling.net_points``), which
+makes the paths better than independent: their sample variance over the path count overstated
+the error of the Cornell room's GI 1.2–1.3×. So the variance of a texel's mean is that, times
+a gain measured on the texels: the split of each texel's mean between its two nets, pooled
+over texels of like variance (``_predicted_variance``, ``Indirect.variance``).
 
 Randomness is a pure function of (seed, texel key, path, bounce): the first direction of each
 path comes from the texel's Owen-scrambled Sobol points, later ones from per-vertex keys.
@@ -48,7 +50,7 @@ from baker.atlas.rasterise import Texels
 from baker.geometry.surface import LUMINANCE, albedo, emission
 from baker.geometry.world import World
 from baker.gltf.scene import Scene
-from baker.light.adaptive import WITHIN
+from baker.light.adaptive import WITHIN, neighbour_mean, pooled_gain
 from baker.light.direct import (
     SHADOW_SHORTEN,
     Emitters,
@@ -57,13 +59,13 @@ from baker.light.direct import (
     direct_at,
     emitter_radiance,
     emitter_samples,
-    neighbour_mean,
 )
 from baker.rays.dimensions import GI_BOUNCE, GI_EMITTER, GI_FIRST, GI_ROULETTE
 from baker.rays.sampling import (
     cosine_hemisphere,
     folded,
     hash_u32,
+    net_points,
     sample_2d,
     tangent_frames,
 )
@@ -77,8 +79,8 @@ MAX_BOUNCES = 1024  # a path cut here at albedo 0.99 has throughput 0.99^1023 = 
 
 @dataclass(frozen=True)
 class Indirect:
-    """E_ind (N, 3) at N texels; the variance (N,) of each texel's E_ind luminance (of the
-    mean of its paths); the rays the paths cast (bounce and shadow rays); the paths cut at
+    """E_ind (N, 3) at N texels; the predicted variance (N,) of each texel's E_ind luminance
+    (of the mean of its paths: ``_predicted_variance``); the rays the paths cast (bounce and shadow rays); the paths cut at
     ``MAX_BOUNCES`` (0 unless paths could not end by themselves)."""
 
     irradiance: np.ndarray
@@ -118,7 +120,8 @@ class _Paths:
     """What k texels' paths ``first`` … ``first + count − 1`` gave: the mean (k, 3) of their
     E_ind, the mean (k,) of its luminance and m2 (k,), the sum of that luminance's squared
     deviations from its mean (so that rounds of paths combine exactly: ``_combined``); the
-    rays they cast and the paths cut at ``MAX_BOUNCES``."""
+    rays they cast and the paths cut at ``MAX_BOUNCES``; net_sum (k,), the luminance summed over
+    the paths of the first of the texel's two nets (the first ⌊count/2⌋: ``_chunk``)."""
 
     mean: np.ndarray
     luminance: np.ndarray
@@ -126,12 +129,15 @@ class _Paths:
     count: int
     rays: int
     capped: int
+    net_sum: np.ndarray
 
 
 def _chunk(scene: Scene, world: World, tracer: Tracer, sources: Sources, texels: Texels,
            rows: slice | np.ndarray, settings: Resolved, paths: int, max_bounces: int,
-           first: int = 0) -> _Paths:
-    """Paths ``first`` … ``first + paths − 1`` of the texels ``rows`` (k of them)."""
+           first: int = 0, start: int = 0) -> _Paths:
+    """Paths ``first`` … ``first + paths − 1`` of the texels ``rows`` (k of them). Their first
+    directions are two independent nets (``sampling.net_points``; ``start``: the first round's
+    paths, when this is a later one), the first ⌊paths/2⌋ paths from the first net."""
     keys = texels.key[rows]
     k = len(keys)
     path_keys = _path_keys(keys, paths, first)
@@ -139,8 +145,8 @@ def _chunk(scene: Scene, world: World, tracer: Tracer, sources: Sources, texels:
     normal = np.repeat(texels.geometric_normal(rows), paths, axis=0)
     frame = np.repeat(texels.hemisphere_normal(rows), paths, axis=0)  # the first rays'
     size = np.repeat(texels.size(rows), paths)
-    points = sample_2d(settings.seed, keys[:, None], np.arange(first, first + paths)[None, :],
-                       GI_FIRST).reshape(-1, 2)
+    points = np.column_stack(net_points(settings.seed, keys, first, paths, GI_FIRST,
+                                        start=start))
     throughput = np.ones((k * paths, 3))
     total = np.zeros((k * paths, 3))
     others = replace(sources, emitters=None)  # punctual lights and sky: next-event estimation
@@ -209,7 +215,7 @@ def _chunk(scene: Scene, world: World, tracer: Tracer, sources: Sources, texels:
     mean = luminance.mean(axis=1)
     deviation = luminance - mean[:, None]
     return _Paths(per_path.mean(axis=1), mean, np.add.reduce(deviation * deviation, axis=1),
-                  paths, rays, len(alive))
+                  paths, rays, len(alive), luminance[:, :paths // 2].sum(axis=1))
 
 
 def _combined(a: _Paths, b: _Paths) -> _Paths:
@@ -219,13 +225,29 @@ def _combined(a: _Paths, b: _Paths) -> _Paths:
     return _Paths((a.count * a.mean + b.count * b.mean) / n,
                   (a.count * a.luminance + b.count * b.luminance) / n,
                   a.m2 + b.m2 + gap * gap * (a.count * b.count / n), n,
-                  a.rays + b.rays, a.capped + b.capped)
+                  a.rays + b.rays, a.capped + b.capped, a.net_sum + b.net_sum)
 
 
 def _variance(m2: np.ndarray, count: np.ndarray) -> np.ndarray:
-    """(k,) the variance of a mean of ``count`` (k,) paths whose luminance has ``m2`` (k,)."""
+    """(k,) the variance of a mean of ``count`` (k,) paths whose luminance has ``m2`` (k,),
+    were the paths independent."""
     count = np.asarray(count, np.float64)
     return np.where(count > 1, m2 / np.maximum(count - 1, 1) / np.maximum(count, 1), 0.0)
+
+
+def _predicted_variance(state: _Paths, counts: np.ndarray) -> np.ndarray:
+    """(k,) the predicted variance of each texel's mean luminance over its ``counts`` (k,)
+    paths: their sample variance over the count (``_variance``) times the first directions'
+    nets' gain, pooled over texels of like variance (``adaptive.pooled_gain``) from the split
+    of each texel's mean between its two nets (an unbiased measure of its variance, of one
+    degree of freedom): (m_a − m_b)² · n_a·n_b / n²."""
+    n = np.maximum(counts, 1).astype(np.float64)
+    first = counts // 2  # the first net's paths: ⌊paths/2⌋ of every round
+    m_a = state.net_sum / np.maximum(first, 1)
+    m_b = (state.luminance * n - state.net_sum) / np.maximum(counts - first, 1)
+    split = np.where(first > 0, (m_a - m_b) ** 2 * first * (counts - first) / (n * n), 0.0)
+    iid = _variance(state.m2, counts)
+    return pooled_gain(iid, split, iid > 0) * iid
 
 
 def _emitter_index(world: World, emitters: Emitters | None) -> np.ndarray:
@@ -307,13 +329,15 @@ def indirect_light(scene: Scene, world: World, tracer: Tracer, sources: Sources,
     ``progress(texels, rays)`` after each chunk, with the rays its paths cast.
 
     ``targets`` (N,) (``adaptive.what_is_left``; None: one round): adaptive rounds. A texel
-    whose neighbours' σ (``direct.neighbour_mean`` of ``Indirect.variance``, the paths being
-    independent) times ``adaptive.WITHIN`` is above its target gets as many paths again — the next
+    whose neighbours' σ (``adaptive.neighbour_mean`` of ``Indirect.variance`` per path, the
+    paths being independent, over the texel's own paths) times ``adaptive.WITHIN`` is above
+    its target gets as many paths again — the next
     ones, paths n … 2n − 1 — while it would stay within ``settings.max_rays`` paths. The rounds
     do not depend on the chunks.
     """
     count = len(texels)
-    state = _Paths(np.zeros((count, 3)), np.zeros(count), np.zeros(count), 0, 0, 0)
+    state = _Paths(np.zeros((count, 3)), np.zeros(count), np.zeros(count), 0, 0, 0,
+                   np.zeros(count))
     counts = np.zeros(count, np.int64)
     active, rays, capped, first = np.arange(count), 0, 0, 0
     while len(active):
@@ -325,16 +349,17 @@ def indirect_light(scene: Scene, world: World, tracer: Tracer, sources: Sources,
         def work(item: tuple[int, np.ndarray], batch=batch, first=first) -> None:
             i, rows = item
             found[i] = part = _chunk(scene, world, tracer, sources, texels, rows, settings,
-                                     batch, max_bounces, first)
+                                     batch, max_bounces, first, paths if first else 0)
             if progress is not None:
                 progress(len(rows) if first == 0 else 0, part.rays)
 
         run_chunks(work, list(enumerate(chunks)), settings.threads)
         for rows, part in zip(chunks, found):
-            old = _Paths(state.mean[rows], state.luminance[rows], state.m2[rows], first, 0, 0)
+            old = _Paths(state.mean[rows], state.luminance[rows], state.m2[rows], first, 0, 0,
+                         state.net_sum[rows])
             new = part if first == 0 else _combined(old, part)
             state.mean[rows], state.luminance[rows] = new.mean, new.luminance
-            state.m2[rows] = new.m2
+            state.m2[rows], state.net_sum[rows] = new.m2, new.net_sum
             rays, capped = rays + part.rays, capped + part.capped
         counts[active] += batch
         first += batch
@@ -342,7 +367,8 @@ def indirect_light(scene: Scene, world: World, tracer: Tracer, sources: Sources,
             break
         # By the neighbours' variance: a texel whose paths missed the rare bright ones has
         # a low mean and a low variance together, and stopped by its own it stays too dark.
-        variance = neighbour_mean(texels, _variance(state.m2, counts), active)
-        active = active[WITHIN * np.sqrt(variance) > targets[active]]
-    return Indirect(irradiance=state.mean, variance=_variance(state.m2, counts), rays=rays,
+        # Per path, over the texel's own paths: a neighbour that stopped has fewer.
+        per_path = neighbour_mean(texels, _predicted_variance(state, counts) * counts, active)
+        active = active[WITHIN * np.sqrt(per_path / counts[active]) > targets[active]]
+    return Indirect(irradiance=state.mean, variance=_predicted_variance(state, counts), rays=rays,
                     capped=capped)

@@ -39,21 +39,19 @@ from baker.gltf.materials import (
 )
 from baker.gltf.scene import Scene
 from baker.jit import inline, jit
-from baker.light.adaptive import WITHIN, pooled_gain
+from baker.light.adaptive import WITHIN, neighbour_mean, pooled_gain
 from baker.light.obscurance import RHO_KINDS, UNIT_REFLECTIVITY, rho
 from baker.rays.dimensions import OBSCURANCE, material_dimension
 from baker.rays.sampling import (
-    extend_nets,
     fill_cosine,
-    fill_points,
     fold,
     frame,
     hash_u32,
-    net_word,
+    net_points,
 )
 from baker.rays.trace import LocalHits, Tracer, ray_lift
 from baker.run.parallel import cores, even_slices, run_chunks, texels_per_chunk
-from baker.settings import TECHNIQUES, Resolved
+from baker.settings import Resolved
 
 _SPLIT_MAX = 1e100  # |halves' differences| beyond this (garbage albedos) are clipped, so
 # that their mean square cannot overflow float64: such an estimate is meaningless anyway
@@ -138,6 +136,10 @@ class Terms:
         second = self.hit_sq + self.escaped * float(r_ave @ LUMINANCE) ** 2
         n = np.maximum(self.counts, 1)
         return np.maximum(second - mean * mean, 0.0) * n / np.maximum(n - 1, 1)
+
+    def alike(self, r_ave: np.ndarray) -> np.ndarray:
+        """(N,) bool: every ray of the texel gave one value (no sample variance)."""
+        return self._sample_variance(r_ave) <= 0
 
     def _unseen(self, variance: np.ndarray) -> np.ndarray:
         """(N,) bool: every ray gave one value and none escaped (``standard_error``)."""
@@ -257,17 +259,9 @@ def cosine_directions(keys: np.ndarray, rays: int, seed: int, technique: str = "
     """The local cosine-distributed directions x, y, z (k·rays,) float64 of samples ``first`` …
     ``first + rays − 1`` of the texels ``keys`` (k,), texel-major, about +z (the normal).
 
-    ``start`` > 0 (``sobol``, an adaptive round: ``first`` and ``rays`` even): the samples
-    grow the two nets that a first round of ``start`` samples began to ``first``/2 + ``rays``/2
-    points each (``sampling.extend_nets``), the first net's new points then the second's."""
+    ``start``: ``sampling.net_points``."""
     k = len(keys)
-    u, v = np.empty(k * rays), np.empty(k * rays)
-    if start and first and technique == "sobol":
-        extend_nets(np.uint64(seed), keys, first // 2, rays // 2,
-                    net_word(np.uint64(OBSCURANCE), start // 2), np.uint64(OBSCURANCE), u, v)
-    else:
-        fill_points(TECHNIQUES.index(technique), np.uint64(seed), keys, first, rays,
-                    np.uint64(OBSCURANCE), u, v)
+    u, v = net_points(seed, keys, first, rays, OBSCURANCE, technique, start)
     x, y, z = np.empty(k * rays), np.empty(k * rays), np.empty(k * rays)
     fill_cosine(u, v, x, y, z)
     return x, y, z
@@ -687,10 +681,11 @@ def hemisphere_terms(scene: Scene, world: World, tracer: Tracer, texels: Texels,
     in rounds — ``rays``, then doubling each texel's count while it stays within ``max_rays``
     (counts are rays·2^k; with ``sobol`` a round grows the texel's two nets, so a texel with n
     rays has what a bake with n rays would: ``cosine_directions``) — and a texel stops once
-    its predicted error (``unsettled``) is within the target: ``targets`` (one per row:
+    its predicted error (``predicted_error``, with its neighbours among ``rows``) times
+    ``adaptive.WITHIN`` is within the target: ``targets`` (one per row:
     ``adaptive.what_is_left``), by default ``settings.target_error``. The rounds are the same
     whatever the chunking, so the result is too (they depend on the rows asked for: the error
-    model is pooled over them). ``progress(texels, rays)`` is told after each chunk how many texels it
+    model is pooled over them, and the neighbours are those among them). ``progress(texels, rays)`` is told after each chunk how many texels it
     finished (in the first round; 0 after) and the rays it cast (``run.progress.Meter``).
     ``surfaces``: ``surfaces_of(scene, world)``, made here when not given. Light through
     translucent surfaces is not in these terms: ``light.integrate.integrate`` adds it
@@ -702,6 +697,7 @@ def hemisphere_terms(scene: Scene, world: World, tracer: Tracer, texels: Texels,
     chaining = surfaces.special  # else no chain is counted: the counts stay empty
     chain_counts = np.zeros((len(rows) if chaining else 0, 2), np.int64)  # rays, capped chains
     counts = np.zeros(len(rows), np.int64)
+    errors = np.zeros(len(rows))  # each row's predicted error after its last round
     active = np.arange(len(rows))
     first, batch = 0, settings.rays
     while len(active):
@@ -724,8 +720,13 @@ def hemisphere_terms(scene: Scene, world: World, tracer: Tracer, texels: Texels,
         first += batch
         if settings.target_error is None or 2 * first > settings.max_rays:
             break
-        active = active[unsettled(_means(sums[active], counts[active]), error_scale,
-                                  settings.target_error if targets is None else targets[active])]
+        going = _means(sums[active], counts[active])
+        errors[active] = predicted_error(going, error_scale)
+        blind = np.zeros(len(rows), bool)
+        blind[active] = going.alike(_r_ave(error_scale))
+        errors = neighbours_error(errors, counts, blind, texels, rows)
+        target = settings.target_error if targets is None else targets[active]
+        active = active[WITHIN * errors[active] > target]
         batch = first
     terms = _means(sums, counts)
     if chaining:
@@ -735,7 +736,8 @@ def hemisphere_terms(scene: Scene, world: World, tracer: Tracer, texels: Texels,
 
 def predicted_error(terms: Terms, error_scale: tuple[np.ndarray, float] | None) -> np.ndarray:
     """(N,) the predicted error σ of each texel of ``terms`` in lightmap luminance (I_A·W),
-    the quantity ``--target-error`` bounds (``adaptive.py``).
+    the quantity ``--target-error`` bounds (``adaptive.py``), from the texels' own rays
+    (``texel_errors`` adds the neighbours').
 
     The rays' sample variance assumes independent rays and overstates a scrambled net's error
     4–8×; one texel's split (``Terms.split_errors``) is unbiased but has one degree of freedom.
@@ -743,12 +745,10 @@ def predicted_error(terms: Terms, error_scale: tuple[np.ndarray, float] | None) 
     the texels of like variance (the nets' measured advantage, pooled: ``adaptive.pooled_gain``;
     it depends on the rows, not on chunks).
     Where no ray escaped and all gave one value, ``binomial_floor`` (``standard_error``): the
-    rays cannot tell a texel that is exact from one whose other value has p ≲ 1/n. A texel
-    whose rays all escaped stops, as an open floor's should; under a ceiling at 0.9 d_max
-    that is wrong for one texel in 30 at 16 rays and one in 700,000 at 64. error_scale:
-    (R_ave (3,), lightmap luminance per unit W), default (1, 1).
+    rays cannot tell a texel that is exact from one whose other value has p ≲ 1/n.
+    error_scale: (R_ave (3,), lightmap luminance per unit W), default (1, 1).
     """
-    r_ave, scale = error_scale if error_scale is not None else (np.ones(3), 1.0)
+    r_ave, scale = _r_ave(error_scale), _scale(error_scale)
     variance = terms._sample_variance(r_ave)
     iid = variance / np.maximum(terms.counts, 1)
     alike = terms._unseen(variance)
@@ -757,11 +757,43 @@ def predicted_error(terms: Terms, error_scale: tuple[np.ndarray, float] | None) 
     return np.where(alike, binomial_floor(terms.counts, r_ave), np.sqrt(gain * iid)) * scale
 
 
-def unsettled(terms: Terms, error_scale: tuple[np.ndarray, float] | None,
-              target: float) -> np.ndarray:
-    """(N,) bool: the texels of ``terms`` whose ``predicted_error`` is above ``target`` /
-    ``WITHIN``, so that they need another round."""
-    return WITHIN * predicted_error(terms, error_scale) > target
+def texel_errors(terms: Terms, error_scale: tuple[np.ndarray, float] | None, texels: Texels,
+                 rows: np.ndarray) -> np.ndarray:
+    """(N,) ``predicted_error`` of ``terms``, the texels ``rows`` (N,) of ``texels``, with
+    their neighbours' where a texel's rays all gave one value (``neighbours_error``)."""
+    return neighbours_error(predicted_error(terms, error_scale), terms.counts,
+                            terms.alike(_r_ave(error_scale)), texels, rows)
+
+
+def _r_ave(error_scale: tuple[np.ndarray, float] | None) -> np.ndarray:
+    """R_ave (3,) of an ``error_scale``, (1, 1, 1) without one."""
+    return np.ones(3) if error_scale is None else error_scale[0]
+
+
+def _scale(error_scale: tuple[np.ndarray, float] | None) -> float:
+    """Lightmap luminance per unit W of an ``error_scale``, 1 without one."""
+    return 1.0 if error_scale is None else error_scale[1]
+
+
+def neighbours_error(error: np.ndarray, counts: np.ndarray, blind: np.ndarray, texels: Texels,
+                     rows: np.ndarray) -> np.ndarray:
+    """(k,) ``error`` (k,) of the texels ``rows`` (k,) of ``texels``, at the ``blind`` ones
+    (k,) bool at least σ = sqrt(v / n): v the mean of error² · count over their neighbours
+    among ``rows`` (``adaptive.neighbour_mean``), n their own ``counts`` (k,).
+
+    A texel whose rays all gave one value (``Terms.alike``) has no variance of its own to go
+    by. Under a ceiling at 0.9 d_max one texel in 30 sees its 16 rays all escape; stopped by
+    them it would be 0.19 off, its neighbours' rays say it is not settled. An open floor's
+    texels, whose neighbours' rays all escape too, still stop."""
+    if not blind.any():
+        return error
+    per_ray = np.zeros(len(texels.key))
+    known = np.zeros(len(texels.key), bool)
+    per_ray[rows], known[rows] = error * error * counts, True
+    prior = neighbour_mean(texels, per_ray, rows[blind], known)
+    out = error.copy()
+    out[blind] = np.maximum(error[blind], np.sqrt(prior / np.maximum(counts[blind], 1)))
+    return out
 
 
 def _luminance_and_escaped(sums: np.ndarray) -> np.ndarray:

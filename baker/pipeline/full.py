@@ -62,7 +62,7 @@ from baker.light.foliage import (
     shaded,
 )
 from baker.light.gi import Indirect, indirect_light, rays_per_path
-from baker.light.hemisphere import Surfaces, Terms, predicted_error, surfaces_of
+from baker.light.hemisphere import Surfaces, Terms, surfaces_of, texel_errors
 from baker.light.integrate import integrate
 from baker.pipeline import cluster
 from baker.pipeline.parts import PerTexel, Tally, TexelPoints, part_slices
@@ -437,7 +437,8 @@ def _bake_part(baking: Baking, rows: slice, times: dict[str, float],
                                            stages.obscurance, error_scale, baking.surfaces,
                                            targets)
     if direct is None and s.target_error is not None:
-        left = what_is_left(s.target_error, predicted_error(terms, error_scale))
+        error = texel_errors(terms, error_scale, texels, np.arange(len(texels)))
+        left = what_is_left(s.target_error, error)
         direct, _ = _adaptive_direct(baking, texels, left, times, stages)
     elif direct is None:
         with timed(times, "direct"):

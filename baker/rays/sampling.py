@@ -265,6 +265,24 @@ def extend_nets(seed, keys, have, more, second, dimension, u, v):
                     have + s, shuffle, sx, sy)
 
 
+def net_points(seed: int, keys: np.ndarray, first: int, count: int, dimension: int,
+               technique: str = "sobol", start: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Points u, v (k·count,) of samples ``first`` … ``first + count − 1`` of the texels
+    ``keys`` (k,), texel-major, as ``fill_points`` lays them out: with ``sobol`` from
+    ``first`` = 0 two independent nets, the first ⌊count/2⌋ samples of one then the rest of the
+    other. ``start`` > 0 (``sobol``, an adaptive round: ``first`` and ``count`` even): the
+    samples grow the two nets that a first round of ``start`` samples began, to ``first``/2 +
+    ``count``/2 points each (``extend_nets``), the first net's new points then the second's."""
+    u, v = np.empty(len(keys) * count), np.empty(len(keys) * count)
+    if start and first and technique == "sobol":
+        extend_nets(_U64(seed), keys, first // 2, count // 2,
+                    net_word(_U64(dimension), start // 2), _U64(dimension), u, v)
+    else:
+        fill_points(TECHNIQUES.index(technique), _U64(seed), keys, first, count,
+                    _U64(dimension), u, v)
+    return u, v
+
+
 @jit
 def _points_kernel(technique, seed, keys, samples, counts, dimension, out):
     for i in range(len(keys)):
