@@ -275,7 +275,7 @@ def _report(input_path: Path, output: Path, done, info, pages, times: dict[str, 
         "carrier": done.settings.carrier, "baked_lights": done.settings.baked_lights,
         "notes": list(info.notes) + clipping_notes(pages) + viewer_notes(
             done.scene, done.world, [u.instance for u in done.atlas.instances],
-            done.settings.carrier) + gi_notes(done),
+            done.settings.carrier) + gi_notes(done) + target_notes(done, pages),
         "warnings": input_warnings(done.scene, done.world),  # dropped or changed, counted
         "lightmap_pages": [{"intensity": page.intensity, "peak": page.peak,
                             "clipped_fraction": page.clipped} for page in pages],
@@ -306,6 +306,21 @@ def gi_notes(done) -> list[str]:
     return ([f"--method gi: {capped:,} paths were still going after {MAX_BOUNCES} bounces and were "
              "cut there, so the indirect light is low (albedos of 1 with nothing escaping?)"]
             if capped else [])
+
+
+def target_notes(done, pages) -> list[str]:
+    """A report note when ``--target-error`` E was not met: the bake's estimated RMSE is above
+    E (a texel stops when twice its predicted error is within E, so a bake that meets E
+    estimates about E/2 or less). Its rays stopped at ``--max-rays`` first; E is in lightmap
+    units, which the pages' peaks put in scale."""
+    target = done.settings.target_error
+    rmse = done.rmse_estimate()
+    if target is None or rmse <= target:
+        return []
+    peak = max((page.peak for page in pages), default=0.0)
+    return [f"--target-error {target:g} was not met: the estimated RMSE is {rmse:.4g}, as "
+            f"texels reached --max-rays {done.settings.max_rays} first; raise --max-rays, or "
+            f"give a target in scale with the lightmap (its pages peak at {peak:.4g})"]
 
 
 def clipping_notes(pages) -> list[str]:

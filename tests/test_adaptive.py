@@ -6,6 +6,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+import baker
 from assets.light_scenes import floor_under_box, penumbra
 from assets.make_scenes import cornell_box, parallel_planes
 from baker.image.compose import effective_r_ave
@@ -16,7 +17,7 @@ from baker.errors import SettingsError
 from baker.settings import Settings
 from baker.geometry.surface import LUMINANCE
 from baker.rays.trace import Tracer
-from tests.bakehelp import computed
+from tests.bakehelp import computed, saved
 
 SETTINGS = dict(texel_density=6.0, rays=16, max_rays=256, d_max=0.6)
 
@@ -224,3 +225,22 @@ def test_neighbour_mean_averages_the_square_about_each_texel_without_it():
         expected.append(np.mean(near) if near else values[r])
     assert np.allclose(adaptive.neighbour_mean(texels, values, rows), expected, rtol=1e-12)
     assert any(e != values[r] for e, r in zip(expected, rows))
+
+
+def test_a_target_the_rays_cannot_reach_is_said(tmp_path):
+    """A target below what ``--max-rays`` can reach leaves a note with the estimated RMSE and
+    what to change; a target the bake meets leaves none."""
+    scene = saved(cornell_box(), tmp_path)
+
+    def bake(target):
+        return baker.bake(scene, tmp_path / "out.glb", Settings(
+            texel_density=4.0, rays=4, max_rays=8, target_error=target)).report
+
+    tight = bake(1e-6)
+    said = [note for note in tight["notes"] if note.startswith("--target-error")]
+    assert len(said) == 1 and tight["rmse_estimate"] > 1e-6
+    assert "1e-06 was not met" in said[0] and "--max-rays 8" in said[0]
+    assert f"{tight['rmse_estimate']:.4g}" in said[0]
+    loose = bake(10.0)
+    assert loose["rmse_estimate"] <= 10.0
+    assert not any(note.startswith("--target-error") for note in loose["notes"])
