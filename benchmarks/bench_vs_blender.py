@@ -27,8 +27,8 @@ r for repeat r, medians of ``--repeat``), as a new process whose wall time is me
   material whose active image node is a 512² float image, Cycles on the CPU, 2 threads,
   N samples, seed r, denoising off, no bounces (``max_bounces`` 0: the default 12 traces paths
   whose light an AO bake throws away; the AO pages were the same bits and the bake call took
-  5.8–6.6 s against 9.1–13.2 s on the Cornell room at 64 samples), then ``bpy.ops.object.bake(type="AO", margin=2)``. The
-  script prints the bake call's own seconds (the Blender "bake" column); the process's wall
+  5.8–6.6 s against 9.1–13.2 s on the Cornell room at 64 samples), then
+  ``bpy.ops.object.bake(type="AO", margin=2)``. The script prints the bake call's own seconds (the Blender "bake" column); the process's wall
   time includes Blender's start, the import, the join and the unwrap.
 
 Blender pitfalls the script avoids: Cycles' denoising is on by default, and Debian's Blender has
@@ -145,7 +145,8 @@ for slot in joined.material_slots:
 if coverage:
     image.pixels.foreach_set(numpy.full(size * size * 4, -1.0, numpy.float32))
 started = time.perf_counter()
-bpy.ops.object.bake(type="AO", margin=0 if coverage else margin, margin_type="EXTEND", use_clear=not coverage)
+bpy.ops.object.bake(type="AO", margin=0 if coverage else margin, margin_type="EXTEND",
+                    use_clear=not coverage)
 seconds = time.perf_counter() - started
 pixels = numpy.empty(size * size * 4, numpy.float32)
 image.pixels.foreach_get(pixels)  # image.save() would write these sRGB-encoded
@@ -333,9 +334,11 @@ def main() -> None:
         sys.exit("bench_vs_blender: blender is not on PATH (Debian: apt-get install blender "
                  "python3-numpy); nothing measured")
     version = subprocess.run(["blender", "--version"], capture_output=True, text=True).stdout
-    print(f"{version.splitlines()[0] if version else 'blender'}; baker at "
-          f"{subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], cwd=ROOT, capture_output=True, text=True).stdout.strip()}"
-          f"; {THREADS} threads each, {os.cpu_count()} cores; load average {os.getloadavg()[0]:.2f}")
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT,
+                            capture_output=True, text=True).stdout.strip()
+    print(f"{version.splitlines()[0] if version else 'blender'}; baker at {commit}; "
+          f"{THREADS} threads each, {os.cpu_count()} cores; "
+          f"load average {os.getloadavg()[0]:.2f}")
     with tempfile.TemporaryDirectory(prefix="bench-vs-blender-") as temp:
         folder = Path(temp)
         os.environ["BAKER_CACHE_DIR"] = str(folder / "cache")  # starts empty: the warm-up fills it
