@@ -794,9 +794,9 @@ def _predicted(direct: Direct, noise: _Noise, texels: Texels, rows: np.ndarray,
     """(k,) the predicted error σ of D's luminance at the texels ``rows``, from their
     neighbours' samples, not their own (``neighbour_mean``): the neighbours' iid variance,
     per sample (× their rounds' ray ``scales`` (N,)) over the texel's own samples (÷ its
-    scale: a neighbour that stopped has fewer), times the nets' gain pooled over these texels (``adaptive.pooled_gain``, the splits
-    ``Direct.variance`` against the iid variances), plus the texel's floor where a neighbour
-    saw a penumbra (``_Noise``).
+    scale: a neighbour that stopped has fewer), times the nets' gain pooled over these texels
+    (``adaptive.pooled_gain``, the splits ``Direct.variance`` against the iid variances), plus
+    the texel's floor where a neighbour saw a penumbra (``_Noise``).
 
     A texel stopped by its own samples is biased: an emitter's estimate is heavy-tailed (1/d²
     beside it), a texel whose samples missed the rare bright ones has a low mean and a low

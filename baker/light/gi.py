@@ -80,8 +80,9 @@ MAX_BOUNCES = 1024  # a path cut here at albedo 0.99 has throughput 0.99^1023 = 
 @dataclass(frozen=True)
 class Indirect:
     """E_ind (N, 3) at N texels; the predicted variance (N,) of each texel's E_ind luminance
-    (of the mean of its paths: ``_predicted_variance``); the rays the paths cast (bounce and shadow rays); the paths cut at
-    ``MAX_BOUNCES`` (0 unless paths could not end by themselves)."""
+    (of the mean of its paths: ``_predicted_variance``); the rays the paths cast (bounce and
+    shadow rays); the paths cut at ``MAX_BOUNCES`` (0 unless paths could not end by
+    themselves)."""
 
     irradiance: np.ndarray
     variance: np.ndarray
@@ -329,11 +330,10 @@ def indirect_light(scene: Scene, world: World, tracer: Tracer, sources: Sources,
     ``progress(texels, rays)`` after each chunk, with the rays its paths cast.
 
     ``targets`` (N,) (``adaptive.what_is_left``; None: one round): adaptive rounds. A texel
-    whose neighbours' σ (``adaptive.neighbour_mean`` of ``Indirect.variance`` per path, the
-    paths being independent, over the texel's own paths) times ``adaptive.WITHIN`` is above
-    its target gets as many paths again — the next
-    ones, paths n … 2n − 1 — while it would stay within ``settings.max_rays`` paths. The rounds
-    do not depend on the chunks.
+    whose neighbours' σ (``adaptive.neighbour_mean`` of ``Indirect.variance`` per path, over
+    the texel's own paths) times ``adaptive.WITHIN`` is above its target gets as many paths
+    again — the next ones, paths n … 2n − 1 — while it would stay within
+    ``settings.max_rays`` paths. The rounds do not depend on the chunks.
     """
     count = len(texels)
     state = _Paths(np.zeros((count, 3)), np.zeros(count), np.zeros(count), 0, 0, 0,
@@ -370,5 +370,5 @@ def indirect_light(scene: Scene, world: World, tracer: Tracer, sources: Sources,
         # Per path, over the texel's own paths: a neighbour that stopped has fewer.
         per_path = neighbour_mean(texels, _predicted_variance(state, counts) * counts, active)
         active = active[WITHIN * np.sqrt(per_path / counts[active]) > targets[active]]
-    return Indirect(irradiance=state.mean, variance=_predicted_variance(state, counts), rays=rays,
-                    capped=capped)
+    return Indirect(irradiance=state.mean, variance=_predicted_variance(state, counts),
+                    rays=rays, capped=capped)

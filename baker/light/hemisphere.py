@@ -685,8 +685,9 @@ def hemisphere_terms(scene: Scene, world: World, tracer: Tracer, texels: Texels,
     ``adaptive.WITHIN`` is within the target: ``targets`` (one per row:
     ``adaptive.what_is_left``), by default ``settings.target_error``. The rounds are the same
     whatever the chunking, so the result is too (they depend on the rows asked for: the error
-    model is pooled over them, and the neighbours are those among them). ``progress(texels, rays)`` is told after each chunk how many texels it
-    finished (in the first round; 0 after) and the rays it cast (``run.progress.Meter``).
+    model is pooled over them, and the neighbours are those among them). ``progress(texels,
+    rays)`` is told after each chunk how many texels it finished (in the first round; 0 after)
+    and the rays it cast (``run.progress.Meter``).
     ``surfaces``: ``surfaces_of(scene, world)``, made here when not given. Light through
     translucent surfaces is not in these terms: ``light.integrate.integrate`` adds it
     (``inner.add_translucency``, §4).
@@ -723,7 +724,7 @@ def hemisphere_terms(scene: Scene, world: World, tracer: Tracer, texels: Texels,
         going = _means(sums[active], counts[active])
         errors[active] = predicted_error(going, error_scale)
         blind = np.zeros(len(rows), bool)
-        blind[active] = going.alike(_r_ave(error_scale))
+        blind[active] = going.alike(_unit_or(error_scale)[0])
         errors = neighbours_error(errors, counts, blind, texels, rows)
         target = settings.target_error if targets is None else targets[active]
         active = active[WITHIN * errors[active] > target]
@@ -748,7 +749,7 @@ def predicted_error(terms: Terms, error_scale: tuple[np.ndarray, float] | None) 
     rays cannot tell a texel that is exact from one whose other value has p ≲ 1/n.
     error_scale: (R_ave (3,), lightmap luminance per unit W), default (1, 1).
     """
-    r_ave, scale = _r_ave(error_scale), _scale(error_scale)
+    r_ave, scale = _unit_or(error_scale)
     variance = terms._sample_variance(r_ave)
     iid = variance / np.maximum(terms.counts, 1)
     alike = terms._unseen(variance)
@@ -762,17 +763,12 @@ def texel_errors(terms: Terms, error_scale: tuple[np.ndarray, float] | None, tex
     """(N,) ``predicted_error`` of ``terms``, the texels ``rows`` (N,) of ``texels``, with
     their neighbours' where a texel's rays all gave one value (``neighbours_error``)."""
     return neighbours_error(predicted_error(terms, error_scale), terms.counts,
-                            terms.alike(_r_ave(error_scale)), texels, rows)
+                            terms.alike(_unit_or(error_scale)[0]), texels, rows)
 
 
-def _r_ave(error_scale: tuple[np.ndarray, float] | None) -> np.ndarray:
-    """R_ave (3,) of an ``error_scale``, (1, 1, 1) without one."""
-    return np.ones(3) if error_scale is None else error_scale[0]
-
-
-def _scale(error_scale: tuple[np.ndarray, float] | None) -> float:
-    """Lightmap luminance per unit W of an ``error_scale``, 1 without one."""
-    return 1.0 if error_scale is None else error_scale[1]
+def _unit_or(error_scale: tuple[np.ndarray, float] | None) -> tuple[np.ndarray, float]:
+    """``error_scale`` (R_ave (3,), lightmap luminance per unit W), or (1, 1) without one."""
+    return (np.ones(3), 1.0) if error_scale is None else error_scale
 
 
 def neighbours_error(error: np.ndarray, counts: np.ndarray, blind: np.ndarray, texels: Texels,
