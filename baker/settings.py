@@ -24,6 +24,9 @@ ESCAPES = ("auto", "scene", "white")
 TECHNIQUES = ("sobol", "stratified", "random")  # how ray directions are drawn: rays.sampling
 LIGHTMAP_FORMATS = ("png", "hdr", "exr")  # files of --lightmaps DIR: image.hdr
 PREVIEW_MODES = ("lit", "lightmap", "checker", "unlit")  # what baker.preview shows
+DEFAULT_RAYS = 64  # obscurance and sky rays per texel when not given
+FIRST_ROUND_RAYS = 16  # the same with ``target_error``: its first round. With 64 the penumbra
+# of benchmarks/bench_target_error.py took 4.05× the rays of the best uniform count, with 16 1.23×
 STUDY_RAYS = (4, 8, 16, 32, 64, 128, 256, 512, 1024)  # rays per texel a study tries: baker.study
 FOLIAGE_MODES = ("none", "approx")  # how leaves' obscurance is found: light.foliage
 ANIMATED = ("bake", "occlude", "skip")
@@ -50,7 +53,7 @@ class Settings:
         the artist authored: one ``page_size``² page, checked by ``atlas.authored``) instead
         of unwrapping with xatlas; None: unwrap.
     padding: texels kept free around every chart (dilation fills them).
-    rays: obscurance rays per texel.
+    rays: obscurance rays per texel (GI paths with ``method`` "gi"); None: ``ray_default``.
     sampling: how each texel's ray directions are drawn: "sobol" (Owen-scrambled Sobol, the
         default), "stratified" (jittered grid) or "random" (independent), see sampling.py.
     target_error: adaptive sampling: give each texel rays in rounds (``rays``, even, then
@@ -105,7 +108,8 @@ class Settings:
         surface under a uniform sky of radiance L receives irradiance π·L.
     sky_horizon: linear RGB radiance at and below the horizon, blended linearly in the sine of
         the elevation up to ``sky`` at the zenith; None: a uniform sky.
-    sky_rays: rays per texel that look for the sky (escaping the scene entirely).
+    sky_rays: rays per texel that look for the sky (escaping the scene entirely); None:
+        ``ray_default``.
     mirror_roughness: metals with roughness below this are perfect mirrors (materials.py).
     specular: what an obscurance ray does at a mirror or glass (paper §3.1–3.2): "b" follows
         the reflected/refracted path and applies ρ to its summed length, stopping past d_max
@@ -147,7 +151,7 @@ class Settings:
     texel_density: float | None = None
     page_size: int = 1024
     padding: int = 2
-    rays: int = 64
+    rays: int | None = None
     sampling: str = "sobol"
     target_error: float | None = None
     max_rays: int = 1024
@@ -170,7 +174,7 @@ class Settings:
     emissive_rays: int = 16
     sky: tuple[float, float, float] | None = None
     sky_horizon: tuple[float, float, float] | None = None
-    sky_rays: int = 64
+    sky_rays: int | None = None
     mirror_roughness: float = 0.1
     specular: str = "b"
     translucent: float = 0.5
@@ -185,6 +189,12 @@ class Settings:
     uv: int | None = None
     max_total_rays: int = MAX_TOTAL_RAYS
     allow_hard_links: bool = False
+
+    def ray_default(self) -> int:
+        """The rays a texel gets of a kind whose count is not given (``rays``, ``sky_rays``):
+        ``DEFAULT_RAYS``, or ``FIRST_ROUND_RAYS`` with ``target_error``, where the count is the
+        first round, the least a texel gets: the quiet texels stop there."""
+        return DEFAULT_RAYS if self.target_error is None else FIRST_ROUND_RAYS
 
     def check(self) -> None:
         """Raise SettingsError for a value that cannot work, saying which values can."""
@@ -203,20 +213,23 @@ class Settings:
         if self.ambient is not None and self.ambient < 0:
             raise SettingsError(f"ambient must be 0 or more, not {self.ambient}",
                                 fix="give --ambient a value of 0 or more")
-        integers = {"page_size": (self.page_size, 16), "rays": (self.rays, 1), "max_rays": (self.max_rays, 1),
+        rays = self.ray_default() if self.rays is None else self.rays
+        sky_rays = self.ray_default() if self.sky_rays is None else self.sky_rays
+        integers = {"page_size": (self.page_size, 16), "rays": (rays, 1),
+                    "max_rays": (self.max_rays, 1),
                     "chunk_texels": (self.chunk_texels, 1), "padding": (self.padding, 0),
                     "threads": (self.threads, 0), "seed": (self.seed, 0),
                     "shadow_rays": (self.shadow_rays, 1), "emissive_rays": (self.emissive_rays, 1),
-                    "sky_rays": (self.sky_rays, 1), "supersample": (self.supersample, 1),
+                    "sky_rays": (sky_rays, 1), "supersample": (self.supersample, 1),
                     "max_total_rays": (self.max_total_rays, 1)}
         for name, (value, low) in integers.items():
             if int(value) != value or value < low:
                 raise SettingsError(f"{name} must be a whole number of at least {low}, not {value}",
                                     fix=f"give --{name.replace('_', '-')} a whole number ≥ {low}")
-        if self.target_error is not None and self.rays % 2:
-            raise SettingsError(f"--target-error needs an even number of rays, not {self.rays}: "
+        if self.target_error is not None and rays % 2:
+            raise SettingsError(f"--target-error needs an even number of rays, not {rays}: "
                                 f"its rounds grow each texel's two nets of rays/2 points",
-                                fix=f"use --rays {self.rays + 1}")
+                                fix=f"use --rays {rays + 1}")
         self._check_uv()
         self._check_lights()
         self._check_materials()
@@ -387,6 +400,9 @@ def resolve(settings: Settings, surface_area: float, diagonal: float) -> Resolve
     values["texel_density"] = float(values["texel_density"])  # one type, one fingerprint
     if values["d_max"] is None:
         values["d_max"] = settings.d_max_fraction * quarter_octave(diagonal) if diagonal > 0 else 1.0
+    for name in ("rays", "sky_rays"):
+        if values[name] is None:
+            values[name] = settings.ray_default()
     if values["baked_lights"] is None:
         values["baked_lights"] = "keep" if settings.carrier == "occlusion" else "remove"
     if values["encoding"] is None:

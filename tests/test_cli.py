@@ -53,6 +53,20 @@ def test_bake_prints_a_summary_and_writes_the_report(tmp_path, capsys):
     assert data["rays_per_second"] > 0
 
 
+def test_an_adaptive_bake_prints_the_rays_its_texels_got(tmp_path, capsys):
+    """With ``--target-error`` the summary gives the rays a texel got on average, not the
+    first round's (``--rays`` not given: 16)."""
+    scene = cornell_box().save(tmp_path / "box.glb")
+    out, report = tmp_path / "box_baked.glb", tmp_path / "report.json"
+    assert main(["bake", str(scene), "-o", str(out), "--target-error", "0.01",
+                 "--texel-density", "6", "--report", str(report)]) == 0
+    printed = capsys.readouterr().out
+    data = json.loads(report.read_text())
+    assert data["settings"]["rays"] == 16 and data["rays"] > 16 * data["texels"]
+    assert (f"{data['rays'] / data['texels']:.1f} rays/texel on average (rounds from 16, at "
+            f"most 1024)") in printed
+
+
 def test_quiet_prints_nothing(tmp_path, capsys):
     scene = cornell_box().save(tmp_path / "box.glb")
     assert main(["bake", str(scene), "-o", str(tmp_path / "o.glb"), "--rays", "4",

@@ -10,6 +10,7 @@ import baker
 import baker.settings
 from baker.cli.common import add_debug, exit_code, positive_float
 from baker.cli.state import add_state_options, print_rebake, state_arguments
+from baker.settings import DEFAULT_RAYS, FIRST_ROUND_RAYS
 
 EPILOG = """examples:
   baker bake level.glb -o level_baked.glb
@@ -54,8 +55,10 @@ def add_parser(commands) -> None:
     quality.add_argument("--padding", type=int, default=d.padding, metavar="TEXELS",
                          help=f"free texels around each chart (default {d.padding})")
     model = bake.add_argument_group("light model")
-    model.add_argument("--rays", type=int, default=d.rays,
-                       help=f"obscurance rays per texel: more is smoother and slower (default {d.rays})")
+    model.add_argument("--rays", type=int, default=None,
+                       help=f"obscurance rays per texel: more is smoother and slower (default "
+                            f"{DEFAULT_RAYS}; {FIRST_ROUND_RAYS}, the first round, with "
+                            f"--target-error)")
     model.add_argument("--d-max", type=positive_float, metavar="DISTANCE",
                        help="obscurance distance in scene units: farther surfaces count as open "
                             f"(default {d.d_max_fraction:g} × the baked surfaces' bounds diagonal, rounded to "
@@ -87,9 +90,8 @@ def add_parser(commands) -> None:
                             "paths with --method gi) in rounds (--rays, even, then doubling) "
                             "until each texel's predicted error is at most E/2 in lightmap "
                             "units (95 %% of texels within E), or its rays of a kind reach "
-                            "--max-rays; the first round is the least a texel gets, so "
-                            "a small one (--rays 16) lets quiet texels stop early (default: "
-                            "every texel gets --rays)")
+                            "--max-rays; the first round is the least a texel gets: quiet "
+                            "texels stop there (default: every texel gets --rays)")
     model.add_argument("--method", choices=baker.settings.METHODS, default=d.method,
                        help="obscurance: direct light + I_A·W (fast, the default); gi: direct "
                             "light + path-traced indirect light, --rays paths per texel (a "
@@ -139,8 +141,9 @@ def add_parser(commands) -> None:
     direct.add_argument("--sky-horizon", type=rgb, metavar="R,G,B",
                         help="the sky's radiance at the horizon and below: a two-colour "
                              "gradient (default: uniform)")
-    direct.add_argument("--sky-rays", type=int, default=d.sky_rays, metavar="N",
-                        help=f"rays per texel that look for the sky (default {d.sky_rays})")
+    direct.add_argument("--sky-rays", type=int, default=None, metavar="N",
+                        help=f"rays per texel that look for the sky (default {DEFAULT_RAYS}; "
+                             f"{FIRST_ROUND_RAYS} with --target-error)")
     direct.add_argument("--supersample", type=int, default=d.supersample, metavar="N",
                         help="sub-texel positions the shadow, emissive, sky and obscurance "
                              "rays of each texel start from (ray s from position s mod N): "
@@ -233,6 +236,16 @@ def rgb(text: str) -> tuple[float, float, float]:
     return (values[0], values[1], values[2])
 
 
+def _rays_per_texel(result: baker.BakeResult) -> str:
+    """The obscurance rays a texel got: ``--rays``, or with adaptive rounds their mean and
+    range (the first round alone would understate them)."""
+    s = result.settings
+    if s.target_error is None or s.method == "gi" or not result.texels:
+        return f"{s.rays} rays/texel"
+    return (f"{result.rays / result.texels:.1f} rays/texel on average (rounds from {s.rays}, "
+            f"at most {s.max_rays})")
+
+
 def print_summary(result: baker.BakeResult) -> None:
     """What was baked, the plan, notes, rays/s and stage times, on stdout."""
     s = result.settings
@@ -242,7 +255,7 @@ def print_summary(result: baker.BakeResult) -> None:
           f"{result.report['atlas']['width']}×{result.report['atlas']['height']}, "
           + (f"TEXCOORD_{s.uv} (about {result.report['atlas']['texel_density']:.4g} "
              "texels/unit)" if s.uv is not None else f"texel density {s.texel_density:.4g}/unit")
-          + f", d_max {s.d_max:.4g}, {s.rays} rays/texel")
+          + f", d_max {s.d_max:.4g}, {_rays_per_texel(result)}")
     print(f"  carrier {s.carrier} ({s.encoding}), baked lights {s.baked_lights}; "
           f"baker view {result.output} shows it")
     print("\n".join(result.plan.lines()))
