@@ -35,16 +35,22 @@ GAIN_TEXELS = 256  # texels at least in each group that ``pooled_gain`` measures
 GAIN_GROUPS = 8
 
 
-def pooled_gain(iid: np.ndarray, split: np.ndarray, seen: np.ndarray) -> np.ndarray:
+def pooled_gain(iid: np.ndarray, split: np.ndarray, seen: np.ndarray,
+                like: np.ndarray) -> np.ndarray:
     """(N,) each texel's gain: Σ split / Σ iid over its group of the ``seen`` texels, grouped
-    by their iid variance in up to ``GAIN_GROUPS`` equal groups of ``GAIN_TEXELS`` or more
-    (the gain differs between quiet texels and noisy ones: a smooth integrand gains more);
-    texels not seen take the gain of all. Sorted stably, so ties go in row order.
+    by ``like`` in up to ``GAIN_GROUPS`` equal groups of ``GAIN_TEXELS`` or more (the gain
+    differs between quiet texels and noisy ones: a smooth integrand gains more); texels not
+    seen take the gain of all. Sorted stably, so ties go in row order.
 
     iid: (N,) the variance of a texel's mean were its rays independent (sample variance / n);
     split: (N,) the square of half the difference of its two nets' means (one degree of
-    freedom, unbiased for the variance of the mean)."""
-    order = np.flatnonzero(seen)[np.argsort(iid[seen], kind="stable")]
+    freedom, unbiased for the variance of the mean); like: (N,) a measure of each texel's
+    variance not taken from its own rays: its neighbours' iid (``neighbours_among``). Grouped
+    by their own iid, texels whose nets happened to agree gathered in a group of their own
+    and measured a gain of 0: under a ceiling at 0.3 d_max with ρ = step, 560 texels of 1681
+    whose nets both saw 12 escapes of 128 (truth 11.52) stopped at 256 rays, 0.0038 off at
+    E = 0.002."""
+    order = np.flatnonzero(seen)[np.argsort(like[seen], kind="stable")]
     groups = max(1, min(GAIN_GROUPS, len(order) // GAIN_TEXELS))
     gain = np.full(len(iid), _gain(iid[order], split[order]))
     for part in np.array_split(order, groups):
@@ -117,3 +123,13 @@ def neighbour_mean(texels: Texels, values: np.ndarray, rows: np.ndarray,
                 total += np.where(hit, values[at], 0.0)
                 seen += hit
     return np.where(seen > 0, total / np.maximum(seen, 1), values[rows])
+
+
+def neighbours_among(texels: Texels, values: np.ndarray, rows: np.ndarray,
+                     about: np.ndarray | None = None) -> np.ndarray:
+    """``neighbour_mean`` of ``values`` (k,), known at the texels ``rows`` (k,) of ``texels``
+    only: each texel's mean over its neighbours among ``rows``, for the rows ``about`` (k,)
+    bool (default all)."""
+    full, known = np.zeros(len(texels.key)), np.zeros(len(texels.key), bool)
+    full[rows], known[rows] = values, True
+    return neighbour_mean(texels, full, rows if about is None else rows[about], known)

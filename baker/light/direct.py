@@ -804,7 +804,7 @@ def _predicted(direct: Direct, noise: _Noise, texels: Texels, rows: np.ndarray,
     lower than uniform sampling's); one stopped by its neighbours' is not, its rounds being
     independent of its own samples."""
     iid = neighbour_mean(texels, noise.iid * scales, rows) / scales[rows]
-    gain = pooled_gain(noise.iid[rows], direct.variance()[rows], noise.iid[rows] > 0)
+    gain = pooled_gain(noise.iid[rows], direct.variance()[rows], noise.iid[rows] > 0, iid)
     near = neighbour_mean(texels, noise.partial.astype(np.float64), rows) > 0
     return np.sqrt(gain * iid + np.where(near, noise.floor[rows], 0.0))
 

@@ -236,10 +236,11 @@ def _variance(m2: np.ndarray, count: np.ndarray) -> np.ndarray:
     return np.where(count > 1, m2 / np.maximum(count - 1, 1) / np.maximum(count, 1), 0.0)
 
 
-def _predicted_variance(state: _Paths, counts: np.ndarray) -> np.ndarray:
-    """(k,) the predicted variance of each texel's mean luminance over its ``counts`` (k,)
-    paths: their sample variance over the count (``_variance``) times the first directions'
-    nets' gain, pooled over texels of like variance (``adaptive.pooled_gain``) from the split
+def _predicted_variance(state: _Paths, counts: np.ndarray, texels: Texels) -> np.ndarray:
+    """(N,) the predicted variance of each texel's mean luminance over its ``counts`` (N,)
+    paths, at every texel of ``texels``: their sample variance over the count (``_variance``)
+    times the first directions' nets' gain, pooled over texels of like variance, by their
+    neighbours' (``adaptive.pooled_gain``), from the split
     of each texel's mean between its two nets (an unbiased measure of its variance, of one
     degree of freedom): (m_a − m_b)² · n_a·n_b / n²."""
     n = np.maximum(counts, 1).astype(np.float64)
@@ -248,7 +249,8 @@ def _predicted_variance(state: _Paths, counts: np.ndarray) -> np.ndarray:
     m_b = (state.luminance * n - state.net_sum) / np.maximum(counts - first, 1)
     split = np.where(first > 0, (m_a - m_b) ** 2 * first * (counts - first) / (n * n), 0.0)
     iid = _variance(state.m2, counts)
-    return pooled_gain(iid, split, iid > 0) * iid
+    like = neighbour_mean(texels, iid, np.arange(len(iid)))
+    return pooled_gain(iid, split, iid > 0, like) * iid
 
 
 def _emitter_index(world: World, emitters: Emitters | None) -> np.ndarray:
@@ -368,7 +370,8 @@ def indirect_light(scene: Scene, world: World, tracer: Tracer, sources: Sources,
         # By the neighbours' variance: a texel whose paths missed the rare bright ones has
         # a low mean and a low variance together, and stopped by its own it stays too dark.
         # Per path, over the texel's own paths: a neighbour that stopped has fewer.
-        per_path = neighbour_mean(texels, _predicted_variance(state, counts) * counts, active)
+        per_path = neighbour_mean(texels, _predicted_variance(state, counts, texels) * counts,
+                                  active)
         active = active[WITHIN * np.sqrt(per_path / counts[active]) > targets[active]]
-    return Indirect(irradiance=state.mean, variance=_predicted_variance(state, counts),
+    return Indirect(irradiance=state.mean, variance=_predicted_variance(state, counts, texels),
                     rays=rays, capped=capped)

@@ -39,7 +39,7 @@ from baker.gltf.materials import (
 )
 from baker.gltf.scene import Scene
 from baker.jit import inline, jit
-from baker.light.adaptive import WITHIN, neighbour_mean, pooled_gain
+from baker.light.adaptive import WITHIN, neighbours_among, pooled_gain
 from baker.light.obscurance import RHO_KINDS, UNIT_REFLECTIVITY, rho
 from baker.rays.dimensions import OBSCURANCE, material_dimension
 from baker.rays.sampling import (
@@ -681,7 +681,7 @@ def hemisphere_terms(scene: Scene, world: World, tracer: Tracer, texels: Texels,
     in rounds — ``rays``, then doubling each texel's count while it stays within ``max_rays``
     (counts are rays·2^k; with ``sobol`` a round grows the texel's two nets, so a texel with n
     rays has what a bake with n rays would: ``cosine_directions``) — and a texel stops once
-    its predicted error (``predicted_error``, with its neighbours among ``rows``) times
+    its neighbours' predicted error per ray over its own rays (``_stopping_error``) times
     ``adaptive.WITHIN`` is within the target: ``targets`` (one per row:
     ``adaptive.what_is_left``), by default ``settings.target_error``. The rounds are the same
     whatever the chunking, so the result is too (they depend on the rows asked for: the error
@@ -722,12 +722,9 @@ def hemisphere_terms(scene: Scene, world: World, tracer: Tracer, texels: Texels,
         if settings.target_error is None or 2 * first > settings.max_rays:
             break
         going = _means(sums[active], counts[active])
-        errors[active] = predicted_error(going, error_scale)
-        blind = np.zeros(len(rows), bool)
-        blind[active] = going.alike(_unit_or(error_scale)[0])
-        errors = neighbours_error(errors, counts, blind, texels, rows)
+        errors[active] = predicted_error(going, error_scale, texels, rows[active])
         target = settings.target_error if targets is None else targets[active]
-        active = active[WITHIN * errors[active] > target]
+        active = active[WITHIN * _stopping_error(errors, counts, texels, rows, active) > target]
         batch = first
     terms = _means(sums, counts)
     if chaining:
@@ -735,16 +732,18 @@ def hemisphere_terms(scene: Scene, world: World, tracer: Tracer, texels: Texels,
     return terms
 
 
-def predicted_error(terms: Terms, error_scale: tuple[np.ndarray, float] | None) -> np.ndarray:
-    """(N,) the predicted error σ of each texel of ``terms`` in lightmap luminance (I_A·W),
+def predicted_error(terms: Terms, error_scale: tuple[np.ndarray, float] | None, texels: Texels,
+                    rows: np.ndarray) -> np.ndarray:
+    """(N,) the predicted error σ of each texel of ``terms``, the texels ``rows`` (N,) of
+    ``texels``, in lightmap luminance (I_A·W),
     the quantity ``--target-error`` bounds (``adaptive.py``), from the texels' own rays
     (``texel_errors`` adds the neighbours').
 
     The rays' sample variance assumes independent rays and overstates a scrambled net's error
     4–8×; one texel's split (``Terms.split_errors``) is unbiased but has one degree of freedom.
     The prediction is the sample variance times the gain g = Σ split / Σ sample variance over
-    the texels of like variance (the nets' measured advantage, pooled: ``adaptive.pooled_gain``;
-    it depends on the rows, not on chunks).
+    the texels of like variance, by their neighbours' (the nets' measured advantage, pooled:
+    ``adaptive.pooled_gain``; it depends on the rows, not on chunks).
     Where no ray escaped and all gave one value, ``binomial_floor`` (``standard_error``): the
     rays cannot tell a texel that is exact from one whose other value has p ≲ 1/n.
     error_scale: (R_ave (3,), lightmap luminance per unit W), default (1, 1).
@@ -754,15 +753,33 @@ def predicted_error(terms: Terms, error_scale: tuple[np.ndarray, float] | None) 
     iid = variance / np.maximum(terms.counts, 1)
     alike = terms._unseen(variance)
     split = terms.split_errors(r_ave)
-    gain = pooled_gain(iid, split, ~alike)
+    gain = pooled_gain(iid, split, ~alike, neighbours_among(texels, iid, rows))
     return np.where(alike, binomial_floor(terms.counts, r_ave), np.sqrt(gain * iid)) * scale
+
+
+def _stopping_error(errors: np.ndarray, counts: np.ndarray, texels: Texels, rows: np.ndarray,
+                      active: np.ndarray) -> np.ndarray:
+    """(a,) the error σ that the texels ``active`` (a,) of ``rows`` (k,) stop by: sqrt(v / n),
+    v the mean of errors² · counts (each texel's predicted variance per ray, (k,) both) over
+    their neighbours among ``rows``, themselves left out, n their own counts.
+
+    Stopped by its own prediction, a texel is chosen by its own rays: those whose first rays
+    happened to agree stop, those that did not go on, their first rays' error still in their
+    mean. Under a ceiling (ρ = sqrt, E = 0.004, a first round of 64) the texels that went to
+    256 rays then had an RMSE 11 % above a uniform 256-ray bake's, 94.2 % within E against
+    96.5 %; a texel stopped by its neighbours has its count's uniform error (as the direct
+    light's and the GI paths' rounds do)."""
+    about = np.zeros(len(rows), bool)
+    about[active] = True
+    per_ray = neighbours_among(texels, errors * errors * counts, rows, about)
+    return np.sqrt(per_ray / np.maximum(counts[active], 1))
 
 
 def texel_errors(terms: Terms, error_scale: tuple[np.ndarray, float] | None, texels: Texels,
                  rows: np.ndarray) -> np.ndarray:
     """(N,) ``predicted_error`` of ``terms``, the texels ``rows`` (N,) of ``texels``, with
     their neighbours' where a texel's rays all gave one value (``neighbours_error``)."""
-    return neighbours_error(predicted_error(terms, error_scale), terms.counts,
+    return neighbours_error(predicted_error(terms, error_scale, texels, rows), terms.counts,
                             terms.alike(_unit_or(error_scale)[0]), texels, rows)
 
 
@@ -783,10 +800,7 @@ def neighbours_error(error: np.ndarray, counts: np.ndarray, blind: np.ndarray, t
     texels, whose neighbours' rays all escape too, still stop."""
     if not blind.any():
         return error
-    per_ray = np.zeros(len(texels.key))
-    known = np.zeros(len(texels.key), bool)
-    per_ray[rows], known[rows] = error * error * counts, True
-    prior = neighbour_mean(texels, per_ray, rows[blind], known)
+    prior = neighbours_among(texels, error * error * counts, rows, blind)
     out = error.copy()
     out[blind] = np.maximum(error[blind], np.sqrt(prior / np.maximum(counts[blind], 1)))
     return out
