@@ -286,9 +286,11 @@ def _report(input_path: Path, output: Path, done, info, pages, times: dict[str, 
 
 
 def gi_report(tally) -> dict:
-    """What ``--method gi``'s paths did: their rays, and how many were cut at ``MAX_BOUNCES``
-    (their share of the light is lost: at most a_max^(B−1) of what each would still gather)."""
-    return {"rays": tally.gi_rays, "max_bounces": MAX_BOUNCES, "paths_capped": tally.gi_capped}
+    """What ``--method gi``'s paths did: how many were traced, their rays, and how many were
+    cut at ``MAX_BOUNCES`` (their share of the light is lost: at most a_max^(B−1) of what each
+    would still gather)."""
+    return {"paths": tally.gi_paths, "rays": tally.gi_rays, "max_bounces": MAX_BOUNCES,
+            "paths_capped": tally.gi_capped}
 
 
 def carried(done) -> Lightmaps:

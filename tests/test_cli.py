@@ -67,6 +67,25 @@ def test_an_adaptive_bake_prints_the_rays_its_texels_got(tmp_path, capsys):
             f"most 1024)") in printed
 
 
+def test_a_gi_bake_prints_the_paths_its_texels_got(tmp_path, capsys):
+    """``--method gi``: the summary gives the GI paths a texel got (on average, with rounds)
+    and the rays they cast, as the report counts them; uniform paths are --rays a texel."""
+    scene = cornell_box().save(tmp_path / "box.glb")
+    out, report = tmp_path / "box_baked.glb", tmp_path / "report.json"
+    for options, rounds in ((["--rays", "4"], False), (["--target-error", "0.1"], True)):
+        assert main(["bake", str(scene), "-o", str(out), "--method", "gi", "--texel-density",
+                     "3", "--full", "--report", str(report), *options]) == 0
+        printed = capsys.readouterr().out
+        data = json.loads(report.read_text())
+        paths, texels = data["gi"]["paths"], data["texels"]
+        assert f"{data['gi']['rays']:,} GI path rays" in printed
+        if rounds:
+            assert paths > 16 * texels
+            assert f"{paths / texels:.1f} GI paths/texel on average (rounds from 16" in printed
+        else:
+            assert paths == 4 * texels and "4 GI paths/texel, 4 obscurance rays/texel" in printed
+
+
 def test_quiet_prints_nothing(tmp_path, capsys):
     scene = cornell_box().save(tmp_path / "box.glb")
     assert main(["bake", str(scene), "-o", str(tmp_path / "o.glb"), "--rays", "4",

@@ -237,10 +237,17 @@ def rgb(text: str) -> tuple[float, float, float]:
 
 
 def _rays_per_texel(result: baker.BakeResult) -> str:
-    """The obscurance rays a texel got: ``--rays``, or with adaptive rounds their mean and
-    range (the first round alone would understate them)."""
+    """The obscurance rays a texel got, and with ``--method gi`` its GI paths: ``--rays``, or
+    with adaptive rounds their mean and range (the first round alone would understate them).
+    With ``--method gi`` the obscurance has no rounds: W is not in the lightmap."""
     s = result.settings
-    if s.target_error is None or s.method == "gi" or not result.texels:
+    adaptive = s.target_error is not None and result.texels > 0
+    if s.method == "gi":
+        paths = (f"{result.report['gi']['paths'] / result.texels:.1f} GI paths/texel on average "
+                 f"(rounds from {s.rays}, at most {s.max_rays})" if adaptive
+                 else f"{s.rays} GI paths/texel")
+        return f"{paths}, {s.rays} obscurance rays/texel"
+    if not adaptive:
         return f"{s.rays} rays/texel"
     return (f"{result.rays / result.texels:.1f} rays/texel on average (rounds from {s.rays}, "
             f"at most {s.max_rays})")
@@ -268,7 +275,8 @@ def print_summary(result: baker.BakeResult) -> None:
             f"and {result.report.get('shadow_rays', 0):,} shadow/sky rays)"
             if rebake.get("incremental") else
             f"{result.rays:,} obscurance rays, {result.report['rays_per_second'] / 1e6:.2f} M rays/s, "
-            f"{result.report.get('shadow_rays', 0):,} shadow/sky rays")
+            f"{result.report.get('shadow_rays', 0):,} shadow/sky rays"
+            + (f", {result.report['gi']['rays']:,} GI path rays" if "gi" in result.report else ""))
     foliage = result.report.get("foliage")
     if foliage is not None:
         held = foliage["error"]["held_out"]

@@ -82,12 +82,14 @@ class Indirect:
     """E_ind (N, 3) at N texels; the predicted variance (N,) of each texel's E_ind luminance
     (of the mean of its paths: ``_predicted_variance``); the rays the paths cast (bounce and
     shadow rays); the paths cut at ``MAX_BOUNCES`` (0 unless paths could not end by
-    themselves)."""
+    themselves); the paths traced, over all texels (adaptive rounds give texels different
+    counts)."""
 
     irradiance: np.ndarray
     variance: np.ndarray
     rays: int
     capped: int = 0
+    paths: int = 0
 
 
 def _path_keys(keys: np.ndarray, paths: int, first: int = 0) -> np.ndarray:
@@ -374,4 +376,4 @@ def indirect_light(scene: Scene, world: World, tracer: Tracer, sources: Sources,
                                   active)
         active = active[WITHIN * np.sqrt(per_path / counts[active]) > targets[active]]
     return Indirect(irradiance=state.mean, variance=_predicted_variance(state, counts, texels),
-                    rays=rays, capped=capped)
+                    rays=rays, capped=capped, paths=int(counts.sum()))

@@ -112,8 +112,8 @@ class Tally:
     texels: how many; rays: obscurance rays cast; shadow_rays: shadow and sky rays cast;
     states: texels in each validity state, by name; split_square: ``Terms.split_square``
     summed; direct_variance: the sum over texels of the variance of D's luminance; with
-    ``--method gi``, indirect_variance the same of E_ind's, the paths' rays (gi_rays) and the
-    paths cut at ``gi.MAX_BOUNCES`` (gi_capped); ambient_squares: the sum over texels of the
+    ``--method gi``, indirect_variance the same of E_ind's, the paths traced (gi_paths), their
+    rays (gi_rays) and the paths cut at ``gi.MAX_BOUNCES`` (gi_capped); ambient_squares: the sum over texels of the
     squared luminance of I_A·W, which an error of I_A scales (``Ambient.relative_variance``).
     """
 
@@ -124,6 +124,7 @@ class Tally:
     split_square: float = 0.0
     direct_variance: float = 0.0
     indirect_variance: float = 0.0
+    gi_paths: int = 0
     gi_rays: int = 0
     gi_capped: int = 0
     ambient_squares: float = 0.0
@@ -144,6 +145,7 @@ class Tally:
             self.direct_variance += float(np.sum(direct.variance()))
         if indirect is not None:
             self.indirect_variance += float(np.sum(indirect.variance))
+            self.gi_paths += indirect.paths
             self.gi_rays += indirect.rays
             self.gi_capped += indirect.capped
         for name, count in validity.counts().items():
