@@ -137,6 +137,27 @@ def test_the_total_after_a_tenth_of_the_work_is_within_a_quarter(tmp_path, monke
     assert 0.75 <= (total - n) / (final - n) <= 1.25, (n, total, final)
 
 
+@pytest.mark.parametrize("method", ["obscurance", "gi"])
+def test_an_adaptive_bake_s_bar_does_not_stand_at_its_total_while_rounds_run(tmp_path,
+                                                                             monkeypatch, method):
+    """With ``--target-error`` the rounds after the first announce their rays: the bar's
+    total is above its rays done at every update but one at each round's end (the next
+    round's announcement follows it, at the same rays done), until the last ray."""
+    monkeypatch.setattr(progress, "Bar", _Recorded)
+    monkeypatch.setattr(full, "wanted", lambda quiet: True)
+    _Recorded.updates = []
+    computed(cornell_box(), tmp_path, page_size=128, method=method, target_error=0.01,
+             max_rays=256)
+    updates = _Recorded.updates
+    final = updates[-1][1]
+    assert updates[-1][0] == final
+    stood = [i for i, (n, total) in enumerate(updates) if n < final and total <= n]
+    assert all(updates[i + 1][0] == updates[i][0] < updates[i + 1][1] for i in stood), [
+        (updates[i], updates[i + 1]) for i in stood]
+    rounds = sum(1 for a, b in zip(updates, updates[1:]) if b[0] == a[0] and b[1] > a[1])
+    assert rounds >= 2  # the test saw rounds announced
+
+
 def _bake_with_stderr_on(stderr, env, tmp_path, *more: str) -> subprocess.Popen:
     source = cornell_box().save(tmp_path / "box.glb")
     return subprocess.Popen(

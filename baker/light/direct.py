@@ -756,6 +756,8 @@ def _rounds(scene: Scene, world: World, tracer: Tracer, texels: Texels, sources:
             active = active[WITHIN * error > targets[active]]
             if not len(active):
                 break
+            if progress is not None:  # the round's rays, for the bar
+                progress(0, 0, len(active) * sources.rays_per_texel(sources.counts(None, scale)))
 
         def work(rows: np.ndarray, scale=scale) -> None:
             receivers = texel_receivers(texels, rows, tracer.center, tracer, settings.supersample,

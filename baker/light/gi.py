@@ -375,5 +375,7 @@ def indirect_light(scene: Scene, world: World, tracer: Tracer, sources: Sources,
         per_path = neighbour_mean(texels, _predicted_variance(state, counts, texels) * counts,
                                   active)
         active = active[WITHIN * np.sqrt(per_path / counts[active]) > targets[active]]
+        if progress is not None and len(active):  # the round's rays at the paths' mean so far
+            progress(0, 0, round(len(active) * first * rays / max(1, int(counts.sum()))))
     return Indirect(irradiance=state.mean, variance=_predicted_variance(state, counts, texels),
                     rays=rays, capped=capped, paths=int(counts.sum()))

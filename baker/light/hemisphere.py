@@ -687,7 +687,8 @@ def hemisphere_terms(scene: Scene, world: World, tracer: Tracer, texels: Texels,
     whatever the chunking, so the result is too (they depend on the rows asked for: the error
     model is pooled over them, and the neighbours are those among them). ``progress(texels,
     rays)`` is told after each chunk how many texels it finished (in the first round; 0 after)
-    and the rays it cast (``run.progress.Meter``).
+    and the rays it cast, and ``progress(0, 0, coming)`` before a round the rays it will cast
+    (``run.progress.Meter``).
     ``surfaces``: ``surfaces_of(scene, world)``, made here when not given. Light through
     translucent surfaces is not in these terms: ``light.integrate.integrate`` adds it
     (``inner.add_translucency``, §4).
@@ -726,6 +727,8 @@ def hemisphere_terms(scene: Scene, world: World, tracer: Tracer, texels: Texels,
         target = settings.target_error if targets is None else targets[active]
         active = active[WITHIN * _stopping_error(errors, counts, texels, rows, active) > target]
         batch = first
+        if progress is not None and len(active):
+            progress(0, 0, len(active) * batch)
     terms = _means(sums, counts)
     if chaining:
         terms = replace(terms, chain_rays=chain_counts[:, 0], capped=chain_counts[:, 1])

@@ -10,7 +10,10 @@ of a 4-ray obscurance bake. Each stage (obscurance, direct light, GI) is registe
 texels and an estimate of the rays a texel casts (``Meter.stage``); as it reports the texels
 done and the rays they cast, its remaining rays are re-estimated from its mean so far, and the
 bar's total follows (GI's paths end by Russian roulette: their length is known only by casting
-them). tqdm draws it, only on a terminal, not in CI (a log would get every redraw).
+them). An adaptive round (``--target-error``) announces its rays before it starts, so the
+bar does not stand at its total while the rounds after the first cast most of the rays; the
+rounds after it are not known until it ends. tqdm draws it, only on a terminal, not in CI (a
+log would get every redraw).
 
 Its time left is the Meter's (``Meter.seconds_left``), not tqdm's elapsed × to do / done: a
 ray's cost differs by stage (a GI path's ray, shaded in numpy, costs 3.6–4.6 times an
@@ -45,22 +48,26 @@ def wanted(quiet: bool) -> bool:
 
 @dataclass
 class _Stage:
-    """One stage's texels, its first estimate of rays per texel, what it reported done, and the
-    seconds (compile excluded) put to it."""
+    """One stage's texels, its first estimate of rays per texel, what it reported done, the
+    rays its adaptive rounds announced and have not cast yet, and the seconds (compile
+    excluded) put to it."""
 
     texels: int
     per_texel: float
     texels_done: int = 0
     rays_done: int = 0
+    coming: int = 0
     seconds: float = 0.0
 
     def expected(self) -> float:
-        """The stage's rays in all: those cast, and the rest at the mean so far per texel (at
-        the first estimate before any texel is done)."""
+        """The stage's rays in all: those cast, those its rounds announced, and the texels
+        not done at the mean so far per texel (at the first estimate before any texel is
+        done). Without the announced rays an adaptive bake's bar stood at its total, no time
+        left, while the rounds after the first cast most of its rays."""
         if self.texels_done == 0:
             return self.texels * self.per_texel
         rest = max(0, self.texels - self.texels_done)
-        return self.rays_done + rest * self.rays_done / self.texels_done
+        return self.rays_done + self.coming + rest * self.rays_done / self.texels_done
 
 
 class Meter:
@@ -78,16 +85,18 @@ class Meter:
         self._clock, self._compiled = clock or (lambda: CLOCK()), compiled
         self._last: float | None = None  # the clock, compile excluded, at the last report
 
-    def stage(self, texels: int, rays_per_texel: float) -> Callable[[int, int], None]:
+    def stage(self, texels: int, rays_per_texel: float) -> Callable[..., None]:
         """Register a stage of ``texels`` texels casting about ``rays_per_texel`` rays each;
-        return its ``report(texels, rays)``: that many more texels done, casting that many
-        rays (the time since the last report, or since ``start``, is the stage's)."""
+        return its ``report(texels, rays, coming=None)``: that many more texels done, casting
+        that many rays (the time since the last report, or since ``start``, is the stage's);
+        ``coming``: the rays an adaptive round about to start will cast (each report's rays
+        count against them until the next round says its own)."""
         stage = _Stage(int(texels), float(rays_per_texel))
         with self._lock:
             self._stages.append(stage)
             self._show(0)
 
-        def report(texels_done: int, rays: int) -> None:
+        def report(texels_done: int, rays: int, coming: int | None = None) -> None:
             with self._lock:
                 now = self._now()
                 if self._last is not None:
@@ -95,6 +104,7 @@ class Meter:
                 self._last = now
                 stage.texels_done += int(texels_done)
                 stage.rays_done += int(rays)
+                stage.coming = max(0, stage.coming - int(rays)) if coming is None else int(coming)
                 self._show(int(rays))
 
         return report
