@@ -196,6 +196,10 @@ class Settings:
         first round, the least a texel gets: the quiet texels stop there."""
         return DEFAULT_RAYS if self.target_error is None else FIRST_ROUND_RAYS
 
+    def ray_count(self, given: int | None) -> int:
+        """A ray count as given, or ``ray_default`` when it is None."""
+        return self.ray_default() if given is None else given
+
     def check(self) -> None:
         """Raise SettingsError for a value that cannot work, saying which values can."""
         positive = {
@@ -213,8 +217,7 @@ class Settings:
         if self.ambient is not None and self.ambient < 0:
             raise SettingsError(f"ambient must be 0 or more, not {self.ambient}",
                                 fix="give --ambient a value of 0 or more")
-        rays = self.ray_default() if self.rays is None else self.rays
-        sky_rays = self.ray_default() if self.sky_rays is None else self.sky_rays
+        rays, sky_rays = self.ray_count(self.rays), self.ray_count(self.sky_rays)
         integers = {"page_size": (self.page_size, 16), "rays": (rays, 1),
                     "max_rays": (self.max_rays, 1),
                     "chunk_texels": (self.chunk_texels, 1), "padding": (self.padding, 0),
@@ -400,9 +403,8 @@ def resolve(settings: Settings, surface_area: float, diagonal: float) -> Resolve
     values["texel_density"] = float(values["texel_density"])  # one type, one fingerprint
     if values["d_max"] is None:
         values["d_max"] = settings.d_max_fraction * quarter_octave(diagonal) if diagonal > 0 else 1.0
-    for name in ("rays", "sky_rays"):
-        if values[name] is None:
-            values[name] = settings.ray_default()
+    values["rays"], values["sky_rays"] = (settings.ray_count(settings.rays),
+                                          settings.ray_count(settings.sky_rays))
     if values["baked_lights"] is None:
         values["baked_lights"] = "keep" if settings.carrier == "occlusion" else "remove"
     if values["encoding"] is None:

@@ -761,7 +761,7 @@ def predicted_error(terms: Terms, error_scale: tuple[np.ndarray, float] | None, 
 
 
 def _stopping_error(errors: np.ndarray, counts: np.ndarray, texels: Texels, rows: np.ndarray,
-                      active: np.ndarray) -> np.ndarray:
+                    active: np.ndarray) -> np.ndarray:
     """(a,) the error σ that the texels ``active`` (a,) of ``rows`` (k,) stop by: sqrt(v / n),
     v the mean of errors² · counts (each texel's predicted variance per ray, (k,) both) over
     their neighbours among ``rows``, themselves left out, n their own counts.

@@ -113,8 +113,9 @@ class Tally:
     states: texels in each validity state, by name; split_square: ``Terms.split_square``
     summed; direct_variance: the sum over texels of the variance of D's luminance; with
     ``--method gi``, indirect_variance the same of E_ind's, the paths traced (gi_paths), their
-    rays (gi_rays) and the paths cut at ``gi.MAX_BOUNCES`` (gi_capped); ambient_squares: the sum over texels of the
-    squared luminance of I_A·W, which an error of I_A scales (``Ambient.relative_variance``).
+    rays (gi_rays) and the paths cut at ``gi.MAX_BOUNCES`` (gi_capped); ambient_squares: the
+    sum over texels of the squared luminance of I_A·W, which an error of I_A scales
+    (``Ambient.relative_variance``).
     """
 
     texels: int = 0
