@@ -17,7 +17,7 @@ from assets.make_scenes import cornell_box
 ROOT = Path(__file__).resolve().parent.parent
 
 
-@pytest.mark.skipif(not os.environ.get("BAKER_LONG"), reason="long mode: BAKER_LONG=1")
+@pytest.mark.long
 def test_after_the_warm_up_the_first_bake_compiles_nothing(tmp_path):
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"), NUMBA_DEBUG_CACHE="1")
     warm = subprocess.run([sys.executable, str(ROOT / "assets" / "warm_kernels.py")], env=env,
