@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from baker.jit import jit
+from baker.jit import inline, jit
 
 MIN_PARTS = 64  # a mesh with fewer small flat loose parts leaves them all to xatlas
 MAX_SIDE = 16.0  # texels: a larger part is left to xatlas
@@ -187,6 +187,13 @@ def _projected(p: np.ndarray, corners: np.ndarray, owner: np.ndarray, count: int
                           triangle_start)
 
 
+@inline
+def _dot(a, b):
+    """a · b of two 3-vectors, summed by hand: numba's ``np.dot`` calls BLAS through scipy,
+    which is not one of baker's dependencies."""
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
 @jit
 def _project_parts(p, corners, vertex_order, vertex_start, triangle_order, triangle_start):
     """``_projected``'s work, a part at a time: its normal (the sum of its triangles' area
@@ -200,14 +207,14 @@ def _project_parts(p, corners, vertex_order, vertex_start, triangle_order, trian
         for j in range(triangle_start[part], triangle_start[part + 1]):
             a, b, c = corners[triangle_order[j]]
             n += np.cross(p[b] - p[a], p[c] - p[a])
-        n /= np.sqrt(np.dot(n, n))
+        n /= np.sqrt(_dot(n, n))
         best, best_u, best_v = np.inf, np.zeros(3), np.zeros(3)
         for j in range(triangle_start[part], triangle_start[part + 1]):
             t = triangle_order[j]
             for k in range(3):
                 e = p[corners[t, (k + 1) % 3]] - p[corners[t, k]]
-                e -= np.dot(e, n) * n
-                length = np.sqrt(np.dot(e, e))
+                e -= _dot(e, n) * n
+                length = np.sqrt(_dot(e, e))
                 if length == 0:
                     continue
                 e /= length
@@ -215,7 +222,7 @@ def _project_parts(p, corners, vertex_order, vertex_start, triangle_order, trian
                 lo_u, hi_u, lo_v, hi_v = np.inf, -np.inf, np.inf, -np.inf
                 for i in range(vertex_start[part], vertex_start[part + 1]):
                     q = p[vertex_order[i]]
-                    x, y = np.dot(q, e), np.dot(q, v)
+                    x, y = _dot(q, e), _dot(q, v)
                     lo_u, hi_u = min(lo_u, x), max(hi_u, x)
                     lo_v, hi_v = min(lo_v, y), max(hi_v, y)
                 if (hi_u - lo_u) * (hi_v - lo_v) < best:
@@ -225,11 +232,11 @@ def _project_parts(p, corners, vertex_order, vertex_start, triangle_order, trian
         lo_u, lo_v = np.inf, np.inf
         for i in range(vertex_start[part], vertex_start[part + 1]):
             q = p[vertex_order[i]]
-            lo_u, lo_v = min(lo_u, np.dot(q, best_u)), min(lo_v, np.dot(q, best_v))
+            lo_u, lo_v = min(lo_u, _dot(q, best_u)), min(lo_v, _dot(q, best_v))
         for i in range(vertex_start[part], vertex_start[part + 1]):
             q = p[vertex_order[i]]
-            flat[vertex_order[i], 0] = np.dot(q, best_u) - lo_u
-            flat[vertex_order[i], 1] = np.dot(q, best_v) - lo_v
+            flat[vertex_order[i], 0] = _dot(q, best_u) - lo_u
+            flat[vertex_order[i], 1] = _dot(q, best_v) - lo_v
     return flat, sides
 
 
