@@ -91,11 +91,11 @@ def test_a_variant_bakes_validates_and_matches_the_plain_one(tmp_path, plain, na
         assert any("baked in its rest pose" in reason for _where, reason in result.plan.left_out)
 
 
-def test_a_missing_decoder_names_the_extra_that_installs_it(tmp_path, plain, monkeypatch):
+def test_a_missing_decoder_names_the_package_that_installs_it(tmp_path, plain, monkeypatch):
     compressed = variant("draco", plain["cornell_box"][0], tmp_path / "draco.glb")
     monkeypatch.setitem(sys.modules, "DracoPy", None)  # import DracoPy raises ImportError
     with pytest.raises(InputError) as error:
         load(compressed)
     assert "KHR_draco_mesh_compression" in error.value.message
-    assert 'pip install "baker[compression]"' in error.value.fix
+    assert 'pip install "DracoPy>=2"' in error.value.fix
     assert "meshes[0].primitives[0]" in error.value.where

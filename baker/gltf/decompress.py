@@ -31,8 +31,9 @@ from baker.gltf.document import COMPONENT_DTYPES
 DRACO = "KHR_draco_mesh_compression"
 MESHOPT = ("EXT_meshopt_compression", "KHR_meshopt_compression")
 COMPRESSION_EXTENSIONS = frozenset({DRACO, *MESHOPT})
-EXTRA = 'pip install "baker[compression]"'
-"""What installs the decoders (DracoPy, meshopt)."""
+EXTRA = 'pip install "DracoPy>=2" "meshopt>=0.1"'
+"""What installs the decoders: both are baker's own dependencies, so only an install that lost
+them (a package removed by hand) needs it."""
 
 _WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}  # the accessor types Draco decodes
 _REEXPORT = "re-export the asset (or decompress it, e.g. gltf-transform copy, and bake that)"
