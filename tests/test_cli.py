@@ -187,3 +187,37 @@ def test_relight_says_what_it_recomposes_and_refuses_an_emission_change(tmp_path
     before = out.read_bytes()
     assert main(["relight", str(scene), "-o", str(out)]) == 1
     assert "beyond its base colour" in capsys.readouterr().err and out.read_bytes() == before
+
+
+def test_report_dash_writes_the_json_alone_to_stdout(tmp_path, capsys, monkeypatch):
+    """``--report -``: stdout is the JSON report and nothing else (a pipe into ``jq`` works),
+    the bake's summary is on stderr, and no file named ``-`` is written."""
+    monkeypatch.chdir(tmp_path)
+    scene = cornell_box().save(tmp_path / "box.glb")
+    code = main(["bake", str(scene), "-o", "box_baked.glb", "--rays", "4", "--texel-density",
+                 "4", "--report", "-", "--no-state"])
+    printed = capsys.readouterr()
+    report = json.loads(printed.out)
+    assert code == 0 and report["settings"]["rays"] == 4
+    assert f"{report['texels']:,} texels" in printed.err
+    assert not (tmp_path / "-").exists()
+
+
+def test_a_texture_left_out_for_want_of_a_package_is_said_under_quiet(tmp_path, capsys,
+                                                                      monkeypatch):
+    """A KTX 2 texture without opengl-basisu (``baker[ktx2]``) bakes with its factor; even with
+    ``--quiet`` stderr names the package that would read it, and so does the report."""
+    import alktx2
+
+    from tests.test_exported_assets import GRADIENT, _texture_scene
+
+    data = alktx2.encode_raw_rgba_to_ktx2(GRADIENT.tobytes(), 32, 32, False)
+    scene = _texture_scene(tmp_path, data, "KHR_texture_basisu", "albedo.ktx2")
+    monkeypatch.setitem(sys.modules, "opengl_basisu", None)
+    code = main(["bake", str(scene), "-o", str(tmp_path / "baked.glb"), "--rays", "4",
+                 "--quiet", "--no-state", "--report", str(tmp_path / "report.json")])
+    printed = capsys.readouterr()
+    assert code == 0 and printed.out == ""
+    assert 'pip install "baker[ktx2]"' in printed.err
+    warnings = json.loads((tmp_path / "report.json").read_text())["warnings"]
+    assert any('pip install "baker[ktx2]"' in text for text in warnings)

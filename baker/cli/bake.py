@@ -8,7 +8,7 @@ from pathlib import Path
 
 import baker
 import baker.settings
-from baker.cli.common import add_debug, exit_code, positive_float
+from baker.cli.common import add_debug, add_report, finish, positive_float, report_file
 from baker.cli.state import add_state_options, print_rebake, state_arguments
 from baker.settings import DEFAULT_RAYS, FIRST_ROUND_RAYS
 
@@ -188,8 +188,7 @@ def add_parser(commands) -> None:
     out.add_argument("--error-map", type=Path, metavar="DIR",
                      help="also write each page's per-texel standard error (lightmap units) "
                           "as .hdr (values) and .png (scaled to the page's largest) in DIR")
-    out.add_argument("--report", type=Path, metavar="FILE",
-                     help="write a JSON report: settings used, plan, stage times, rays/s")
+    add_report(out)
     running = bake.add_argument_group("running")
     running.add_argument("--allow-hard-links", action="store_true",
                          help="read files the scene names that have other names too (hard "
@@ -295,12 +294,8 @@ def print_summary(result: baker.BakeResult) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Bake; exit code 0, or 4 when no surface got a lightmap (``common.exit_code``)."""
-    result = baker.bake(args.scene, args.output, settings_from(args), report_path=args.report,
-                        lightmaps_dir=args.lightmaps, lightmaps_format=args.lightmaps_format,
-                        error_map_dir=args.error_map,
-                        quiet=args.quiet, overwrite=args.overwrite,
-                        **state_arguments(args))
-    if not args.quiet:
-        print_rebake(result)
-        print_summary(result)
-    return exit_code(result)
+    result = baker.bake(args.scene, args.output, settings_from(args),
+                        report_path=report_file(args), lightmaps_dir=args.lightmaps,
+                        lightmaps_format=args.lightmaps_format, error_map_dir=args.error_map,
+                        quiet=args.quiet, overwrite=args.overwrite, **state_arguments(args))
+    return finish(args, result, print_rebake, print_summary)

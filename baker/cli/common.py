@@ -1,9 +1,13 @@
-"""Argument types the subcommands share."""
+"""What the subcommands share: argument types, the report option, the end of a bake."""
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
+from contextlib import nullcontext, redirect_stdout
+from pathlib import Path
+from typing import Callable
 
 import baker
 
@@ -25,6 +29,43 @@ def add_debug(parser: argparse.ArgumentParser) -> None:
     """
     parser.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
                         help="show the traceback of an error")
+
+
+STDOUT = Path("-")
+REPORT_HELP = ("write the JSON report (settings used, plan, stage times, rays/s) to FILE; "
+               "- writes it to stdout, and the bake's own lines to stderr")
+
+
+def add_report(parser) -> None:
+    """``--report FILE`` (``-``: stdout)."""
+    parser.add_argument("--report", type=Path, metavar="FILE", help=REPORT_HELP)
+
+
+def report_file(args: argparse.Namespace) -> Path | None:
+    """The report's file for ``baker.bake``: None when there is none or it goes to stdout."""
+    return None if args.report in (None, STDOUT) else args.report
+
+
+def finish(args: argparse.Namespace, result: baker.BakeResult,
+           *printers: Callable[[baker.BakeResult], None]) -> int:
+    """The end of a bake on the command line: ``printers`` print its summary on stdout unless
+    ``--quiet``; a texture left out for want of a package is said on stderr even then; with
+    ``--report -`` the summary goes to stderr and the JSON report alone to stdout (a pipe into
+    ``jq`` gets nothing else). Returns the exit code (``exit_code``)."""
+    streamed = args.report == STDOUT
+    with redirect_stdout(sys.stderr) if streamed else nullcontext():
+        if args.quiet:
+            for warning, count in result.report["warnings"].items():
+                if "pip install" in warning:  # what the user can mend: said even when quiet
+                    print(f"baker: warning: {count} × {warning}", file=sys.stderr)
+        else:
+            for show in printers:
+                show(result)
+        code = exit_code(result)
+    if streamed:
+        sys.stdout.write(json.dumps(result.report, indent=2) + "\n")
+        sys.stdout.flush()
+    return code
 
 
 def exit_code(result: baker.BakeResult) -> int:

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import baker
 from baker.cli.bake import add_cluster_option, print_summary
-from baker.cli.common import exit_code
+from baker.cli.common import finish, report_file
 from baker.cli.state import add_update_options, print_rebake
 
 EPILOG = """examples:
@@ -50,11 +50,9 @@ def run(args: argparse.Namespace) -> int:
 
     state = args.state or baker.rebake.state.default_path(args.output)
     settings = asked_settings(state, threads=args.threads, cluster=args.cluster)
-    result = baker.bake(args.scene, args.output, settings, report_path=args.report,
+    result = baker.bake(args.scene, args.output, settings, report_path=report_file(args),
                         quiet=args.quiet, incremental=True, state=state)
-    if not args.quiet:
-        print_rebake(result)
-        print_summary(result)
+    code = finish(args, result, print_rebake, print_summary)
     if args.moved and result.rebake.get("incremental"):
         names = baker.rebake.incremental.node_names(args.scene)
         found = set(result.rebake["moved_nodes"])
@@ -67,4 +65,4 @@ def run(args: argparse.Namespace) -> int:
             print(f"baker: note: --moved named {', '.join(sorted(named))}; the diff found "
                   f"{', '.join(sorted(found)) or 'no node'} moved (the rebake followed the diff)",
                   file=sys.stderr)
-    return exit_code(result)
+    return code

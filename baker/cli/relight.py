@@ -7,6 +7,7 @@ from pathlib import Path
 
 import baker
 from baker.cli.bake import print_summary
+from baker.cli.common import finish, report_file
 from baker.cli.state import add_update_options, print_rebake
 
 
@@ -32,9 +33,8 @@ def run(args: argparse.Namespace) -> int:
     from baker.rebake.incremental import asked_settings
 
     state = args.state or baker.rebake.state.default_path(args.output)
-    result = baker.bake(args.scene, args.output, asked_settings(state), report_path=args.report,
-                        quiet=args.quiet, relight=True, state=state)
-    if not args.quiet:
-        print_rebake(result)
-        print_summary(result)
+    result = baker.bake(args.scene, args.output, asked_settings(state),
+                        report_path=report_file(args), quiet=args.quiet, relight=True,
+                        state=state)
+    finish(args, result, print_rebake, print_summary)
     return 0

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 import baker
-from baker.cli.common import add_debug
+from baker.cli.common import add_debug, add_report
 
 
 def add_state_options(group) -> None:
@@ -66,6 +66,6 @@ def add_update_options(parser) -> None:
     --state, --report, --quiet, --debug."""
     parser.add_argument("--state", type=Path, metavar="FILE",
                         help="the bake state (default: OUTPUT.bake)")
-    parser.add_argument("--report", type=Path, metavar="FILE", help="write the JSON report")
+    add_report(parser)
     parser.add_argument("--quiet", action="store_true", help="print nothing but errors")
     add_debug(parser)
