@@ -132,7 +132,7 @@ class BakeState:
 
 
 MIN_RATIO = 1.7
-"""An array is deflated only if ISA-L deflates its first ``zipwriter.BLOCK_BYTES`` to at most
+"""An array is deflated only if zlib deflates its first ``zipwriter.BLOCK_BYTES`` to at most
 1/MIN_RATIO of their size, else stored: the terms' noisy means (``w_hit`` 1.39×, ``hit_sq``
 1.2–1.3× in the crates of bench_rebake.py) inflate at a fraction of a stored read's speed and
 are the bulk of a rebake's read, for a few MB saved."""
@@ -140,8 +140,8 @@ are the bulk of a rebake's read, for a few MB saved."""
 
 def _deflates(column: Column) -> bool:
     """Whether ``column``'s bytes deflate by ``MIN_RATIO`` or more, judged by their first
-    ``zipwriter.BLOCK_BYTES`` (by its bytes alone, so the same state gives the same file:
-    ``zipwriter.deflate``, never the one-shot compressor, whose output varies)."""
+    ``zipwriter.BLOCK_BYTES`` (by its bytes alone, through ``zipwriter.deflate``, so the same
+    state gives the same file)."""
     size = min(int(np.prod(column.shape, dtype=np.int64)) * column.dtype.itemsize, BLOCK_BYTES)
     if not size:
         return False

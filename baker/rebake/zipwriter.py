@@ -1,9 +1,13 @@
 """A ZIP archive written in one pass, its members deflated or stored: the bake state's container.
 
-Python's ``zipfile`` writes the same layout, but checksums and deflates every member with zlib
-(CRC-32 at 1.3 GB/s, deflate at about 40 MB/s at its default level) while holding up the bake
-beside it; ISA-L's (``isal_zlib``) CRC-32 runs at 12 GB/s and its level-1 deflate at about
-400 MB/s. The bytes depend on the members alone — names, contents and order, every member dated
+Python's ``zipfile`` writes the same layout, but checksums every member with zlib's CRC-32 (1.3
+GB/s) and deflates at zlib's default level (about 40 MB/s) while holding up the bake beside it;
+here ISA-L's (``isal_zlib``) CRC-32 runs at 12 GB/s and zlib deflates at level 1 (about
+100-200 MB/s). ISA-L's own deflate, 4-9 times faster, is not used: its output is no pure
+function of its input (its hash table starts from memory it does not clear: the same 24 bytes
+deflated to 14, 15 or 16 bytes from one process to the next, and 1 process in 40 gave other
+bytes for 301 short arrays through the streaming compressor, 3 in 60 through the one-shot
+one; tests/test_zipwriter.py). The bytes depend on the members alone — names, contents and order, every member dated
 1980-01-01 00:00:00, permissions 0644, and a deflated member's contents fed to the compressor
 in blocks of ``BLOCK_BYTES`` whatever pieces the writer hands over — so the same state gives
 the same file (docs/design.md §4). Members or offsets past 2 GiB get the ZIP64 extensions, as
@@ -16,12 +20,13 @@ the same file (docs/design.md §4). Members or offsets past 2 GiB get the ZIP64 
 from __future__ import annotations
 
 import struct
+import zlib
 from typing import BinaryIO, Callable
 
 from isal import isal_zlib
 
 ZIP64_LIMIT = (1 << 31) - 1  # sizes and offsets past this get ZIP64 fields (as ``zipfile``)
-LEVEL = 1  # ISA-L's deflate level (0–3): bench_state.py measured 1 and 2 alike, 3 slower
+LEVEL = 1  # zlib's deflate level: the fastest
 BLOCK_BYTES = 1 << 20  # a deflated member's contents are compressed this many bytes at a time
 STORED, DEFLATED = 0, 8  # the ZIP compression methods
 _DOS_DATE, _DOS_TIME = (0 << 9) | (1 << 5) | 1, 0  # 1980-01-01 00:00:00
@@ -37,22 +42,20 @@ _SAT32, _SAT16 = 0xFFFFFFFF, 0xFFFF
 
 
 def deflated_most(size: int) -> int:
-    """The most bytes ISA-L's deflate makes of ``size`` bytes (incompressible ones are stored
-    in blocks of at most 64 KiB, 5 bytes of header each, in every ``BLOCK_BYTES`` piece)."""
-    return size + 5 * (size // (1 << 16) + size // BLOCK_BYTES + 2) + 64
+    """More bytes than zlib's raw deflate makes of ``size`` bytes (its ``deflateBound``: size +
+    size/4096 + size/16384 + size/2^25 + 7)."""
+    return size + size // 2048 + 64
 
 
 def deflate(data) -> bytes:
-    """``data`` deflated (raw deflate, ``LEVEL``) as a member's contents are: through ISA-L's
-    streaming compressor. Its one-shot ``isal_zlib.compress`` is no pure function of its input:
-    24 bytes came out as 14, 15 or 16 from one process to the next (tests/test_zipwriter.py)."""
+    """``data`` deflated (raw deflate, ``LEVEL``) as a member's contents are."""
     squeeze = _compressor()
     return squeeze.compress(data) + squeeze.flush()
 
 
 def _compressor():
-    """A raw deflate stream at ``LEVEL`` (ISA-L)."""
-    return isal_zlib.compressobj(LEVEL, isal_zlib.DEFLATED, -15)
+    """A raw deflate stream at ``LEVEL`` (zlib: the same bytes in every process)."""
+    return zlib.compressobj(LEVEL, zlib.DEFLATED, -15)
 
 
 class _Member:
