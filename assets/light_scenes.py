@@ -122,3 +122,15 @@ def floor_under_box() -> GltfBuilder:
     b.node("box", b.shape_mesh("box", box((0.6, 0.6, 0.6)), material=grey),
            translation=(0.0, 0.3, 0.0))
     return b
+
+
+def facing_walls(side: float = 1.0, gap: float = 4.0) -> GltfBuilder:
+    """Two upright panels facing away from each other, +X (node ``east``) and −X (``west``),
+    ``gap`` apart, so that neither sees the other (for an image sky's closed forms)."""
+    b = GltfBuilder()
+    grey = b.material("grey", FLOOR_ALBEDO)
+    for name, degrees, x in (("east", -90.0, gap / 2), ("west", 90.0, -gap / 2)):
+        wall = transformed(quad(side, side), rotation=rotation_matrix((0, 0, 1), degrees))
+        b.info[name] = b.node(name, b.shape_mesh(name, wall, material=grey),
+                              translation=(x, 0.0, 0.0))
+    return b

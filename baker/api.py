@@ -282,6 +282,8 @@ def _report(input_path: Path, output: Path, done, info, pages, times: dict[str, 
         "rebake": rebake,
         **({"foliage": done.foliage.report()} if done.foliage is not None else {}),
         **({"gi": gi_report(done.tally)} if done.settings.method == "gi" else {}),
+        **({"sky": done.sources.sky.report()}
+           if done.sources is not None and done.sources.sky is not None else {}),
     }
 
 

@@ -110,6 +110,11 @@ class Settings:
         the elevation up to ``sky`` at the zenith; None: a uniform sky.
     sky_rays: rays per texel that look for the sky (escaping the scene entirely); None:
         ``ray_default``.
+    sky_image: an equirectangular panorama (``.hdr`` or ``.exr``, linear radiance, +Y up,
+        three.js's layout) to light the scene with instead of ``sky``, importance-sampled by
+        its brightness (light/sky.py); None: none.
+    sky_rotation: degrees ``sky_image`` is turned about +Y (right-handed: +Z towards +X).
+    sky_intensity: factor on ``sky_image``'s radiance.
     mirror_roughness: metals with roughness below this are perfect mirrors (materials.py).
     specular: what an obscurance ray does at a mirror or glass (paper §3.1–3.2): "b" follows
         the reflected/refracted path and applies ρ to its summed length, stopping past d_max
@@ -175,6 +180,9 @@ class Settings:
     sky: tuple[float, float, float] | None = None
     sky_horizon: tuple[float, float, float] | None = None
     sky_rays: int | None = None
+    sky_image: str | None = None
+    sky_rotation: float = 0.0
+    sky_intensity: float = 1.0
     mirror_roughness: float = 0.1
     specular: str = "b"
     translucent: float = 0.5
@@ -341,6 +349,22 @@ class Settings:
         if self.sky_horizon is not None and self.sky is None:
             raise SettingsError("sky_horizon needs sky (the zenith colour) too",
                                 fix="add --sky R,G,B, or leave out --sky-horizon")
+        self._check_sky_image()
+
+    def _check_sky_image(self) -> None:
+        """A sky image alone (no colour sky beside it), its rotation finite and its intensity
+        finite and ≥ 0."""
+        for name, value, least in (("sky_rotation", self.sky_rotation, -math.inf),
+                                   ("sky_intensity", self.sky_intensity, 0.0)):
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= least):
+                low = "" if least == -math.inf else " ≥ 0"
+                raise SettingsError(f"{name} must be a finite number{low}, not {value!r}",
+                                    fix=f"give --{name.replace('_', '-')} a value such as "
+                                        f"{'90' if name == 'sky_rotation' else '1'}")
+        if self.sky_image is not None and self.sky is not None:
+            raise SettingsError("a sky image and a sky colour were both given: the image is "
+                                "the sky", fix="leave out --sky (and --sky-horizon), or "
+                                               "--sky-image")
 
 
 @dataclass(frozen=True)
@@ -405,6 +429,8 @@ def resolve(settings: Settings, surface_area: float, diagonal: float) -> Resolve
         values["d_max"] = settings.d_max_fraction * quarter_octave(diagonal) if diagonal > 0 else 1.0
     values["rays"], values["sky_rays"] = (settings.ray_count(settings.rays),
                                           settings.ray_count(settings.sky_rays))
+    if values["sky_image"] is not None:  # a path given as a Path: one type, one fingerprint
+        values["sky_image"] = str(values["sky_image"])
     if values["baked_lights"] is None:
         values["baked_lights"] = "keep" if settings.carrier == "occlusion" else "remove"
     if values["encoding"] is None:

@@ -54,11 +54,12 @@ class Study:
     reference_rays: int
     reference_seconds: float
     gi: dict | None = None  # obscurances against full GI (``compare_with_gi``)
-
+    sky: tuple[Row, ...] = ()  # an image sky's direct light, as baked and by cosine rays
+    # alone (``sky_rows``), against its own reference
     def slope(self, technique: str, min_rays: int = 16) -> float:
         """Least-squares slope of log RMSE against log rays (−0.5 for plain Monte Carlo)."""
-        rows = [r for r in self.rows if r.technique == technique and r.rays >= min_rays
-                and r.rmse > 0]
+        rows = [r for r in self.rows + self.sky if r.technique == technique
+                and r.rays >= min_rays and r.rmse > 0]
         x = np.log([r.rays for r in rows])
         y = np.log([r.rmse for r in rows])
         return float(np.polyfit(x, y, 1)[0])
@@ -69,7 +70,10 @@ class Study:
         for r in self.rows:
             lines.append(f"{r.technique:<11}{r.rays:>6}{r.seconds:>10.3f}{r.rmse:>12.3e}"
                          f"{r.estimated_rmse:>12.3e}")
-        for technique in dict.fromkeys(r.technique for r in self.rows):
+        for r in self.sky:
+            lines.append(f"{r.technique:<11}{r.rays:>6}{r.seconds:>10.3f}{r.rmse:>12.3e}"
+                         f"{r.estimated_rmse:>12.3e}")
+        for technique in dict.fromkeys(r.technique for r in self.rows + self.sky):
             lines.append(f"{technique}: RMSE ∝ rays^{self.slope(technique):.2f}")
         lines.append(f"reference: {self.reference_rays} rays/texel (sobol), "
                      f"{self.reference_seconds:.1f} s, {self.texels:,} texels")
@@ -85,8 +89,9 @@ class Study:
     def as_dict(self) -> dict:
         return {"texels": self.texels, "reference_rays": self.reference_rays, "gi": self.gi,
                 "reference_seconds": self.reference_seconds,
-                "rows": [r.as_dict() for r in self.rows],
-                "slopes": {t: self.slope(t) for t in dict.fromkeys(r.technique for r in self.rows)}}
+                "rows": [r.as_dict() for r in self.rows], "sky": [r.as_dict() for r in self.sky],
+                "slopes": {t: self.slope(t)
+                           for t in dict.fromkeys(r.technique for r in self.rows + self.sky)}}
 
 
 def _luminance(done: Computed, terms: Terms) -> np.ndarray:
@@ -134,7 +139,35 @@ def run_study(done: Computed, rays: tuple[int, ...] = DEFAULT_RAYS,
 
 
 _COLOURS = {"sobol": (31, 119, 180), "stratified": (255, 127, 14), "random": (44, 160, 44),
-            "gi": (214, 39, 40)}
+            "gi": (214, 39, 40), "sky image": (148, 103, 189), "sky cosine": (140, 86, 75)}
+
+
+def sky_rows(done: Computed, rays: tuple[int, ...] = DEFAULT_RAYS,
+             reference_rays: int = 4096) -> tuple[Row, ...]:
+    """The direct sky light of ``done``'s texels (an image sky: ``--sky-image``) at each of
+    ``rays`` rays per texel, drawn as a bake draws them ("sky image": the image's peak by the
+    image, light/sky.py) and by cosine rays alone ("sky cosine", as a colour sky's), each timed
+    and measured (luminance RMSE) against ``reference_rays`` of the bake's rays, another
+    seed; the estimated RMSE from the rays' halves (``direct.mean_and_variance``). Empty
+    without an image sky."""
+    sky = done.sources.sky if done.sources is not None else None
+    if sky is None or not sky.is_image:
+        return ()
+    tracer = Tracer(done.world)
+    receivers = direct.texel_receivers(done.texels, slice(None), tracer.center)
+    reference, _ = direct.sky_irradiance(sky, reference_rays, receivers, tracer,
+                                         done.settings.seed + 1)
+    rows = []
+    for name, drawn in (("sky image", sky), ("sky cosine", replace(sky, ceiling=np.inf,
+                                                                     image_share=0.0))):
+        for count in rays:
+            started = time.perf_counter()
+            got, variance = direct.sky_irradiance(drawn, count, receivers, tracer,
+                                                  done.settings.seed)
+            seconds = time.perf_counter() - started
+            rmse = float(np.sqrt(np.mean(((got - reference) @ LUMINANCE) ** 2)))
+            rows.append(Row(name, count, seconds, rmse, float(np.sqrt(np.mean(variance)))))
+    return tuple(rows)
 
 
 def plot(study: Study, size: tuple[int, int] = (800, 560)) -> bytes:
@@ -143,7 +176,7 @@ def plot(study: Study, size: tuple[int, int] = (800, 560)) -> bytes:
 
     width, height = size
     left, right, top, bottom = 80, 20, 40, 60
-    rows = [r for r in study.rows if r.seconds > 0 and r.rmse > 0]
+    rows = [r for r in study.rows + study.sky if r.seconds > 0 and r.rmse > 0]
     xs = np.log10([r.seconds for r in rows])
     ys = np.log10([v for r in rows for v in (r.rmse, r.estimated_rmse) if v > 0])
     x0, x1 = np.floor(xs.min()), np.ceil(xs.max())

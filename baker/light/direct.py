@@ -11,7 +11,8 @@ ray cast:
   light with a size). ``Direct.light_colours`` (L, 3) holds colour × intensity as baked.
 - Emissive triangles (emissiveFactor × emissiveTexture × KHR_materials_emissive_strength, taken
   as emitted radiance) as area lights, sampled in proportion to their power.
-- A uniform or two-colour gradient sky, through cosine-distributed rays that escape the scene.
+- The sky (``sky.Sky``): a uniform or two-colour gradient, through cosine-distributed rays that
+  escape the scene, or an environment image, importance-sampled by the image and the cosine.
 
 Soft shadows: a point/spot light with radius R is a sphere of uniform radiance I / (πR²); it is
 sampled by directions uniform in the cone it subtends, so an unoccluded receiver facing it gets
@@ -57,6 +58,7 @@ from baker.geometry.world import World
 from baker.gltf.scene import Light, Scene
 from baker.jit import jit
 from baker.light.adaptive import WITHIN, neighbour_mean, pooled_gain
+from baker.light.sky import Sky, sky_of
 from baker.rays.dimensions import EMISSIVE, POWER, SKY, light_dimension
 from baker.rays.sampling import (
     cosine_hemisphere,
@@ -120,7 +122,7 @@ class Sources:
     (radians), 0 for a hard light. samples: (L,) int64 shadow rays per texel (1 when hard, or
     the supersample count when that is more: one ray from each sub-position).
     emitters: the emissive triangles, None when nothing emits. emissive_rays: rays per texel
-    towards them. sky: (2, 3) float64 zenith and horizon radiance, None for no sky. sky_rays.
+    towards them. sky: what the sky sends (``sky.Sky``), None for no sky. sky_rays.
     """
 
     lights: tuple[Light, ...]
@@ -128,7 +130,7 @@ class Sources:
     samples: np.ndarray
     emitters: Emitters | None
     emissive_rays: int
-    sky: np.ndarray | None
+    sky: Sky | None
     sky_rays: int
 
     def light_colours(self) -> np.ndarray:
@@ -216,15 +218,10 @@ def light_sources(scene: Scene, world: World, settings: Resolved) -> Sources:
             size = light.radius if light.radius is not None else settings.light_radius
         spread.append(size)
         samples.append(max(settings.shadow_rays if size > 0 else 1, settings.supersample))
-    sky = None
-    if settings.sky is not None:
-        zenith = np.asarray(settings.sky, np.float64)
-        horizon = zenith if settings.sky_horizon is None else np.asarray(settings.sky_horizon, np.float64)
-        sky = np.stack([zenith, horizon])
     return Sources(lights=tuple(scene.lights), spread=np.asarray(spread, np.float64).reshape(-1),
                    samples=np.asarray(samples, np.int64).reshape(-1),
                    emitters=find_emitters(scene, world), emissive_rays=settings.emissive_rays,
-                   sky=sky, sky_rays=settings.sky_rays)
+                   sky=sky_of(settings), sky_rays=settings.sky_rays)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -492,13 +489,7 @@ def emitter_radiance(scene: Scene, world: World, emitters: Emitters, picked: np.
     return radiance
 
 
-def sky_radiance(sky: np.ndarray, directions: np.ndarray) -> np.ndarray:
-    """Sky radiance (…, 3) in unit directions (…, 3): horizon + (zenith − horizon)·max(0, y)."""
-    up = np.maximum(directions[..., 1:2], 0.0)
-    return sky[1] + (sky[0] - sky[1]) * up
-
-
-def sky_irradiance(sky: np.ndarray, n: int, receivers: Receivers, tracer: Tracer,
+def sky_irradiance(sky: Sky, n: int, receivers: Receivers, tracer: Tracer,
                    seed: int) -> tuple[np.ndarray, np.ndarray]:
     """Irradiance (k, 3) from the sky about the shading normal, and its luminance variance (k,).
 
@@ -506,26 +497,36 @@ def sky_irradiance(sky: np.ndarray, n: int, receivers: Receivers, tracer: Tracer
     (``sampling.hemisphere_normals``: the shading normal, the front face's on flat surfaces),
     those below the front face folded above it (``sampling.fold``), as the obscurance's; a ray
     that meets nothing at any distance sees the sky, so the estimate is π · mean(L_sky(ω) · V(ω)).
+    An image sky draws half of them by the image instead, each weighted by the mixture's
+    density (``Sky.draw``).
     """
     value, _ = sky_samples(sky, n, receivers, tracer, seed)
     return _rgb_mean_and_variance(value)
 
 
-def sky_samples(sky: np.ndarray, n: int, receivers: Receivers, tracer: Tracer,
+def sky_samples(sky: Sky, n: int, receivers: Receivers, tracer: Tracer,
                 seed: int) -> tuple[np.ndarray, np.ndarray]:
     """``sky_irradiance``'s samples (k, n, 3) and the luminance (k, n) each would give
     unoccluded."""
     k = len(receivers.position)
     if k == 0:
         return np.zeros((0, n, 3)), np.zeros((0, n))
-    local = cosine_hemisphere(split_samples(seed, receivers.key, n, SKY))
+    points = split_samples(seed, receivers.key, n, SKY)
     normal = hemisphere_normals(receivers.normal, receivers.geometric)
-    t1, t2 = tangent_frames(normal)
-    directions = folded((local[..., :1] * t1[:, None] + local[..., 1:2] * t2[:, None]
-                         + local[..., 2:] * normal[:, None]).reshape(-1, 3),
-                        np.repeat(normal, n, axis=0), np.repeat(receivers.geometric, n, axis=0))
-    escaped = ~tracer.occluded(receivers.origins(n), directions, np.inf)
-    unoccluded = np.pi * sky_radiance(sky, directions)
+    if sky.is_image:
+        directions, unoccluded = sky.draw(points.reshape(-1, 2), np.repeat(normal, n, axis=0),
+                                          np.repeat(receivers.geometric, n, axis=0))
+    else:
+        local = cosine_hemisphere(points)
+        t1, t2 = tangent_frames(normal)
+        directions = folded((local[..., :1] * t1[:, None] + local[..., 1:2] * t2[:, None]
+                             + local[..., 2:] * normal[:, None]).reshape(-1, 3),
+                            np.repeat(normal, n, axis=0),
+                            np.repeat(receivers.geometric, n, axis=0))
+        unoccluded = np.pi * sky.radiance(directions)
+    live = np.flatnonzero(unoccluded.any(axis=1)) if sky.is_image else slice(None)
+    escaped = np.zeros(k * n, bool)
+    escaped[live] = ~tracer.occluded(receivers.origins(n)[live], directions[live], np.inf)
     return ((unoccluded * escaped[:, None]).reshape(k, n, 3),
             (unoccluded @ LUMINANCE).reshape(k, n))
 

@@ -6,6 +6,7 @@ can see at a glance what the bake will and will not account for.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -173,10 +174,18 @@ def _direct_stages(scene: Scene, sources: Sources | None) -> dict[str, str]:
         f"{len(emitters.triangles)} emissive triangle(s) as area lights, sampled by power, "
         f"{sources.emissive_rays} shadow rays per texel; their own texels hold only the light "
         "they receive (the material adds the emission)")
-    if sources.sky is None:
-        stages["sky"] = "none: no escaping rays (--sky R,G,B adds one)"
+    sky = sources.sky
+    if sky is None:
+        stages["sky"] = "none: no escaping rays (--sky R,G,B or --sky-image FILE adds one)"
+    elif sky.is_image:
+        height, width = sky.image.shape[:2]
+        stages["sky"] = (f"image {sky.source} ({width}×{height}, mean radiance "
+                         f"{_rgb(sky.mean_radiance())}, turned {math.degrees(sky.rotation):g}° "
+                         f"about +Y), {sources.sky_rays} rays per texel, half drawn by the "
+                         "image's brightness and half by the cosine (one-sample MIS); it lights "
+                         "D, I_A and GI's paths alike")
     else:
-        zenith, horizon = sources.sky
+        zenith, horizon = sky.gradient
         shape = "uniform" if np.array_equal(zenith, horizon) else f"gradient to {_rgb(horizon)} at the horizon"
         stages["sky"] = f"radiance {_rgb(zenith)} at the zenith, {shape}, {sources.sky_rays} rays per texel"
     return stages
