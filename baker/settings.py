@@ -115,6 +115,11 @@ class Settings:
         its brightness (light/sky.py); None: none.
     sky_rotation: degrees ``sky_image`` is turned about +Y (right-handed: +Z towards +X).
     sky_intensity: factor on ``sky_image``'s radiance.
+    directional: directional lightmaps for normal-mapped materials: per texel also the
+        irradiance's dominant direction (from every estimator), an extra page per lightmap
+        page that viewers decode with the material's normal map (light/directional.py,
+        docs/directional.md); only with the moz carrier, and only when a baked material has a
+        normal map (``Resolved.directional_pages``).
     mirror_roughness: metals with roughness below this are perfect mirrors (materials.py).
     specular: what an obscurance ray does at a mirror or glass (paper §3.1–3.2): "b" follows
         the reflected/refracted path and applies ρ to its summed length, stopping past d_max
@@ -183,6 +188,7 @@ class Settings:
     sky_image: str | None = None
     sky_rotation: float = 0.0
     sky_intensity: float = 1.0
+    directional: bool = False
     mirror_roughness: float = 0.1
     specular: str = "b"
     translucent: float = 0.5
@@ -293,6 +299,11 @@ class Settings:
                                 f"the {self.carrier} carrier has none",
                                 fix="use --carrier occlusion for visibility alone, or leave out "
                                     "--occlusion")
+        if self.directional and self.carrier != "moz":
+            raise SettingsError(f"directional pages ride beside the MOZ_lightmap (the "
+                                f"BAKER_lightmap_directional extension); the {self.carrier} "
+                                f"carrier has none", fix="add --carrier moz, or leave out "
+                                                         "--directional")
         if self.carrier == "occlusion" and self.baked_lights == "indirect":
             raise SettingsError("the occlusion carrier holds no light, so it has no indirect "
                                 "light to bake", fix="leave out --baked-lights (keep)")
@@ -369,10 +380,14 @@ class Settings:
 
 @dataclass(frozen=True)
 class Resolved(Settings):
-    """Settings with every derived value filled in (no None left but ``ambient``)."""
+    """Settings with every derived value filled in (no None left but ``ambient``).
+
+    directional_pages: ``directional`` was asked and a baked material has a normal map: the
+    estimators keep the light's directions and the output gets directional pages."""
 
     texel_density: float = 0.0
     d_max: float = 0.0
+    directional_pages: bool = False
 
     def as_dict(self) -> dict:
         """The settings as plain JSON-able values, for the report."""
@@ -407,11 +422,13 @@ def quarter_octave(length: float) -> float:
     return 2.0 ** (round(4.0 * math.log2(length)) / 4.0)
 
 
-def resolve(settings: Settings, surface_area: float, diagonal: float) -> Resolved:
+def resolve(settings: Settings, surface_area: float, diagonal: float,
+            normal_maps: bool = False) -> Resolved:
     """Fill in the defaults that depend on the scene.
 
     ``surface_area``: world area of the baked surfaces; ``diagonal``: length of the diagonal of
-    their world bounds. Both in scene units.
+    their world bounds. Both in scene units. ``normal_maps``: some baked material has a normal
+    map (what ``directional`` pages are for).
     """
     settings.check()
     values = {f.name: getattr(settings, f.name) for f in fields(Settings)}
@@ -429,6 +446,7 @@ def resolve(settings: Settings, surface_area: float, diagonal: float) -> Resolve
         values["d_max"] = settings.d_max_fraction * quarter_octave(diagonal) if diagonal > 0 else 1.0
     values["rays"], values["sky_rays"] = (settings.ray_count(settings.rays),
                                           settings.ray_count(settings.sky_rays))
+    values["directional_pages"] = bool(settings.directional and normal_maps)
     if values["sky_image"] is not None:  # a path given as a Path: one type, one fingerprint
         values["sky_image"] = str(values["sky_image"])
     if values["baked_lights"] is None:

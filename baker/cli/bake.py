@@ -183,6 +183,11 @@ def add_parser(commands) -> None:
                      help="also write the visibility (1 = unoccluded) as the core "
                           "occlusionTexture next to the MOZ_lightmap; three.js darkens the "
                           "lightmap by it too (default none)")
+    out.add_argument("--directional", action="store_true",
+                     help="directional lightmaps: an extra page holding each texel's dominant "
+                          "light direction, which baker view and the three.js plugin decode "
+                          "with the material's normal map (BAKER_lightmap_directional, "
+                          "--carrier moz; see docs/directional.md)")
     out.add_argument("--denoise", action="store_true",
                      help="denoise each chart of the lightmap with Intel Open Image Denoise's "
                           "lightmap filter before dilation (needs pip install \"baker[denoise]\"; "

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from baker.geometry.surface import LUMINANCE
-from baker.gltf.materials import material_table
+from baker.gltf.materials import material_table, normal_mapped
 from baker.gltf.scene import Scene
 from baker.light.ambient import Ambient
 from baker.light.direct import Sources
@@ -54,9 +54,10 @@ def _node_label(scene: Scene, node: int) -> str:
 
 
 def make_plan(scene: Scene, ambient: Ambient, rho: str, sources: Sources | None = None,
-              surround: Environment | None = None) -> Plan:
+              surround: Environment | None = None, directional: bool = False) -> Plan:
     """What this bake does with ``scene``; ``sources``: its direct light (direct.light_sources);
-    ``surround``: what rays that meet nothing count, and why (environment.environment)."""
+    ``surround``: what rays that meet nothing count, and why (environment.environment);
+    ``directional``: whether directional lightmaps were asked for."""
     baked, left_out = [], [(s.where, s.reason) for s in scene.skipped]
     for inst in scene.instances:
         prim = scene.primitives[inst.primitive]
@@ -93,6 +94,7 @@ def make_plan(scene: Scene, ambient: Ambient, rho: str, sources: Sources | None 
         stages["escaping rays"] = f"rays that meet nothing within d_max count {surround.reason}"
     stages.update(material_stages(scene))
     stages.update(_direct_stages(scene, sources))
+    stages["directional"] = _directional_stage(scene, directional)
     return Plan(stages=stages, baked=tuple(baked), left_out=tuple(left_out))
 
 
@@ -189,6 +191,24 @@ def _direct_stages(scene: Scene, sources: Sources | None) -> dict[str, str]:
         shape = "uniform" if np.array_equal(zenith, horizon) else f"gradient to {_rgb(horizon)} at the horizon"
         stages["sky"] = f"radiance {_rgb(zenith)} at the zenith, {shape}, {sources.sky_rays} rays per texel"
     return stages
+
+
+def _directional_stage(scene: Scene, asked: bool) -> str:
+    """What ``--directional`` does here: which normal-mapped materials get directional pages,
+    or why there are none."""
+    if not asked:
+        return "off: one irradiance per texel (--directional adds its dominant direction for " \
+               "normal-mapped materials)"
+    mapped = sorted({scene.primitives[inst.primitive].material for inst in scene.instances
+                     if inst.baked and normal_mapped(scene, scene.primitives[inst.primitive]
+                                                     .material)})
+    if not mapped:
+        return "left out: directional pages, the scene has no normal map"
+    names = ", ".join(scene.materials[m].name or f"materials[{scene.materials[m].index}]"
+                      for m in mapped)
+    return (f"per texel the irradiance and its dominant direction from every estimator, one "
+            f"more page per lightmap page (BAKER_lightmap_directional) for {len(mapped)} "
+            f"normal-mapped material(s): {names}")
 
 
 def _rgb(v) -> str:
