@@ -56,9 +56,11 @@ class Study:
     gi: dict | None = None  # obscurances against full GI (``compare_with_gi``)
     sky: tuple[Row, ...] = ()  # an image sky's direct light, as baked and by cosine rays
     # alone (``sky_rows``), against its own reference
+    directional: tuple[Row, ...] = ()  # with directional pages: the obscurance's first
+    # moment U (``light.directional``) of each technique's runs against the reference's
     def slope(self, technique: str, min_rays: int = 16) -> float:
         """Least-squares slope of log RMSE against log rays (−0.5 for plain Monte Carlo)."""
-        rows = [r for r in self.rows + self.sky if r.technique == technique
+        rows = [r for r in self.rows + self.sky + self.directional if r.technique == technique
                 and r.rays >= min_rays and r.rmse > 0]
         x = np.log([r.rays for r in rows])
         y = np.log([r.rmse for r in rows])
@@ -70,10 +72,11 @@ class Study:
         for r in self.rows:
             lines.append(f"{r.technique:<11}{r.rays:>6}{r.seconds:>10.3f}{r.rmse:>12.3e}"
                          f"{r.estimated_rmse:>12.3e}")
-        for r in self.sky:
+        for r in self.sky + self.directional:
             lines.append(f"{r.technique:<11}{r.rays:>6}{r.seconds:>10.3f}{r.rmse:>12.3e}"
                          f"{r.estimated_rmse:>12.3e}")
-        for technique in dict.fromkeys(r.technique for r in self.rows + self.sky):
+        for technique in dict.fromkeys(r.technique for r in self.rows + self.sky
+                                       + self.directional):
             lines.append(f"{technique}: RMSE ∝ rays^{self.slope(technique):.2f}")
         lines.append(f"reference: {self.reference_rays} rays/texel (sobol), "
                      f"{self.reference_seconds:.1f} s, {self.texels:,} texels")
@@ -90,8 +93,9 @@ class Study:
         return {"texels": self.texels, "reference_rays": self.reference_rays, "gi": self.gi,
                 "reference_seconds": self.reference_seconds,
                 "rows": [r.as_dict() for r in self.rows], "sky": [r.as_dict() for r in self.sky],
-                "slopes": {t: self.slope(t)
-                           for t in dict.fromkeys(r.technique for r in self.rows + self.sky)}}
+                "directional": [r.as_dict() for r in self.directional],
+                "slopes": {t: self.slope(t) for t in dict.fromkeys(
+                    r.technique for r in self.rows + self.sky + self.directional)}}
 
 
 def _luminance(done: Computed, terms: Terms) -> np.ndarray:
@@ -127,7 +131,7 @@ def run_study(done: Computed, rays: tuple[int, ...] = DEFAULT_RAYS,
         progress(f"reference: {reference_rays} rays per texel")
     reference_terms, reference_seconds = estimate("sobol", reference_rays)
     reference = _luminance(done, reference_terms)
-    rows = []
+    rows, aims = [], []
     for technique in techniques:
         for count in rays:
             if progress:
@@ -135,7 +139,23 @@ def run_study(done: Computed, rays: tuple[int, ...] = DEFAULT_RAYS,
             terms, seconds = estimate(technique, count)
             rmse = float(np.sqrt(np.mean((_luminance(done, terms) - reference) ** 2)))
             rows.append(Row(technique, count, seconds, rmse, _estimated_rmse(done, terms)))
-    return Study(tuple(rows), len(done.texels), reference_rays, reference_seconds)
+            if len(terms.aim_hit):
+                aims.append(_aim_row(done, technique, count, seconds, terms, reference_terms))
+    return Study(tuple(rows), len(done.texels), reference_rays, reference_seconds,
+                 directional=tuple(aims))
+
+
+def _aim_row(done: Computed, technique: str, count: int, seconds: float, terms: Terms,
+             reference: Terms) -> Row:
+    """A run's row for the obscurance's first moment U (directional pages), in lightmap
+    luminance (× I_A's): the RMS length of its difference from the reference's, and the
+    estimate from the rays' halves (``Terms.aim_errors``)."""
+    r_ave = effective_r_ave(done.ambient, done.settings.rho)
+    scale = float(done.ambient.intensity @ LUMINANCE)
+    gap = (terms.aim(r_ave) - reference.aim(r_ave)) * scale
+    rmse = float(np.sqrt(np.mean(np.sum(gap * gap, axis=1))))
+    return Row(f"U {technique}", count, seconds, rmse,
+               float(np.sqrt(np.mean(terms.aim_errors(r_ave)))) * scale)
 
 
 _COLOURS = {"sobol": (31, 119, 180), "stratified": (255, 127, 14), "random": (44, 160, 44),
@@ -176,7 +196,8 @@ def plot(study: Study, size: tuple[int, int] = (800, 560)) -> bytes:
 
     width, height = size
     left, right, top, bottom = 80, 20, 40, 60
-    rows = [r for r in study.rows + study.sky if r.seconds > 0 and r.rmse > 0]
+    rows = [r for r in study.rows + study.sky + study.directional
+            if r.seconds > 0 and r.rmse > 0]
     xs = np.log10([r.seconds for r in rows])
     ys = np.log10([v for r in rows for v in (r.rmse, r.estimated_rmse) if v > 0])
     x0, x1 = np.floor(xs.min()), np.ceil(xs.max())

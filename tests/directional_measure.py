@@ -25,10 +25,12 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
+import baker
 from baker.geometry.surface import LUMINANCE, SRGB_TO_LINEAR
 from baker.gltf.load import load
 from baker.preview import View, render
 from baker.view import start
+from tests.bakehelp import saved
 
 SIZE = (240, 240)
 BUMPS, TILT = 6, 30.0  # ``bumped_normals``'s defaults
@@ -134,3 +136,50 @@ def relief_correlation(luminance: np.ndarray, base: np.ndarray, pixels: np.ndarr
     if np.ptp(shown) == 0:
         return 0.0
     return float(np.corrcoef(shown, expected)[0, 1])
+
+
+def reliefs(browser, builder, view: View, folder: Path, closed_form, **settings) -> dict:
+    """The plain and the directional bake of ``builder`` (an assets scene with a bumped floor,
+    ``info["floor_size"]``), each in ``baker view`` and ``baker preview``: the reliefs'
+    correlations with ``closed_form(points, normals)`` (``relief_correlation``, over the floor
+    pixels lit in both), the renderers' correlation, and the PNG bytes of both bakes' pages."""
+    source = saved(builder, folder, "scene.glb")
+    shown, report = {}, {}
+    for directional in (False, True):
+        out = folder / f"{'directional' if directional else 'plain'}.glb"
+        result = baker.bake(source, out, baker.Settings(
+            directional=directional, texel_density=24.0, rays=16, ambient=0.0, **settings),
+            state=False)
+        shown[directional], report[directional] = (pictures(browser, out, view,
+                                                            out.with_suffix(".png")),
+                                                   result.report)
+    plain, mapped = shown[False], shown[True]
+    normals = floor_normals(mapped.position, builder.info["floor_size"])
+    closed = closed_form(mapped.position, normals)
+    flat = closed_form(mapped.position, np.broadcast_to([0.0, 1.0, 0.0], normals.shape))
+    pixels = (mapped.floor & plain.floor & (flat > 0.01 * flat.max())
+              & (plain.browser > 2e-3) & (plain.preview > 2e-3))
+    directional = report[True]["directional"]
+    out = {"pixels": int(pixels.sum()),
+           "browser, plain": relief_correlation(plain.browser, plain.browser, pixels, closed,
+                                                flat),
+           "browser": relief_correlation(mapped.browser, plain.browser, pixels, closed, flat),
+           "preview": relief_correlation(mapped.preview, plain.preview, pixels, closed, flat),
+           "browser, against E(n0)": relief_correlation(mapped.browser, flat, pixels, closed,
+                                                        flat),
+           "browser ~ preview": float(np.corrcoef(mapped.browser[pixels],
+                                                  mapped.preview[pixels])[0, 1]),
+           "plain bytes": sum(len(b) for b in page_pngs(folder / "plain.glb")),
+           "directional bytes": directional["png_bytes"] + directional["lightmap_png_bytes"]}
+    print(out)
+    return out
+
+
+def page_pngs(path: Path) -> list[bytes]:
+    """The PNG bytes of every lightmap page image a baked .glb holds."""
+    import pygltflib
+
+    document = pygltflib.GLTF2.load(str(path))
+    blob, views = document.binary_blob(), document.bufferViews
+    return [blob[views[i.bufferView].byteOffset or 0:][:views[i.bufferView].byteLength]
+            for i in document.images if "page" in (i.name or "")]

@@ -21,12 +21,19 @@ import pytest
 
 import baker
 from assets.gltf_builder import box
-from assets.light_scenes import normal_mapped_floor, open_floor
+from assets.light_scenes import normal_mapped_floor, open_floor, window_room
 from baker.atlas.rasterise import flat_pages
 from baker.errors import SettingsError
 from baker.geometry.surface import LUMINANCE
 from baker.light.directional import decode_vectors, fit, shading_factor, uniform_aim
 from tests.bakehelp import computed, saved
+from tests.directional_measure import (
+    page_pngs,
+    point_light,
+    reliefs,
+    top_view,
+    window_light,
+)
 
 import gltf_validator
 from test_browser import browser  # noqa: F401 (the headless Chromium fixture)
@@ -134,18 +141,10 @@ def test_the_output_carries_directional_pages_validator_clean(tmp_path):
     assert document.asset.extras["baker"]["directional_extension"] == "BAKER_lightmap_directional"
     info = result.report["directional"]
     textures = info["png_bytes"] + info["lightmap_png_bytes"]
-    plain_textures = sum(len(b) for b in _images(plain))
-    assert textures == sum(len(b) for b in _images(directional))
+    plain_textures = sum(len(b) for b in page_pngs(plain))
+    assert textures == sum(len(b) for b in page_pngs(directional))
     assert textures <= 2.5 * plain_textures, (textures, plain_textures)
     assert info["aim_rmse_estimate"] > 0
-
-
-def _images(path: Path) -> list[bytes]:
-    document = pygltflib.GLTF2.load(str(path))
-    blob = document.binary_blob()
-    views = document.bufferViews
-    return [blob[views[i.bufferView].byteOffset or 0:][:views[i.bufferView].byteLength]
-            for i in document.images if "page" in (i.name or "")]
 
 
 def _with_box(at: tuple[float, float, float]):
@@ -206,51 +205,18 @@ def test_adaptive_rounds_and_gi_keep_directions(tmp_path):
     assert gi.tally.aim_rmse() > 0
 
 
-def _reliefs(browser, builder, view, folder: Path, closed_form, **settings) -> dict:
-    """The plain and the directional bake of ``builder``, each in ``baker view`` and ``baker
-    preview``: their reliefs' correlations with the closed form (``relief_correlation``, over
-    the pixels of the floor lit in both) and the two renderers' correlation."""
-    from directional_measure import floor_normals, pictures, relief_correlation
-
-    source = saved(builder, folder, "scene.glb")
-    shown = {}
-    for directional in (False, True):
-        out = folder / f"{'directional' if directional else 'plain'}.glb"
-        baker.bake(source, out, baker.Settings(directional=directional, texel_density=24.0,
-                                               rays=16, ambient=0.0, **settings), state=False)
-        shown[directional] = pictures(browser, out, view, out.with_suffix(".png"))
-    plain, mapped = shown[False], shown[True]
-    normals = floor_normals(mapped.position, builder.info["floor_size"])
-    closed = closed_form(mapped.position, normals)
-    flat = closed_form(mapped.position, np.broadcast_to([0.0, 1.0, 0.0], normals.shape))
-    pixels = (mapped.floor & plain.floor & (flat > 0.01 * flat.max())
-              & (plain.browser > 2e-3) & (plain.preview > 2e-3))
-    assert pixels.sum() > 20000
-    out = {"browser, plain": relief_correlation(plain.browser, plain.browser, pixels, closed,
-                                                flat)}
-    for name, picture in (("browser", mapped.browser), ("preview", mapped.preview)):
-        base = plain.browser if name == "browser" else plain.preview
-        out[name] = relief_correlation(picture, base, pixels, closed, flat)
-    out["browser, against E(n0)"] = relief_correlation(mapped.browser, flat, pixels, closed, flat)
-    out["browser ~ preview"] = float(np.corrcoef(mapped.browser[pixels],
-                                                 mapped.preview[pixels])[0, 1])
-    print(out)
-    return out
-
-
 def test_a_point_light_on_a_bumped_floor_in_the_browser(browser, tmp_path):
     """Issue 42's measure under a point light: ``baker view`` (three.js and our plugin, in
     headless Chromium) shows the bumps as the closed form I·(n·l)/r² has them, per pixel
     (relief correlation ≥ 0.95; measured 0.9997), where the plain lightmap's face is flat
     (its relief does not vary: 0); ``baker preview`` computes the same pixels (≥ 0.999)."""
-    from directional_measure import point_light, top_view
-
-    found = _reliefs(browser, normal_mapped_floor(), top_view(2.6), tmp_path,
+    found = reliefs(browser, normal_mapped_floor(), top_view(2.6), tmp_path,
                      lambda p, n: point_light(p, n, (1.2, 1.0, 0.3), 4.0))
     assert found["browser, plain"] == 0.0
     assert found["browser"] >= 0.95 and found["preview"] >= 0.95
     assert found["browser, against E(n0)"] >= 0.95
     assert found["browser ~ preview"] >= 0.999
+    assert found["directional bytes"] <= 2.5 * found["plain bytes"], found
 
 
 @pytest.mark.long
@@ -259,13 +225,25 @@ def test_a_window_on_a_bumped_floor_in_the_browser(browser, tmp_path):
     one wall, whose light at a normal n is L·n·Φ (Lambert's polygon). The relief over the plain
     bake's picture, where the lightmap's noise cancels, ≥ 0.95 (measured 0.999); over the
     closed form at n₀ the sky's 256 rays' noise stays in (0.91)."""
-    from assets.light_scenes import window_room
-    from directional_measure import top_view, window_light
-
     room = window_room()
-    found = _reliefs(browser, room, top_view(5.5, fov=40.0), tmp_path,
+    found = reliefs(browser, room, top_view(5.5, fov=40.0), tmp_path,
                      lambda p, n: window_light(p, n, room.info["window"], 1.0),
                      sky=(1.0, 1.0, 1.0), sky_rays=256)
     assert found["browser, plain"] == 0.0
     assert found["browser"] >= 0.95 and found["preview"] >= 0.95
     assert found["browser ~ preview"] >= 0.999
+
+
+def test_the_study_measures_the_directions(tmp_path):
+    """``baker study --directional``: the obscurance's first moment U of each run against the
+    reference's, falling with the rays, its halves' estimate tracking it."""
+    from baker.study import run_study
+
+    b = _with_box((0.0, 0.15, 0.0))
+    done = computed(b, tmp_path, texel_density=8.0, rays=1, page_size=64, directional=True)
+    study = run_study(done, (16, 64, 256), ("sobol",), reference_rays=2048)
+    rows = {r.rays: r for r in study.directional}
+    assert set(rows) == {16, 64, 256} and rows[256].rmse < rows[16].rmse / 3
+    for row in rows.values():
+        assert 0.5 < row.estimated_rmse / row.rmse < 2.0, row
+    assert "U sobol" in study.table()

@@ -43,6 +43,10 @@ def add_parser(commands) -> None:
                        help="turn --sky-image about +Y (default 0)")
     study.add_argument("--sky-intensity", type=float, default=1.0, metavar="F",
                        help="factor on --sky-image's radiance (default 1)")
+    study.add_argument("--directional", action="store_true",
+                       help="keep the directions too (--directional): add the rows of the "
+                            "obscurance's first moment U for each technique (the scene needs "
+                            "a normal-mapped material)")
     study.add_argument("--plot", type=Path, metavar="PNG", help="write the plot here")
     study.add_argument("--json", type=Path, metavar="FILE", help="write the table as JSON")
     add_debug(study)
@@ -57,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
 
     settings = baker.Settings(page_size=args.page_size, d_max=args.d_max, rays=1, sky_rays=1,
                               sky_image=args.sky_image, sky_rotation=args.sky_rotation,
-                              sky_intensity=args.sky_intensity)
+                              sky_intensity=args.sky_intensity, directional=args.directional)
     done = compute(load(args.scene), settings)
     result = run_study(done, tuple(args.rays), tuple(args.techniques), args.reference_rays,
                        progress=lambda text: print(f"  {text}", flush=True))
