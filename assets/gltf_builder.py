@@ -145,6 +145,8 @@ class GltfBuilder:
         alpha_mode: str = "OPAQUE",
         alpha_cutoff: float | None = None,
         base_color_image: np.ndarray | None = None,
+        normal_image: np.ndarray | None = None,
+        normal_scale: float | None = None,
         extensions: dict[str, Any] | None = None,
     ) -> int:
         """Add a metallic-roughness material; return its index.
@@ -152,7 +154,9 @@ class GltfBuilder:
         ``base_color``: linear RGB or RGBA factor (alpha 1 if omitted). ``emissive``: linear RGB
         factor in [0, 1]; ``emissive_strength`` multiplies it via KHR_materials_emissive_strength.
         ``base_color_image``: (h, w, 3|4) uint8 sRGB pixels, row 0 at the top (v = 0), sampled from
-        TEXCOORD_0 and multiplied by the factor. ``extensions``: extra material extensions
+        TEXCOORD_0 and multiplied by the factor. ``normal_image``: (h, w, 3) uint8 tangent-space
+        normals (0.5 + 0.5·n per channel, glTF's +X right, +Y up in the image) as the
+        ``normalTexture`` on TEXCOORD_0, with ``normal_scale``. ``extensions``: extra material extensions
         ({"KHR_materials_transmission": {...}, ...}), recorded in extensionsUsed.
         """
         color = [float(c) for c in base_color]
@@ -176,6 +180,10 @@ class GltfBuilder:
         )
         if alpha_cutoff is not None:
             mat.alphaCutoff = float(alpha_cutoff)
+        if normal_image is not None:
+            mat.normalTexture = pygltflib.NormalMaterialTexture(
+                index=self._image_texture(normal_image, f"{name} normals"),
+                scale=None if normal_scale is None else float(normal_scale))
         exts: dict[str, Any] = {}
         if emissive_strength is not None:
             exts["KHR_materials_emissive_strength"] = {"emissiveStrength": float(emissive_strength)}
@@ -199,13 +207,15 @@ class GltfBuilder:
         uv1: np.ndarray | None = None,
         colors: np.ndarray | None = None,
         material: int | None = None,
+        tangents: np.ndarray | None = None,
     ) -> int:
         """Add a mesh of one triangle primitive; return its index.
 
         ``positions`` (n, 3) metres, ``triangles`` (m, 3) vertex indices (zero-area triangles are
         kept), ``normals`` (n, 3) unit vectors or None (omitted: readers use flat normals),
         ``uv0``/``uv1`` (n, 2) glTF UV space (v = 0 at the image top), ``colors`` (n, 3|4) linear
-        floats written as COLOR_0, ``material`` a material index or None (glTF default material).
+        floats written as COLOR_0, ``material`` a material index or None (glTF default material),
+        ``tangents`` (n, 4) glTF TANGENT (xyz along +u, w the bitangent's sign) or None.
         """
         positions = np.asarray(positions, dtype=np.float64)
         triangles = np.asarray(triangles)
@@ -222,6 +232,7 @@ class GltfBuilder:
             ("TEXCOORD_0", uv0, (2,)),
             ("TEXCOORD_1", uv1, (2,)),
             ("COLOR_0", colors, (3, 4)),
+            ("TANGENT", tangents, (4,)),
         ):
             if values is None:
                 continue

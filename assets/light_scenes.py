@@ -12,7 +12,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from assets.gltf_builder import GltfBuilder, box, quad, rotation_matrix, transformed
+from assets.gltf_builder import GltfBuilder, box, box_face, quad, rotation_matrix, transformed
 
 FLOOR_ALBEDO = (0.5, 0.5, 0.5)
 
@@ -121,4 +121,78 @@ def floor_under_box() -> GltfBuilder:
            translation=(0.0, -0.01, 0.0))
     b.node("box", b.shape_mesh("box", box((0.6, 0.6, 0.6)), material=grey),
            translation=(0.0, 0.3, 0.0))
+    return b
+
+
+def facing_walls(side: float = 1.0, gap: float = 4.0) -> GltfBuilder:
+    """Two upright panels facing away from each other, +X (node ``east``) and −X (``west``),
+    ``gap`` apart, so that neither sees the other (for an image sky's closed forms)."""
+    b = GltfBuilder()
+    grey = b.material("grey", FLOOR_ALBEDO)
+    for name, degrees, x in (("east", -90.0, gap / 2), ("west", 90.0, -gap / 2)):
+        wall = transformed(quad(side, side), rotation=rotation_matrix((0, 0, 1), degrees))
+        b.info[name] = b.node(name, b.shape_mesh(name, wall, material=grey),
+                              translation=(x, 0.0, 0.0))
+    return b
+
+
+def bumped_normals(size: int = 256, bumps: int = 6, tilt_degrees: float = 30.0) -> np.ndarray:
+    """(size, size, 3) uint8 tangent-space normals of a field of ``bumps``² round bumps and dips
+    (height sin(2πk·u)·sin(2πk·v)), tilted up to about ``tilt_degrees`` both across u (+X of
+    the normal) and up the image (+Y): glTF's encoding 0.5 + 0.5·n, row 0 at the image top."""
+    u = (np.arange(size) + 0.5) / size
+    slope = np.tan(np.radians(tilt_degrees))
+    su, cu = np.sin(2 * np.pi * bumps * u), np.cos(2 * np.pi * bumps * u)
+    dx = slope * cu[None, :] * su[:, None]  # ∂h/∂u, the image's x
+    dy = -slope * su[None, :] * cu[:, None]  # ∂h/∂(−v): up the image
+    n = np.stack([-dx, -dy, np.ones_like(dx)], axis=-1)
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    return np.round(255.0 * (0.5 + 0.5 * n)).astype(np.uint8)
+
+
+def normal_mapped_floor(kind: str = "point", size: float = 2.0, intensity: float = 4.0,
+                        position: Sequence[float] = (1.2, 1.0, 0.3),
+                        direction: Sequence[float] = (-0.6, -0.8, 0.0)) -> GltfBuilder:
+    """A white floor (its UVs: u along +Z, the image's up along +X; TANGENT given) whose
+    material has a bumpy normal map (``bumped_normals``), lit by one light (point at
+    ``position``, or directional along ``direction``): what directional lightmaps are for."""
+    b = GltfBuilder()
+    white = b.material("bumped", (0.8, 0.8, 0.8), normal_image=bumped_normals())
+    positions, triangles, normals, uv = box_face((size, 0.0, size), "+y")
+    tangents = np.tile([0.0, 0.0, 1.0, 1.0], (len(positions), 1))
+    b.info["floor"] = b.node("floor", b.mesh("floor", positions, triangles, normals=normals,
+                                             uv0=uv, material=white, tangents=tangents))
+    b.info["floor_size"] = size
+    _add_light(b, kind, position, direction, intensity=intensity)
+    return b
+
+
+def window_room(size: float = 4.0, height: float = 2.5,
+                window: tuple[float, float, float, float] = (-0.8, 0.8, 1.0, 2.2)) -> GltfBuilder:
+    """A closed room (``size`` square, ``height`` high, walls seen from inside) with one window
+    opening in its +X wall (z from window[0] to window[1], y from window[2] to window[3]) and the
+    bumped floor of ``normal_mapped_floor``: with a sky, the floor is lit through the window.
+    ``info["window"]`` holds the opening's corners (4, 3), counter-clockwise seen from inside."""
+    b = GltfBuilder()
+    grey = b.material("wall", (0.6, 0.6, 0.6))
+    bumped = b.material("bumped", (0.8, 0.8, 0.8), normal_image=bumped_normals())
+    half = size / 2
+    positions, triangles, normals, uv = box_face((size, 0.0, size), "+y")
+    tangents = np.tile([0.0, 0.0, 1.0, 1.0], (len(positions), 1))
+    b.info["floor"] = b.node("floor", b.mesh("floor", positions, triangles, normals=normals,
+                                             uv0=uv, material=bumped, tangents=tangents))
+    shell = box((size, height, size), inward=True, faces=("-x", "+y", "+z", "-z"))
+    b.node("walls", b.shape_mesh("walls", shell, material=grey), translation=(0.0, height / 2, 0.0))
+    z0, z1, y0, y1 = window
+    pieces = [(-half, z0, 0.0, height), (z1, half, 0.0, height), (z0, z1, 0.0, y0),
+              (z0, z1, y1, height)]  # the +X wall around the opening, facing −X
+    for k, (za, zb, ya, yb) in enumerate(pieces):
+        corners = np.array([[half, ya, za], [half, ya, zb], [half, yb, zb], [half, yb, za]])
+        b.node(f"window wall {k}", b.mesh(f"window wall {k}", corners,
+                                          np.array([[0, 1, 2], [0, 2, 3]]),
+                                          normals=np.tile([-1.0, 0.0, 0.0], (4, 1)),
+                                          uv0=np.array([[0, 1], [1, 1], [1, 0], [0, 0]], float),
+                                          material=grey))
+    b.info["floor_size"] = size
+    b.info["window"] = np.array([[half, y0, z0], [half, y0, z1], [half, y1, z1], [half, y1, z0]])
     return b

@@ -22,7 +22,7 @@ from baker.image.encode import encode
 from baker.image.errormap import write_error_maps
 from baker.image.hdr import check_format, page_file
 from baker.light.gi import MAX_BOUNCES
-from baker.output.write import WriteOptions, image_file_name, write
+from baker.output.write import DIRECTIONAL_EXTENSION, WriteOptions, image_file_name, write
 from baker.pipeline import cluster
 from baker.pipeline.full import compute, timed, writes_occlusion
 from baker.pipeline.input_warnings import input_warnings
@@ -282,7 +282,26 @@ def _report(input_path: Path, output: Path, done, info, pages, times: dict[str, 
         "rebake": rebake,
         **({"foliage": done.foliage.report()} if done.foliage is not None else {}),
         **({"gi": gi_report(done.tally)} if done.settings.method == "gi" else {}),
+        **({"directional": directional_report(done, pages)}
+           if done.settings.directional else {}),
+        **({"sky": done.sources.sky.report()}
+           if done.sources is not None and done.sources.sky is not None else {}),
     }
+
+
+def directional_report(done, pages) -> dict:
+    """What ``--directional`` gave: whether pages were written (a baked material has a normal
+    map), the extension, the RMS standard error of the texels' first moment U
+    (``light.directional``, lightmap luminance units) and the pages' PNG bytes against the
+    irradiance pages'."""
+    written = done.settings.directional_pages
+    out = {"pages": written, "extension": DIRECTIONAL_EXTENSION if written else None,
+           "reason": done.plan.stages.get("directional", "")}
+    if written:
+        out.update({"aim_rmse_estimate": done.tally.aim_rmse(),
+                    "png_bytes": sum(len(p.direction_png or b"") for p in pages),
+                    "lightmap_png_bytes": sum(len(p.png) for p in pages)})
+    return out
 
 
 def gi_report(tally) -> dict:

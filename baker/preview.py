@@ -46,6 +46,8 @@ from baker.geometry.world import World, build_world
 from baker.gltf.load import _Context, _decode_image, load, resolve_buffers, trs_matrices
 from baker.gltf.scene import Scene
 from baker.image.encode import linear_to_srgb, png_bytes
+from baker.light.directional import decode_vectors, shading_factor, texel_vectors
+from baker.output.write import DIRECTIONAL_EXTENSION
 from baker.rays.trace import Tracer
 from baker.run.atomic import write_atomically
 from baker.settings import PREVIEW_MODES
@@ -84,13 +86,33 @@ class SceneLightmaps:
     pages: list of (h, w, 3) float64 linear pages, intensity already applied. page: (T,) int64
     index into ``pages`` per world triangle, −1 where the triangle has no lightmap. uv: (T, 3, 2)
     float64 lightmap UV of each triangle's corners, in ``World.triangles`` corner order.
-    encoding: the encoding the pages were decoded with.
+    encoding: the encoding the pages were decoded with. directional: the triangles' directional
+    pages and normal maps (``Directional``), None when no material has both.
     """
 
     pages: list[np.ndarray]
     page: np.ndarray
     uv: np.ndarray
     encoding: str
+    directional: "Directional | None" = None
+
+
+@dataclass(frozen=True)
+class Directional:
+    """What the decode of directional pages needs (``light.directional``), per world triangle.
+
+    pages: (h, w, 3) float64 h of each directional page; page: (T,) int64 index into them (−1:
+    none, the triangle shades as a plain lightmap). normal_maps: (h, w, 3) float64 tangent-space
+    normals (texel/255·2 − 1) of each normal texture; normal_map: (T,) int64 index into them;
+    normal_uv: (T, 3, 2) its UVs at the triangle's corners; normal_scale: (T,) its scale.
+    """
+
+    pages: list[np.ndarray]
+    page: np.ndarray
+    normal_maps: list[np.ndarray]
+    normal_map: np.ndarray
+    normal_uv: np.ndarray
+    normal_scale: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -237,11 +259,13 @@ def read_lightmaps(scene: Scene, world: World) -> SceneLightmaps:
     count = len(world.triangles)
     tri_page = np.full(count, -1, np.int64)
     tri_uv = np.zeros((count, 3, 2))
+    directional = _DirectionalReader(ctx, count)
     for i, inst in enumerate(scene.instances):
         prim = scene.primitives[inst.primitive]
         found = _carried_texture(document, scene.materials[prim.material], carrier, encoding)
         if found is None or found[1] >= len(prim.texcoords):
             continue
+        directional.add(scene, world, i, found[1])
         texture, texcoord, scale, curve, red = found
         source = document.textures[texture].source
         key = (source, scale, curve, red)
@@ -261,7 +285,56 @@ def read_lightmaps(scene: Scene, world: World) -> SceneLightmaps:
                          file=str(scene.path),
                          fix="bake it first: baker bake SCENE -o SCENE_baked.glb, then preview "
                              "the baked file")
-    return SceneLightmaps(pages=pages, page=tri_page, uv=tri_uv, encoding=encoding)
+    return SceneLightmaps(pages=pages, page=tri_page, uv=tri_uv, encoding=encoding,
+                          directional=directional.made())
+
+
+class _DirectionalReader:
+    """Gathers ``Directional`` instance by instance (``read_lightmaps``)."""
+
+    def __init__(self, ctx, count: int):
+        self.ctx = ctx
+        self.pages: dict[int, int] = {}  # image index → row of ``Directional.pages``
+        self.normals: dict[int, int] = {}
+        self.page, self.normal_map = np.full(count, -1, np.int64), np.full(count, -1, np.int64)
+        self.normal_uv, self.normal_scale = np.zeros((count, 3, 2)), np.ones(count)
+        self.images: list[np.ndarray] = []
+        self.maps: list[np.ndarray] = []
+
+    def add(self, scene: Scene, world: World, instance: int, lightmap_uv: int) -> None:
+        """The directional page and the normal map of ``instance``'s material, when it has
+        both (``BAKER_lightmap_directional`` on the lightmap's UV set, a normalTexture)."""
+        prim = scene.primitives[scene.instances[instance].primitive]
+        index = scene.materials[prim.material].index
+        if index is None:
+            return
+        gltf = self.ctx.document.materials[index]
+        ext = (gltf.extensions or {}).get(DIRECTIONAL_EXTENSION)
+        normal = gltf.normalTexture
+        if not isinstance(ext, dict) or ext.get("index") is None or normal is None:
+            return
+        texcoord = int(normal.texCoord or 0)
+        if texcoord >= len(prim.texcoords):
+            return
+        tris = world.instance_triangles(instance)
+        local = world.triangles[tris] - world.vertex_start[instance]
+        self.page[tris] = self._image(self.pages, self.images, ext["index"], texel_vectors)
+        self.normal_map[tris] = self._image(self.normals, self.maps, normal.index, texel_vectors)
+        self.normal_uv[tris] = prim.texcoords[texcoord][local]
+        self.normal_scale[tris] = 1.0 if normal.scale is None else float(normal.scale)
+
+    def _image(self, seen: dict, out: list, texture: int, decode) -> int:
+        source = self.ctx.document.textures[texture].source
+        if source not in seen:
+            out.append(decode(_decode_image(self.ctx, source)[..., :3]))
+            seen[source] = len(out) - 1
+        return seen[source]
+
+    def made(self) -> Directional | None:
+        if not self.images:
+            return None
+        return Directional(self.images, self.page, self.maps, self.normal_map, self.normal_uv,
+                           self.normal_scale)
 
 
 def _carried_texture(document, material, carrier: str, encoding: str):
@@ -448,6 +521,8 @@ def _shade(scene: Scene, world: World, lightmaps: SceneLightmaps, mode: str, tri
         else:
             shape = np.array(lightmaps.pages[p].shape[1::-1], np.float64)
             light[on] = sample_bilinear(lightmaps.pages[p], texel[on] / shape)
+    if mode != "checker" and lightmaps.directional is not None:
+        light *= _directional_factor(world, lightmaps, tris, b, texel)[:, None]
     cosine = np.abs(np.einsum("kj,kj->k", world.geometric_normals(tris), directions[hit]))
     level = (light[baked] @ LUMINANCE).mean() if baked.any() else 1.0
     if mode == "checker":
@@ -470,6 +545,62 @@ def _shade(scene: Scene, world: World, lightmaps: SceneLightmaps, mode: str, tri
     lightmapped = np.zeros(n, bool)
     lightmapped[hit[baked]] = True
     return radiance, lightmapped, from_lightmap
+
+
+def _directional_factor(world: World, lightmaps: SceneLightmaps, tris: np.ndarray,
+                        bary: np.ndarray, texel: np.ndarray) -> np.ndarray:
+    """(k,) what directional pages do to the lightmap at barycentric points ``bary`` (k, 3)
+    of ``tris`` (k,), at lightmap texel positions ``texel`` (k, 2): the factor
+    max(0, 1 + (n − n₀)·g) (``light.directional.shading_factor``), 1 where a triangle has no
+    directional page. n₀ is the interpolated vertex normal; n the normal map's, in a tangent
+    frame from the normal texture's UVs (T along +u, the bitangent towards the image's top, as
+    MikkTSpace tangents and three.js without them have it)."""
+    directional = lightmaps.directional
+    out = np.ones(len(tris))
+    on = np.flatnonzero(directional.page[tris] >= 0)
+    if not len(on):
+        return out
+    t, w = tris[on], bary[on]
+    base = np.einsum("kc,kcj->kj", w, world.normals[world.triangles[t]])
+    base /= np.maximum(np.linalg.norm(base, axis=1, keepdims=True), 1e-300)
+    tangent, bitangent = _tangent_frames(world, directional.normal_uv[t], t, base)
+    mapped = np.zeros((len(on), 3))
+    g = np.zeros((len(on), 3))
+    uv = np.einsum("kc,kcj->kj", w, directional.normal_uv[t])
+    page = lightmaps.page[t]
+    for m in np.unique(directional.normal_map[t]):
+        mine = directional.normal_map[t] == m
+        mapped[mine] = sample_bilinear(directional.normal_maps[m], uv[mine] % 1.0)
+    for p in np.unique(directional.page[t]):
+        mine = directional.page[t] == p
+        shape = np.array(lightmaps.pages[page[mine][0]].shape[1::-1], np.float64)
+        g[mine] = decode_vectors(sample_bilinear(directional.pages[p], texel[on][mine] / shape))
+    scale = directional.normal_scale[t][:, None]
+    normal = (mapped[:, :1] * scale * tangent + mapped[:, 1:2] * scale * bitangent
+              + mapped[:, 2:] * base)
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+    out[on] = shading_factor(normal, base, g)
+    return out
+
+
+def _tangent_frames(world: World, uv: np.ndarray, tris: np.ndarray,
+                    normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit tangents and bitangents (k, 3) at unit ``normals`` (k, 3) of triangles ``tris``
+    (k,) with UVs ``uv`` (k, 3, 2) at their corners: T = ∂P/∂u made normal to n, the bitangent
+    n × T, turned to point where v decreases (the image's top)."""
+    a, b, c = world.corners(tris)
+    e1, e2 = b - a, c - a
+    du1, dv1 = uv[:, 1, 0] - uv[:, 0, 0], uv[:, 1, 1] - uv[:, 0, 1]
+    du2, dv2 = uv[:, 2, 0] - uv[:, 0, 0], uv[:, 2, 1] - uv[:, 0, 1]
+    det = du1 * dv2 - du2 * dv1
+    det = np.where(np.abs(det) > 1e-300, det, 1e-300)
+    along_u = (e1 * dv2[:, None] - e2 * dv1[:, None]) / det[:, None]
+    along_v = (e2 * du1[:, None] - e1 * du2[:, None]) / det[:, None]
+    tangent = along_u - normals * np.einsum("kj,kj->k", along_u, normals)[:, None]
+    tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-300)
+    bitangent = np.cross(normals, tangent)
+    up = np.where(np.einsum("kj,kj->k", bitangent, along_v) > 0, -1.0, 1.0)
+    return tangent, bitangent * up[:, None]
 
 
 def preview(input: str | os.PathLike, output: str | os.PathLike, mode: str = "lit",

@@ -110,6 +110,16 @@ class Settings:
         the elevation up to ``sky`` at the zenith; None: a uniform sky.
     sky_rays: rays per texel that look for the sky (escaping the scene entirely); None:
         ``ray_default``.
+    sky_image: an equirectangular panorama (``.hdr`` or ``.exr``, linear radiance, +Y up,
+        three.js's layout) to light the scene with instead of ``sky``, importance-sampled by
+        its brightness (light/sky.py); None: none.
+    sky_rotation: degrees ``sky_image`` is turned about +Y (right-handed: +Z towards +X).
+    sky_intensity: factor on ``sky_image``'s radiance.
+    directional: directional lightmaps for normal-mapped materials: per texel also the
+        irradiance's dominant direction (from every estimator), an extra page per lightmap
+        page that viewers decode with the material's normal map (light/directional.py,
+        docs/directional.md); only with the moz carrier, and only when a baked material has a
+        normal map (``Resolved.directional_pages``).
     mirror_roughness: metals with roughness below this are perfect mirrors (materials.py).
     specular: what an obscurance ray does at a mirror or glass (paper §3.1–3.2): "b" follows
         the reflected/refracted path and applies ρ to its summed length, stopping past d_max
@@ -175,6 +185,10 @@ class Settings:
     sky: tuple[float, float, float] | None = None
     sky_horizon: tuple[float, float, float] | None = None
     sky_rays: int | None = None
+    sky_image: str | None = None
+    sky_rotation: float = 0.0
+    sky_intensity: float = 1.0
+    directional: bool = False
     mirror_roughness: float = 0.1
     specular: str = "b"
     translucent: float = 0.5
@@ -285,6 +299,11 @@ class Settings:
                                 f"the {self.carrier} carrier has none",
                                 fix="use --carrier occlusion for visibility alone, or leave out "
                                     "--occlusion")
+        if self.directional and self.carrier != "moz":
+            raise SettingsError(f"directional pages ride beside the MOZ_lightmap (the "
+                                f"BAKER_lightmap_directional extension); the {self.carrier} "
+                                f"carrier has none", fix="add --carrier moz, or leave out "
+                                                         "--directional")
         if self.carrier == "occlusion" and self.baked_lights == "indirect":
             raise SettingsError("the occlusion carrier holds no light, so it has no indirect "
                                 "light to bake", fix="leave out --baked-lights (keep)")
@@ -341,14 +360,34 @@ class Settings:
         if self.sky_horizon is not None and self.sky is None:
             raise SettingsError("sky_horizon needs sky (the zenith colour) too",
                                 fix="add --sky R,G,B, or leave out --sky-horizon")
+        self._check_sky_image()
+
+    def _check_sky_image(self) -> None:
+        """A sky image alone (no colour sky beside it), its rotation finite and its intensity
+        finite and ≥ 0."""
+        for name, value, least in (("sky_rotation", self.sky_rotation, -math.inf),
+                                   ("sky_intensity", self.sky_intensity, 0.0)):
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= least):
+                low = "" if least == -math.inf else " ≥ 0"
+                raise SettingsError(f"{name} must be a finite number{low}, not {value!r}",
+                                    fix=f"give --{name.replace('_', '-')} a value such as "
+                                        f"{'90' if name == 'sky_rotation' else '1'}")
+        if self.sky_image is not None and self.sky is not None:
+            raise SettingsError("a sky image and a sky colour were both given: the image is "
+                                "the sky", fix="leave out --sky (and --sky-horizon), or "
+                                               "--sky-image")
 
 
 @dataclass(frozen=True)
 class Resolved(Settings):
-    """Settings with every derived value filled in (no None left but ``ambient``)."""
+    """Settings with every derived value filled in (no None left but ``ambient``).
+
+    directional_pages: ``directional`` was asked and a baked material has a normal map: the
+    estimators keep the light's directions and the output gets directional pages."""
 
     texel_density: float = 0.0
     d_max: float = 0.0
+    directional_pages: bool = False
 
     def as_dict(self) -> dict:
         """The settings as plain JSON-able values, for the report."""
@@ -383,11 +422,13 @@ def quarter_octave(length: float) -> float:
     return 2.0 ** (round(4.0 * math.log2(length)) / 4.0)
 
 
-def resolve(settings: Settings, surface_area: float, diagonal: float) -> Resolved:
+def resolve(settings: Settings, surface_area: float, diagonal: float,
+            normal_maps: bool = False) -> Resolved:
     """Fill in the defaults that depend on the scene.
 
     ``surface_area``: world area of the baked surfaces; ``diagonal``: length of the diagonal of
-    their world bounds. Both in scene units.
+    their world bounds. Both in scene units. ``normal_maps``: some baked material has a normal
+    map (what ``directional`` pages are for).
     """
     settings.check()
     values = {f.name: getattr(settings, f.name) for f in fields(Settings)}
@@ -405,6 +446,9 @@ def resolve(settings: Settings, surface_area: float, diagonal: float) -> Resolve
         values["d_max"] = settings.d_max_fraction * quarter_octave(diagonal) if diagonal > 0 else 1.0
     values["rays"], values["sky_rays"] = (settings.ray_count(settings.rays),
                                           settings.ray_count(settings.sky_rays))
+    values["directional_pages"] = bool(settings.directional and normal_maps)
+    if values["sky_image"] is not None:  # a path given as a Path: one type, one fingerprint
+        values["sky_image"] = str(values["sky_image"])
     if values["baked_lights"] is None:
         values["baked_lights"] = "keep" if settings.carrier == "occlusion" else "remove"
     if values["encoding"] is None:

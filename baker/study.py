@@ -54,11 +54,14 @@ class Study:
     reference_rays: int
     reference_seconds: float
     gi: dict | None = None  # obscurances against full GI (``compare_with_gi``)
-
+    sky: tuple[Row, ...] = ()  # an image sky's direct light, as baked and by cosine rays
+    # alone (``sky_rows``), against its own reference
+    directional: tuple[Row, ...] = ()  # with directional pages: the obscurance's first
+    # moment U (``light.directional``) of each technique's runs against the reference's
     def slope(self, technique: str, min_rays: int = 16) -> float:
         """Least-squares slope of log RMSE against log rays (−0.5 for plain Monte Carlo)."""
-        rows = [r for r in self.rows if r.technique == technique and r.rays >= min_rays
-                and r.rmse > 0]
+        rows = [r for r in self.rows + self.sky + self.directional if r.technique == technique
+                and r.rays >= min_rays and r.rmse > 0]
         x = np.log([r.rays for r in rows])
         y = np.log([r.rmse for r in rows])
         return float(np.polyfit(x, y, 1)[0])
@@ -69,7 +72,11 @@ class Study:
         for r in self.rows:
             lines.append(f"{r.technique:<11}{r.rays:>6}{r.seconds:>10.3f}{r.rmse:>12.3e}"
                          f"{r.estimated_rmse:>12.3e}")
-        for technique in dict.fromkeys(r.technique for r in self.rows):
+        for r in self.sky + self.directional:
+            lines.append(f"{r.technique:<11}{r.rays:>6}{r.seconds:>10.3f}{r.rmse:>12.3e}"
+                         f"{r.estimated_rmse:>12.3e}")
+        for technique in dict.fromkeys(r.technique for r in self.rows + self.sky
+                                       + self.directional):
             lines.append(f"{technique}: RMSE ∝ rays^{self.slope(technique):.2f}")
         lines.append(f"reference: {self.reference_rays} rays/texel (sobol), "
                      f"{self.reference_seconds:.1f} s, {self.texels:,} texels")
@@ -85,8 +92,10 @@ class Study:
     def as_dict(self) -> dict:
         return {"texels": self.texels, "reference_rays": self.reference_rays, "gi": self.gi,
                 "reference_seconds": self.reference_seconds,
-                "rows": [r.as_dict() for r in self.rows],
-                "slopes": {t: self.slope(t) for t in dict.fromkeys(r.technique for r in self.rows)}}
+                "rows": [r.as_dict() for r in self.rows], "sky": [r.as_dict() for r in self.sky],
+                "directional": [r.as_dict() for r in self.directional],
+                "slopes": {t: self.slope(t) for t in dict.fromkeys(
+                    r.technique for r in self.rows + self.sky + self.directional)}}
 
 
 def _luminance(done: Computed, terms: Terms) -> np.ndarray:
@@ -122,7 +131,7 @@ def run_study(done: Computed, rays: tuple[int, ...] = DEFAULT_RAYS,
         progress(f"reference: {reference_rays} rays per texel")
     reference_terms, reference_seconds = estimate("sobol", reference_rays)
     reference = _luminance(done, reference_terms)
-    rows = []
+    rows, aims = [], []
     for technique in techniques:
         for count in rays:
             if progress:
@@ -130,11 +139,55 @@ def run_study(done: Computed, rays: tuple[int, ...] = DEFAULT_RAYS,
             terms, seconds = estimate(technique, count)
             rmse = float(np.sqrt(np.mean((_luminance(done, terms) - reference) ** 2)))
             rows.append(Row(technique, count, seconds, rmse, _estimated_rmse(done, terms)))
-    return Study(tuple(rows), len(done.texels), reference_rays, reference_seconds)
+            if len(terms.aim_hit):
+                aims.append(_aim_row(done, technique, count, seconds, terms, reference_terms))
+    return Study(tuple(rows), len(done.texels), reference_rays, reference_seconds,
+                 directional=tuple(aims))
+
+
+def _aim_row(done: Computed, technique: str, count: int, seconds: float, terms: Terms,
+             reference: Terms) -> Row:
+    """A run's row for the obscurance's first moment U (directional pages), in lightmap
+    luminance (× I_A's): the RMS length of its difference from the reference's, and the
+    estimate from the rays' halves (``Terms.aim_errors``)."""
+    r_ave = effective_r_ave(done.ambient, done.settings.rho)
+    scale = float(done.ambient.intensity @ LUMINANCE)
+    gap = (terms.aim(r_ave) - reference.aim(r_ave)) * scale
+    rmse = float(np.sqrt(np.mean(np.sum(gap * gap, axis=1))))
+    return Row(f"U {technique}", count, seconds, rmse,
+               float(np.sqrt(np.mean(terms.aim_errors(r_ave)))) * scale)
 
 
 _COLOURS = {"sobol": (31, 119, 180), "stratified": (255, 127, 14), "random": (44, 160, 44),
-            "gi": (214, 39, 40)}
+            "gi": (214, 39, 40), "sky image": (148, 103, 189), "sky cosine": (140, 86, 75)}
+
+
+def sky_rows(done: Computed, rays: tuple[int, ...] = DEFAULT_RAYS,
+             reference_rays: int = 4096) -> tuple[Row, ...]:
+    """The direct sky light of ``done``'s texels (an image sky: ``--sky-image``) at each of
+    ``rays`` rays per texel, drawn as a bake draws them ("sky image": the image's peak by the
+    image, light/sky.py) and by cosine rays alone ("sky cosine", as a colour sky's), each timed
+    and measured (luminance RMSE) against ``reference_rays`` of the bake's rays, another
+    seed; the estimated RMSE from the rays' halves (``direct.mean_and_variance``). Empty
+    without an image sky."""
+    sky = done.sources.sky if done.sources is not None else None
+    if sky is None or not sky.is_image:
+        return ()
+    tracer = Tracer(done.world)
+    receivers = direct.texel_receivers(done.texels, slice(None), tracer.center)
+    reference, _ = direct.sky_irradiance(sky, reference_rays, receivers, tracer,
+                                         done.settings.seed + 1)
+    rows = []
+    for name, drawn in (("sky image", sky), ("sky cosine", replace(sky, ceiling=np.inf,
+                                                                     image_share=0.0))):
+        for count in rays:
+            started = time.perf_counter()
+            got, variance = direct.sky_irradiance(drawn, count, receivers, tracer,
+                                                  done.settings.seed)
+            seconds = time.perf_counter() - started
+            rmse = float(np.sqrt(np.mean(((got - reference) @ LUMINANCE) ** 2)))
+            rows.append(Row(name, count, seconds, rmse, float(np.sqrt(np.mean(variance)))))
+    return tuple(rows)
 
 
 def plot(study: Study, size: tuple[int, int] = (800, 560)) -> bytes:
@@ -143,7 +196,8 @@ def plot(study: Study, size: tuple[int, int] = (800, 560)) -> bytes:
 
     width, height = size
     left, right, top, bottom = 80, 20, 40, 60
-    rows = [r for r in study.rows if r.seconds > 0 and r.rmse > 0]
+    rows = [r for r in study.rows + study.sky + study.directional
+            if r.seconds > 0 and r.rmse > 0]
     xs = np.log10([r.seconds for r in rows])
     ys = np.log10([v for r in rows for v in (r.rmse, r.estimated_rmse) if v > 0])
     x0, x1 = np.floor(xs.min()), np.ceil(xs.max())

@@ -141,6 +141,14 @@ def add_parser(commands) -> None:
     direct.add_argument("--sky-horizon", type=rgb, metavar="R,G,B",
                         help="the sky's radiance at the horizon and below: a two-colour "
                              "gradient (default: uniform)")
+    direct.add_argument("--sky-image", metavar="FILE",
+                        help="light the scene with an equirectangular panorama (.hdr or .exr, "
+                             "linear, +Y up, three.js's layout) instead of --sky, "
+                             "importance-sampled by its brightness; see docs/sky.md")
+    direct.add_argument("--sky-rotation", type=float, default=d.sky_rotation, metavar="DEGREES",
+                        help="turn --sky-image about +Y (+Z towards +X) (default 0)")
+    direct.add_argument("--sky-intensity", type=positive_float, default=d.sky_intensity,
+                        metavar="F", help="factor on --sky-image's radiance (default 1)")
     direct.add_argument("--sky-rays", type=int, default=None, metavar="N",
                         help=f"rays per texel that look for the sky (default {DEFAULT_RAYS}; "
                              f"{FIRST_ROUND_RAYS} with --target-error)")
@@ -175,6 +183,11 @@ def add_parser(commands) -> None:
                      help="also write the visibility (1 = unoccluded) as the core "
                           "occlusionTexture next to the MOZ_lightmap; three.js darkens the "
                           "lightmap by it too (default none)")
+    out.add_argument("--directional", action="store_true",
+                     help="directional lightmaps: an extra page holding each texel's dominant "
+                          "light direction, which baker view and the three.js plugin decode "
+                          "with the material's normal map (BAKER_lightmap_directional, "
+                          "--carrier moz; see docs/directional.md)")
     out.add_argument("--denoise", action="store_true",
                      help="denoise each chart of the lightmap with Intel Open Image Denoise's "
                           "lightmap filter before dilation (needs pip install \"baker[denoise]\"; "

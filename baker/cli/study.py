@@ -35,6 +35,18 @@ def add_parser(commands) -> None:
                        help="obscurance distance (default: as a bake derives it)")
     study.add_argument("--gi-paths", type=int, default=256, metavar="N",
                        help="paths per texel of the full-GI comparison (0: skip it; default 256)")
+    study.add_argument("--sky-image", metavar="FILE",
+                       help="light the scene with this panorama (.hdr, .exr) and add the sky "
+                            "light's rows: as baked (the image's peak drawn by the image) and "
+                            "by cosine rays alone")
+    study.add_argument("--sky-rotation", type=float, default=0.0, metavar="DEGREES",
+                       help="turn --sky-image about +Y (default 0)")
+    study.add_argument("--sky-intensity", type=float, default=1.0, metavar="F",
+                       help="factor on --sky-image's radiance (default 1)")
+    study.add_argument("--directional", action="store_true",
+                       help="keep the directions too (--directional): add the rows of the "
+                            "obscurance's first moment U for each technique (the scene needs "
+                            "a normal-mapped material)")
     study.add_argument("--plot", type=Path, metavar="PNG", help="write the plot here")
     study.add_argument("--json", type=Path, metavar="FILE", help="write the table as JSON")
     add_debug(study)
@@ -45,12 +57,17 @@ def run(args: argparse.Namespace) -> int:
     from baker.gltf.load import load
     from baker.pipeline.full import compute
     from baker.run.atomic import write_atomically
-    from baker.study import compare_with_gi, plot, run_study
+    from baker.study import compare_with_gi, plot, run_study, sky_rows
 
-    settings = baker.Settings(page_size=args.page_size, d_max=args.d_max, rays=1)
+    settings = baker.Settings(page_size=args.page_size, d_max=args.d_max, rays=1, sky_rays=1,
+                              sky_image=args.sky_image, sky_rotation=args.sky_rotation,
+                              sky_intensity=args.sky_intensity, directional=args.directional)
     done = compute(load(args.scene), settings)
     result = run_study(done, tuple(args.rays), tuple(args.techniques), args.reference_rays,
                        progress=lambda text: print(f"  {text}", flush=True))
+    if args.sky_image:
+        print("  sky light: as baked and by cosine rays alone", flush=True)
+        result = replace(result, sky=sky_rows(done, tuple(args.rays), args.reference_rays))
     if args.gi_paths:
         print(f"  full GI: {args.gi_paths} paths per texel", flush=True)
         result = replace(result, gi=compare_with_gi(done, paths=args.gi_paths))

@@ -251,3 +251,18 @@ def material_table(scene) -> MaterialTable:
 # Alpha testing
 
 MASK, BLEND = 1, 2
+
+
+def normal_mapped(scene, material: int) -> bool:
+    """Whether the scene's material ``material`` (index into ``Scene.materials``) has a glTF
+    ``normalTexture``: what directional lightmaps are for (``Settings.directional``)."""
+    index = scene.materials[material].index
+    if index is None or not scene.document.materials:
+        return False
+    return getattr(scene.document.materials[index], "normalTexture", None) is not None
+
+
+def has_normal_maps(scene) -> bool:
+    """Whether a baked instance's material has a normal map (``normal_mapped``)."""
+    return any(normal_mapped(scene, scene.primitives[inst.primitive].material)
+               for inst in scene.instances if inst.baked)

@@ -7,7 +7,7 @@ per light at unit intensity, so a light's new colour or intensity is a recomposi
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
@@ -15,7 +15,9 @@ from baker.atlas.layout import Atlas
 from baker.atlas.rasterise import Texels, flat_pages
 from baker.jit import jit
 from baker.light.ambient import Ambient
+from baker.geometry.surface import LUMINANCE
 from baker.light.direct import Direct
+from baker.light.directional import encode_vectors, fit, smoothed, uniform_aim
 from baker.light.hemisphere import Terms, obscurance_at
 from baker.light.obscurance import UNIT_REFLECTIVITY
 from baker.run.spill import PER_SCENE
@@ -31,11 +33,15 @@ class Lightmaps:
     nothing occludes, as glTF's occlusion is (W is R-weighted: R_ave on an open surface); (0, H,
     W, 3) when not kept (a bake without ``occlusion`` does not need it: 400 MB at 4096²). covered: (P, H, W) bool, texels that were baked
     (the rest are padding, filled by dilation).
+    direction: (P, H, W, 3) float64, with directional pages: each texel's g
+    (``light.directional.fit``) as composed, then h (``directional_pages``: what the page
+    holds), 0 in padding until dilation; (0, H, W, 3) without.
     """
 
     light: np.ndarray
     visibility: np.ndarray
     covered: np.ndarray
+    direction: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 0, 3)))
 
 
 def effective_r_ave(ambient: Ambient, rho: str) -> np.ndarray:
@@ -49,32 +55,36 @@ def effective_r_ave(ambient: Ambient, rho: str) -> np.ndarray:
 def compose(atlas: Atlas, texels: Texels, terms: Terms, ambient: Ambient, rho: str,
             direct: Direct | None = None, light_colours: np.ndarray | None = None,
             indirect: np.ndarray | None = None, visibility: bool = True) -> Lightmaps:
-    """Scatter the texels' light L = D + I_A·W and their visibility into page images.
-
-    ``direct``: the texels' direct light (None: L = I_A·W); ``light_colours`` (L, 3) replaces the
-    baked colour × intensity of its punctual lights (relighting without rays). ``indirect``
-    (N, 3): path-traced indirect irradiance (``--method gi``) to use instead of I_A·W.
-    ``visibility``: keep the pages of the visibility too.
-    """
+    """Scatter the texels' light L = D + I_A·W and their visibility into new page images
+    (``compose_into``; ``visibility``: keep the pages of the visibility too)."""
     lightmaps = blank(atlas, visibility)
     compose_into(lightmaps, texels, terms, ambient, rho, direct, light_colours, indirect)
     return lightmaps
 
 
-def blank(atlas: Atlas, visibility: bool = True) -> Lightmaps:
+def blank(atlas: Atlas, visibility: bool = True, directional: bool = False) -> Lightmaps:
     """Lightmaps of zeros, no texel covered, the atlas's pages in size (``visibility``: with
-    pages of the visibility, else 0 of them)."""
+    pages of the visibility, else 0 of them; ``directional``: with directional pages)."""
     shape = (atlas.page_count, atlas.height, atlas.width)
     return Lightmaps(light=np.zeros(shape + (3,)),
                      visibility=np.zeros((shape[0] if visibility else 0,) + shape[1:] + (3,)),
-                     covered=np.zeros(shape, bool))
+                     covered=np.zeros(shape, bool),
+                     direction=np.zeros((shape[0] if directional else 0,) + shape[1:] + (3,)))
 
 
 def compose_into(lightmaps: Lightmaps, texels: Texels, terms: Terms, ambient: Ambient, rho: str,
                  direct: Direct | None = None, light_colours: np.ndarray | None = None,
-                 indirect: np.ndarray | None = None) -> None:
-    """``compose`` the texels into ``lightmaps``' pages, in place: a bake made part by part
-    composes each part as it is done. The pixels of other texels are left as they are.
+                 indirect: np.ndarray | None = None,
+                 indirect_aim: np.ndarray | None = None) -> None:
+    """Scatter the texels' light L = D + I_A·W and their visibility into ``lightmaps``' page
+    images, in place: a bake made part by part composes each part as it is done. The pixels of
+    other texels are left as they are.
+
+    ``direct``: the texels' direct light (None: L = I_A·W); ``light_colours`` (L, 3) replaces the
+    baked colour × intensity of its punctual lights (relighting without rays). ``indirect``
+    (N, 3): path-traced indirect irradiance (``--method gi``) to use instead of I_A·W, and
+    ``indirect_aim`` (N, 3) its first moment (``gi.Indirect.aim``). With directional pages,
+    each texel's h from every term's first moment (``_directions``).
 
     A block of ``_TEXELS_AT_ONCE`` texels at a time: at once, the (N, 3) values and their
     temporaries would be 200 MB each at 4096².
@@ -92,6 +102,44 @@ def compose_into(lightmaps: Lightmaps, texels: Texels, terms: Terms, ambient: Am
                         none if direct is None else
                         _rows(direct, block, count).irradiance(light_colours),
                         pages, visibility, covered)
+        if len(lightmaps.direction):
+            index = texels.pixel_index(block)
+            flat_pages(lightmaps.direction)[index] = _directions(
+                pages[index], texels.normal[block], _rows(terms, block, count), ambient, r_ave,
+                None if direct is None else _rows(direct, block, count), light_colours,
+                None if indirect_aim is None else indirect_aim[block])
+
+
+def _directions(light: np.ndarray, normals: np.ndarray, terms: Terms, ambient: Ambient,
+                r_ave: np.ndarray, direct: Direct | None, light_colours: np.ndarray | None,
+                indirect_aim: np.ndarray | None) -> np.ndarray:
+    """(k, 3) h of k texels of composed irradiance ``light`` (k, 3) and unit normals
+    ``normals`` (k, 3): U summed over the terms (``light.directional``) — D's, and I_A·W's
+    (W's moment over its rays times lum(I_A·W)/lum W; the light through translucent surfaces
+    counted uniform) or the path-traced light's —, then its g (``fit``)."""
+    aim = np.zeros((len(light), 3))
+    if direct is not None and len(direct.punctual_aim):
+        aim += direct.aim(light_colours)
+    if indirect_aim is not None:
+        aim += indirect_aim
+    else:
+        front = terms.w_hit + terms.escaped[:, None] * r_ave
+        own = front @ LUMINANCE
+        lit = (front * ambient.intensity) @ LUMINANCE
+        aim += np.where(own > 0, lit / np.where(own > 0, own, 1.0), 0.0)[:, None] * terms.aim(r_ave)
+        whole = terms.obscurance(r_ave)
+        aim += uniform_aim(((whole - front) * ambient.intensity) @ LUMINANCE, normals)
+    return fit(light @ LUMINANCE, aim, normals)
+
+
+def directional_pages(lightmaps: Lightmaps) -> Lightmaps:
+    """``lightmaps`` with its directional pages' g, every texel composed, turned into what the
+    pages hold: h of g pooled over each texel's neighbours (``light.directional.smoothed``,
+    ``encode_vectors``); as they are without directional pages."""
+    if not len(lightmaps.direction):
+        return lightmaps
+    weight = np.where(lightmaps.covered, lightmaps.light @ LUMINANCE, 0.0)
+    return replace(lightmaps, direction=encode_vectors(smoothed(lightmaps.direction, weight)))
 
 
 @jit

@@ -29,6 +29,7 @@ from isal import isal_zlib
 from baker.geometry.surface import LUMINANCE
 from baker.image.compose import Lightmaps
 from baker.jit import jit
+from baker.light.directional import page_texels
 from baker.run.parallel import run_chunks
 
 CLIP_PERCENTILE = 99.9
@@ -47,7 +48,8 @@ class EncodedPage:
 
     ``peak``: the page's largest covered value (any channel, linear light units); ``clipped``:
     the fraction of covered texels whose brightest channel is above ``intensity`` (those texels
-    decode to ``intensity``, losing ``value − intensity``).
+    decode to ``intensity``, losing ``value − intensity``). ``direction_png``: the page's
+    directional page (``light.directional.page_texels``), or None without one.
     """
 
     png: bytes
@@ -55,6 +57,7 @@ class EncodedPage:
     occlusion_png: bytes | None = None
     peak: float = 0.0
     clipped: float = 0.0
+    direction_png: bytes | None = None
 
 
 def linear_to_srgb(x: np.ndarray) -> np.ndarray:
@@ -204,7 +207,8 @@ def page_scale(light: np.ndarray, covered: np.ndarray,
 
 def encode(lightmaps: Lightmaps, encoding: str, occlusion: bool,
            clip_percentile: float = CLIP_PERCENTILE) -> list[EncodedPage]:
-    """One EncodedPage per page; ``occlusion`` adds the visibility as a grey PNG.
+    """One EncodedPage per page; ``occlusion`` adds the visibility as a grey PNG, directional
+    pages (``Lightmaps.direction``) their PNG.
 
     Each page's intensity is ``page_scale`` of its covered texels at ``clip_percentile``.
     """
@@ -220,7 +224,9 @@ def encode(lightmaps: Lightmaps, encoding: str, occlusion: bool,
             _quantise_linear(np.ascontiguousarray(light, np.float64), intensity, texels)
         else:
             texels = _page_texels(light, lambda rows: quantise(rows / intensity, encoding))
+        direction_png = (png_bytes(page_texels(lightmaps.direction[p]))
+                         if len(lightmaps.direction) else None)
         pages.append(EncodedPage(png=png_bytes(texels),
                                  intensity=intensity, occlusion_png=occlusion_png,
-                                 peak=peak, clipped=clipped))
+                                 peak=peak, clipped=clipped, direction_png=direction_png))
     return pages

@@ -142,7 +142,8 @@ def postprocess(lightmaps: Lightmaps, padding: int, invalid: np.ndarray | None =
                 enclosed: np.ndarray | None = None, seams: Seams | None = None) -> Lightmaps:
     """Clean the composed pages: enclosed texels dark, invalid ones from valid neighbours,
     dilation past the padding (at least 4 texels, for bilinear + 1 mip), then both sides of
-    every smooth UV seam made to agree (``seams.stitch``).
+    every smooth UV seam made to agree (``seams.stitch``); the directional pages alike (an
+    enclosed texel's h 0: no tilt changes its darkness).
 
     invalid, enclosed: (P, H, W) bool masks from ``validity.Validity.page_masks`` (None: none).
     seams: from ``seams.find_seams`` (None: no stitching).
@@ -153,10 +154,11 @@ def postprocess(lightmaps: Lightmaps, padding: int, invalid: np.ndarray | None =
     """
     covered = lightmaps.covered
     pages = [np.ascontiguousarray(values, np.float64)
-             for values in (lightmaps.light, lightmaps.visibility)]
+             for values in (lightmaps.light, lightmaps.visibility, lightmaps.direction)]
     kept = tuple(values for values in pages if len(values))  # W's pages may not be kept
     if not kept:  # nothing baked
-        return Lightmaps(light=pages[0], visibility=pages[1], covered=covered)
+        return Lightmaps(light=pages[0], visibility=pages[1], covered=covered,
+                         direction=pages[2])
     if enclosed is not None and enclosed.any():
         for values in kept:
             values[enclosed] = 0.0  # shut inside a solid: no light reaches it
@@ -165,4 +167,4 @@ def postprocess(lightmaps: Lightmaps, padding: int, invalid: np.ndarray | None =
     _dilate_in_place(kept, covered, max(2 * padding, 4))
     if seams is not None and len(seams):
         pages = [stitch(values, covered, seams) if len(values) else values for values in pages]
-    return Lightmaps(light=pages[0], visibility=pages[1], covered=covered)
+    return Lightmaps(light=pages[0], visibility=pages[1], covered=covered, direction=pages[2])

@@ -11,7 +11,8 @@ ray cast:
   light with a size). ``Direct.light_colours`` (L, 3) holds colour × intensity as baked.
 - Emissive triangles (emissiveFactor × emissiveTexture × KHR_materials_emissive_strength, taken
   as emitted radiance) as area lights, sampled in proportion to their power.
-- A uniform or two-colour gradient sky, through cosine-distributed rays that escape the scene.
+- The sky (``sky.Sky``): a uniform or two-colour gradient, through cosine-distributed rays that
+  escape the scene, or an environment image, importance-sampled by the image and the cosine.
 
 Soft shadows: a point/spot light with radius R is a sphere of uniform radiance I / (πR²); it is
 sampled by directions uniform in the cone it subtends, so an unoccluded receiver facing it gets
@@ -57,6 +58,7 @@ from baker.geometry.world import World
 from baker.gltf.scene import Light, Scene
 from baker.jit import jit
 from baker.light.adaptive import WITHIN, neighbour_mean, pooled_gain
+from baker.light.sky import Sky, sky_of
 from baker.rays.dimensions import EMISSIVE, POWER, SKY, light_dimension
 from baker.rays.sampling import (
     cosine_hemisphere,
@@ -120,7 +122,7 @@ class Sources:
     (radians), 0 for a hard light. samples: (L,) int64 shadow rays per texel (1 when hard, or
     the supersample count when that is more: one ray from each sub-position).
     emitters: the emissive triangles, None when nothing emits. emissive_rays: rays per texel
-    towards them. sky: (2, 3) float64 zenith and horizon radiance, None for no sky. sky_rays.
+    towards them. sky: what the sky sends (``sky.Sky``), None for no sky. sky_rays.
     """
 
     lights: tuple[Light, ...]
@@ -128,7 +130,7 @@ class Sources:
     samples: np.ndarray
     emitters: Emitters | None
     emissive_rays: int
-    sky: np.ndarray | None
+    sky: Sky | None
     sky_rays: int
 
     def light_colours(self) -> np.ndarray:
@@ -216,15 +218,10 @@ def light_sources(scene: Scene, world: World, settings: Resolved) -> Sources:
             size = light.radius if light.radius is not None else settings.light_radius
         spread.append(size)
         samples.append(max(settings.shadow_rays if size > 0 else 1, settings.supersample))
-    sky = None
-    if settings.sky is not None:
-        zenith = np.asarray(settings.sky, np.float64)
-        horizon = zenith if settings.sky_horizon is None else np.asarray(settings.sky_horizon, np.float64)
-        sky = np.stack([zenith, horizon])
     return Sources(lights=tuple(scene.lights), spread=np.asarray(spread, np.float64).reshape(-1),
                    samples=np.asarray(samples, np.int64).reshape(-1),
                    emitters=find_emitters(scene, world), emissive_rays=settings.emissive_rays,
-                   sky=sky, sky_rays=settings.sky_rays)
+                   sky=sky_of(settings), sky_rays=settings.sky_rays)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -339,17 +336,18 @@ def punctual_irradiance(light: Light, spread: float, n: int, receivers: Receiver
     candela). ``spread`` > 0 makes the light a sphere of that radius (point/spot) or a disc of that
     angular radius (directional), sampled with ``n`` shadow rays per receiver; otherwise one ray.
     """
-    values, _ = punctual_samples(light, spread, n, receivers, tracer, seed, dimension)
+    values, _, _ = punctual_samples(light, spread, n, receivers, tracer, seed, dimension)
     return mean_and_variance(values)
 
 
 def punctual_samples(light: Light, spread: float, n: int, receivers: Receivers, tracer: Tracer,
                      seed: int, dimension: int) -> tuple[np.ndarray, np.ndarray]:
-    """``punctual_irradiance``'s samples (k, n') and what each would give unoccluded (k, n'):
-    n' = ``n`` for a soft light or with supersampling, else 1."""
+    """``punctual_irradiance``'s samples (k, n'), what each would give unoccluded (k, n') and
+    their unit directions towards the light (k, n', 3): n' = ``n`` for a soft light or with
+    supersampling, else 1."""
     k = len(receivers.position)
     if k == 0:
-        return np.zeros((0, 1)), np.zeros((0, 1))
+        return np.zeros((0, 1)), np.zeros((0, 1)), np.zeros((0, 1, 3))
     soft = spread > 0
     n = n if soft or receivers.sub is not None else 1
     u = split_samples(seed, receivers.key, n, dimension)  # (k, n, 2)
@@ -394,7 +392,7 @@ def punctual_samples(light: Light, spread: float, n: int, receivers: Receivers, 
         rays = directions.reshape(-1, 3)[flat]
         visible[flat] = ~tracer.occluded(origins, rays, lengths[flat])
     unoccluded = np.broadcast_to(cos * scale, (k, n))
-    return unoccluded * visible.reshape(k, n), unoccluded
+    return unoccluded * visible.reshape(k, n), unoccluded, directions
 
 
 @jit
@@ -449,18 +447,18 @@ def emissive_irradiance(scene: Scene, world: World, emitters: Emitters, n: int,
     it; the estimate is Le(q)·cosθ_p·cosθ_q / d² · V / (P_t / A_t), unbiased for the irradiance
     of every emitter (a triangle whose mean emission is 0 at the fixed points is never picked).
     """
-    value, _ = emissive_samples(scene, world, emitters, n, receivers, tracer, seed)
+    value, _, _ = emissive_samples(scene, world, emitters, n, receivers, tracer, seed)
     return _rgb_mean_and_variance(value)
 
 
 def emissive_samples(scene: Scene, world: World, emitters: Emitters, n: int,
                      receivers: Receivers, tracer: Tracer, seed: int
                      ) -> tuple[np.ndarray, np.ndarray]:
-    """``emissive_irradiance``'s samples (k, n, 3) and the luminance (k, n) each would give
-    unoccluded."""
+    """``emissive_irradiance``'s samples (k, n, 3), the luminance (k, n) each would give
+    unoccluded and their unit directions (k, n, 3)."""
     k = len(receivers.position)
     if k == 0:
-        return np.zeros((0, n, 3)), np.zeros((0, n))
+        return np.zeros((0, n, 3)), np.zeros((0, n)), np.zeros((0, n, 3))
     u = split_samples(seed, receivers.key, n, EMISSIVE).reshape(-1, 2)
     origins = receivers.origins(n)
     raised = np.zeros(k, bool) if receivers.raised is None else receivers.raised
@@ -477,7 +475,7 @@ def emissive_samples(scene: Scene, world: World, emitters: Emitters, n: int,
         radiance = emitter_radiance(scene, world, emitters, chosen[live], bary[live])
         unoccluded[live] = (radiance @ LUMINANCE) * weight[live]
         value[live] = radiance * (weight[live] * visible)[:, None]
-    return value.reshape(k, n, 3), unoccluded.reshape(k, n)
+    return value.reshape(k, n, 3), unoccluded.reshape(k, n), directions.reshape(k, n, 3)
 
 
 def emitter_radiance(scene: Scene, world: World, emitters: Emitters, picked: np.ndarray,
@@ -492,13 +490,7 @@ def emitter_radiance(scene: Scene, world: World, emitters: Emitters, picked: np.
     return radiance
 
 
-def sky_radiance(sky: np.ndarray, directions: np.ndarray) -> np.ndarray:
-    """Sky radiance (…, 3) in unit directions (…, 3): horizon + (zenith − horizon)·max(0, y)."""
-    up = np.maximum(directions[..., 1:2], 0.0)
-    return sky[1] + (sky[0] - sky[1]) * up
-
-
-def sky_irradiance(sky: np.ndarray, n: int, receivers: Receivers, tracer: Tracer,
+def sky_irradiance(sky: Sky, n: int, receivers: Receivers, tracer: Tracer,
                    seed: int) -> tuple[np.ndarray, np.ndarray]:
     """Irradiance (k, 3) from the sky about the shading normal, and its luminance variance (k,).
 
@@ -506,28 +498,38 @@ def sky_irradiance(sky: np.ndarray, n: int, receivers: Receivers, tracer: Tracer
     (``sampling.hemisphere_normals``: the shading normal, the front face's on flat surfaces),
     those below the front face folded above it (``sampling.fold``), as the obscurance's; a ray
     that meets nothing at any distance sees the sky, so the estimate is π · mean(L_sky(ω) · V(ω)).
+    An image sky draws half of them by the image instead, each weighted by the mixture's
+    density (``Sky.draw``).
     """
-    value, _ = sky_samples(sky, n, receivers, tracer, seed)
+    value, _, _ = sky_samples(sky, n, receivers, tracer, seed)
     return _rgb_mean_and_variance(value)
 
 
-def sky_samples(sky: np.ndarray, n: int, receivers: Receivers, tracer: Tracer,
+def sky_samples(sky: Sky, n: int, receivers: Receivers, tracer: Tracer,
                 seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """``sky_irradiance``'s samples (k, n, 3) and the luminance (k, n) each would give
-    unoccluded."""
+    """``sky_irradiance``'s samples (k, n, 3), the luminance (k, n) each would give
+    unoccluded and their unit directions (k, n, 3)."""
     k = len(receivers.position)
     if k == 0:
-        return np.zeros((0, n, 3)), np.zeros((0, n))
-    local = cosine_hemisphere(split_samples(seed, receivers.key, n, SKY))
+        return np.zeros((0, n, 3)), np.zeros((0, n)), np.zeros((0, n, 3))
+    points = split_samples(seed, receivers.key, n, SKY)
     normal = hemisphere_normals(receivers.normal, receivers.geometric)
-    t1, t2 = tangent_frames(normal)
-    directions = folded((local[..., :1] * t1[:, None] + local[..., 1:2] * t2[:, None]
-                         + local[..., 2:] * normal[:, None]).reshape(-1, 3),
-                        np.repeat(normal, n, axis=0), np.repeat(receivers.geometric, n, axis=0))
-    escaped = ~tracer.occluded(receivers.origins(n), directions, np.inf)
-    unoccluded = np.pi * sky_radiance(sky, directions)
+    if sky.is_image:
+        directions, unoccluded = sky.draw(points.reshape(-1, 2), np.repeat(normal, n, axis=0),
+                                          np.repeat(receivers.geometric, n, axis=0))
+    else:
+        local = cosine_hemisphere(points)
+        t1, t2 = tangent_frames(normal)
+        directions = folded((local[..., :1] * t1[:, None] + local[..., 1:2] * t2[:, None]
+                             + local[..., 2:] * normal[:, None]).reshape(-1, 3),
+                            np.repeat(normal, n, axis=0),
+                            np.repeat(receivers.geometric, n, axis=0))
+        unoccluded = np.pi * sky.radiance(directions)
+    live = np.flatnonzero(unoccluded.any(axis=1)) if sky.is_image else slice(None)
+    escaped = np.zeros(k * n, bool)
+    escaped[live] = ~tracer.occluded(receivers.origins(n)[live], directions[live], np.inf)
     return ((unoccluded * escaped[:, None]).reshape(k, n, 3),
-            (unoccluded @ LUMINANCE).reshape(k, n))
+            (unoccluded @ LUMINANCE).reshape(k, n), directions.reshape(k, n, 3))
 
 
 # ------------------------------------------------------------------------------------------------
@@ -557,6 +559,11 @@ class Direct:
     a texel not held: 270 MB on a 4096² page). rays_per_texel: shadow and sky rays cast from
     each texel (``rays`` in all); texel_rays: (N,) int64 the rays each texel cast in all of
     its adaptive rounds (``direct_light``), empty (0 rows) without them.
+    punctual_aim (N, L, 3), emission_aim (N, 3), sky_aim (N, 3): each source's first moment of
+    its irradiance's luminance along the light's world directions (``light.directional``), at
+    unit intensity and white for the lights; punctual_aim_var (N, L), emission_aim_var (N,),
+    sky_aim_var (N,): their estimates' variances (summed over the components). Empty (0 rows)
+    without ``Resolved.directional_pages`` (or the source).
     """
 
     punctual: np.ndarray
@@ -568,6 +575,35 @@ class Direct:
     sky_var: np.ndarray
     rays_per_texel: int
     texel_rays: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    punctual_aim: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 3)))
+    punctual_aim_var: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    emission_aim: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    emission_aim_var: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    sky_aim: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    sky_aim_var: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+    def aim(self, light_colours: np.ndarray | None = None) -> np.ndarray:
+        """(N, 3) the first moment of D's luminance along the light's directions, for the
+        lights' colour × intensity (L, 3), by default the baked ones; (0, 3) when not kept."""
+        if not len(self.punctual_aim):
+            return np.zeros((0, 3))
+        colours = self.light_colours if light_colours is None else np.asarray(light_colours, np.float64)
+        out = np.einsum("nlc,l->nc", self.punctual_aim, colours @ LUMINANCE)
+        for term in (self.emission_aim, self.sky_aim):
+            if len(term):
+                out += term
+        return out
+
+    def aim_variance(self, light_colours: np.ndarray | None = None) -> np.ndarray:
+        """(N,) the variance of ``aim``'s estimate (the sources' are independent)."""
+        if not len(self.punctual_aim):
+            return np.zeros(0)
+        colours = self.light_colours if light_colours is None else np.asarray(light_colours, np.float64)
+        out = self.punctual_aim_var @ (colours @ LUMINANCE) ** 2
+        for term in (self.emission_aim_var, self.sky_aim_var):
+            if len(term):
+                out += term
+        return out
 
     @property
     def rays(self) -> int:
@@ -667,35 +703,83 @@ def _noise_of(values: np.ndarray, unoccluded: np.ndarray, scale: float) -> tuple
 
 def _direct_rows(scene: Scene, world: World, tracer: Tracer, sources: Sources,
                  receivers: Receivers, seed: int, samples: int | None = None,
-                 scale: int = 1) -> tuple[Direct, _Noise]:
+                 scale: int = 1, aims: bool = False) -> tuple[Direct, _Noise]:
     """``direct_at``, with each noisy source's rays × ``scale`` (an adaptive round:
-    ``Sources.counts``), and its ``_Noise``."""
+    ``Sources.counts``), and its ``_Noise``; ``aims``: keep each source's ``Direct.aim``."""
     k = len(receivers.position)
-    punctual, punctual_var = np.zeros((k, len(sources.lights))), np.zeros((k, len(sources.lights)))
+    lights = len(sources.lights)
+    punctual, punctual_var = np.zeros((k, lights)), np.zeros((k, lights))
     emitted, emitted_var = _source_terms(k, sources.emitters is not None)
     sky, sky_var = _source_terms(k, sources.sky is not None)
+    aim = _Aims.blank(k if aims else 0, lights, sources)
     noise = _Noise(np.zeros(k), np.zeros(k), np.zeros(k, bool))
     counts = sources.counts(samples, scale)
     colours = sources.light_colours() @ LUMINANCE
     for l, light in enumerate(sources.lights):
-        values, unoccluded = punctual_samples(light, float(sources.spread[l]), int(counts[l]),
-                                              receivers, tracer, seed, light_dimension(l))
+        values, unoccluded, directions = punctual_samples(
+            light, float(sources.spread[l]), int(counts[l]), receivers, tracer, seed,
+            light_dimension(l))
         punctual[:, l], punctual_var[:, l] = mean_and_variance(values)
         _add(noise, _noise_of(values, unoccluded, float(colours[l])))
+        if aims:
+            aim.punctual[:, l], aim.punctual_var[:, l] = aim_of(values, directions)
     if sources.emitters is not None:
-        values, unoccluded = emissive_samples(scene, world, sources.emitters, int(counts[-2]),
-                                              receivers, tracer, seed)
+        values, unoccluded, directions = emissive_samples(
+            scene, world, sources.emitters, int(counts[-2]), receivers, tracer, seed)
         emitted, emitted_var = _rgb_mean_and_variance(values)
         _add(noise, _noise_of(values @ LUMINANCE, unoccluded, 1.0))
+        if aims:
+            aim.emission[:], aim.emission_var[:] = aim_of(values @ LUMINANCE, directions)
     if sources.sky is not None:
-        values, unoccluded = sky_samples(sources.sky, int(counts[-1]), receivers, tracer, seed)
+        values, unoccluded, directions = sky_samples(sources.sky, int(counts[-1]), receivers,
+                                                     tracer, seed)
         sky, sky_var = _rgb_mean_and_variance(values)
         _add(noise, _noise_of(values @ LUMINANCE, unoccluded, 1.0))
+        if aims:
+            aim.sky[:], aim.sky_var[:] = aim_of(values @ LUMINANCE, directions)
     rays = sources.rays_per_texel(counts)
     return (Direct(punctual=punctual, punctual_var=punctual_var,
                    light_colours=sources.light_colours(), emission=emitted,
-                   emission_var=emitted_var, sky=sky, sky_var=sky_var, rays_per_texel=rays),
+                   emission_var=emitted_var, sky=sky, sky_var=sky_var, rays_per_texel=rays,
+                   **aim.fields()),
             noise)
+
+
+def aim_of(values: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The first moment (k, 3) of luminance samples ``values`` (k, n) along their unit
+    directions (k, n, 3) (``light.directional``: the mean of value × direction) and its
+    variance (k,), the three components' ``mean_and_variance`` summed."""
+    moment = values[..., None] * directions
+    aim, variance = np.empty((len(values), 3)), np.zeros(len(values))
+    for c in range(3):
+        aim[:, c], part = mean_and_variance(moment[..., c])
+        variance += part
+    return aim, variance
+
+
+@dataclass(frozen=True)
+class _Aims:
+    """The ``Direct`` aim fields of k receivers (0 rows: not kept), filled source by source."""
+
+    punctual: np.ndarray
+    punctual_var: np.ndarray
+    emission: np.ndarray
+    emission_var: np.ndarray
+    sky: np.ndarray
+    sky_var: np.ndarray
+
+    @classmethod
+    def blank(cls, k: int, lights: int, sources: Sources) -> "_Aims":
+        emission, sky = (k if sources.emitters is not None else 0), (
+            k if sources.sky is not None else 0)
+        return cls(np.zeros((k, lights, 3)), np.zeros((k, lights)), np.zeros((emission, 3)),
+                   np.zeros(emission), np.zeros((sky, 3)), np.zeros(sky))
+
+    def fields(self) -> dict[str, np.ndarray]:
+        """The ``Direct`` fields, by name."""
+        return {"punctual_aim": self.punctual, "punctual_aim_var": self.punctual_var,
+                "emission_aim": self.emission, "emission_aim_var": self.emission_var,
+                "sky_aim": self.sky, "sky_aim_var": self.sky_var}
 
 
 def _add(noise: _Noise, source: tuple[np.ndarray, ...]) -> None:
@@ -743,9 +827,11 @@ def _rounds(scene: Scene, world: World, tracer: Tracer, texels: Texels, sources:
     if not sources.any():
         return no_direct(count), (None if targets is None else np.zeros(count))
     lights = len(sources.lights)
+    aims = settings.directional_pages
     out = Direct(np.zeros((count, lights)), np.zeros((count, lights)), sources.light_colours(),
                  *_source_terms(count, sources.emitters is not None),
-                 *_source_terms(count, sources.sky is not None), sources.rays_per_texel())
+                 *_source_terms(count, sources.sky is not None), sources.rays_per_texel(),
+                 **_Aims.blank(count if aims else 0, lights, sources).fields())
     noise = _Noise(np.zeros(count), np.zeros(count), np.zeros(count, bool))
     texel_rays = np.zeros(count, np.int64)
     scales = np.ones(count)  # each texel's last round's ray scale
@@ -763,7 +849,7 @@ def _rounds(scene: Scene, world: World, tracer: Tracer, texels: Texels, sources:
             receivers = texel_receivers(texels, rows, tracer.center, tracer, settings.supersample,
                                          settings.seed)
             part, part_noise = _direct_rows(scene, world, tracer, sources, receivers,
-                                            settings.seed, scale=scale)
+                                            settings.seed, scale=scale, aims=aims)
             _store(out, noise, rows, part, part_noise)
             texel_rays[rows] += part.rays_per_texel
             if progress is not None:
@@ -787,6 +873,12 @@ def _store(out: Direct, noise: _Noise, rows: np.ndarray, part: Direct, part_nois
         out.emission[rows], out.emission_var[rows] = part.emission, part.emission_var
     if len(out.sky):
         out.sky[rows], out.sky_var[rows] = part.sky, part.sky_var
+    if len(out.punctual_aim):
+        out.punctual_aim[rows], out.punctual_aim_var[rows] = part.punctual_aim, part.punctual_aim_var
+    if len(out.emission_aim):
+        out.emission_aim[rows], out.emission_aim_var[rows] = part.emission_aim, part.emission_aim_var
+    if len(out.sky_aim):
+        out.sky_aim[rows], out.sky_aim_var[rows] = part.sky_aim, part.sky_aim_var
     noise.iid[rows], noise.floor[rows] = part_noise.iid, part_noise.floor
     noise.partial[rows] = part_noise.partial
 

@@ -25,11 +25,12 @@ import numpy as np
 
 from baker.geometry.world import World
 from baker.light.direct import Sources, power_points, sky_irradiance
+from baker.light.sky import Sky
 from baker.rays.trace import Tracer
 
 OPEN_SHARE = 0.5
 """Share of the surfaces' cosine rays that escape, at or above which a scene is open."""
-_WHITE_SKY = np.ones((2, 3))
+_WHITE_SKY = Sky.of_gradient(np.ones(3))
 
 
 @dataclass(frozen=True)

@@ -55,6 +55,7 @@ from baker.light.crowns import (
     nearest_shell,
     shell_terms,
 )
+from baker.light.directional import uniform_aim
 from baker.light.hemisphere import Surfaces, Terms
 from baker.light.inner import translucent
 from baker.light.integrate import integrate
@@ -325,7 +326,7 @@ def _fit_crown(scene: Scene, world: World, inputs: FitInputs, settings: Resolved
 
 
 def foliage_terms(foliage: Foliage, scene: Scene, world: World, texels: Texels,
-                  rows: np.ndarray) -> Terms:
+                  rows: np.ndarray, directional: bool = False) -> Terms:
     """The closed-form terms of the foliage texels ``rows`` (k,): escaped = V, w_hit = (1 − V)·c,
     no ray (counts 0, the splits 0); hit_sq as if a share 1 − V of rays met c. A leaf's back
     face (a leaf material, ``inner.py``) adds t·(1 − V_back)·c and t·V_back as the light through
@@ -345,6 +346,9 @@ def foliage_terms(foliage: Foliage, scene: Scene, world: World, texels: Texels,
     lum = colour @ LUMINANCE
     terms = Terms(w_hit=w_hit, escaped=visibility, hit_sq=(1.0 - visibility) * lum * lum,
                   counts=np.zeros(k, np.int64), half_split=np.zeros((k, 2)))
+    if directional:  # the closed form follows no direction: uniform (``light.directional``)
+        terms = replace(terms, aim_hit=uniform_aim(w_hit @ LUMINANCE, normals),
+                        aim_escaped=uniform_aim(visibility, normals), aim_split=np.zeros((k, 6)))
     table = translucent(scene)
     if not table.any:
         return terms
@@ -425,7 +429,7 @@ def integrate_with_foliage(foliage: Foliage, scene: Scene, world: World, texels:
     traced = integrate(scene, world, foliage.tracer, texels, settings, progress, traced_rows,
                        error_scale, surfaces=surfaces,
                        targets=None if targets is None else targets[traced_rows])
-    approx = foliage_terms(foliage, scene, world, texels, closed)
+    approx = foliage_terms(foliage, scene, world, texels, closed, settings.directional_pages)
     if progress is not None and len(closed):
         progress(len(closed), 0)  # closed forms: no ray
     return _merged(len(texels), (traced_rows, traced), (closed, approx))

@@ -41,7 +41,7 @@ path comes from the texel's Owen-scrambled Sobol points, later ones from per-ver
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
@@ -83,13 +83,18 @@ class Indirect:
     (of the mean of its paths: ``_predicted_variance``); the rays the paths cast (bounce and
     shadow rays); the paths cut at ``MAX_BOUNCES`` (0 unless paths could not end by
     themselves); the paths traced, over all texels (adaptive rounds give texels different
-    counts)."""
+    counts). aim: (N, 3) the first moment of E_ind's luminance along each path's first world
+    direction (``light.directional``), aim_variance (N,) its estimate's variance (its paths'
+    sample variance over their count, summed over the components), both empty (0 rows)
+    without ``Resolved.directional_pages``."""
 
     irradiance: np.ndarray
     variance: np.ndarray
     rays: int
     capped: int = 0
     paths: int = 0
+    aim: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    aim_variance: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 def _path_keys(keys: np.ndarray, paths: int, first: int = 0) -> np.ndarray:
@@ -124,7 +129,9 @@ class _Paths:
     E_ind, the mean (k,) of its luminance and m2 (k,), the sum of that luminance's squared
     deviations from its mean (so that rounds of paths combine exactly: ``_combined``); the
     rays they cast and the paths cut at ``MAX_BOUNCES``; net_sum (k,), the luminance summed over
-    the paths of the first of the texel's two nets (the first ⌊count/2⌋: ``_chunk``)."""
+    the paths of the first of the texel's two nets (the first ⌊count/2⌋: ``_chunk``); aim
+    (k, 3) the mean of luminance × first direction and aim_square (k,) the mean of its squared
+    length, or (0, 3) and (0,) when not kept."""
 
     mean: np.ndarray
     luminance: np.ndarray
@@ -133,6 +140,8 @@ class _Paths:
     rays: int
     capped: int
     net_sum: np.ndarray
+    aim: np.ndarray
+    aim_square: np.ndarray
 
 
 def _chunk(scene: Scene, world: World, tracer: Tracer, sources: Sources, texels: Texels,
@@ -158,6 +167,7 @@ def _chunk(scene: Scene, world: World, tracer: Tracer, sources: Sources, texels:
     two_sided = np.array([m.double_sided for m in scene.materials], bool)
     alive = np.arange(k * paths)
     rays = 0
+    first_directions = np.zeros((0, 3))
     for bounce in range(max_bounces):
         if not len(alive):
             break
@@ -169,6 +179,8 @@ def _chunk(scene: Scene, world: World, tracer: Tracer, sources: Sources, texels:
         else:  # the texel: about its hemisphere normal, folded above its front face
             directions = folded(_cosine_directions(frame, points), frame, normal)
             cos_out = np.einsum("ij,ij->i", directions, frame)
+            if settings.directional_pages:
+                first_directions = directions
         origins = position + ray_lift(position, size, tracer.center)[:, None] * normal
         hits = tracer.cast(origins, directions, _FAR)
         rays += len(alive)
@@ -217,8 +229,11 @@ def _chunk(scene: Scene, world: World, tracer: Tracer, sources: Sources, texels:
     luminance = per_path @ LUMINANCE
     mean = luminance.mean(axis=1)
     deviation = luminance - mean[:, None]
+    moment = (luminance.reshape(-1)[:len(first_directions), None]
+              * first_directions).reshape(-1, paths, 3)
     return _Paths(per_path.mean(axis=1), mean, np.add.reduce(deviation * deviation, axis=1),
-                  paths, rays, len(alive), luminance[:, :paths // 2].sum(axis=1))
+                  paths, rays, len(alive), luminance[:, :paths // 2].sum(axis=1),
+                  moment.mean(axis=1), (moment * moment).sum(axis=2).mean(axis=1))
 
 
 def _combined(a: _Paths, b: _Paths) -> _Paths:
@@ -228,7 +243,9 @@ def _combined(a: _Paths, b: _Paths) -> _Paths:
     return _Paths((a.count * a.mean + b.count * b.mean) / n,
                   (a.count * a.luminance + b.count * b.luminance) / n,
                   a.m2 + b.m2 + gap * gap * (a.count * b.count / n), n,
-                  a.rays + b.rays, a.capped + b.capped, a.net_sum + b.net_sum)
+                  a.rays + b.rays, a.capped + b.capped, a.net_sum + b.net_sum,
+                  (a.count * a.aim + b.count * b.aim) / n,
+                  (a.count * a.aim_square + b.count * b.aim_square) / n)
 
 
 def _variance(m2: np.ndarray, count: np.ndarray) -> np.ndarray:
@@ -340,8 +357,9 @@ def indirect_light(scene: Scene, world: World, tracer: Tracer, sources: Sources,
     ``settings.max_rays`` paths. The rounds do not depend on the chunks.
     """
     count = len(texels)
+    kept = count if settings.directional_pages else 0
     state = _Paths(np.zeros((count, 3)), np.zeros(count), np.zeros(count), 0, 0, 0,
-                   np.zeros(count))
+                   np.zeros(count), np.zeros((kept, 3)), np.zeros(kept))
     counts = np.zeros(count, np.int64)
     active, rays, capped, first = np.arange(count), 0, 0, 0
     while len(active):
@@ -360,10 +378,13 @@ def indirect_light(scene: Scene, world: World, tracer: Tracer, sources: Sources,
         run_chunks(work, list(enumerate(chunks)), settings.threads)
         for rows, part in zip(chunks, found):
             old = _Paths(state.mean[rows], state.luminance[rows], state.m2[rows], first, 0, 0,
-                         state.net_sum[rows])
+                         state.net_sum[rows], state.aim[rows] if kept else state.aim,
+                         state.aim_square[rows] if kept else state.aim_square)
             new = part if first == 0 else _combined(old, part)
             state.mean[rows], state.luminance[rows] = new.mean, new.luminance
             state.m2[rows], state.net_sum[rows] = new.m2, new.net_sum
+            if kept:
+                state.aim[rows], state.aim_square[rows] = new.aim, new.aim_square
             rays, capped = rays + part.rays, capped + part.capped
         counts[active] += batch
         first += batch
@@ -377,5 +398,9 @@ def indirect_light(scene: Scene, world: World, tracer: Tracer, sources: Sources,
         active = active[WITHIN * np.sqrt(per_path / counts[active]) > targets[active]]
         if progress is not None and len(active):  # the round's rays at the paths' mean so far
             progress(0, 0, round(len(active) * first * rays / max(1, int(counts.sum()))))
+    n = np.maximum(counts[:kept], 1).astype(np.float64)
+    spread = state.aim_square - np.einsum("kc,kc->k", state.aim, state.aim)
+    aim_variance = np.maximum(spread, 0.0) / np.maximum(n - 1, 1) if kept else np.zeros(0)
     return Indirect(irradiance=state.mean, variance=_predicted_variance(state, counts, texels),
-                    rays=rays, capped=capped, paths=int(counts.sum()))
+                    rays=rays, capped=capped, paths=int(counts.sum()), aim=state.aim,
+                    aim_variance=aim_variance)

@@ -78,6 +78,10 @@ class Terms:
     weight of R_ave (× the back face's escaped fraction, + the inner obscurance); None when the
     scene has no leaf or closed translucent material. The error estimates cover the front's
     rays only.
+    aim_hit, aim_escaped: (N, 3) with ``directional_pages``, else (0, 3): the means of
+    luminance of R(Q)·ρ(d) × the ray's first world direction, and of its escaped weight × that
+    direction (``light.directional``: W's first moment is aim_hit + lum R_ave · aim_escaped);
+    aim_split: (N, 6) their first half's mean minus the second's (as ``half_split``), or (0, 6).
     """
 
     w_hit: np.ndarray
@@ -89,6 +93,9 @@ class Terms:
     capped: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     through_hit: np.ndarray | None = None
     through_ave: np.ndarray | None = None
+    aim_hit: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    aim_escaped: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    aim_split: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))
 
     @property
     def rays(self) -> int:
@@ -114,6 +121,18 @@ class Terms:
         return (self.w_hit, self.escaped,
                 none if self.through_hit is None else self.through_hit,
                 none if self.through_ave is None else self.through_ave)
+
+    def aim(self, r_ave: np.ndarray) -> np.ndarray:
+        """(N, 3) the first moment of W's luminance over the texel's rays, world space
+        (``light.directional``), for R_ave ``r_ave`` (3,); (0, 3) without directions."""
+        return self.aim_hit + float(r_ave @ LUMINANCE) * self.aim_escaped
+
+    def aim_errors(self, r_ave: np.ndarray) -> np.ndarray:
+        """(N,) e² per texel of ``aim``'s estimate, summed over its three components, from
+        the halves of the texel's rays (as ``split_errors``); (0,) without directions."""
+        lum = float(r_ave @ LUMINANCE)
+        e = 0.5 * (self.aim_split[:, :3] + lum * self.aim_split[:, 3:])
+        return np.sum(np.clip(e, -_SPLIT_MAX, _SPLIT_MAX) ** 2, axis=1)
 
     def _front(self, r_ave: np.ndarray) -> np.ndarray:
         """(N, 3) the part of W that the texel's own rays estimate."""
@@ -311,6 +330,15 @@ def world_rays(texels: Texels, rows: np.ndarray | slice, rays: int, x: np.ndarra
 _RGB, _ESCAPED, _SQUARE = slice(0, 3), 3, 4
 _HALF = slice(5, 7)  # (hit luminance, escaped) over the first half of the rays
 _COLUMNS = 7
+# With directions (``Resolved.directional_pages``): luminance of R·ρ and escaped weight, each
+# × the ray's direction, over all rays, then over the first half.
+_AIM, _AIM_HALF = slice(7, 13), slice(13, 19)
+_AIM_COLUMNS = 19
+
+
+def columns(directional: bool) -> int:
+    """How many sums a texel's rays make (``_accumulate_kernel``)."""
+    return _AIM_COLUMNS if directional else _COLUMNS
 
 
 _CONSTANT, _VARYING, _SPECIAL = 0, 1, 2  # per-triangle kinds of ``_accumulate_kernel``
@@ -334,16 +362,19 @@ def _on_grid(x):
 
 # ``_accumulate_kernel``'s (target, sample) for rays laid out texel by texel.
 _TEXEL_MAJOR = (np.zeros(0, np.int64), np.zeros(0, np.int64))
+_NO_DIRECTIONS = np.zeros((0, 3), np.float32)  # its ``directions`` when they are not kept
 
 
 @jit
 def _accumulate_kernel(rays, primitive, distance, d_max, rho_kind, table, kind, ray_albedo,
-                       luminance, sums, target, sample, sign):
+                       luminance, sums, target, sample, sign, directions):
     """Add each ray's values to its texel's sums (k, 7): R(Q)·ρ(d) (RGB), escaped weight (1 for
     a miss), squared luminance of R·ρ; then, for the rays among the first ⌊rays/2⌋ of their
     texel, luminance of R·ρ and escaped weight (for the split error estimate, see
-    ``Terms.rmse``). Every value is rounded to the grid (``_on_grid``) first, so
-    the sums are exact: the same bits in any order.
+    ``Terms.rmse``). With ``directions`` (one unit world direction per ray, (m, 3); (0, 3):
+    none) and sums of ``_AIM_COLUMNS``: also luminance of R·ρ and escaped weight × the
+    direction, over all rays and over the first half. Every value is rounded to the grid
+    (``_on_grid``) first, so the sums are exact: the same bits in any order.
 
     primitive/distance: the rays' hit triangle (−1: no hit within d_max) and distance (``LocalHits``), laid
     out texel by texel (k·rays,), ray r being sample r mod rays of texel r // rays, when
@@ -358,6 +389,7 @@ def _accumulate_kernel(rays, primitive, distance, d_max, rho_kind, table, kind, 
     """
     half = rays // 2
     indexed = len(target) > 0
+    aimed = len(directions) > 0
     for r in range(len(primitive)):
         i, s = (target[r], sample[r]) if indexed else (r // rays, r % rays)
         t = primitive[r]
@@ -387,6 +419,15 @@ def _accumulate_kernel(rays, primitive, distance, d_max, rho_kind, table, kind, 
         if s < half:
             sums[i, 5] += sign * lum
             sums[i, 6] += sign * escape
+        if aimed:
+            for c in range(3):
+                d = float(directions[r, c])
+                along, away = _on_grid(lum * d), _on_grid(escape * d)
+                sums[i, 7 + c] += sign * along
+                sums[i, 10 + c] += sign * away
+                if s < half:
+                    sums[i, 13 + c] += sign * along
+                    sums[i, 16 + c] += sign * away
 
 
 @dataclass(frozen=True)
@@ -662,10 +703,11 @@ def _chunk_sums(surfaces: Surfaces, tracer: Tracer, texels: Texels, rows: np.nda
     if surfaces.special:
         _special_hits(surfaces, tracer, origins, directions, hits, texels.key[rows], first, rays,
                       settings, ray_albedo, chains)
-    sums = np.zeros((len(rows), _COLUMNS))
+    sums = np.zeros((len(rows), columns(settings.directional_pages)))
     _accumulate_kernel(rays, hits.triangle, hits.distance, np.float32(settings.d_max),
                        RHO_KINDS[settings.rho], surfaces.table, kind, ray_albedo, LUMINANCE,
-                       sums, *_TEXEL_MAJOR, 1.0)
+                       sums, *_TEXEL_MAJOR, 1.0,
+                       directions if settings.directional_pages else _NO_DIRECTIONS)
     return sums, chains
 
 
@@ -695,7 +737,7 @@ def hemisphere_terms(scene: Scene, world: World, tracer: Tracer, texels: Texels,
     """
     rows = np.arange(len(texels)) if rows is None else np.asarray(rows, np.int64)
     surfaces = surfaces_of(scene, world) if surfaces is None else surfaces
-    sums = np.zeros((len(rows), _COLUMNS))
+    sums = np.zeros((len(rows), columns(settings.directional_pages)))
     chaining = surfaces.special  # else no chain is counted: the counts stay empty
     chain_counts = np.zeros((len(rows) if chaining else 0, 2), np.int64)  # rays, capped chains
     counts = np.zeros(len(rows), np.int64)
@@ -826,15 +868,22 @@ _MEAN_ROWS = 1 << 16  # texels ``_means`` works on at once
 
 
 def _means(sums: np.ndarray, counts: np.ndarray) -> Terms:
-    """Terms from per-texel sums (k, 7) over ``counts`` (k,) rays, ``_MEAN_ROWS`` rows at a time
+    """Terms from per-texel sums (k, 7 or ``_AIM_COLUMNS``) over ``counts`` (k,) rays, ``_MEAN_ROWS`` rows at a time
     (the split's temporaries for every texel at once would be larger than the terms)."""
     means = np.empty((len(counts), _HALF.start))
     first_half = np.empty((len(counts), 2))
+    aimed = sums.shape[1] == _AIM_COLUMNS
+    aims = np.empty((len(counts) if aimed else 0, 6))
+    aim_split = np.empty((len(counts) if aimed else 0, 6))
     for start in range(0, len(counts), _MEAN_ROWS):
         rows = slice(start, start + _MEAN_ROWS)
         part, count = sums[rows], counts[rows]
         means[rows] = part[:, :_HALF.start] / np.maximum(count, 1)[:, None]
         first_half[rows] = _split(part[:, _HALF], count // 2, _luminance_and_escaped(part),
                                   count)
+        if aimed:
+            aims[rows] = part[:, _AIM] / np.maximum(count, 1)[:, None]
+            aim_split[rows] = _split(part[:, _AIM_HALF], count // 2, part[:, _AIM], count)
     return Terms(w_hit=means[:, _RGB], escaped=means[:, _ESCAPED], hit_sq=means[:, _SQUARE],
-                 counts=counts, half_split=first_half)
+                 counts=counts, half_split=first_half, aim_hit=aims[:, :3],
+                 aim_escaped=aims[:, 3:], aim_split=aim_split)

@@ -52,6 +52,10 @@ from baker.run.atomic import Outputs
 from baker.settings import BAKED_LIGHTS, CARRIERS, ENCODINGS, OCCLUSION_MODES
 
 LIGHTMAP_EXTENSION = "MOZ_lightmap"
+DIRECTIONAL_EXTENSION = "BAKER_lightmap_directional"
+"""Directional pages beside a MOZ_lightmap, on normal-mapped materials (docs/directional.md):
+``{"index": T, "texCoord": n}``, texture T holding h = g/(1 + |g|) as 0.5 + 0.5·h, linear, on
+the lightmap's UV set (``light.directional``)."""
 LIGHTS_EXTENSION = "KHR_lights_punctual"
 VARIANTS_EXTENSION = "KHR_materials_variants"
 EMISSIVE_STRENGTH = "KHR_materials_emissive_strength"
@@ -279,6 +283,7 @@ class _Builder:
             if "mesh" in node:
                 self.mesh_users[node["mesh"]] = self.mesh_users.get(node["mesh"], 0) + 1
         self.lightmap_textures: list[int] = []
+        self.direction_textures: list[int] = []  # a page's directional page, if any
         self.occlusion_textures: list[int] = []
         self.intensities: list[float] = []
         self.material_copies: dict[tuple[int | None, int, int], int] = {}
@@ -384,6 +389,9 @@ class _Builder:
                 kind = "emission" if self.options.carrier == "emissive" else "lightmap"
                 self.lightmap_textures.append(
                     self._add_texture(page.png, sampler, f"{kind} page {p}"))
+            if page.direction_png is not None and self.options.carrier == "moz":
+                self.direction_textures.append(
+                    self._add_texture(page.direction_png, sampler, f"directional page {p}"))
             if self._writes_occlusion():
                 if page.occlusion_png is None:
                     raise SettingsError(f"occlusion output was asked but lightmap page {p} has "
@@ -428,6 +436,9 @@ class _Builder:
             copied.setdefault("extensions", {})[LIGHTMAP_EXTENSION] = {
                 "index": self.lightmap_textures[page], "texCoord": texcoord,
                 "intensity": self.intensities[page]}
+            if self.direction_textures and "normalTexture" in copied:
+                copied["extensions"][DIRECTIONAL_EXTENSION] = {
+                    "index": self.direction_textures[page], "texCoord": texcoord}
         elif self.options.carrier == "emissive":
             _carry_as_emission(copied, self.lightmap_textures[page], texcoord,
                                self.intensities[page])
@@ -573,6 +584,8 @@ class _Builder:
             "lightmap_extension": LIGHTMAP_EXTENSION if moz else None,
             "occlusion": "visibility" if self._writes_occlusion() else "none",
             "lightmap_intensity_percentile": self.options.clip_percentile,
+            **({"directional_extension": DIRECTIONAL_EXTENSION} if self.direction_textures
+               else {}),
         }
         asset["extras"] = extras
 

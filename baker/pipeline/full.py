@@ -32,8 +32,15 @@ from baker.atlas.validity import (HEMISPHERE_RAYS, TANGENT_RAYS, TANGENT_ROUNDS,
                                   check_texels)
 from baker.geometry.surface import LUMINANCE
 from baker.geometry.world import World, build_world
+from baker.gltf.materials import has_normal_maps
 from baker.gltf.scene import Scene
-from baker.image.compose import Lightmaps, blank, compose_into, effective_r_ave
+from baker.image.compose import (
+    Lightmaps,
+    blank,
+    compose_into,
+    directional_pages,
+    effective_r_ave,
+)
 from baker.image.denoise import DenoiseInfo, denoise
 from baker.image.postprocess import postprocess
 from baker.image.seams import find_seams
@@ -182,7 +189,8 @@ def lighting(scene: Scene, world: World, resolved: Resolved, times: dict[str, fl
     with timed(times, "plan"):
         surround = environment(world, tracer, sources, resolved.escape, resolved.seed)
         ambient = ambient_terms(scene, world, resolved.ambient, power, surround.neutral)
-        plan = make_plan(scene, ambient, resolved.rho, sources, surround)
+        plan = make_plan(scene, ambient, resolved.rho, sources, surround,
+                         resolved.directional)
     return Lighting(tracer, sources, power, ambient, plan)
 
 
@@ -257,7 +265,7 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True,
         with timed(times, "load"):
             world = build_world(scene)
         area, diagonal = bounds_of_baked(world, scene)
-        resolved = resolve(settings, area, diagonal)
+        resolved = resolve(settings, area, diagonal, has_normal_maps(scene))
         lit = lighting(scene, world, resolved, times)
     with timed(times, "unwrap"), log.stage("unwrap"):
         if settings.uv is not None:  # the artist's lightmap UVs: no unwrap
@@ -487,7 +495,8 @@ class _Pages:
     @classmethod
     def blank(cls, baking: Baking) -> "_Pages":
         """Nothing composed yet (pages of the visibility only for the occlusion texture)."""
-        lightmaps = blank(baking.atlas, visibility=writes_occlusion(baking.settings))
+        lightmaps = blank(baking.atlas, visibility=writes_occlusion(baking.settings),
+                          directional=baking.settings.directional_pages)
         return cls(lightmaps, (np.zeros_like(lightmaps.covered),
                                np.zeros_like(lightmaps.covered)), Tally(), [])
 
@@ -502,7 +511,8 @@ class _Pages:
         colours = (np.zeros_like(direct.light_colours)
                    if baking.settings.baked_lights == "indirect" else None)
         compose_into(self.lightmaps, texels, terms, ambient, rho, direct, colours,
-                     None if indirect is None else indirect.irradiance)
+                     None if indirect is None else indirect.irradiance,
+                     None if indirect is None or not len(indirect.aim) else indirect.aim)
         validity.mark(texels, *self.masks)
         self.tally.add(terms, direct, validity, effective_r_ave(ambient, rho), indirect,
                        ambient.intensity)
@@ -523,6 +533,8 @@ def _finish_pages(baking: Baking, per_texel: PerTexel, pages: _Pages, times: dic
     if staging is not None:
         staging.start(baking, per_texel, fingerprint)
     resolved, lightmaps, masks = baking.settings, pages.lightmaps, pages.masks
+    with timed(times, "compose"):
+        lightmaps = directional_pages(lightmaps)
     denoised = None
     if resolved.denoise:  # per chart, before the fill of invalid texels and dilation (denoise.py)
         with timed(times, "denoise"):

@@ -115,7 +115,9 @@ class Tally:
     ``--method gi``, indirect_variance the same of E_ind's, the paths traced (gi_paths), their
     rays (gi_rays) and the paths cut at ``gi.MAX_BOUNCES`` (gi_capped); ambient_squares: the
     sum over texels of the squared luminance of I_A·W, which an error of I_A scales
-    (``Ambient.relative_variance``).
+    (``Ambient.relative_variance``); aim_variance: with directional pages, the sum over texels
+    of the variance of their first moment U's estimate (``light.directional``; lightmap
+    luminance units, the obscurance's at I_A's luminance).
     """
 
     texels: int = 0
@@ -129,6 +131,7 @@ class Tally:
     gi_rays: int = 0
     gi_capped: int = 0
     ambient_squares: float = 0.0
+    aim_variance: float = 0.0
 
     def add(self, terms: Terms, direct: Direct | None, validity: Validity,
             r_ave: np.ndarray, indirect: Indirect | None = None,
@@ -144,6 +147,12 @@ class Tally:
         if direct is not None:
             self.shadow_rays += direct.rays
             self.direct_variance += float(np.sum(direct.variance()))
+            self.aim_variance += float(np.sum(direct.aim_variance()))
+        if indirect is not None and len(indirect.aim):
+            self.aim_variance += float(np.sum(indirect.aim_variance))
+        elif len(terms.aim_hit) and intensity is not None:
+            scale = float(intensity @ LUMINANCE) ** 2
+            self.aim_variance += scale * float(np.sum(terms.aim_errors(r_ave)))
         if indirect is not None:
             self.indirect_variance += float(np.sum(indirect.variance))
             self.gi_paths += indirect.paths
@@ -151,6 +160,10 @@ class Tally:
             self.gi_capped += indirect.capped
         for name, count in validity.counts().items():
             self.states[name] += count
+
+    def aim_rmse(self) -> float:
+        """The RMS over the texels of the standard error of their first moment U."""
+        return float(np.sqrt(self.aim_variance / self.texels)) if self.texels else 0.0
 
     def obscurance_rmse(self) -> float:
         """``Terms.rmse`` over every texel (of W's luminance, R_ave as in ``add``)."""

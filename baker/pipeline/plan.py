@@ -6,12 +6,13 @@ can see at a glance what the bake will and will not account for.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from baker.geometry.surface import LUMINANCE
-from baker.gltf.materials import material_table
+from baker.gltf.materials import material_table, normal_mapped
 from baker.gltf.scene import Scene
 from baker.light.ambient import Ambient
 from baker.light.direct import Sources
@@ -53,9 +54,10 @@ def _node_label(scene: Scene, node: int) -> str:
 
 
 def make_plan(scene: Scene, ambient: Ambient, rho: str, sources: Sources | None = None,
-              surround: Environment | None = None) -> Plan:
+              surround: Environment | None = None, directional: bool = False) -> Plan:
     """What this bake does with ``scene``; ``sources``: its direct light (direct.light_sources);
-    ``surround``: what rays that meet nothing count, and why (environment.environment)."""
+    ``surround``: what rays that meet nothing count, and why (environment.environment);
+    ``directional``: whether directional lightmaps were asked for."""
     baked, left_out = [], [(s.where, s.reason) for s in scene.skipped]
     for inst in scene.instances:
         prim = scene.primitives[inst.primitive]
@@ -92,6 +94,7 @@ def make_plan(scene: Scene, ambient: Ambient, rho: str, sources: Sources | None 
         stages["escaping rays"] = f"rays that meet nothing within d_max count {surround.reason}"
     stages.update(material_stages(scene))
     stages.update(_direct_stages(scene, sources))
+    stages["directional"] = _directional_stage(scene, directional)
     return Plan(stages=stages, baked=tuple(baked), left_out=tuple(left_out))
 
 
@@ -173,13 +176,39 @@ def _direct_stages(scene: Scene, sources: Sources | None) -> dict[str, str]:
         f"{len(emitters.triangles)} emissive triangle(s) as area lights, sampled by power, "
         f"{sources.emissive_rays} shadow rays per texel; their own texels hold only the light "
         "they receive (the material adds the emission)")
-    if sources.sky is None:
-        stages["sky"] = "none: no escaping rays (--sky R,G,B adds one)"
+    sky = sources.sky
+    if sky is None:
+        stages["sky"] = "none: no escaping rays (--sky R,G,B or --sky-image FILE adds one)"
+    elif sky.is_image:
+        height, width = sky.image.shape[:2]
+        stages["sky"] = (f"image {sky.source} ({width}×{height}, mean radiance "
+                         f"{_rgb(sky.mean_radiance())}, turned {math.degrees(sky.rotation):g}° "
+                         f"about +Y), {sources.sky_rays} rays per texel, half drawn by the "
+                         "image's brightness and half by the cosine (one-sample MIS); it lights "
+                         "D, I_A and GI's paths alike")
     else:
-        zenith, horizon = sources.sky
+        zenith, horizon = sky.gradient
         shape = "uniform" if np.array_equal(zenith, horizon) else f"gradient to {_rgb(horizon)} at the horizon"
         stages["sky"] = f"radiance {_rgb(zenith)} at the zenith, {shape}, {sources.sky_rays} rays per texel"
     return stages
+
+
+def _directional_stage(scene: Scene, asked: bool) -> str:
+    """What ``--directional`` does here: which normal-mapped materials get directional pages,
+    or why there are none."""
+    if not asked:
+        return "off: one irradiance per texel (--directional adds its dominant direction for " \
+               "normal-mapped materials)"
+    mapped = sorted({scene.primitives[inst.primitive].material for inst in scene.instances
+                     if inst.baked and normal_mapped(scene, scene.primitives[inst.primitive]
+                                                     .material)})
+    if not mapped:
+        return "left out: directional pages, the scene has no normal map"
+    names = ", ".join(scene.materials[m].name or f"materials[{scene.materials[m].index}]"
+                      for m in mapped)
+    return (f"per texel the irradiance and its dominant direction from every estimator, one "
+            f"more page per lightmap page (BAKER_lightmap_directional) for {len(mapped)} "
+            f"normal-mapped material(s): {names}")
 
 
 def _rgb(v) -> str:

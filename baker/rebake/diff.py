@@ -137,6 +137,8 @@ def fingerprints(scene: Scene, world: World, settings: Resolved, asked=None) -> 
     values = settings.as_dict()
     rays = {k: v for k, v in values.items()
             if k not in _NO_EFFECT + RECOMPOSE_SETTINGS + ATLAS_SETTINGS}
+    if rays.get("sky_image") is not None:  # the image's bytes, wherever it is named from
+        rays["sky_image"] = digest(np.frombuffer(Path(rays["sky_image"]).read_bytes(), np.uint8))
     baked = baked_instances(scene)
     unwrap_input = digest(settings.texel_density, settings.page_size, settings.padding,
                           settings.uv,

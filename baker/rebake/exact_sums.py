@@ -19,6 +19,7 @@ from baker.light.hemisphere import (
     _HALF,
     _RGB,
     _SHIFT,
+    _NO_DIRECTIONS,
     _SQUARE,
     Surfaces,
     Terms,
@@ -44,7 +45,8 @@ def ray_changes(surfaces: Surfaces, settings: Resolved, target: np.ndarray,
         kind, ray_albedo = _shading(surfaces, settings, hits)
         _accumulate_kernel(settings.rays, hits.triangle, hits.distance,
                            np.float32(settings.d_max), RHO_KINDS[settings.rho], surfaces.table,
-                           kind, ray_albedo, LUMINANCE, changes, target, sample, sign)
+                           kind, ray_albedo, LUMINANCE, changes, target, sample, sign,
+                           _NO_DIRECTIONS)
     return changes
 
 

@@ -49,7 +49,7 @@ from baker.atlas.validity import Faces, Validity, check_texels
 from baker.errors import SettingsError
 from baker.geometry.world import World, build_world
 from baker.gltf.load import read_document
-from baker.gltf.materials import SPECULAR, TRANSPARENT, material_table
+from baker.gltf.materials import SPECULAR, TRANSPARENT, has_normal_maps, material_table
 from baker.gltf.scene import Scene
 from baker.jit import inline, jit
 from baker.light.direct import (
@@ -1038,7 +1038,7 @@ def _compared(scene: Scene, settings: Settings, path, relight: bool, times: dict
             raise FullBake(str(error)) from None
         world = build_world(scene)
     area, diagonal = bounds_of_baked(world, scene)
-    resolved = resolve(settings, area, diagonal)
+    resolved = resolve(settings, area, diagonal, has_normal_maps(scene))
     if settings.texel_density is None and density is not None and (
             density < resolved.texel_density):
         # The full bake lowered its derived density until the charts fit a page
@@ -1146,9 +1146,10 @@ def _dirty_search(scene: Scene, start: _Compared, lit: Lighting, stored: _Stored
     surfaces = surfaces_of(scene, world)
     # Texels whose rays changed take only those rays' change (``_by_ray``) when each ray's part
     # of its texel's terms stands alone and their sums are exact: no chains, no other side, no
-    # adaptive rounds, albedos within [0, 1].
+    # adaptive rounds, albedos within [0, 1], no directions (their sums are not recovered).
     by_ray = (surfaces.exact_sums and resolved.rays <= EXACT_RAYS and not translucent(scene).any
-              and resolved.target_error is None and not change.recoloured)
+              and resolved.target_error is None and not change.recoloured
+              and not resolved.directional_pages)
     raw = stored.raw
     texels = replace(raw, position=stored.texels.positions(raw.position))  # changed in place below
     search = _Search(np.full(len(raw), -1, np.int8), texels, stored.validity, surfaces, by_ray)
@@ -1323,12 +1324,16 @@ def _traced_again(scene: Scene, start: _Compared, lit: Lighting, stored: _Stored
         if relit:
             clean = np.ix_(rows[~dirty_rows], relit)
             direct.punctual[clean], direct.punctual_var[clean] = done.relit, done.relit_var
+            if len(direct.punctual_aim):
+                direct.punctual_aim[clean] = done.relit_aim
+                direct.punctual_aim_var[clean] = done.relit_aim_var
             rays += int((~dirty_rows).sum()) * int(sources.samples[list(relit)].sum())
     if updated is not None:
         terms = merge(terms, *updated)
     if len(closed):
-        terms = merge(terms, foliage_terms(foliage, scene, start.world, search.texels, closed),
-                      closed)
+        approx = foliage_terms(foliage, scene, start.world, search.texels, closed,
+                               resolved.directional_pages)
+        terms = merge(terms, approx, closed)
     return terms, direct, rays
 
 

@@ -24,7 +24,14 @@ from baker.geometry.surface import LUMINANCE
 from baker.gltf.scene import Scene
 from baker.geometry.world import World
 from baker.image.compose import effective_r_ave
-from baker.light.direct import Direct, direct_light, punctual_irradiance, texel_receivers
+from baker.light.direct import (
+    Direct,
+    aim_of,
+    direct_light,
+    mean_and_variance,
+    punctual_samples,
+    texel_receivers,
+)
 from baker.light.hemisphere import Surfaces, Terms, surfaces_of
 from baker.light.integrate import integrate
 from baker.pipeline import cluster
@@ -71,12 +78,16 @@ class _Rows:
 class Retraced:
     """One part's results: ``terms`` of its obscurance rows and ``direct`` light of its direct
     rows (``_Rows``, in order), and for its other rows each relit light's unit irradiance and
-    variance, ``relit`` and ``relit_var`` (c, R) for the R lights of ``Retracing.relit``."""
+    variance, ``relit`` and ``relit_var`` (c, R) for the R lights of ``Retracing.relit``, with
+    directional pages their first moments ``relit_aim`` (c, R, 3) and its variance
+    ``relit_aim_var`` (c, R) (``direct.Direct.punctual_aim``; else 0 rows)."""
 
     terms: Terms
     direct: Direct
     relit: np.ndarray
     relit_var: np.ndarray
+    relit_aim: np.ndarray
+    relit_aim_var: np.ndarray
 
     @property
     def rays(self) -> int:
@@ -140,22 +151,31 @@ def _retrace_part(work: Retracing, rows: _Rows, seconds: dict[str, float]) -> Re
         clean = np.flatnonzero(~rows.direct) if work.relit else np.zeros(0, np.int64)
         relit = np.zeros((len(clean), len(work.relit)))
         relit_var = np.zeros_like(relit)
+        aimed = len(clean) if s.directional_pages else 0
+        relit_aim, relit_aim_var = np.zeros((aimed, len(work.relit), 3)), np.zeros((aimed, len(work.relit)))
         for column, light in enumerate(work.relit):
-            relit[:, column], relit_var[:, column] = _relight(texels, lit.tracer, lit.sources,
-                                                              s, light, clean)
-    return Retraced(terms, direct, relit, relit_var)
+            (relit[:, column], relit_var[:, column], aim, aim_var) = _relight(
+                texels, lit.tracer, lit.sources, s, light, clean)
+            if aimed:
+                relit_aim[:, column], relit_aim_var[:, column] = aim, aim_var
+    return Retraced(terms, direct, relit, relit_var, relit_aim, relit_aim_var)
 
 
 def _relight(texels: Texels, tracer: Tracer, sources, settings, light: int,
-             rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Light ``light``'s unit-intensity irradiance and variance at the texels ``rows``, with the
-    same estimator, samples and chunks as ``direct.direct_light``."""
+             rows: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Light ``light``'s unit-intensity irradiance and variance at the texels ``rows``, and
+    its first moment (k, 3) and that moment's variance (``direct.aim_of``), with the same
+    estimator, samples and chunks as ``direct.direct_light``."""
     value, variance = np.zeros(len(rows)), np.zeros(len(rows))
+    aim, aim_var = np.zeros((len(rows), 3)), np.zeros(len(rows))
     step = max(1, settings.chunk_texels)
     for start in range(0, len(rows), step):
         part = rows[start:start + step]
+        done = slice(start, start + len(part))
         receivers = texel_receivers(take(texels, part), slice(0, len(part)), tracer.center)
-        value[start:start + len(part)], variance[start:start + len(part)] = punctual_irradiance(
+        samples, _, directions = punctual_samples(
             sources.lights[light], float(sources.spread[light]), int(sources.samples[light]),
             receivers, tracer, settings.seed, light_dimension(light))
-    return value, variance
+        value[done], variance[done] = mean_and_variance(samples)
+        aim[done], aim_var[done] = aim_of(samples, directions)
+    return value, variance, aim, aim_var

@@ -1,12 +1,45 @@
-// A GLTFLoader plugin for MOZ_lightmap, as baker writes it (docs/output.md).
+// A GLTFLoader plugin for MOZ_lightmap, as baker writes it (docs/output.md), and for its
+// directional pages, BAKER_lightmap_directional (docs/directional.md).
 //
 // {"extensions": {"MOZ_lightmap": {"index": T, "texCoord": n, "intensity": s}}} on a material
 // becomes three.js's lightMap (texture T read from TEXCOORD_n) with lightMapIntensity s.
 // The texels decode by the file's asset.extras.baker.lightmap_encoding: "linear" (texel/255,
 // what Hubs and the three.js plugin have always done; the default) or "srgb" (the extension
 // text). three.js shades a lightmap as irradiance: diffuse colour x lightMap x intensity / pi.
+//
+// {"BAKER_lightmap_directional": {"index": D, "texCoord": n}} beside it (on normal-mapped
+// materials) holds, per lightmap texel, h = g / (1 + |g|) as 0.5 + 0.5 h (linear), on the
+// lightmap's UV set. The shader patch below decodes g and scales the lightmap's irradiance by
+// max(0, 1 + (n - n0) . g), with n the normal-mapped world normal and n0 the interpolated
+// vertex one (baker/light/directional.py; baker preview computes the same). World space is the
+// glTF scene's: add the loaded scene without a transform of its own.
 
 import { NoColorSpace, SRGBColorSpace } from './three.min.js';
+
+const DIRECTIONAL = 'BAKER_lightmap_directional';
+
+const DECODE = `
+#if defined( RE_IndirectDiffuse ) && defined( USE_LIGHTMAP )
+{
+  vec3 bakerH = texture2D( bakerDirectionMap, vLightMapUv ).rgb * 2.0 - 1.0;
+  vec3 bakerG = bakerH / max( 1.0 - length( bakerH ), 1e-6 );
+  vec3 bakerN = inverseTransformDirection( normal, viewMatrix );
+  vec3 bakerN0 = inverseTransformDirection( nonPerturbedNormal, viewMatrix );
+  float bakerFactor = max( 0.0, 1.0 + faceDirection * dot( bakerN - bakerN0, bakerG ) );
+  irradiance += lightMapIrradiance * ( bakerFactor - 1.0 );
+}
+#endif`;
+
+// The material's shader with the directional decode after three.js's lightmap term.
+function directionalShader(texture) {
+  return (shader) => {
+    shader.uniforms.bakerDirectionMap = { value: texture };
+    shader.fragmentShader = shader.fragmentShader
+      .replace('#include <lightmap_pars_fragment>',
+        '#include <lightmap_pars_fragment>\nuniform sampler2D bakerDirectionMap;')
+      .replace('#include <lights_fragment_maps>', `#include <lights_fragment_maps>${DECODE}`);
+  };
+}
 
 export class MozLightmapPlugin {
   constructor(parser) {
@@ -18,10 +51,20 @@ export class MozLightmapPlugin {
 
   extendMaterialParams(materialIndex, params) {
     const material = this.parser.json.materials[materialIndex];
-    const extension = (material.extensions || {})[this.name];
+    const extensions = material.extensions || {};
+    const extension = extensions[this.name];
     if (!extension || extension.index === undefined) return Promise.resolve();
     params.lightMapIntensity = extension.intensity === undefined ? 1 : extension.intensity;
-    return this.parser.assignTexture(params, 'lightMap',
-      { index: extension.index, texCoord: extension.texCoord || 0 }, this.colorSpace);
+    const pending = [this.parser.assignTexture(params, 'lightMap',
+      { index: extension.index, texCoord: extension.texCoord || 0 }, this.colorSpace)];
+    const directional = extensions[DIRECTIONAL];
+    if (directional && directional.index !== undefined) {
+      pending.push(this.parser.getDependency('texture', directional.index).then((texture) => {
+        texture.colorSpace = NoColorSpace;
+        params.onBeforeCompile = directionalShader(texture);
+        params.customProgramCacheKey = () => DIRECTIONAL;
+      }));
+    }
+    return Promise.all(pending);
   }
 }
