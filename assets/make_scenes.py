@@ -5,7 +5,7 @@ metres, colours linear RGB. Scene functions describe what they built in ``builde
 names and indices, triangle ranges, ...), which tests read and which is not written to the file.
 
     python assets/make_scenes.py        # or: python -m assets.make_scenes
-writes the demo scenes (Cornell box, vase room) into ``assets/scenes/`` and prints their paths.
+writes the demo scenes (Cornell box, vase room, a tree) into ``assets/scenes/`` and prints their paths.
 """
 
 from __future__ import annotations
@@ -367,7 +367,15 @@ def textured_floor(
     return b
 
 
-DEMO_SCENES = {"cornell_box": cornell_box, "vase_room": vase_room}
+def tree() -> GltfBuilder:
+    """A tree of 400 alpha-cut leaf quads and 100 grass blades (``assets/foliage_scenes.py``):
+    many small flat loose parts, which baker charts by projection (``baker/atlas/planar.py``)."""
+    from assets.foliage_scenes import tree as foliage_tree
+
+    return foliage_tree(leaf_count=400, grass_count=100)
+
+
+DEMO_SCENES = {"cornell_box": cornell_box, "vase_room": vase_room, "tree": tree}
 
 
 def main(out_dir: Path = SCENES_DIR) -> list[Path]:
