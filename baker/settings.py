@@ -80,21 +80,26 @@ class Settings:
         ``pip install "baker[cluster]"``); None: on this machine. The bytes are the same
         either way.
     chunk_texels: texels per work unit; bounds memory, never changes the result.
-    carrier: how the bake reaches a viewer (docs/output.md): "moz" (MOZ_lightmap: three.js with
-        a plugin, Hubs, ``baker view``), "emissive" (the lit surface's radiance in the emission
-        of a copy of each material: every viewer, no plugin) or "occlusion" (visibility, 1 =
-        unoccluded, as the core occlusionTexture: every viewer, their own lights kept).
+    carrier: how the bake reaches a viewer (docs/viewers.md): "emissive" (the default: the
+        diffuse light a lit surface sends out as the emission of a copy of each material that
+        keeps its specular response: every glTF viewer, no plugin), "moz" (MOZ_lightmap, the
+        irradiance: three.js with our plugin, Hubs, ``baker view``) or "occlusion" (visibility,
+        1 = unoccluded, as the core occlusionTexture: every viewer, their own lights kept).
     baked_lights: what becomes of the KHR_lights_punctual lights baked into the lightmap:
         "remove" them from the output (so viewers do not light the baked surfaces again),
-        "keep" them (the lightmap holds their light: a viewer that lights with them doubles
-        it), or "indirect": keep them and bake only the indirect light, for viewers that light
-        with them; None: "keep" for the occlusion carrier, else "remove".
+        "keep" them, or "indirect": keep them and bake only the indirect light, for viewers
+        that light with them (moz). None: "keep" for the occlusion carrier, and for the
+        emissive carrier where a surface without a lightmap needs them
+        (``Scene.lights_needed``: its copies have no diffuse response, so the lights then give
+        the baked surfaces only their highlights), else "remove".
     encoding: how lightmap PNG texels map to light, named for what reads them: "linear"
         (texel/255: the three.js MOZ_lightmap plugin, Hubs, ``baker view``) or "srgb" (the
         MOZ_lightmap extension text; the emissive carrier's texture, which glTF says is sRGB);
         None: "srgb" for the emissive carrier, else "linear".
     occlusion: also write the visibility (1 = unoccluded) as the core occlusionTexture next to
-        the MOZ_lightmap ("also"), or not ("none"); the occlusion carrier writes it alone.
+        the bake ("also": with the emissive carrier, viewers then dim their environment's
+        reflections where the bake found the surface occluded), or not ("none"); the occlusion
+        carrier writes it alone.
     clip_percentile: each page's MOZ_lightmap intensity is this percentile (in (50, 100]) of its
         texels' brightest channel; brighter texels clip to it (encode.py). 100: the page's peak.
     shadow_rays: shadow rays per texel towards each light that has a size (radius or angular
@@ -163,7 +168,7 @@ class Settings:
     seed: int = 0
     threads: int = 0
     chunk_texels: int = 4096
-    carrier: str = "moz"
+    carrier: str = "emissive"
     baked_lights: str | None = None
     encoding: str | None = None
     occlusion: str = "none"
@@ -280,11 +285,14 @@ class Settings:
             raise SettingsError("the emissive carrier's texture is an emissiveTexture, which glTF "
                                 "defines as sRGB: it cannot be linear",
                                 fix="leave out --encoding (srgb), or use --carrier moz")
-        if self.carrier != "moz" and self.occlusion == "also":
-            raise SettingsError(f"occlusion 'also' adds an occlusionTexture to the MOZ_lightmap; "
-                                f"the {self.carrier} carrier has none",
-                                fix="use --carrier occlusion for visibility alone, or leave out "
-                                    "--occlusion")
+        if self.carrier == "occlusion" and self.occlusion == "also":
+            raise SettingsError("occlusion 'also' adds the visibility as an occlusionTexture "
+                                "beside the bake; the occlusion carrier is that texture alone",
+                                fix="leave out --occlusion")
+        if self.carrier == "emissive" and self.baked_lights == "indirect":
+            raise SettingsError("the emissive carrier's copies have no diffuse response: the "
+                                "lights' direct light must be in the bake, or nothing shows it",
+                                fix="leave out --baked-lights (keep), or use --carrier moz")
         if self.carrier == "occlusion" and self.baked_lights == "indirect":
             raise SettingsError("the occlusion carrier holds no light, so it has no indirect "
                                 "light to bake", fix="leave out --baked-lights (keep)")
@@ -383,11 +391,14 @@ def quarter_octave(length: float) -> float:
     return 2.0 ** (round(4.0 * math.log2(length)) / 4.0)
 
 
-def resolve(settings: Settings, surface_area: float, diagonal: float) -> Resolved:
+def resolve(settings: Settings, surface_area: float, diagonal: float,
+            lights_needed: bool = False) -> Resolved:
     """Fill in the defaults that depend on the scene.
 
     ``surface_area``: world area of the baked surfaces; ``diagonal``: length of the diagonal of
-    their world bounds. Both in scene units.
+    their world bounds. Both in scene units. ``lights_needed``: the punctual lights light a
+    surface that gets no lightmap (``Scene.lights_needed``), so a carrier that could drop them
+    keeps them.
     """
     settings.check()
     values = {f.name: getattr(settings, f.name) for f in fields(Settings)}
@@ -406,7 +417,9 @@ def resolve(settings: Settings, surface_area: float, diagonal: float) -> Resolve
     values["rays"], values["sky_rays"] = (settings.ray_count(settings.rays),
                                           settings.ray_count(settings.sky_rays))
     if values["baked_lights"] is None:
-        values["baked_lights"] = "keep" if settings.carrier == "occlusion" else "remove"
+        kept = settings.carrier == "occlusion" or (settings.carrier == "emissive"
+                                                     and lights_needed)
+        values["baked_lights"] = "keep" if kept else "remove"
     if values["encoding"] is None:
         values["encoding"] = "srgb" if settings.carrier == "emissive" else "linear"
     return Resolved(**values)
