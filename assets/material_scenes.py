@@ -8,8 +8,10 @@ normal +Y.
 from __future__ import annotations
 
 import numpy as np
+import pygltflib
 
-from assets.gltf_builder import GltfBuilder, box, box_face, quad, rotation_matrix, transformed
+from assets.gltf_builder import (GltfBuilder, box, box_face, quad, rotation_matrix, transformed,
+                                 uv_sphere)
 
 # The extensions' own sample values (their README examples in the Khronos glTF repository).
 TRANSMISSION = {"KHR_materials_transmission": {"transmissionFactor": 1.0},
@@ -163,4 +165,54 @@ def leaf(height: float = 0.2, translucency: float = 0.4, facing: str = "up") -> 
     turn = rotation_matrix((1, 0, 0), 180 if facing == "down-opaque" else 0)
     sheet = transformed(quad(1.0, 1.0), rotation=turn, translation=(0.0, height, 0.0))
     b.info["leaf"] = b.node("leaf", b.shape_mesh("leaf", sheet, material=material))
+    return b
+
+
+def metal_glass_room() -> GltfBuilder:
+    """A 4 × 3 × 4 m room seen from outside (its walls face in; the +z wall is left open so the
+    default view sees in), lit by a point lamp under the ceiling and an emissive ceiling panel,
+    holding every kind of surface a viewer shades differently: a rough gold sphere (metallic
+    1), a glossy steel sphere (metallic 1, roughness 0.3), a box whose metallicRoughnessTexture
+    is metal on its left half and dielectric on its right, a half-transmissive frosted pane,
+    a clear glass pane (transmission 1) and a red and a white dielectric. info["nodes"]: name →
+    node index."""
+    b = GltfBuilder()
+    white = b.material("white", (0.75, 0.75, 0.75), roughness=0.8)
+    red = b.material("red", (0.7, 0.1, 0.08), roughness=0.6)
+    gold = b.material("gold", (1.0, 0.77, 0.34), metallic=1.0, roughness=0.7)
+    steel = b.material("steel", (0.56, 0.57, 0.58), metallic=1.0, roughness=0.3)
+    frosted = b.material("frosted", (0.8, 0.9, 1.0), roughness=0.5,
+                         extensions={"KHR_materials_transmission": {"transmissionFactor": 0.5}})
+    glass = b.material("glass", (1.0, 1.0, 1.0), roughness=0.0, extensions=TRANSMISSION)
+    panel = b.material("panel", (0.8, 0.8, 0.8), emissive=(1.0, 0.95, 0.85),
+                       emissive_strength=4.0)
+    halves = np.zeros((8, 8, 3), np.uint8)
+    halves[..., 1] = 160  # roughness 0.63
+    halves[:, :4, 2] = 255  # metal on the left half (u < 0.5)
+    mixed = b.material("mixed", (0.9, 0.6, 0.5), metallic=1.0, roughness=1.0)
+    b._materials[mixed].pbrMetallicRoughness.metallicRoughnessTexture = pygltflib.TextureInfo(
+        index=b._image_texture(halves, "mixed metal roughness"))
+    nodes = {}
+    walls = {"floor": ("-y", white), "ceiling": ("+y", white), "left": ("-x", red),
+             "right": ("+x", white), "back": ("-z", white)}
+    for name, (face, material) in walls.items():
+        nodes[name] = b.node(name, b.shape_mesh(name, box_face((4.0, 3.0, 4.0), face,
+                                                               inward=True), material=material),
+                             translation=(0.0, 1.5, 0.0))
+    nodes["panel"] = b.node("panel", b.shape_mesh("panel", transformed(
+        quad(1.0, 1.0), rotation=rotation_matrix((1, 0, 0), 180.0)), material=panel),
+        translation=(0.8, 2.98, -0.8))
+    for name, material, radius, at in (("gold", gold, 0.45, (-0.9, 0.45, -0.6)),
+                                       ("steel", steel, 0.35, (0.9, 0.35, 0.4))):
+        nodes[name] = b.node(name, b.shape_mesh(name, uv_sphere(radius, 16, 32),
+                                                material=material), translation=at)
+    nodes["mixed"] = b.node("mixed", b.shape_mesh("mixed", box((0.6, 0.6, 0.6)),
+                                                  material=mixed), translation=(0.3, 0.3, -1.2))
+    for name, material, x in (("frosted", frosted, -0.2), ("glass", glass, 1.4)):
+        nodes[name] = b.node(name, b.shape_mesh(name, box((0.9, 1.2, 0.04)), material=material),
+                             translation=(x, 0.6, 1.0))
+    lamp = b.light("point", name="lamp", intensity=6.0, color=(1.0, 0.9, 0.8))
+    nodes["lamp"] = b.node("lamp", translation=(-0.5, 2.4, 0.2),
+                           extensions={"KHR_lights_punctual": {"light": lamp}})
+    b.info["nodes"] = nodes
     return b

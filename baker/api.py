@@ -122,15 +122,16 @@ def check_input_kept(scene: Scene, output: Path, overwrite: bool = False) -> Non
     """Refuse an output whose files would replace a file the input uses (its .bin, its images),
     unless ``overwrite``.
 
-    A ``.gltf`` output writes ``<stem>.bin`` beside it, and any output in another folder than
-    the input's copies the images the input names by URI beside it (``write.image_file_name``).
+    A ``.gltf`` output writes ``<stem>.bin`` beside it, and in another folder than the input's
+    copies the images the input names by URI beside it (``write.image_file_name``); a ``.glb``
+    holds them.
     """
     if overwrite:
         return
-    written = [output] + ([output.with_name(output.stem + ".bin")]
-                          if output.suffix.lower() == ".gltf" else [])
+    gltf = output.suffix.lower() == ".gltf"
+    written = [output] + ([output.with_name(output.stem + ".bin")] if gltf else [])
     folder = scene.path.parent
-    if output.parent.resolve() != folder.resolve():
+    if gltf and output.parent.resolve() != folder.resolve():
         written += [output.with_name(image_file_name(output, i, image.uri))
                     for i, image in enumerate(scene.document.images)
                     if isinstance(image.uri, str) and not image.uri.startswith("data:")]
@@ -318,7 +319,8 @@ def carried(done) -> Lightmaps:
     if done.settings.carrier != "emissive":
         return done.lightmaps
     return emissive_lightmaps(done.scene, done.world, done.atlas, done.texels, done.lightmaps,
-                              done.settings.padding)
+                              done.settings.padding,
+                              done.direct if done.settings.baked_lights == "keep" else None)
 
 
 def gi_notes(done) -> list[str]:
@@ -346,8 +348,9 @@ def target_notes(done, pages) -> list[str]:
 
 def clipping_notes(pages) -> list[str]:
     """One report note per page whose intensity (a percentile, encode.py) clips texels."""
-    return [f"lightmap page {p}: {page.clipped:.2%} of its texels are brighter than its "
-            f"MOZ_lightmap intensity {page.intensity:.4g} (peak {page.peak:.4g}) and clip to it; "
+    return [f"lightmap page {p}: {page.clipped:.2%} of its texels are brighter than its scale "
+            f"{page.intensity:.4g} (the MOZ_lightmap intensity, the emissive strength; peak "
+            f"{page.peak:.4g}) and clip to it; "
             "--clip-percentile 100 scales to the peak, --lightmaps DIR --format exr keeps floats"
             for p, page in enumerate(pages) if page.clipped > 0]
 

@@ -45,6 +45,7 @@ from baker.geometry.surface import (LUMINANCE, SRGB_TO_LINEAR, albedo, base_colo
 from baker.geometry.world import World, build_world
 from baker.gltf.load import _Context, _decode_image, load, resolve_buffers, trs_matrices
 from baker.gltf.scene import Scene
+from baker.light.viewer_lights import punctual_shading
 from baker.image.encode import linear_to_srgb, png_bytes
 from baker.light.directional import decode_vectors, shading_factor, texel_vectors
 from baker.output.write import DIRECTIONAL_EXTENSION
@@ -540,6 +541,11 @@ def _shade(scene: Scene, world: World, lightmaps: SceneLightmaps, mode: str, tri
         shaded = diffuse * (1.0 if mode == "unlit" else light / np.pi)
         radiance[hit] = (np.where(baked[:, None], shaded, albedo(scene, world, tris, b) * flat)
                          + emission(scene, world, tris, b))
+        if mode == "lit" and baked.any():  # the file's lights, as a viewer adds them
+            on = hit[baked]
+            radiance[on] += punctual_shading(scene, world, tris[baked], b[baked],
+                                             _points(world, triangle[on], bary[on]),
+                                             -directions[on])
         if mode == "lit":
             from_lightmap[hit[baked]] = shaded[baked]
     lightmapped = np.zeros(n, bool)

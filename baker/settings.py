@@ -80,21 +80,27 @@ class Settings:
         ``pip install "baker[cluster]"``); None: on this machine. The bytes are the same
         either way.
     chunk_texels: texels per work unit; bounds memory, never changes the result.
-    carrier: how the bake reaches a viewer (docs/output.md): "moz" (MOZ_lightmap: three.js with
-        a plugin, Hubs, ``baker view``), "emissive" (the lit surface's radiance in the emission
-        of a copy of each material: every viewer, no plugin) or "occlusion" (visibility, 1 =
-        unoccluded, as the core occlusionTexture: every viewer, their own lights kept).
+    carrier: how the bake reaches a viewer (docs/viewers.md): "emissive" (the diffuse light a
+        lit surface sends out, as the emission of a copy of each material that keeps its
+        specular response: every glTF viewer, no plugin), "moz" (MOZ_lightmap, the irradiance:
+        three.js with our plugin, Hubs, ``baker view``) or "occlusion" (visibility, 1 =
+        unoccluded, as the core occlusionTexture: every viewer, their own lights kept). None
+        (the default): "emissive", or "moz" with ``directional`` (``chosen_carrier``).
     baked_lights: what becomes of the KHR_lights_punctual lights baked into the lightmap:
         "remove" them from the output (so viewers do not light the baked surfaces again),
-        "keep" them (the lightmap holds their light: a viewer that lights with them doubles
-        it), or "indirect": keep them and bake only the indirect light, for viewers that light
-        with them; None: "keep" for the occlusion carrier, else "remove".
+        "keep" them, or "indirect": keep them and bake only the indirect light, for viewers
+        that light with them (moz). None: "keep" for the occlusion carrier, and for the
+        emissive carrier where a surface without a lightmap needs them
+        (``Scene.lights_needed``: its copies have no diffuse response, so the lights then give
+        the baked surfaces only their highlights), else "remove".
     encoding: how lightmap PNG texels map to light, named for what reads them: "linear"
         (texel/255: the three.js MOZ_lightmap plugin, Hubs, ``baker view``) or "srgb" (the
         MOZ_lightmap extension text; the emissive carrier's texture, which glTF says is sRGB);
         None: "srgb" for the emissive carrier, else "linear".
     occlusion: also write the visibility (1 = unoccluded) as the core occlusionTexture next to
-        the MOZ_lightmap ("also"), or not ("none"); the occlusion carrier writes it alone.
+        the bake ("also": with the emissive carrier, viewers then dim their environment's
+        reflections where the bake found the surface occluded), or not ("none"); the occlusion
+        carrier writes it alone.
     clip_percentile: each page's MOZ_lightmap intensity is this percentile (in (50, 100]) of its
         texels' brightest channel; brighter texels clip to it (encode.py). 100: the page's peak.
     shadow_rays: shadow rays per texel towards each light that has a size (radius or angular
@@ -173,7 +179,7 @@ class Settings:
     seed: int = 0
     threads: int = 0
     chunk_texels: int = 4096
-    carrier: str = "moz"
+    carrier: str | None = None
     baked_lights: str | None = None
     encoding: str | None = None
     occlusion: str = "none"
@@ -277,12 +283,18 @@ class Settings:
                                 "not shipped to them", fix="bake without --cluster or without "
                                                            "--foliage")
 
+    def chosen_carrier(self) -> str:
+        """``carrier``, or when it is not given the default: "moz" for directional lightmaps
+        (their pages ride beside the MOZ_lightmap), else "emissive"."""
+        return self.carrier or ("moz" if self.directional else "emissive")
+
     def _check_output(self) -> None:
         """Carrier, baked lights, encoding and occlusion: known values that fit together."""
         if self.occlusion == "only":
             raise SettingsError("occlusion 'only' is now the occlusion carrier",
                                 fix="use --carrier occlusion")
-        for name, value, allowed in (("carrier", self.carrier, CARRIERS),
+        carrier = self.chosen_carrier()
+        for name, value, allowed in (("carrier", carrier, CARRIERS),
                                      ("baked_lights", self.baked_lights, BAKED_LIGHTS),
                                      ("encoding", self.encoding, ENCODINGS),
                                      ("occlusion", self.occlusion, OCCLUSION_MODES)):
@@ -290,21 +302,24 @@ class Settings:
                                                                           "encoding")):
                 raise SettingsError(f"{name} must be one of {', '.join(allowed)}, not {value!r}",
                                     fix=f"use --{name.replace('_', '-')} {allowed[0]}")
-        if self.carrier == "emissive" and self.encoding == "linear":
+        if carrier == "emissive" and self.encoding == "linear":
             raise SettingsError("the emissive carrier's texture is an emissiveTexture, which glTF "
                                 "defines as sRGB: it cannot be linear",
                                 fix="leave out --encoding (srgb), or use --carrier moz")
-        if self.carrier != "moz" and self.occlusion == "also":
-            raise SettingsError(f"occlusion 'also' adds an occlusionTexture to the MOZ_lightmap; "
-                                f"the {self.carrier} carrier has none",
-                                fix="use --carrier occlusion for visibility alone, or leave out "
-                                    "--occlusion")
-        if self.directional and self.carrier != "moz":
+        if carrier == "occlusion" and self.occlusion == "also":
+            raise SettingsError("occlusion 'also' adds the visibility as an occlusionTexture "
+                                "beside the bake; the occlusion carrier is that texture alone",
+                                fix="leave out --occlusion")
+        if carrier == "emissive" and self.baked_lights == "indirect":
+            raise SettingsError("the emissive carrier's copies have no diffuse response: the "
+                                "lights' direct light must be in the bake, or nothing shows it",
+                                fix="leave out --baked-lights (keep), or use --carrier moz")
+        if self.directional and self.carrier not in (None, "moz"):
             raise SettingsError(f"directional pages ride beside the MOZ_lightmap (the "
                                 f"BAKER_lightmap_directional extension); the {self.carrier} "
-                                f"carrier has none", fix="add --carrier moz, or leave out "
-                                                         "--directional")
-        if self.carrier == "occlusion" and self.baked_lights == "indirect":
+                                f"carrier has none", fix="leave out --carrier (moz with "
+                                                         "--directional), or --directional")
+        if carrier == "occlusion" and self.baked_lights == "indirect":
             raise SettingsError("the occlusion carrier holds no light, so it has no indirect "
                                 "light to bake", fix="leave out --baked-lights (keep)")
 
@@ -423,12 +438,14 @@ def quarter_octave(length: float) -> float:
 
 
 def resolve(settings: Settings, surface_area: float, diagonal: float,
-            normal_maps: bool = False) -> Resolved:
+            normal_maps: bool = False, lights_needed: bool = False) -> Resolved:
     """Fill in the defaults that depend on the scene.
 
     ``surface_area``: world area of the baked surfaces; ``diagonal``: length of the diagonal of
     their world bounds. Both in scene units. ``normal_maps``: some baked material has a normal
-    map (what ``directional`` pages are for).
+    map (what ``directional`` pages are for). ``lights_needed``: the punctual lights light a
+    surface that gets no lightmap (``Scene.lights_needed``), so a carrier that could drop them
+    keeps them.
     """
     settings.check()
     values = {f.name: getattr(settings, f.name) for f in fields(Settings)}
@@ -449,10 +466,12 @@ def resolve(settings: Settings, surface_area: float, diagonal: float,
     values["directional_pages"] = bool(settings.directional and normal_maps)
     if values["sky_image"] is not None:  # a path given as a Path: one type, one fingerprint
         values["sky_image"] = str(values["sky_image"])
+    carrier = values["carrier"] = settings.chosen_carrier()
     if values["baked_lights"] is None:
-        values["baked_lights"] = "keep" if settings.carrier == "occlusion" else "remove"
+        kept = carrier == "occlusion" or (carrier == "emissive" and lights_needed)
+        values["baked_lights"] = "keep" if kept else "remove"
     if values["encoding"] is None:
-        values["encoding"] = "srgb" if settings.carrier == "emissive" else "linear"
+        values["encoding"] = "srgb" if carrier == "emissive" else "linear"
     return Resolved(**values)
 
 

@@ -41,3 +41,18 @@ def computed(builder, folder: Path, only_nodes=None, **settings) -> Computed:
             replace(inst, baked=inst.baked and inst.node in only_nodes, reason="not under test")
             for inst in scene.instances))
     return compute(scene, Settings(**settings))
+
+
+def carried(material) -> dict | None:
+    """What carries the bake on a material of a baked file (pygltflib Material or its JSON
+    dict), whichever the carrier: {"index": texture, "texCoord": n}, from its MOZ_lightmap or,
+    for a lightmap copy of the emissive carrier ("… (lightmap page p)"), its emissiveTexture;
+    None for a material that carries none."""
+    data = material if isinstance(material, dict) else material.to_dict()
+    extension = (data.get("extensions") or {}).get("MOZ_lightmap")
+    if extension is not None:
+        return {"index": extension["index"], "texCoord": extension.get("texCoord", 0)}
+    emissive = data.get("emissiveTexture")
+    if emissive is not None and "(lightmap page" in (data.get("name") or ""):
+        return {"index": emissive["index"], "texCoord": emissive.get("texCoord", 0)}
+    return None

@@ -147,8 +147,9 @@ def reliefs(browser, builder, view: View, folder: Path, closed_form, **settings)
     shown, report = {}, {}
     for directional in (False, True):
         out = folder / f"{'directional' if directional else 'plain'}.glb"
-        result = baker.bake(source, out, baker.Settings(
-            directional=directional, texel_density=24.0, rays=16, ambient=0.0, **settings),
+        result = baker.bake(source, out, baker.Settings(  # the plain bake on the same carrier
+            directional=directional, carrier="moz", texel_density=24.0, rays=16, ambient=0.0,
+            **settings),
             state=False)
         shown[directional], report[directional] = (pictures(browser, out, view,
                                                             out.with_suffix(".png")),

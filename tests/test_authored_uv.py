@@ -23,6 +23,7 @@ from baker.pipeline.full import bounds_of_baked
 from baker.rebake.state import default_path
 from baker.settings import Settings, resolve
 from tests.gltf_validator import validate
+from tests.bakehelp import carried
 
 PAGE = 64
 SETTINGS = Settings(uv=1, page_size=PAGE, rays=8, shadow_rays=1, threads=1)
@@ -78,8 +79,8 @@ def test_a_good_authored_set_bakes_into_itself_and_stays_texcoord_1(tmp_path):
         assert len(after.texcoords) == 2  # TEXCOORD_0 and the lightmap set: nothing moved
         np.testing.assert_allclose(after.texcoords[1], before.texcoords[1], atol=1e-7)
         assert len(after.positions) == len(before.positions)
-    lightmapped = [m for m in out.materials if "MOZ_lightmap" in (m.extensions or {})]
-    assert lightmapped and all(m.extensions["MOZ_lightmap"]["texCoord"] == 1 for m in lightmapped)
+    lightmapped = [m for m in out.materials if carried(m) is not None]
+    assert lightmapped and all(carried(m)["texCoord"] == 1 for m in lightmapped)
     assert validate(tmp_path / "out.gltf")["issues"]["numErrors"] == 0
 
 
@@ -184,5 +185,4 @@ def test_texcoord_0_as_the_lightmap_set_is_written_as_texcoord_1(tmp_path):
     np.testing.assert_allclose(prim.texcoords[1], prim.texcoords[0], atol=1e-7)
     np.testing.assert_allclose(prim.texcoords[2], load(path).primitives[0].texcoords[1], atol=1e-7)
     data = json.loads((tmp_path / "out.gltf").read_text())
-    assert all(m["extensions"]["MOZ_lightmap"]["texCoord"] == 1
-               for m in data["materials"] if "MOZ_lightmap" in m.get("extensions", {}))
+    assert all(carried(m)["texCoord"] == 1 for m in data["materials"] if carried(m) is not None)

@@ -35,6 +35,7 @@ from assets.make_scenes import checker, cornell_box
 from baker.gltf.load import load
 from baker.run.parallel import run_chunks
 from baker.cli.main import main
+from tests.bakehelp import carried
 
 ROOT = Path(__file__).resolve().parents[1]
 API = importlib.import_module("baker.api")  # the modules (``baker.bake`` is the function)
@@ -439,7 +440,7 @@ def test_overwrite_through_the_python_api(tmp_path):
 def _every_primitive_lightmapped(scene) -> bool:
     document = scene.document
     materials = [document.materials[p.material] for m in document.meshes for p in m.primitives]
-    return bool(materials) and all("MOZ_lightmap" in (m.extensions or {}) for m in materials)
+    return bool(materials) and all(carried(m) is not None for m in materials)
 
 
 # ------------------------------------------------------------------------------------------------

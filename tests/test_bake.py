@@ -11,7 +11,7 @@ import io
 import baker
 from assets.make_scenes import cornell_box, three_instances, vase_room
 from baker.gltf.load import load, read_accessor, resolve_buffers
-from tests.bakehelp import REAL_SCENES, saved
+from tests.bakehelp import REAL_SCENES, carried, saved
 from tests.gltf_validator import describe, issue_codes, validate
 
 FAST = dict(texel_density=8.0, rays=16)
@@ -40,14 +40,15 @@ def _new_problems(source, out):
 
 
 def _lightmap_texcoords_exist(path):
-    """Every MOZ_lightmap.texCoord names a TEXCOORD set of each primitive that uses it."""
+    """Every carrier's texCoord (bakehelp.carried) names a TEXCOORD set of each primitive that
+    uses it."""
     doc = pygltflib.GLTF2().load(str(path))
     checked = 0
     for mesh in doc.meshes:
         for prim in mesh.primitives:
             if prim.material is None:
                 continue
-            ext = (doc.materials[prim.material].extensions or {}).get("MOZ_lightmap")
+            ext = carried(doc.materials[prim.material])
             if ext is None:
                 continue
             assert getattr(prim.attributes, f"TEXCOORD_{ext['texCoord']}") is not None
@@ -98,7 +99,7 @@ def test_a_mesh_on_three_nodes_gets_three_lightmap_areas(tmp_path):
     masks = {}
     for name, mesh in meshes.items():
         prim = doc.meshes[mesh].primitives[0]
-        ext = doc.materials[prim.material].extensions["MOZ_lightmap"]
+        ext = carried(doc.materials[prim.material])
         page = doc.textures[ext["index"]].source
         size = _image_size(doc, page)
         uv = read_accessor(doc, buffers, getattr(prim.attributes, f"TEXCOORD_{ext['texCoord']}"))
@@ -174,8 +175,8 @@ def test_real_scene_facts_show_in_the_plan(tmp_path):
     assert any("TEXCOORD_1 moved up" in note for note in multi.report["notes"])
     document = pygltflib.GLTF2.load(str(tmp_path / "m.glb"))
     for material in document.materials:
-        if "MOZ_lightmap" in (material.extensions or {}):
-            assert material.extensions["MOZ_lightmap"]["texCoord"] == 1
+        if carried(material) is not None:
+            assert carried(material)["texCoord"] == 1
 
 
 def test_files_written_beside_the_output_get_the_usual_permissions(tmp_path):

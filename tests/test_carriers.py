@@ -53,9 +53,11 @@ def test_visibility_is_the_escaped_fraction(tmp_path):
 
 
 def test_emissive_pages_are_albedo_times_irradiance_over_pi(tmp_path):
+    """The Cornell room, all dielectric: each front texel's radiance is its base colour ×
+    irradiance / π plus its own emission (the lamp's texels)."""
     done = computed(cornell_box(), tmp_path, texel_density=6, rays=16)
     out = emissive_lightmaps(done.scene, done.world, done.atlas, done.texels, done.lightmaps,
-                             done.settings.padding)
+                             done.settings.padding, None)
     texels = done.texels
     rows = np.flatnonzero((texels.key & OTHER_SIDE) == 0)
     index = texels.pixel_index(rows)
@@ -75,10 +77,36 @@ def test_emissive_pages_are_albedo_times_irradiance_over_pi(tmp_path):
     assert np.count_nonzero(out.light.max(axis=-1) > 0) > len(rows)
 
 
+@pytest.mark.parametrize("metallic", [1.0, 0.25])
+def test_a_metal_sends_its_surroundings_and_a_kept_light_only_its_highlight(tmp_path, metallic):
+    """A rough floor of base colour 0.5 and metallic 1 or 0.25 under a point light: viewers
+    shade (1 − m) of it as diffuse and m as metal. The page is base × E / π when the light is
+    dropped (the metal part reflecting its surroundings as the bake models a rough metal), and
+    base × (E − (m × the light's direct E)) / π when the light is kept (its highlight is then the
+    viewer's)."""
+    scene = lit_floor("point", intensity=20.0)
+    scene._materials[0].pbrMetallicRoughness.metallicFactor = metallic
+    done = computed(scene, tmp_path, texel_density=6, rays=16)
+    rows = np.flatnonzero((done.texels.key & OTHER_SIDE) == 0)
+    index = done.texels.pixel_index(rows)
+    irradiance = flat_pages(done.lightmaps.light)[index]
+    direct = done.direct.punctual[rows] @ done.direct.light_colours
+    assert (direct > 0.3 * irradiance).all()  # the light gives much of the floor's light
+
+    def page(kept):
+        out = emissive_lightmaps(done.scene, done.world, done.atlas, done.texels,
+                                 done.lightmaps, done.settings.padding, kept)
+        return flat_pages(out.light)[index]
+
+    np.testing.assert_allclose(page(None), 0.5 * irradiance / np.pi)
+    np.testing.assert_allclose(page(done.direct),
+                               0.5 * (irradiance - metallic * direct) / np.pi, atol=1e-12)
+
+
 def test_indirect_leaves_out_exactly_the_punctual_direct_light(tmp_path):
     scene = lit_floor("point", intensity=20.0)
-    removed = computed(scene, tmp_path / "a", texel_density=6, rays=16)
-    indirect = computed(scene, tmp_path / "b", texel_density=6, rays=16,
+    removed = computed(scene, tmp_path / "a", texel_density=6, rays=16, carrier="moz")
+    indirect = computed(scene, tmp_path / "b", texel_density=6, rays=16, carrier="moz",
                         baked_lights="indirect")
     covered = removed.lightmaps.covered
     direct_only = compose(removed.atlas, removed.texels, removed.terms, removed.ambient,
@@ -121,7 +149,7 @@ def test_each_carrier_validates_and_previews(tmp_path, carrier):
     if carrier == "occlusion":
         return
     moz = tmp_path / "reference.glb"
-    baker.bake(source, moz, baker.Settings(**settings), state=False)
+    baker.bake(source, moz, baker.Settings(carrier="moz", **settings), state=False)
     size = (120, 90)
     reference = render(load(moz), "lit", size, exposure=2.0)
     picture = render(load(out), "lit", size, exposure=2.0)
@@ -134,8 +162,8 @@ def test_each_carrier_validates_and_previews(tmp_path, carrier):
 
 def test_metals_are_reported_for_moz_only(tmp_path):
     settings = dict(texel_density=4.0, rays=8)
-    moz = baker.bake(REAL_SCENES["MultiUVTest"], tmp_path / "moz.glb", baker.Settings(**settings),
-                     state=False)
+    moz = baker.bake(REAL_SCENES["MultiUVTest"], tmp_path / "moz.glb",
+                     baker.Settings(carrier="moz", **settings), state=False)
     assert any("diffuse part" in note and "--carrier emissive" in note
                for note in moz.report["notes"]), moz.report["notes"]
     emissive = baker.bake(REAL_SCENES["MultiUVTest"], tmp_path / "e.glb",
@@ -145,7 +173,7 @@ def test_metals_are_reported_for_moz_only(tmp_path):
 
 @pytest.mark.parametrize("settings, words", [
     (dict(carrier="emissive", encoding="linear"), "sRGB"),
-    (dict(carrier="emissive", occlusion="also"), "occlusion"),
+    (dict(carrier="occlusion", occlusion="also"), "occlusion"),
     (dict(carrier="occlusion", baked_lights="indirect"), "indirect"),
     (dict(occlusion="only"), "--carrier occlusion"),
     (dict(carrier="lightmap"), "carrier"),
@@ -179,8 +207,8 @@ def test_the_metals_note_reads_the_metallic_texture(tmp_path, metal_rows, noted)
     pbr.metallicFactor = 1.0
     pbr.metallicRoughnessTexture = pygltflib.TextureInfo(index=b._image_texture(pixels, "mr"))
     source = b.save(tmp_path / "metal.glb")
-    done = baker.bake(source, tmp_path / "out.glb", baker.Settings(texel_density=8.0, rays=4),
-                      state=False)
+    done = baker.bake(source, tmp_path / "out.glb",
+                      baker.Settings(texel_density=8.0, rays=4, carrier="moz"), state=False)
     notes = [note for note in done.report["notes"] if "diffuse part" in note]
     assert bool(notes) == noted, done.report["notes"]
     if noted:

@@ -114,8 +114,10 @@ def test_no_normal_map_no_directional_pages(tmp_path):
                                             "reason": result.plan.stages["directional"]}
     document = pygltflib.GLTF2.load(str(out))
     assert "BAKER_lightmap_directional" not in (document.extensionsUsed or [])
-    with pytest.raises(SettingsError, match="add --carrier moz"):
+    with pytest.raises(SettingsError, match="leave out --carrier"):
         baker.Settings(directional=True, carrier="emissive").check()
+    assert baker.Settings(directional=True).chosen_carrier() == "moz"  # moz unless told
+    assert baker.Settings().chosen_carrier() == "emissive"
 
 
 def test_the_output_carries_directional_pages_validator_clean(tmp_path):
@@ -125,7 +127,7 @@ def test_the_output_carries_directional_pages_validator_clean(tmp_path):
     scene = saved(normal_mapped_floor(), tmp_path)
     settings = dict(texel_density=32.0, rays=16, sky=(0.3, 0.35, 0.4))
     plain, directional = tmp_path / "plain.glb", tmp_path / "directional.glb"
-    baker.bake(scene, plain, baker.Settings(**settings), state=False)
+    baker.bake(scene, plain, baker.Settings(carrier="moz", **settings), state=False)
     result = baker.bake(scene, directional, baker.Settings(directional=True, **settings),
                         state=False)
     report = gltf_validator.validate(directional)

@@ -164,7 +164,8 @@ def test_bake_writes_float_pages_that_match_the_float_lightmaps(tmp_path):
     (tmp_path / "float").mkdir()
     expected = computed(scene, tmp_path / "float", **SETTINGS).lightmaps.light
     out = tmp_path / "baked.glb"
-    code = main(["bake", str(source), "-o", str(out), "--texel-density", "16", "--rays", "4",
+    code = main(["bake", str(source), "-o", str(out), "--carrier", "moz",
+                 "--texel-density", "16", "--rays", "4",
                  "--page-size", "128", "--lightmaps", str(tmp_path / "maps"), "--format", "hdr",
                  "--report", str(tmp_path / "report.json"), "--quiet"])
     assert code == 0

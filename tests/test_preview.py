@@ -1,4 +1,8 @@
-"""``baker preview``: the picture of a baked scene (albedo × lightmap, one Embree ray per pixel)."""
+"""``baker preview``: the picture of a baked scene (albedo × lightmap, one Embree ray per pixel).
+
+The files here are baked with the moz carrier, whose lightmap the preview shades itself: the
+emissive carrier's pages hold the shaded light already (tests/test_carriers.py compares the
+two; tests/test_browser.py compares both with the viewers')."""
 
 import io
 
@@ -27,7 +31,7 @@ def cornell(tmp_path_factory):
     builder = cornell_box()
     source = saved(builder, folder, "in.glb")
     out = folder / "out.glb"
-    baker.bake(source, out, baker.Settings(texel_density=10.0, rays=32))
+    baker.bake(source, out, baker.Settings(texel_density=10.0, rays=32, carrier="moz"))
     scene = load(out)
     world = build_world(scene)
     node_of_triangle = np.array([inst.node for inst in scene.instances])[world.tri_instance]
@@ -144,7 +148,8 @@ def small_bake(tmp_path_factory):
         if name not in done:
             out = tmp_path_factory.mktemp(name) / "out.glb"
             baker.bake(REAL_SCENES[name], out, baker.Settings(texel_density=4.0, rays=8,
-                                                                       escape="scene"))
+                                                                       escape="scene",
+                                                                       carrier="moz"))
             done[name] = out
         return done[name]
 

@@ -48,7 +48,7 @@ def test_serves_the_page_the_file_and_its_exposure_on_localhost(served):
     status, page, kind = _get(url)
     assert status == 200 and b'src="viewer.js"' in page and kind.startswith("text/html")
     info = json.loads(_get(url + "info.json")[1])
-    assert info["carrier"] == "moz" and info["name"] == out.name
+    assert info["carrier"] == "emissive" and info["name"] == out.name  # the default
     assert info["exposure"] == render(load(out), "lit", (160, 120)).exposure
     status, body, kind = _get(url + info["model"])
     assert status == 200 and body == out.read_bytes() and kind == "model/gltf-binary"

@@ -18,9 +18,10 @@ EPILOG = """examples:
   baker bake prop.glb -o prop_ao.glb --rho step          (classic ambient occlusion)
 
 The output is the same scene with the lightmap UVs as TEXCOORD_1 and the bake embedded as PNG,
-carried to viewers as --carrier says: moz (MOZ_lightmap: three.js with its plugin, Hubs,
-baker view), emissive (the lit colour as emission: every glTF viewer, no plugin) or occlusion
-(visibility as the core occlusionTexture). baker view OUT.glb shows it in a browser.
+carried to viewers as --carrier says: emissive (the default: the baked light as the emission of
+each material, which keeps its specular response: every glTF viewer, no plugin), moz
+(MOZ_lightmap: three.js with our plugin, Hubs, baker view) or occlusion (visibility as the core
+occlusionTexture). baker view OUT.glb shows it in a browser.
 """
 
 
@@ -159,35 +160,37 @@ def add_parser(commands) -> None:
                              f"casts N rays (default {d.supersample}: none)")
     out = bake.add_argument_group("output")
     out.add_argument("--carrier", choices=baker.settings.CARRIERS, default=d.carrier,
-                     help="how the bake reaches viewers: moz (MOZ_lightmap, for three.js with "
-                          "its plugin, Hubs, baker view), emissive (the lit colour written as "
-                          "the emission of a copy of each material: shows in every glTF "
-                          "viewer, no plugin; base colour textures at lightmap resolution) or "
-                          "occlusion (visibility, 1 = open, as the core occlusionTexture, for "
-                          "viewers' own lights) (default moz)")
+                     help="how the bake reaches viewers: emissive (the baked diffuse light as "
+                          "the emission of a copy of each material, which keeps its specular "
+                          "response: shows in every glTF viewer, no plugin; base colour "
+                          "textures at lightmap resolution), moz (MOZ_lightmap, for three.js "
+                          "with our plugin, Hubs, baker view) or occlusion (visibility, 1 = "
+                          "open, as the core occlusionTexture, for viewers' own lights) "
+                          "(default emissive; moz with --directional)")
     out.add_argument("--baked-lights", choices=baker.settings.BAKED_LIGHTS,
                      help="the KHR_lights_punctual lights once baked: remove them (viewers "
                           "would light the baked surfaces twice), keep them, or keep them and "
-                          "bake indirect light only (default: remove; keep for --carrier "
-                          "occlusion)")
+                          "bake indirect light only (default: keep; remove for --carrier "
+                          "moz)")
     out.add_argument("--encoding", choices=baker.settings.ENCODINGS, default=d.encoding,
                      help="how PNG texels map to light, by what reads them: linear (the "
                           "three.js MOZ_lightmap plugin, Hubs, baker view) or srgb (the "
-                          "MOZ_lightmap extension text) (default linear; srgb, and only srgb, "
-                          "for --carrier emissive)")
+                          "MOZ_lightmap extension text) (default: srgb, and only srgb, for "
+                          "--carrier emissive; linear for the others)")
     out.add_argument("--clip-percentile", type=float, default=d.clip_percentile, metavar="P",
                      help="each page's MOZ_lightmap intensity is this percentile of its texels' "
                           "brightness; the few brighter texels clip (reported), the rest keep "
                           f"the 8 bits; 100 scales to the peak (default {d.clip_percentile:g})")
     out.add_argument("--occlusion", choices=baker.settings.OCCLUSION_MODES, default=d.occlusion,
                      help="also write the visibility (1 = unoccluded) as the core "
-                          "occlusionTexture next to the MOZ_lightmap; three.js darkens the "
-                          "lightmap by it too (default none)")
+                          "occlusionTexture next to the bake: viewers dim their environment's "
+                          "light by it (three.js: a MOZ_lightmap too) (default none)")
     out.add_argument("--directional", action="store_true",
                      help="directional lightmaps: an extra page holding each texel's dominant "
                           "light direction, which baker view and the three.js plugin decode "
-                          "with the material's normal map (BAKER_lightmap_directional, "
-                          "--carrier moz; see docs/directional.md)")
+                          "with the material's normal map (BAKER_lightmap_directional; the "
+                          "carrier is then moz unless --carrier says otherwise: see "
+                          "docs/directional.md)")
     out.add_argument("--denoise", action="store_true",
                      help="denoise each chart of the lightmap with Intel Open Image Denoise's "
                           "lightmap filter before dilation (needs pip install \"baker[denoise]\"; "

@@ -66,7 +66,7 @@ def sample_texture(image: Image, ref: TextureRef, uv: np.ndarray,
     return top * (1 - fy) + bottom * fy
 
 
-def _interpolate(values: np.ndarray, world: World, tris: np.ndarray, bary: np.ndarray) -> np.ndarray:
+def interpolate(values: np.ndarray, world: World, tris: np.ndarray, bary: np.ndarray) -> np.ndarray:
     """Interpolate a per-vertex array (V, c) at barycentric points (k, 3) of triangles (k,)."""
     return np.einsum("kv,kvc->kc", bary, values[world.triangles[tris]])
 
@@ -75,7 +75,7 @@ def texture_uv(world: World, ref: TextureRef, tris: np.ndarray, bary: np.ndarray
     """The UVs (k, 2) at which ``ref`` is sampled at barycentric points (k, 3) of world
     triangles (k,): its UV set interpolated, then its KHR_texture_transform applied (an affine
     map, so transforming the interpolated UVs equals interpolating transformed corners)."""
-    uv = _interpolate(world.texcoords[ref.texcoord], world, tris, bary)
+    uv = interpolate(world.texcoords[ref.texcoord], world, tris, bary)
     if ref.transform is None:
         return uv
     a, b, c, d, e, f = ref.transform
@@ -117,17 +117,30 @@ def viewer_diffuse_weight(scene: Scene) -> np.ndarray:
                      for m in scene.materials], np.float64)
 
 
+def metallic_roughness_at(scene: Scene, world: World, tris: np.ndarray,
+                          bary: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(k,) metallic and (k,) roughness in [0, 1] at barycentric points (k, 3) of world
+    triangles (k,): the factors × the metallicRoughnessTexture's blue and green channels
+    (linear) where there is one, as viewers sample it per pixel."""
+    factor = np.array([[1.0, m.roughness, m.metallic] for m in scene.materials],
+                      np.float64).reshape(-1, 3)
+    values = _textured(scene, world, tris, bary, factor, lambda m: m.metallic_roughness_texture,
+                       LINEAR_LEVELS)
+    return np.clip(values[:, 2], 0.0, 1.0), np.clip(values[:, 1], 0.0, 1.0)
+
+
+def metallic_at(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray) -> np.ndarray:
+    """(k,) metallic in [0, 1] at barycentric points (``metallic_roughness_at``)."""
+    return metallic_roughness_at(scene, world, tris, bary)[0]
+
+
 def viewer_diffuse_weight_at(scene: Scene, world: World, tris: np.ndarray,
                              bary: np.ndarray) -> np.ndarray:
     """(k,) ``viewer_diffuse_weight`` at barycentric points (k, 3) of world triangles (k,), with
-    metallic the factor × the metallicRoughnessTexture's blue channel (linear) where there is
-    one: viewers sample it per pixel, so a textured metal's dielectric parts show a lightmap
-    (LightsPunctualLamp's stand)."""
-    factor = np.array([[m.metallic] * 3 for m in scene.materials], np.float64).reshape(-1, 3)
-    metallic = _textured(scene, world, tris, bary, factor, lambda m: m.metallic_roughness_texture,
-                         LINEAR_LEVELS)[:, 2]
+    metallic read per point (``metallic_at``): a textured metal's dielectric parts show a
+    lightmap (LightsPunctualLamp's stand)."""
     transmission = np.array([m.transmission for m in scene.materials], np.float64)
-    return ((1.0 - np.clip(metallic, 0.0, 1.0))
+    return ((1.0 - metallic_at(scene, world, tris, bary))
             * (1.0 - np.clip(transmission, 0.0, 1.0)[world.tri_material[tris]]))
 
 
@@ -136,14 +149,14 @@ def base_colour(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray) 
     factor × texture × COLOR_0, every branch's weight left out (tints of mirrors and glass)."""
     factor = np.array([m.base_color[:3] for m in scene.materials], np.float64).reshape(-1, 3)
     colour = _textured(scene, world, tris, bary, factor, lambda m: m.base_color_texture)
-    return colour * _interpolate(world.colors[:, :3], world, tris, bary)
+    return colour * interpolate(world.colors[:, :3], world, tris, bary)
 
 
 def albedo(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray) -> np.ndarray:
     """Diffuse albedo (k, 3), linear RGB, at barycentric points (k, 3) of world triangles (k,)."""
     colour = _textured(scene, world, tris, bary, diffuse_factors(scene),
                        lambda m: m.base_color_texture)
-    return colour * _interpolate(world.colors[:, :3], world, tris, bary)
+    return colour * interpolate(world.colors[:, :3], world, tris, bary)
 
 
 # Barycentric points (4, 3) at which each triangle's albedo and emission are averaged.
@@ -203,7 +216,7 @@ def alpha(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray) -> np.
             continue
         uv = texture_uv(world, ref, tris[mask], bary[mask])
         out[mask] *= sample_alpha(scene.images[ref.image], ref, uv)
-    return out * _interpolate(world.colors[:, 3:4], world, tris, bary)[:, 0]
+    return out * interpolate(world.colors[:, 3:4], world, tris, bary)[:, 0]
 
 
 def triangle_albedo(scene: Scene, world: World) -> tuple[np.ndarray, np.ndarray]:

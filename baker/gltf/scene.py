@@ -181,3 +181,11 @@ class Scene:
     # Files with several names (hard links) were allowed (a setting: files.read_inside), for the
     # writer, which reads the buffers and image files again.
     hard_links: bool = False
+
+    def lights_needed(self) -> bool:
+        """Whether the punctual lights light a surface that no lightmap will hold: an instance
+        left without one (skinned, GPU-instanced, animated, a mirror, clear glass) whose
+        material is not unlit. Removing the lights would leave it dark in a viewer."""
+        return bool(self.lights) and any(
+            not inst.baked and not self.materials[self.primitives[inst.primitive].material].unlit
+            for inst in self.instances)

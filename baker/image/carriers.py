@@ -1,19 +1,22 @@
-"""What the emissive carrier writes: the radiance a lit surface sends to the eye, per texel.
+"""What the emissive carrier writes: the light a lit surface sends out, as its emission.
 
 The moz carrier stores the light arriving at the surface, E (irradiance), and leaves the shading
-to the viewer (three.js shades a lightmap as diffuse colour × E / π). A viewer that reads no
-lightmap extension still shows a material's emission as it is, so the emissive carrier writes
-what the viewer would have shown,
+to a viewer that reads it (three.js shades a lightmap as diffuse colour × E / π). A viewer that
+reads no lightmap extension still shows a material's emission as it is, so the emissive carrier
+(the default) writes, per texel, the view-independent part of what the surface sends out,
 
-    radiance = R · E / π + emission
+    radiance = base · [(1 − m)(1 − t) · E + m · (E − E_kept)] / π + emission
 
-with R the diffuse albedo that the bake itself used at the texel (``geometry.surface.albedo``: base
-colour factor × base colour texture × COLOR_0 × the material's diffuse weight, rough metal
-counting as diffuse as in ``gltf/materials.py``) and the material's own emission. A base colour
-*texture* is therefore sampled once per lightmap texel, at the texel's centre: the output shows
-the texture's detail only down to the lightmap's resolution (docs/output.md says so; the moz
-carrier keeps the texture at full resolution). The writer sets the copied materials' base colour
-to black so that nothing else lights them (``output/write.py``).
+with base the base colour (factor × texture × COLOR_0), m metallic and t transmission at the
+texel's centre, E the bake's irradiance and E_kept the part of it that the punctual lights give
+directly when the output keeps them (0 when it drops them). The first term is the diffuse
+reflection that glTF's BRDF gives the material. The second is a metal's reflection of its
+surroundings, taken as if they were uniform (the bake's own model of a rough metal,
+``gltf/materials.py``). The writer keeps each material's specular response
+(``output/specular.py``) and takes away its diffuse one, so a viewer adds its own
+environment's reflections and nothing lights the baked diffuse twice; where the output keeps
+the lights, they give the metals their highlights, in place of E_kept. A base colour *texture* is sampled once per lightmap texel, at its centre: the output shows
+its detail down to the lightmap's resolution (the moz carrier keeps the texture whole).
 """
 
 from __future__ import annotations
@@ -22,37 +25,54 @@ import numpy as np
 
 from baker.atlas.layout import Atlas
 from baker.atlas.rasterise import Texels, flat_pages, texel_barycentrics
-from baker.geometry.surface import albedo, emission, viewer_diffuse_weight_at
+from baker.geometry.surface import base_colour, emission, metallic_at, viewer_diffuse_weight_at
 from baker.geometry.world import World
 from baker.gltf.scene import Scene
 from baker.image.compose import Lightmaps
 from baker.image.postprocess import dilate
+from baker.light.direct import Direct
 from baker.light.inner import OTHER_SIDE
 
 _DARK_WEIGHT = 0.5  # a viewer shows less than half the bake's diffuse light: worth a warning
 
 
 def emissive_lightmaps(scene: Scene, world: World, atlas: Atlas, texels: Texels,
-                       lightmaps: Lightmaps, padding: int) -> Lightmaps:
-    """The post-processed ``lightmaps`` turned into outgoing radiance pages, R·E/π + emission.
+                       lightmaps: Lightmaps, padding: int, kept: Direct | None) -> Lightmaps:
+    """The post-processed ``lightmaps`` turned into pages of outgoing radiance (the module's
+    formula), ``kept`` the texels' direct light when the output keeps the punctual lights
+    (None: it drops them).
 
     Every front texel (``texels`` without the other-side bit of ``inner.py``) gets its owning
-    surface's albedo and emission at its centre, multiplied into the page's (denoised, filled,
-    stitched) irradiance there; the padding around charts is grown from those texels by
-    ``padding`` rings, as the lightmap's was. The visibility pages are kept as they are.
+    surface's base colour, metallic, transmission and emission at its centre, multiplied into
+    the page's (denoised, filled, stitched) irradiance there; the padding around charts is grown
+    from those texels by ``padding`` rings, as the lightmap's was. The visibility pages are kept
+    as they are.
     """
     front = np.flatnonzero((texels.key & OTHER_SIDE) == 0)
     tris = texels.triangle[front]
     bary = texel_barycentrics(atlas, world, texels)[front]
     index = texels.pixel_index(front)
     irradiance = flat_pages(lightmaps.light)[index]
+    diffuse = viewer_diffuse_weight_at(scene, world, tris, bary)[:, None] * irradiance
+    metal = metallic_at(scene, world, tris, bary)[:, None]
+    if metal.any():
+        punctual = _punctual_irradiance(kept, front, len(texels.key))
+        diffuse += metal * np.maximum(irradiance - punctual, 0.0)
     radiance = np.zeros_like(lightmaps.light)
-    flat_pages(radiance)[index] = (albedo(scene, world, tris, bary) * irradiance / np.pi
+    flat_pages(radiance)[index] = (base_colour(scene, world, tris, bary) * diffuse / np.pi
                                    + emission(scene, world, tris, bary))
     filled = np.zeros(lightmaps.covered.shape, bool)
     flat_pages(filled)[index] = True
     radiance, _ = dilate(radiance, filled, padding)
     return Lightmaps(light=radiance, visibility=lightmaps.visibility, covered=lightmaps.covered)
+
+
+def _punctual_irradiance(direct: Direct | None, rows: np.ndarray, count: int) -> np.ndarray:
+    """(len(rows), 3) the irradiance the punctual lights give the texels ``rows`` directly, as
+    baked (0 where there is no such light)."""
+    if direct is None or not direct.punctual.shape[1] or len(direct.punctual) != count:
+        return np.zeros((len(rows), 3))
+    return direct.punctual[rows] @ direct.light_colours
 
 
 def viewer_notes(scene: Scene, world: World, instances: list[int], carrier: str) -> list[str]:

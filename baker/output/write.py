@@ -41,13 +41,15 @@ import numpy as np
 import pygltflib
 
 from baker.atlas.layout import Atlas, InstanceUV
-from baker.errors import OutputError, SettingsError
+from baker.errors import InputError, OutputError, SettingsError
 from baker.gltf import document as gltf_document
+from baker.gltf import images
 from baker.gltf.document import COMPONENT_DTYPES
 from baker.gltf.files import inside, read_inside
 from baker.gltf.load import MAX_IMAGE_FILE_BYTES, read_accessor, resolve_buffers
-from baker.gltf.scene import Scene
+from baker.gltf.scene import Material, Scene
 from baker.image.encode import PNG_SIGNATURE, EncodedPage
+from baker.output.specular import dielectric_f0, mixed_pair, without_diffuse
 from baker.run.atomic import Outputs
 from baker.settings import BAKED_LIGHTS, CARRIERS, ENCODINGS, OCCLUSION_MODES
 
@@ -59,19 +61,12 @@ the lightmap's UV set (``light.directional``)."""
 LIGHTS_EXTENSION = "KHR_lights_punctual"
 VARIANTS_EXTENSION = "KHR_materials_variants"
 EMISSIVE_STRENGTH = "KHR_materials_emissive_strength"
-SPECULAR = "KHR_materials_specular"
 ENCODING_TARGETS = {
     "linear": "texel/255 x intensity: the three.js MOZ_lightmap plugin, Hubs, baker view",
     "srgb": "sRGB-decoded texel x intensity: the MOZ_lightmap extension text; glTF's "
             "emissiveTexture",
 }
 """What reads each encoding as it is meant (recorded in ``asset.extras.baker``)."""
-# Material extensions that would shade an emissive-carrier copy beyond its emission (a clear
-# coat, sheen or transmission over the black base): dropped from those copies.
-_SHADING_EXTENSIONS = ("KHR_materials_transmission", "KHR_materials_volume",
-                       "KHR_materials_clearcoat", "KHR_materials_sheen",
-                       "KHR_materials_iridescence", "KHR_materials_anisotropy",
-                       "KHR_materials_diffuse_transmission", "KHR_materials_dispersion")
 
 _FLOAT = 5126
 _UNSIGNED_SHORT = 5123
@@ -82,6 +77,8 @@ _TRIANGLES = 4
 _LINEAR = 9729
 _CLAMP_TO_EDGE = 33071
 
+_MIME_TYPES = {"PNG": "image/png", "JPEG": "image/jpeg", "WEBP": "image/webp",
+               "KTX2": "image/ktx2"}
 _GLB_MAGIC, _GLB_JSON, _GLB_BIN = 0x46546C67, 0x4E4F534A, 0x004E4942
 
 
@@ -287,6 +284,7 @@ class _Builder:
         self.occlusion_textures: list[int] = []
         self.intensities: list[float] = []
         self.material_copies: dict[tuple[int | None, int, int], int] = {}
+        self.mixed: dict[int | None, tuple[int, int | None] | None] = {}  # specular.mixed_pair
         self.texcoord: dict[int, int] = {}
         self.notes: list[str] = []
 
@@ -404,14 +402,17 @@ class _Builder:
     def _writes_occlusion(self) -> bool:
         return self.options.carrier == "occlusion" or self.options.occlusion == "also"
 
-    def _add_texture(self, png: bytes, sampler: int, name: str) -> int:
+    def _add_texture(self, png: bytes, sampler: int | None, name: str) -> int:
         if not bytes(png[:8]) == PNG_SIGNATURE:
             raise ValueError(f"{name} is not a PNG image")
         images = self.data.setdefault("images", [])
         images.append({"bufferView": self._add_view(bytes(png)), "mimeType": "image/png",
                        "name": name})
         textures = self.data.setdefault("textures", [])
-        textures.append({"sampler": sampler, "source": len(images) - 1, "name": name})
+        texture = {"source": len(images) - 1, "name": name}
+        if sampler is not None:
+            texture["sampler"] = sampler
+        textures.append(texture)
         return len(textures) - 1
 
     def _lightmap_material(self, material: int | None, page: int, texcoord: int,
@@ -440,6 +441,8 @@ class _Builder:
                 copied["extensions"][DIRECTIONAL_EXTENSION] = {
                     "index": self.direction_textures[page], "texCoord": texcoord}
         elif self.options.carrier == "emissive":
+            self._note_once(without_diffuse(copied, self._material(material), self.scene,
+                                            lambda: self._mixed_textures(material, copied)))
             _carry_as_emission(copied, self.lightmap_textures[page], texcoord,
                                self.intensities[page])
         if self._writes_occlusion():
@@ -453,6 +456,30 @@ class _Builder:
         materials.append(copied)
         self.material_copies[key] = len(materials) - 1
         return len(materials) - 1
+
+    def _material(self, material: int | None) -> Material:
+        """The scene's Material of glTF material ``material`` (None: glTF's default one)."""
+        return next(m for m in self.scene.materials if m.index == material)
+
+    def _mixed_textures(self, material: int | None, copied: dict) -> tuple[int, int | None] | None:
+        """``specular.mixed_pair`` of ``material``, made once for all its copies, each texture
+        with the sampler of the texture it replaces."""
+        if material not in self.mixed:
+            pbr = copied.get("pbrMetallicRoughness") or {}
+            replaced = pbr.get("metallicRoughnessTexture") or pbr.get("baseColorTexture")
+            sampler = self.data["textures"][replaced["index"]].get("sampler")
+
+            def add_image(png: bytes, name: str) -> int:
+                return self._add_texture(png, sampler, name)
+
+            scene_material = self._material(material)
+            self.mixed[material] = mixed_pair(scene_material, self.scene,
+                                              dielectric_f0(copied), add_image)
+        return self.mixed[material]
+
+    def _note_once(self, note: str | None) -> None:
+        if note is not None:
+            self._note(note)
 
     # -- meshes -----------------------------------------------------------------------------
 
@@ -615,8 +642,9 @@ class _Builder:
                    "bakes only the indirect light, --baked-lights keep keeps both")
 
     def finish(self, kind: str) -> list[tuple[Path, bytes]]:
-        """The files to write, in order: copied images, then .bin, then the .gltf or .glb."""
-        files = self._external_images()
+        """The files to write, in order: copied images (a .gltf output), then .bin, then the
+        .gltf or .glb; a .glb holds every image the input names by URI."""
+        files = self._embed_images() if kind == "glb" else self._external_images()
         self._align()
         blob = bytes(self.blob)
         if blob:
@@ -635,27 +663,47 @@ class _Builder:
             files.append((self.output, _glb(self.data, blob)))
         return files
 
-    def _external_images(self) -> list[tuple[Path, bytes]]:
-        """Images the input names by a relative URI, each a file inside the input's folder
-        (``gltf.files``; anything else is an ``InputError``): referred to as they are when the
-        output goes to the input's folder, else copied beside the output under a name baker
-        makes (``image_file_name``), never at a path taken from the input."""
-        target = self.output.parent
-        same_folder = target.resolve() == self.base.resolve()
-        files: list[tuple[Path, bytes]] = []
+    def _image_files(self):
+        """(index, image JSON, URI) of the images the input names by a URI (a file inside the
+        input's folder, ``gltf.files``: ``_read_image`` refuses anything else)."""
         for i, image in enumerate(self.data.get("images", [])):
             uri = image.get("uri")
             if uri is None or (isinstance(uri, str) and uri.startswith("data:")):
                 continue
-            where = f"images[{i}]"
+            yield i, image, uri
+
+    def _read_image(self, i: int, uri: str) -> bytes:
+        return read_inside(uri, self.base, MAX_IMAGE_FILE_BYTES, str(self.scene.path),
+                           f"images[{i}]", self.scene.hard_links)
+
+    def _embed_images(self) -> list[tuple[Path, bytes]]:
+        """Put every image the input names by URI into the .glb's binary chunk (a bufferView
+        and its mimeType, by the file's own bytes): a .glb is one self-contained file."""
+        for i, image, uri in self._image_files():
+            data = self._read_image(i, uri)
+            mime = _MIME_TYPES.get(images.kind(data))
+            if mime is None:
+                raise InputError(f"images[{i}] ({uri}) is in no format a glTF image may be",
+                                 file=str(self.scene.path), where=f"images[{i}].uri",
+                                 fix="export the image as PNG or JPEG")
+            del image["uri"]
+            image["bufferView"], image["mimeType"] = self._add_view(data), mime
+        return []
+
+    def _external_images(self) -> list[tuple[Path, bytes]]:
+        """For a .gltf output: the images the input names by URI, referred to as they are when
+        the output goes to the input's folder, else copied beside the output under a name baker
+        makes (``image_file_name``), never at a path taken from the input."""
+        target = self.output.parent
+        same_folder = target.resolve() == self.base.resolve()
+        files: list[tuple[Path, bytes]] = []
+        for i, image, uri in self._image_files():
             if same_folder:
-                inside(uri, self.base, str(self.scene.path), where)
+                inside(uri, self.base, str(self.scene.path), f"images[{i}]")
                 continue
-            data = read_inside(uri, self.base, MAX_IMAGE_FILE_BYTES, str(self.scene.path), where,
-                               self.scene.hard_links)
             name = image_file_name(self.output, i, uri)
             image["uri"] = quote(name)
-            files.append((target / name, data))
+            files.append((target / name, self._read_image(i, uri)))
         return files
 
 
@@ -695,26 +743,17 @@ def _shift_texcoords(value) -> None:
 
 def _carry_as_emission(material: dict, texture: int, texcoord: int, scale: float) -> None:
     """Make the material copy show the emissive carrier's page (``texture`` on UV set
-    ``texcoord``, values ``texel × scale``) and nothing else: black base colour (its alpha and,
-    for MASK and BLEND, its texture kept for coverage), dielectric, fully rough and without
-    specular reflection (KHR_materials_specular 0), no occlusion or layered shading, and
-    the page as its emission (KHR_materials_emissive_strength above 1)."""
-    pbr = material.setdefault("pbrMetallicRoughness", {})
-    alpha = float((pbr.get("baseColorFactor") or [1.0, 1.0, 1.0, 1.0])[3])
-    pbr["baseColorFactor"] = [0.0, 0.0, 0.0, alpha]
-    if material.get("alphaMode", "OPAQUE") == "OPAQUE":
-        pbr.pop("baseColorTexture", None)
-    pbr["metallicFactor"], pbr["roughnessFactor"] = 0.0, 1.0
-    pbr.pop("metallicRoughnessTexture", None)
-    material.pop("occlusionTexture", None)
+    ``texcoord``, values ``texel × scale``) as its emission, in place of its own (which the page
+    holds): the factor up to 1, KHR_materials_emissive_strength above it. Its diffuse response
+    is taken away beforehand (``specular.without_diffuse``)."""
     extensions = material.setdefault("extensions", {})
-    for name in _SHADING_EXTENSIONS + (EMISSIVE_STRENGTH,):
-        extensions.pop(name, None)
-    extensions[SPECULAR] = {"specularFactor": 0.0}
+    extensions.pop(EMISSIVE_STRENGTH, None)
     material["emissiveTexture"] = {"index": texture, "texCoord": texcoord}
     material["emissiveFactor"] = [min(scale, 1.0)] * 3
     if scale > 1.0:
         extensions[EMISSIVE_STRENGTH] = {"emissiveStrength": scale}
+    if not extensions:
+        del material["extensions"]
 
 
 def _glb(data: dict, blob: bytes) -> bytes:

@@ -265,7 +265,8 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True,
         with timed(times, "load"):
             world = build_world(scene)
         area, diagonal = bounds_of_baked(world, scene)
-        resolved = resolve(settings, area, diagonal, has_normal_maps(scene))
+        resolved = resolve(settings, area, diagonal, normal_maps=has_normal_maps(scene),
+                           lights_needed=scene.lights_needed())
         lit = lighting(scene, world, resolved, times)
     with timed(times, "unwrap"), log.stage("unwrap"):
         if settings.uv is not None:  # the artist's lightmap UVs: no unwrap

@@ -1038,7 +1038,8 @@ def _compared(scene: Scene, settings: Settings, path, relight: bool, times: dict
             raise FullBake(str(error)) from None
         world = build_world(scene)
     area, diagonal = bounds_of_baked(world, scene)
-    resolved = resolve(settings, area, diagonal, has_normal_maps(scene))
+    resolved = resolve(settings, area, diagonal, normal_maps=has_normal_maps(scene),
+                       lights_needed=scene.lights_needed())
     if settings.texel_density is None and density is not None and (
             density < resolved.texel_density):
         # The full bake lowered its derived density until the charts fit a page
