@@ -41,7 +41,7 @@ import numpy as np
 
 from baker.errors import InputError, OutputError, SettingsError
 from baker.geometry.surface import (LUMINANCE, SRGB_TO_LINEAR, albedo, base_colour, emission,
-                                    viewer_diffuse_weight_at)
+                                    transformed_uv, viewer_diffuse_weight_at)
 from baker.geometry.world import World, build_world
 from baker.gltf.load import _Context, _decode_image, load, resolve_buffers, trs_matrices
 from baker.gltf.scene import Scene
@@ -280,7 +280,8 @@ def read_lightmaps(scene: Scene, world: World) -> SceneLightmaps:
         tris = world.instance_triangles(i)
         local = world.triangles[tris] - world.vertex_start[i]
         tri_page[tris] = page_of_key[key]
-        tri_uv[tris] = prim.texcoords[texcoord][local]
+        tri_uv[tris] = transformed_uv(prim.texcoords[texcoord][local],
+                                    _carrier_transform(scene.materials[prim.material], carrier))
     if not pages and not recorded:
         raise InputError("the scene has no lightmap: no material has a MOZ_lightmap extension",
                          file=str(scene.path),
@@ -355,6 +356,14 @@ def _carried_texture(document, material, carrier: str, encoding: str):
     if carrier == "occlusion" and gltf.occlusionTexture is not None:
         return (gltf.occlusionTexture.index, int(gltf.occlusionTexture.texCoord or 0), 1.0,
                 "linear", True)
+    return None
+
+
+def _carrier_transform(material, carrier: str) -> tuple[float, ...] | None:
+    """The KHR_texture_transform (``TextureRef.transform``) through which ``material`` reads the
+    emissive carrier's page: an instance sharing another's lightmap UVs (``output/write.py``)."""
+    if carrier == "emissive" and material.emissive_texture is not None:
+        return material.emissive_texture.transform
     return None
 
 

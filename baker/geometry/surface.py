@@ -75,11 +75,18 @@ def texture_uv(world: World, ref: TextureRef, tris: np.ndarray, bary: np.ndarray
     """The UVs (k, 2) at which ``ref`` is sampled at barycentric points (k, 3) of world
     triangles (k,): its UV set interpolated, then its KHR_texture_transform applied (an affine
     map, so transforming the interpolated UVs equals interpolating transformed corners)."""
-    uv = interpolate(world.texcoords[ref.texcoord], world, tris, bary)
-    if ref.transform is None:
+    return transformed_uv(interpolate(world.texcoords[ref.texcoord], world, tris, bary),
+                          ref.transform)
+
+
+def transformed_uv(uv: np.ndarray, transform: tuple[float, ...] | None) -> np.ndarray:
+    """UVs (..., 2) through a ``TextureRef.transform`` (a, b, c, d, e, f): u' = a·u + b·v + c,
+    v' = d·u + e·v + f; as they are without one."""
+    if transform is None:
         return uv
-    a, b, c, d, e, f = ref.transform
-    return np.stack([a * uv[:, 0] + b * uv[:, 1] + c, d * uv[:, 0] + e * uv[:, 1] + f], axis=1)
+    a, b, c, d, e, f = transform
+    return np.stack([a * uv[..., 0] + b * uv[..., 1] + c, d * uv[..., 0] + e * uv[..., 1] + f],
+                    axis=-1)
 
 
 def _textured(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray,

@@ -60,6 +60,7 @@ DIRECTIONAL_EXTENSION = "BAKER_lightmap_directional"
 the lightmap's UV set (``light.directional``)."""
 LIGHTS_EXTENSION = "KHR_lights_punctual"
 VARIANTS_EXTENSION = "KHR_materials_variants"
+TEXTURE_TRANSFORM = "KHR_texture_transform"
 EMISSIVE_STRENGTH = "KHR_materials_emissive_strength"
 ENCODING_TARGETS = {
     "linear": "texel/255 x intensity: the three.js MOZ_lightmap plugin, Hubs, baker view",
@@ -285,6 +286,7 @@ class _Builder:
         self.intensities: list[float] = []
         self.material_copies: dict[tuple[int | None, int, int], int] = {}
         self.mixed: dict[int | None, tuple[int, int | None] | None] = {}  # specular.mixed_pair
+        self.shared_geometry: dict[tuple, tuple[dict, np.ndarray, int]] = {}  # _page_geometry
         self.texcoord: dict[int, int] = {}
         self.notes: list[str] = []
 
@@ -416,11 +418,14 @@ class _Builder:
         return len(textures) - 1
 
     def _lightmap_material(self, material: int | None, page: int, texcoord: int,
-                           shifted: bool = False) -> int:
+                           shifted: bool = False, transform: dict | None = None) -> int:
         """The copy of ``material`` (None: the default material) bound to lightmap ``page`` on
         UV set ``texcoord``; ``shifted``: the primitive's sets from TEXCOORD_1 on moved up one,
-        so every texCoord of 1 or more in the copy moves with them."""
-        key = (material, page, texcoord, shifted)
+        so every texCoord of 1 or more in the copy moves with them; ``transform``: the
+        KHR_texture_transform (offset, scale) that maps the UVs an instance shares with others
+        to its own place on the page (``_shared_uv``), on every texture read on them."""
+        key = (material, page, texcoord, shifted, None if transform is None
+               else (tuple(transform["offset"]), tuple(transform["scale"])))
         if key in self.material_copies:
             return self.material_copies[key]
         materials = self.data.setdefault("materials", [])
@@ -453,6 +458,10 @@ class _Builder:
                     self.notes.append(note)
             copied["occlusionTexture"] = {"index": self.occlusion_textures[page],
                                           "texCoord": texcoord}
+        if transform is not None:
+            for info in (copied.get("emissiveTexture"), copied.get("occlusionTexture")):
+                if info is not None and info.get("texCoord") == texcoord:
+                    info.setdefault("extensions", {})[TEXTURE_TRANSFORM] = dict(transform)
         materials.append(copied)
         self.material_copies[key] = len(materials) - 1
         return len(materials) - 1
@@ -548,33 +557,59 @@ class _Builder:
         result = []
         for page in on_pages:
             used, inverse = np.unique(triangles[page_of == page], return_inverse=True)
-            indices = inverse.reshape(-1, 3)
-            rows = vertices[used]
+            geometry, uv_accessor, transform = self._page_geometry(
+                primitive, where, vertices[used], inverse.reshape(-1, 3), uv[used], texcoord,
+                shifted)
             new = {key: copy.deepcopy(value) for key, value in primitive.items()
                    if key not in ("attributes", "indices", "mode", "targets", "material")}
-            new_attributes = {_moved(name, shifted): self._gather(accessor, rows,
-                                                                  bounds=name == "POSITION")
-                              for name, accessor in attributes.items()
-                              if _moved(name, shifted) != f"TEXCOORD_{texcoord}"}
-            lightmap_uv = self._add_accessor(uv[used].astype(np.float32), _FLOAT, "VEC2")
+            new.update(copy.deepcopy(geometry))
+            new["attributes"][f"TEXCOORD_{texcoord}"] = uv_accessor
             if 0 not in used_sets:
-                new_attributes["TEXCOORD_0"] = lightmap_uv
-            new_attributes[f"TEXCOORD_{texcoord}"] = lightmap_uv
-            new["attributes"] = new_attributes
-            if primitive.get("targets"):
-                new["targets"] = [{_moved(name, shifted):
-                                   self._gather(accessor, rows, bounds=name == "POSITION")
-                                   for name, accessor in target.items()}
-                                  for target in primitive["targets"]]
-            wide = len(used) > 65535  # 65535 itself is reserved (primitive restart)
-            index_type = _UNSIGNED_INT if wide else _UNSIGNED_SHORT
-            new["indices"] = self._add_accessor(indices.reshape(-1, 1), index_type, "SCALAR",
-                                                target=_ELEMENT_ARRAY_BUFFER)
+                new["attributes"]["TEXCOORD_0"] = uv_accessor
             new["mode"] = _TRIANGLES
             new["material"] = self._lightmap_material(primitive.get("material"), int(page),
-                                                       texcoord, shifted)
+                                                       texcoord, shifted, transform)
             result.append(new)
         return result
+
+    def _page_geometry(self, primitive: dict, where: str, rows: np.ndarray, indices: np.ndarray,
+                       uv: np.ndarray, texcoord: int, shifted: bool) -> tuple[dict, int, dict | None]:
+        """A page's part of an instance of the primitive at ``where`` in the input: its
+        attributes but the lightmap UVs, its targets and indices (``rows`` (k,) of the
+        primitive's vertices, ``indices`` (m, 3) into them), and the accessor of its lightmap
+        UVs ``uv`` (k, 2) with the texture transform to read them through (None: as they are).
+
+        Instances of one mesh charted alike give the same rows and indices: the accessors are
+        written once and shared (``shared_geometry``), so a mesh placed 20,000 times is stored
+        once. Where an instance's UVs are the first such instance's moved and scaled on the
+        page (its charts packed as one block), they are shared too, and the instance's material
+        copy reads them through a KHR_texture_transform: with the emissive carrier, whose core
+        textureInfo every viewer transforms (MOZ_lightmap readers know no transform)."""
+        key = (where, shifted, texcoord, rows.tobytes(), indices.tobytes())
+        if key not in self.shared_geometry:
+            attributes = primitive["attributes"]
+            geometry = {"attributes": {
+                _moved(name, shifted): self._gather(accessor, rows, bounds=name == "POSITION")
+                for name, accessor in attributes.items()
+                if _moved(name, shifted) != f"TEXCOORD_{texcoord}"}}
+            if primitive.get("targets"):
+                geometry["targets"] = [{_moved(name, shifted):
+                                        self._gather(accessor, rows, bounds=name == "POSITION")
+                                        for name, accessor in target.items()}
+                                       for target in primitive["targets"]]
+            wide = len(rows) > 65535  # 65535 itself is reserved (primitive restart)
+            geometry["indices"] = self._add_accessor(
+                indices.reshape(-1, 1), _UNSIGNED_INT if wide else _UNSIGNED_SHORT, "SCALAR",
+                target=_ELEMENT_ARRAY_BUFFER)
+            reference = uv.astype(np.float32)
+            self.shared_geometry[key] = (geometry, reference,
+                                         self._add_accessor(reference, _FLOAT, "VEC2"))
+            return geometry, self.shared_geometry[key][2], None
+        geometry, reference, shared = self.shared_geometry[key]
+        transform = _uv_transform(reference, uv)
+        if transform is None or (transform and self.options.carrier != "emissive"):
+            return geometry, self._add_accessor(uv.astype(np.float32), _FLOAT, "VEC2"), None
+        return geometry, shared, transform or None
 
     def _note(self, note: str) -> None:
         if note not in self.notes:
@@ -587,7 +622,10 @@ class _Builder:
         asset.extras."""
         used = self.data.setdefault("extensionsUsed", [])
         for index in sorted(set(self.material_copies.values())):
-            for name in self.data["materials"][index].get("extensions", {}):
+            copied = self.data["materials"][index]
+            transformed = any(TEXTURE_TRANSFORM in ((copied.get(slot) or {}).get("extensions") or {})
+                              for slot in ("emissiveTexture", "occlusionTexture"))
+            for name in [*copied.get("extensions", {}), *([TEXTURE_TRANSFORM] * transformed)]:
                 if name not in used:
                     used.append(name)
         if not used:
@@ -715,6 +753,24 @@ def image_file_name(output: Path, index: int, uri: str) -> str:
     if not re.fullmatch(r"\.[a-z0-9]{1,5}", suffix):
         suffix = ""
     return f"{output.stem}_image{index}{suffix}"
+
+
+def _uv_transform(reference: np.ndarray, uv: np.ndarray) -> dict | None:
+    """The KHR_texture_transform {offset, scale} that maps ``reference`` (k, 2) float32 UVs onto
+    ``uv`` (k, 2) to within a millionth of the page, per axis: {} when they are the same
+    already, None when no such map does it (the charts not moved as one block)."""
+    target = uv.astype(np.float32).astype(np.float64)
+    source = reference.astype(np.float64)
+    if np.array_equal(source, target):
+        return {}
+    low, high = source.min(axis=0), source.max(axis=0)
+    if np.any(high - low <= 0):
+        return None
+    scale = (target.max(axis=0) - target.min(axis=0)) / (high - low)
+    offset = target.min(axis=0) - scale * low
+    if np.abs(source * scale + offset - target).max() > 1e-6:
+        return None
+    return {"offset": [float(v) for v in offset], "scale": [float(v) for v in scale]}
 
 
 def _moved(attribute: str, shifted: bool) -> str:
