@@ -452,3 +452,19 @@ def test_three_js_shows_the_default_carrier_from_r151_on(browser, baked, hubs, r
         return
     found = _compare(shown, preview, label, tmp_path)
     assert found["correlation"] is None or found["correlation"] < 0.9, found
+
+
+def test_baker_s_plugin_in_an_app_of_one_s_own_shows_the_moz_carrier(browser, baked, hubs,
+                                                                     tmp_path):
+    """The steps docs/viewers.md gives a three.js developer: ``baker plugin DIR`` writes
+    moz_lightmap.js, which an app on three.js from npm (0.187 here) registers on its
+    GLTFLoader; the moz carrier then shows as the preview shows it."""
+    from baker.cli.main import main
+
+    url, folder = hubs
+    assert main(["plugin", str(folder)]) == 0 and (folder / "moz_lightmap.js").is_file()
+    out = baked("cornell", "moz")
+    view, preview = _view_and_preview(out)
+    shown = _viewer_picture(browser, hubs, out, view, preview.exposure,
+                            "&three=three-r187&plugin=baker")
+    _assert_same(shown, preview, "three.js 0.187 app + baker plugin cornell moz", tmp_path)

@@ -20,7 +20,7 @@ from typing import Iterator
 import baker
 from baker.cli import INTERRUPTED, started
 
-SUBCOMMANDS = ("bake", "rebake", "relight", "watch", "hook", "preview", "view", "study")
+SUBCOMMANDS = ("bake", "rebake", "relight", "watch", "hook", "preview", "view", "plugin", "study")
 
 
 def build_parser() -> argparse.ArgumentParser:
