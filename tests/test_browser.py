@@ -468,3 +468,27 @@ def test_baker_s_plugin_in_an_app_of_one_s_own_shows_the_moz_carrier(browser, ba
     shown = _viewer_picture(browser, hubs, out, view, preview.exposure,
                             "&three=three-r187&plugin=baker")
     _assert_same(shown, preview, "three.js 0.187 app + baker plugin cornell moz", tmp_path)
+
+
+def test_hubs_reads_the_moz_texels_as_linear(browser, baked, hubs, tmp_path):
+    """Which encoding each MOZ_lightmap reader expects, side by side: Hubs' loader reads a texel
+    as texel/255 (linear: ``_assert_same`` on the default, test_hubs_shows_the_moz_carrier), so
+    a bake encoded as the extension text says (``--encoding srgb``) shows too bright there
+    (measured 2.8× by issue 43), while baker's plugin reads the encoding the file records and
+    shows both right (baker view's page: test_three_js_shows_what_the_preview_shows)."""
+    source = tmp_path / "cornell.glb"
+    cornell_box().save(source)
+    out = tmp_path / "srgb.glb"
+    baker.bake(source, out, baker.Settings(texel_density=8.0, rays=16, carrier="moz",
+                                           encoding="srgb"), state=False)
+    view, preview = _view_and_preview(out)
+    found = _compare(_viewer_picture(browser, hubs, out, view, preview.exposure), preview,
+                     "Hubs cornell moz srgb", tmp_path)
+    assert found["ratio"] > 1.5, found
+    server, url = start(out)
+    try:
+        shown = _png(browser.canvas_png(f"{url}?bare=1&{_query(view, preview.exposure)}"))
+    finally:
+        server.shutdown()
+        server.server_close()
+    _assert_same(shown, preview, "three.js + plugin cornell moz srgb", tmp_path)
