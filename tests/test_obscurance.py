@@ -8,6 +8,8 @@ from baker.image.compose import effective_r_ave
 from baker.light.hemisphere import Terms
 from tests.bakehelp import computed
 
+_NO_DIRECTIONS = np.zeros((0, 3))  # no directional pages: the rays' directions unused
+
 
 def _w(done) -> np.ndarray:
     return done.terms.obscurance(effective_r_ave(done.ambient, done.settings.rho))
@@ -97,11 +99,12 @@ def test_texel_sums_are_exact_in_any_order_and_recovered_from_the_means():
     kind = np.zeros(len(table), np.uint8)
     shade = (np.float32(2.0), 0, table, kind, np.zeros((0, 4)), LUMINANCE)
     in_order = np.zeros((texels, _COLUMNS))
-    _accumulate_kernel(rays, primitive, distance, *shade, in_order, *_TEXEL_MAJOR, 1.0)
+    _accumulate_kernel(rays, primitive, distance, *shade, in_order, *_TEXEL_MAJOR, 1.0,
+                       _NO_DIRECTIONS)
     shuffled = np.random.default_rng(5).permutation(texels * rays)
     any_order = np.zeros((texels, _COLUMNS))
     _accumulate_kernel(rays, primitive[shuffled], distance[shuffled], *shade, any_order,
-                       shuffled // rays, shuffled % rays, 1.0)
+                       shuffled // rays, shuffled % rays, 1.0, _NO_DIRECTIONS)
     assert np.array_equal(in_order, any_order)
     assert (in_order[:, 5] > 0).any() and (in_order[:, 6] > 0).any()  # the first halves
     counts = np.full(texels, rays, np.int64)
@@ -126,12 +129,14 @@ def test_a_rays_change_replaces_its_value_in_the_sums_exactly():
     kind = np.zeros(len(table), np.uint8)
     shade = (np.float32(2.0), 0, table, kind, np.zeros((0, 4)), LUMINANCE)
     before, after = np.zeros((texels, _COLUMNS)), np.zeros((texels, _COLUMNS))
-    _accumulate_kernel(rays, primitive, distance, *shade, before, *_TEXEL_MAJOR, 1.0)
-    _accumulate_kernel(rays, new_primitive, new_distance, *shade, after, *_TEXEL_MAJOR, 1.0)
+    _accumulate_kernel(rays, primitive, distance, *shade, before, *_TEXEL_MAJOR, 1.0,
+                       _NO_DIRECTIONS)
+    _accumulate_kernel(rays, new_primitive, new_distance, *shade, after, *_TEXEL_MAJOR, 1.0,
+                       _NO_DIRECTIONS)
     changes = np.zeros((texels, _COLUMNS))
     for sign, hits, dist in ((-1.0, primitive, distance), (1.0, new_primitive, new_distance)):
         _accumulate_kernel(rays, hits[changed], dist[changed], *shade, changes,
-                           changed // rays, changed % rays, sign)
+                           changed // rays, changed % rays, sign, _NO_DIRECTIONS)
     counts = np.full(texels, rays, np.int64)
     terms, exact = changed_terms(_means(before, counts), changes)
     assert exact.all()
