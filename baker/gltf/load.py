@@ -930,6 +930,11 @@ def _factor(ctx: _Context, value: Any, default: list[float], where: str) -> np.n
     return vector
 
 
+MAX_TEXCOORD_SETS = 32
+"""A texture may name TEXCOORD_0 to TEXCOORD_31; past that (or below 0) it is left out: the
+world holds one UV array per set up to the highest a material reads."""
+
+
 def _texture_ref(ctx: _Context, info: Any, where: str) -> TextureRef | None:
     """Resolve a textureInfo to (image, UV set, wrap modes), decoding the image; None if absent.
 
@@ -968,6 +973,11 @@ def _texture_ref(ctx: _Context, info: Any, where: str) -> TextureRef | None:
     if isinstance(transform, dict):
         texcoord = int(transform.get("texCoord", texcoord))  # the extension's override (spec)
         affine = _uv_transform(ctx, transform, f"{where}.extensions.KHR_texture_transform")
+    if not 0 <= texcoord < MAX_TEXCOORD_SETS:
+        ctx.skip(texture_where, f"{where} reads TEXCOORD_{texcoord}, which no primitive may have "
+                                f"(0 to {MAX_TEXCOORD_SETS - 1}): texture left out, its "
+                                "material's factor used")
+        return None
     wrap_s = wrap_t = REPEAT
     if texture.sampler is not None:
         samplers = ctx.document.samplers
