@@ -520,6 +520,34 @@ def test_gltf_output_copies_referenced_images(tmp_path):
     _assert_valid(output)
 
 
+@pytest.mark.parametrize("beside", [True, False])
+def test_a_glb_output_holds_the_images_its_input_names_by_uri(tmp_path, beside):
+    """A .gltf whose texture is a file beside it, baked to a .glb (in its folder or another):
+    the .glb is one file, its image a bufferView with its mimeType, its bytes the file's."""
+    source_dir = tmp_path / "src"
+    (source_dir / "textures").mkdir(parents=True)
+    (source_dir / "textures" / "brick.png").write_bytes(_png(128))
+    doc = _input_doc()
+    doc.json["images"] = [{"uri": "textures/brick.png"}]
+    doc.json["textures"] = [{"source": 0}]
+    doc.json["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = {"index": 0}
+    source = source_dir / "level.gltf"
+    doc.gltf(source)
+    output = (source_dir if beside else tmp_path / "out") / "level_baked.glb"
+    output.parent.mkdir(exist_ok=True)
+    before = sorted(p.name for p in output.parent.iterdir())
+    write(_scene(source), _atlas(), _pages(), output, WriteOptions())
+    assert sorted(p.name for p in output.parent.iterdir()) == sorted(before + [output.name])
+    data = output.read_bytes()
+    gltf = json.loads(data[20:20 + struct.unpack("<I", data[12:16])[0]])
+    (image,) = [i for i in gltf["images"] if i.get("name") is None]
+    assert "uri" not in image and image["mimeType"] == "image/png"
+    view = gltf["bufferViews"][image["bufferView"]]
+    blob = data[28 + struct.unpack("<I", data[12:16])[0]:]
+    assert blob[view.get("byteOffset", 0):][:view["byteLength"]] == _png(128)
+    _assert_valid(output)
+
+
 def test_missing_folder_raises_and_writes_nothing(tmp_path, baked):
     source, _, _ = baked
     output = tmp_path / "nowhere" / "level.glb"
