@@ -43,7 +43,7 @@ from baker.errors import InputError, OutputError, SettingsError
 from baker.geometry.surface import (LUMINANCE, SRGB_TO_LINEAR, albedo, base_colour, emission,
                                     viewer_diffuse_weight_at)
 from baker.geometry.world import World, build_world
-from baker.gltf.load import _Context, _decode_image, load, resolve_buffers, trs_matrices
+from baker.gltf.load import image_pixels, load, trs_matrices
 from baker.gltf.scene import Scene
 from baker.image.encode import linear_to_srgb, png_bytes
 from baker.rays.trace import Tracer
@@ -230,8 +230,6 @@ def read_lightmaps(scene: Scene, world: World) -> SceneLightmaps:
     recorded = ((extras.get("baker") or {}) if isinstance(extras, dict) else {})
     encoding = recorded.get("lightmap_encoding") or "linear"
     carrier = recorded.get("carrier") or "moz"
-    ctx = _Context(document, resolve_buffers(document, scene.path), str(scene.path),
-                   Path(scene.path).parent)
     pages: list[np.ndarray] = []
     page_of_key: dict[tuple, int] = {}
     count = len(world.triangles)
@@ -246,7 +244,7 @@ def read_lightmaps(scene: Scene, world: World) -> SceneLightmaps:
         source = document.textures[texture].source
         key = (source, scale, curve, red)
         if key not in page_of_key:
-            texels = _decode_image(ctx, source)[..., :3]
+            texels = image_pixels(scene, source)[..., :3]
             if red:
                 texels = np.repeat(texels[..., :1], 3, axis=-1)
             decoded = SRGB_TO_LINEAR[texels] if curve == "srgb" else texels / 255.0

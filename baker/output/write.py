@@ -44,8 +44,7 @@ from baker.atlas.layout import Atlas, InstanceUV
 from baker.errors import OutputError, SettingsError
 from baker.gltf import document as gltf_document
 from baker.gltf.document import COMPONENT_DTYPES
-from baker.gltf.files import inside, read_inside
-from baker.gltf.load import MAX_IMAGE_FILE_BYTES, read_accessor, resolve_buffers
+from baker.gltf.load import read_accessor
 from baker.gltf.scene import Scene
 from baker.image.encode import PNG_SIGNATURE, EncodedPage
 from baker.run.atomic import Outputs
@@ -268,9 +267,7 @@ class _Builder:
         self.options = options
         self.base = Path(scene.path).parent
         self.data = _document_data(scene.document)
-        self.source_buffers = (list(scene.buffers) if scene.buffers is not None
-                               else resolve_buffers(scene.document, scene.path,
-                                                    scene.hard_links))
+        self.source_buffers = list(scene.buffers)
         self.blob = bytearray()
         self._merge_buffers()
         self.source_cache: dict[int, np.ndarray] = {}
@@ -624,23 +621,18 @@ class _Builder:
 
     def _external_images(self) -> list[tuple[Path, bytes]]:
         """Images the input names by a relative URI, each a file inside the input's folder
-        (``gltf.files``; anything else is an ``InputError``): referred to as they are when the
-        output goes to the input's folder, else copied beside the output under a name baker
-        makes (``image_file_name``), never at a path taken from the input."""
+        read once at load (``Image.data``): referred to as they are when the output goes to the
+        input's folder, else copied beside the output under a name baker makes
+        (``image_file_name``), never at a path taken from the input."""
         target = self.output.parent
-        same_folder = target.resolve() == self.base.resolve()
+        if target.resolve() == self.base.resolve():
+            return []
         files: list[tuple[Path, bytes]] = []
-        for i, image in enumerate(self.data.get("images", [])):
-            uri = image.get("uri")
-            if uri is None or (isinstance(uri, str) and uri.startswith("data:")):
+        for i, (image, loaded) in enumerate(zip(self.data.get("images", []), self.scene.images)):
+            data = loaded.data
+            if data is None:
                 continue
-            where = f"images[{i}]"
-            if same_folder:
-                inside(uri, self.base, str(self.scene.path), where)
-                continue
-            data = read_inside(uri, self.base, MAX_IMAGE_FILE_BYTES, str(self.scene.path), where,
-                               self.scene.hard_links)
-            name = image_file_name(self.output, i, uri)
+            name = image_file_name(self.output, i, image["uri"])
             image["uri"] = quote(name)
             files.append((target / name, data))
         return files
