@@ -140,7 +140,7 @@ class Settings:
         node's extras give none; None fits it to a few traced texels.
     allow_hard_links: read files a ``.gltf`` names that have other names too (hard links); by
         default they are refused, as a link to a file outside the scene's folder would be
-        read (gltf/files.py).
+        read (gltf/files.py). Like the rest of ``CALLER_ONLY``, never taken from a bake state.
     max_total_rays: the most rays one bake may cast: its texels × their rays (obscurance,
         direct light, GI paths, validity probes), checked once the texels are known and before
         any ray is cast; a bake that would need more is refused with its figures
