@@ -32,10 +32,10 @@ _POLL = 0.005  # seconds between looks at a running child
 def serve() -> None:
     """The server's loop: a request ``{"argv", "cwd", "limit", "signal", "after"}`` a line,
     an answer ``{"code", "seconds", "kib", "after_signal"}`` a line."""
-    import baker.api  # noqa: F401  the pipeline, imported once for every child
-    import baker.cli.hook  # noqa: F401
-    import baker.cli.main  # noqa: F401
-    import baker.cli.rebake  # noqa: F401
+    import importlib
+
+    for module in ("baker.api", "baker.cli.hook", "baker.cli.main", "baker.cli.rebake"):
+        importlib.import_module(module)  # the pipeline, imported once for every child
 
     answers = os.fdopen(os.dup(1), "w")
     null = os.open(os.devnull, os.O_WRONLY)
