@@ -23,7 +23,7 @@ from baker.run import atomic as staging
 from baker.atlas.layout import Atlas, InstanceUV
 from baker.image.encode import EncodedPage
 from baker.errors import OutputError
-from baker.gltf.scene import Instance, Material, Primitive, Scene
+from baker.gltf.scene import Image, Instance, Material, Primitive, Scene
 from baker.output.write import WriteOptions, write
 
 import gltf_validator
@@ -201,8 +201,13 @@ def _scene(path: Path) -> Scene:
         Instance(node=4, primitive=0, world=moved(0, -2), baked=False, reason="test"),
     )
     materials = (_material(0, "wall"), _material(1, "floor"), _material(None, "default"))
+    buffers = tuple(document.binary_blob() if b.uri is None else (path.parent / b.uri).read_bytes()
+                    for b in document.buffers)
+    images = tuple(Image(pixels=np.full((1, 1, 4), 255, np.uint8),
+                         data=(path.parent / image.uri).read_bytes() if image.uri else None)
+                   for image in document.images or [])
     return Scene(path=path, document=document, primitives=primitives, instances=instances,
-                 materials=materials, images=())
+                 materials=materials, images=images, buffers=buffers)
 
 
 def _atlas() -> Atlas:

@@ -45,8 +45,7 @@ from baker.errors import InputError, OutputError, SettingsError
 from baker.gltf import document as gltf_document
 from baker.gltf import images
 from baker.gltf.document import COMPONENT_DTYPES
-from baker.gltf.files import inside, read_inside
-from baker.gltf.load import MAX_IMAGE_FILE_BYTES, read_accessor, resolve_buffers
+from baker.gltf.load import read_accessor
 from baker.gltf.scene import Material, Scene
 from baker.image.encode import PNG_SIGNATURE, EncodedPage
 from baker.output.specular import dielectric_f0, mixed_pair, without_diffuse
@@ -270,9 +269,7 @@ class _Builder:
         self.options = options
         self.base = Path(scene.path).parent
         self.data = _document_data(scene.document)
-        self.source_buffers = (list(scene.buffers) if scene.buffers is not None
-                               else resolve_buffers(scene.document, scene.path,
-                                                    scene.hard_links))
+        self.source_buffers = list(scene.buffers)
         self.blob = bytearray()
         self._merge_buffers()
         self.source_cache: dict[int, np.ndarray] = {}
@@ -702,27 +699,20 @@ class _Builder:
         return files
 
     def _image_files(self):
-        """(index, image JSON, URI) of the images the input names by a URI (a file inside the
-        input's folder, ``gltf.files``: ``_read_image`` refuses anything else)."""
-        for i, image in enumerate(self.data.get("images", [])):
-            uri = image.get("uri")
-            if uri is None or (isinstance(uri, str) and uri.startswith("data:")):
-                continue
-            yield i, image, uri
-
-    def _read_image(self, i: int, uri: str) -> bytes:
-        return read_inside(uri, self.base, MAX_IMAGE_FILE_BYTES, str(self.scene.path),
-                           f"images[{i}]", self.scene.hard_links)
+        """(index, image JSON, its bytes) of the images the input names by a URI: files
+        inside the input's folder, read once at load (``Image.data``)."""
+        for i, (image, loaded) in enumerate(zip(self.data.get("images", []), self.scene.images)):
+            if loaded.data is not None:
+                yield i, image, loaded.data
 
     def _embed_images(self) -> list[tuple[Path, bytes]]:
         """Put every image the input names by URI into the .glb's binary chunk (a bufferView
         and its mimeType, by the file's own bytes): a .glb is one self-contained file."""
-        for i, image, uri in self._image_files():
-            data = self._read_image(i, uri)
+        for i, image, data in self._image_files():
             mime = _MIME_TYPES.get(images.kind(data))
             if mime is None:
-                raise InputError(f"images[{i}] ({uri}) is in no format a glTF image may be",
-                                 file=str(self.scene.path), where=f"images[{i}].uri",
+                raise InputError(f"images[{i}] ({image['uri']}) is in no format a glTF image "
+                                 "may be", file=str(self.scene.path), where=f"images[{i}].uri",
                                  fix="export the image as PNG or JPEG")
             del image["uri"]
             image["bufferView"], image["mimeType"] = self._add_view(data), mime
@@ -733,15 +723,13 @@ class _Builder:
         the output goes to the input's folder, else copied beside the output under a name baker
         makes (``image_file_name``), never at a path taken from the input."""
         target = self.output.parent
-        same_folder = target.resolve() == self.base.resolve()
+        if target.resolve() == self.base.resolve():
+            return []
         files: list[tuple[Path, bytes]] = []
-        for i, image, uri in self._image_files():
-            if same_folder:
-                inside(uri, self.base, str(self.scene.path), f"images[{i}]")
-                continue
-            name = image_file_name(self.output, i, uri)
+        for i, image, data in self._image_files():
+            name = image_file_name(self.output, i, image["uri"])
             image["uri"] = quote(name)
-            files.append((target / name, self._read_image(i, uri)))
+            files.append((target / name, data))
         return files
 
 

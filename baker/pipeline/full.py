@@ -75,6 +75,7 @@ from baker.pipeline import cluster
 from baker.pipeline.parts import PerTexel, Tally, TexelPoints, part_slices
 from baker.pipeline.plan import Plan, make_plan
 from baker.rays.trace import Tracer
+from baker.run.interruptible import check_interrupted
 from baker.run.progress import Meter, StageLines, bar, wanted
 from baker.run.spill import Spill
 from baker.errors import SettingsError
@@ -83,10 +84,13 @@ from baker.settings import Resolved, Settings, resolve
 
 @contextmanager
 def timed(times: dict[str, float], name: str) -> Iterator[None]:
-    """Add the wall time of the block to ``times[name]``, in seconds."""
+    """Add the wall time of the block to ``times[name]``, in seconds. An interrupt some code
+    swallowed is raised again as the block starts and ends (``run.interruptible``)."""
+    check_interrupted()
     start = time.perf_counter()
     yield
     times[name] = times.get(name, 0.0) + time.perf_counter() - start
+    check_interrupted()
 
 
 def bounds_of_baked(world, scene) -> tuple[float, float]:

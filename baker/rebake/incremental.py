@@ -99,7 +99,7 @@ from baker.rebake.retrace import Retracing, retraced
 from baker.rebake.sobol_cells import cap_boxes, net_solve, sobol_cell_sample
 from baker.run.parallel import cores, even_slices, run_chunks
 from baker.run.progress import StageLines
-from baker.settings import TECHNIQUES, Resolved, Settings, resolve
+from baker.settings import CALLER_ONLY, TECHNIQUES, Resolved, Settings, resolve
 
 # Extra reach (in texel sides of each texel) beyond d_max: the validity probes move a sample
 # point by up to rounds × (probe radius + push) sides, then probe a radius further; plus one.
@@ -1407,7 +1407,9 @@ def details(report: dict, rebaked) -> dict:
 
 def asked_settings(path, **overrides) -> Settings:
     """The ``Settings`` the bake that wrote the state at ``path`` was given (for ``baker
-    rebake``), with ``overrides``; SettingsError when there is no usable state."""
+    rebake``), with ``overrides``; SettingsError when there is no usable state. The settings
+    in ``CALLER_ONLY`` are never taken from the state (it travels with the scene, as untrusted):
+    they are the defaults unless ``overrides`` give them."""
 
     try:
         stored = state_file.load(path, {})
@@ -1418,7 +1420,7 @@ def asked_settings(path, **overrides) -> Settings:
     names = {f.name for f in fields(Settings)}
     try:
         values = {k: tuple(v) if isinstance(v, list) else v
-                  for k, v in (asked or {}).items() if k in names}
+                  for k, v in (asked or {}).items() if k in names and k not in CALLER_ONLY}
         Settings(**values).check()
     except (SettingsError, TypeError, ValueError, AttributeError) as error:
         raise SettingsError(f"cannot rebake: the settings stored in the bake state {path} are "

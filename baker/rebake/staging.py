@@ -9,6 +9,7 @@ from baker.pipeline.full import Baking
 from baker.pipeline.parts import PerTexel
 from baker.rebake.incremental import bake_state_writer
 from baker.run.atomic import Outputs, remove_temporary, stage_atomically
+from baker.run.interruptible import deferred
 from baker.settings import Settings
 
 
@@ -30,7 +31,8 @@ class StateStaging:
         scene's, if made already)."""
         writer = bake_state_writer(baking.scene, baking.world, baking.settings, baking.atlas,
                                    per_texel, self._settings, fingerprint)
-        self._future = self._executor.submit(stage_atomically, self._path, writer)
+        with deferred():  # submitted and recorded, for discard to wait for: not parted
+            self._future = self._executor.submit(stage_atomically, self._path, writer)
 
     def stage_into(self, outputs: Outputs) -> None:
         """Wait for the state to be written and add it to the files ``outputs`` puts in place."""

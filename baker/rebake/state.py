@@ -23,6 +23,7 @@ version, fields that do not match) raises ``StateUnusable`` with a one-line reas
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import io
 import json
@@ -106,7 +107,7 @@ def digest(*parts: Any) -> str:
         if isinstance(part, np.ndarray):
             a = np.ascontiguousarray(part)
             h.update(f"{a.dtype.str}{a.shape}".encode())
-            h.update(a.tobytes())
+            h.update(a.reshape(-1).view(np.uint8))  # its bytes, not a copy (a texture's 256 MiB)
         else:
             h.update(repr(part).encode())
         h.update(b"\x00")
@@ -431,10 +432,17 @@ def load(path: str | Path, classes: dict[str, type]) -> BakeState:
 
 
 def _open_regular(path: Path) -> BinaryIO:
-    """``path`` opened for reading if it is a regular file (followed through links): a FIFO
-    (which would wait for a writer for ever), a device (``/dev/zero``: endless bytes) or a
-    folder is ``StateUnusable`` before a byte is read."""
-    descriptor = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_BINARY", 0))
+    """``path`` opened for reading if it is a regular file: a FIFO (which would wait for a
+    writer for ever), a device (``/dev/zero``: endless bytes), a folder or a symbolic link (to
+    anything: the state beside a scene is as untrusted as the scene, and a bake never replaces
+    a link: ``run.atomic.destination``) is ``StateUnusable`` before a byte is read."""
+    try:
+        descriptor = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_NOFOLLOW
+                             | getattr(os, "O_BINARY", 0))
+    except OSError as error:
+        if error.errno in (errno.ELOOP, errno.EMLINK):
+            raise StateUnusable(f"{path} is a symbolic link: not a bake state") from None
+        raise
     mode = os.fstat(descriptor).st_mode
     if not stat.S_ISREG(mode):
         os.close(descriptor)
