@@ -263,7 +263,7 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True,
         if settings.uv is not None:  # the artist's lightmap UVs: no unwrap
             atlas = authored_atlas(scene, world, resolved)
         else:
-            atlas, resolved = _unwrapped(scene, world, settings, resolved, area)
+            atlas, resolved = _unwrapped(scene, world, settings, resolved)
     with timed(times, "rasterise"), log.stage("rasterise"):
         coverage = cover(atlas, world)
         owned = owners(atlas, world, coverage)
@@ -291,18 +291,18 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True,
         raise
 
 
-def _unwrapped(scene: Scene, world: World, settings: Settings, resolved: Resolved,
-               area: float) -> tuple[Atlas, Resolved]:
-    """xatlas's atlas and the settings with the density it used: a derived density is
+def _unwrapped(scene: Scene, world: World, settings: Settings, resolved: Resolved
+               ) -> tuple[Atlas, Resolved]:
+    """The atlas and the settings with the density it used: a derived density is
     lowered to fit a page (``unwrap.py``); the user's is kept or refused with what fits."""
     derived = settings.texel_density is None
     try:
-        atlas = unwrap(scene, world, resolved, fit_one_page=derived, area=area)
+        atlas = unwrap(scene, world, resolved, fit_one_page=derived)
     except PageTooSmall as error:
         if not derived:  # the user's density: say what fits
             raise
         resolved = replace(resolved, texel_density=error.texel_density)  # derived: shrink it
-        atlas = unwrap(scene, world, resolved, fit_one_page=True, area=area)
+        atlas = unwrap(scene, world, resolved, fit_one_page=True)
     return atlas, replace(resolved, texel_density=atlas.texel_density)
 
 

@@ -1,0 +1,192 @@
+"""Every distinct mesh's charts, by projection where it can be, by xatlas where it cannot.
+
+A mesh is charted in its instance's rigid-free frame in world units (``unwrap.frame_positions``):
+by projection (``planar.project``), or, where that declines (a chart would overlap itself, or
+the surface is too crumpled), by xatlas (``_xatlas_charts``). The charts hold no texel density,
+so a bake at another density packs the same charts again. Each distinct mesh is charted once,
+in forked children beside each other (one per core; ``forked.py``: xatlas's threads can crash
+a process), the meshes dealt by triangles; each result is cached by the mesh's content
+(``unwrap_cache.py``): instances of one mesh stretched alike share one charting, and a bake
+with one mesh edited charts only that one again. Both ways are pure functions of the mesh, so
+the charts do not depend on the cores, the order the children end in, or the cache.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+import xatlas
+
+from baker.atlas import planar, unwrap_cache
+from baker.atlas.layout import Charts
+from baker.run.forked import call_forked_together
+from baker.run.parallel import cores
+
+_NO_PAGE = np.uint32(0xFFFFFFFF)  # xatlas's page index for vertices of faces it could not place
+# xatlas charts a mesh scaled to this many of its units² of surface: every chart many units
+# wide, so that its own packing (a unit a texel, a unit of padding) moves charts, never shapes
+# them; the scale is undone after.
+_XATLAS_AREA = 1e5
+# The CPU time (all its threads) a charting child may use before it is taken for hung
+# (``forked.call_forked``: CPU time, so a loaded machine never makes a genuine run look hung):
+# 5 s, and 2 ms a triangle (xatlas charts about 15,000 triangles a second on one busy core).
+_SECONDS, _SECONDS_PER_TRIANGLE = 5.0, 2e-3
+
+Mesh = tuple[np.ndarray, np.ndarray]  # positions (n, 3) float64 world units, triangles (m, 3) int64
+
+
+def chart_meshes(meshes: list[Mesh], threads: int) -> list[Charts]:
+    """Every mesh's ``Charts``, in order: each distinct mesh once, from the cache or charted
+    in forked children (at most ``threads`` at once, 0: one per core); the split changes only
+    who charts what, not the charts."""
+    names = [chart_name(mesh) for mesh in meshes]
+    first = {name: m for m, name in reversed(list(enumerate(names)))}  # each distinct mesh's first
+    charted: dict[str, Charts] = {}
+    for name, m in first.items():
+        stored = unwrap_cache.read(name, 1)
+        found = _from_entry(stored, meshes[m]) if stored is not None else None
+        if found is not None:
+            charted[name] = found
+    missing = sorted((m for name, m in first.items() if name not in charted),
+                     key=lambda m: (-len(meshes[m][1]), m))
+    if missing:
+        weights = [len(meshes[m][1]) for m in missing]
+        groups = _balanced(missing, weights, min(threads or cores(), cores()))
+        limit = max(_SECONDS + _SECONDS_PER_TRIANGLE * sum(len(meshes[m][1]) for m in group)
+                    for group in groups)
+        runs = call_forked_together(
+            [functools.partial(_chart_group, meshes, group) for group in groups],
+            "the chart builder", limit)
+        for group, results in zip(groups, runs):
+            for m, charts in zip(group, results):
+                charted[names[m]] = charts
+                unwrap_cache.write(names[m], (len(charts.sides),), (_entry(charts),),
+                                   prune=False)
+        unwrap_cache.prune_entries()
+    return [charted[name] for name in names]
+
+
+@functools.cache
+def _charting() -> tuple[object, ...]:
+    """What besides a mesh decides its charts: the projection's constants, xatlas's version
+    and options (made once: every mesh's cache name asks for it)."""
+    return (*planar.KEY, xatlas.__version__, _XATLAS_AREA,
+            *map(_options_of, _xatlas_options()))
+
+
+def chart_name(mesh: Mesh) -> str:
+    """The cache name of one mesh's charts (``unwrap_cache.py``)."""
+    return unwrap_cache.key([mesh], _charting())
+
+
+def _chart_group(meshes: list[Mesh], group: list[int]) -> list[Charts]:
+    """The charts of the meshes ``group`` (indices into ``meshes``), in turn (one child's)."""
+    return [chart(*meshes[m]) for m in group]
+
+
+def chart(positions: np.ndarray, triangles: np.ndarray) -> Charts:
+    """One mesh's charts: by projection, else by xatlas; none for no triangles."""
+    if not len(triangles):
+        return Charts(vertices=np.zeros(0, np.int64), triangles=np.zeros((0, 3), np.int64),
+                      uv=np.zeros((0, 2)), chart=np.zeros(0, np.int64), sides=np.zeros((0, 2)))
+    projected = planar.project(positions, triangles)
+    return projected if projected is not None else _xatlas_charts(positions, triangles)
+
+
+def _balanced(items: list[int], weights: list[int], count: int) -> list[list[int]]:
+    """``items`` (heaviest first) dealt into at most ``count`` non-empty groups of about equal
+    summed ``weights``: each to the lightest group so far (the first of equals)."""
+    groups: list[list[int]] = [[] for _ in range(max(1, min(count, len(items))))]
+    loads = [0] * len(groups)
+    for item, weight in zip(items, weights):
+        k = loads.index(min(loads))
+        groups[k].append(item)
+        loads[k] += weight
+    return groups
+
+
+def _xatlas_options() -> tuple[xatlas.ChartOptions, xatlas.PackOptions]:
+    """xatlas's settings for charting one mesh: its packing only places the charts, which
+    ``packing.py`` packs again, so the cheapest: no bilinear margin, a unit of padding (charts
+    touching would be read back as one)."""
+    options = xatlas.PackOptions()
+    options.texels_per_unit = 1.0
+    options.padding = 1
+    options.bilinear = False
+    options.resolution = 0
+    options.create_image = False
+    return xatlas.ChartOptions(), options
+
+
+def _options_of(options: xatlas.ChartOptions | xatlas.PackOptions) -> dict[str, object]:
+    """Every setting of an xatlas options object by name (for the cache key)."""
+    return {name: getattr(options, name) for name in sorted(dir(options))
+            if not name.startswith("_")}
+
+
+def _xatlas_charts(positions: np.ndarray, triangles: np.ndarray) -> Charts:
+    """One mesh charted by xatlas (scaled to ``_XATLAS_AREA`` units², see there), its charts
+    each moved to start at (0, 0) and scaled back to world units. Vertices of faces xatlas
+    leaves out (degenerate ones) take the chart and place of the nearest placed vertex."""
+    p = np.asarray(positions, np.float64)
+    t = np.asarray(triangles, np.int64)
+    cross = np.cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]])
+    area = 0.5 * float(np.linalg.norm(cross, axis=1).sum())
+    scale = np.sqrt(_XATLAS_AREA / area) if area > 0 else 1.0
+    atlas = xatlas.Atlas()
+    atlas.add_mesh((p * scale).astype(np.float32), t.astype(np.uint32))
+    atlas.generate(*_xatlas_options())
+    vertices, faces, uv = atlas[0]
+    page, owner = atlas.get_mesh_vertex_assignment(0)
+    vertices, faces = vertices.astype(np.int64), faces.astype(np.int64)
+    uv = uv.astype(np.float64) * [atlas.width, atlas.height] / scale
+    placed = page != _NO_PAGE
+    if not placed.any():
+        placed[:] = True  # nothing placed: every vertex one point of one chart
+        uv[:], owner = 0.0, np.zeros(len(vertices), np.int64)
+    lost = np.flatnonzero(~placed)
+    if len(lost):
+        nearest = _nearest(p[vertices], np.flatnonzero(placed), lost)
+        uv[lost], owner = uv[nearest], owner.astype(np.int64)
+        owner[lost] = owner[nearest]
+    labels, owner = np.unique(owner.astype(np.int64), return_inverse=True)
+    count = len(labels)
+    low = np.full((count, 2), np.inf)
+    np.minimum.at(low, owner, uv)
+    uv = uv - low[owner]
+    sides = np.zeros((count, 2))
+    np.maximum.at(sides, owner, uv)
+    return Charts(vertices=vertices, triangles=faces, uv=uv, chart=owner, sides=sides)
+
+
+def _nearest(where: np.ndarray, placed: np.ndarray, lost: np.ndarray) -> np.ndarray:
+    """(len(lost),) for each vertex of ``lost`` the one of ``placed`` nearest to it in
+    ``where`` (k, 3) (the first of equals)."""
+    nearest = np.empty(len(lost), np.int64)
+    for chunk in np.array_split(np.arange(len(lost)), max(1, len(lost) // 256)):
+        distance = np.linalg.norm(where[lost[chunk], None] - where[None, placed], axis=-1)
+        nearest[chunk] = placed[np.argmin(distance, axis=1)]
+    return nearest
+
+
+def _entry(charts: Charts) -> tuple[np.ndarray, ...]:
+    """A mesh's charts as the cache keeps them (``unwrap_cache.PER_MESH`` arrays)."""
+    return charts.vertices, charts.triangles, charts.uv, charts.chart, charts.sides
+
+
+def _from_entry(stored: tuple[tuple[int, ...], tuple[tuple[np.ndarray, ...], ...]],
+                mesh: Mesh) -> Charts | None:
+    """The charts of a cache entry (``unwrap_cache.read``), or None when it has not the
+    shapes, types and index ranges a charting of ``mesh`` gives (it is charted again)."""
+    header, ((vertices, faces, uv, owner, sides),) = stored
+    k, count = len(vertices), len(sides)
+    if (header != (count,) or vertices.dtype != np.int64 or faces.dtype != np.int64
+            or uv.dtype != np.float64 or owner.dtype != np.int64 or sides.dtype != np.float64
+            or vertices.shape != (k,) or faces.shape != mesh[1].shape or uv.shape != (k, 2)
+            or owner.shape != (k,) or sides.shape != (count, 2)
+            or (k and (vertices.min() < 0 or vertices.max() >= len(mesh[0])))
+            or (faces.size and (faces.min() < 0 or faces.max() >= k))
+            or (k and (owner.min() < 0 or owner.max() >= count))):
+        return None
+    return Charts(vertices=vertices, triangles=faces, uv=uv, chart=owner, sides=sides)
