@@ -161,21 +161,21 @@ def test_a_helical_ramp_and_a_crumpled_surface_are_left_to_xatlas():
 
 @pytest.mark.parametrize("seed", range(3))
 def test_packing_keeps_every_rectangle_and_its_padding_apart_on_its_page(seed):
-    """Random rectangles (many small, some large): every one on a page with its padding
-    inside the page, no two padded rectangles sharing a texel; one page is cut to its
+    """Random rectangles (many small, some large): every one inside its page, no two sharing
+    a texel with their padding round them (``2·padding`` apart); one page is cut to its
     rectangles, several are whole pages; the same input gives the same bits."""
     rng = np.random.default_rng(seed)
     cells = np.concatenate([rng.integers(1, 12, (int(rng.integers(1, 600)), 2)),
                             rng.integers(20, 120, (int(rng.integers(0, 8)), 2))])
     padding, page = int(rng.integers(0, 4)), int(rng.choice([128, 256]))
     packed = packing.pack(cells, padding, page)
-    drawn = np.zeros((packed.pages, packed.height, packed.width), np.int64)
+    p = padding  # the drawing has the padding beyond the page's sides too
+    drawn = np.zeros((packed.pages, packed.height + 2 * p, packed.width + 2 * p), np.int64)
     for cell, at, turned, on in zip(cells, packed.corner, packed.turned, packed.page):
         w, h = cell[::-1] if turned else cell
         x, y = at
-        assert x >= padding and y >= padding
-        assert x + w + padding <= packed.width and y + h + padding <= packed.height
-        drawn[on, y - padding:y + h + padding, x - padding:x + w + padding] += 1
+        assert x >= 0 and y >= 0 and x + w <= packed.width and y + h <= packed.height
+        drawn[on, y:y + h + 2 * p, x:x + w + 2 * p] += 1
     assert drawn.max() == 1
     assert packed.pages >= 1 and (packed.pages == 1 or packed.width == packed.height == page)
     assert max(packed.width, packed.height) <= page
@@ -185,10 +185,10 @@ def test_packing_keeps_every_rectangle_and_its_padding_apart_on_its_page(seed):
 
 
 def test_rectangles_that_fill_a_square_pack_into_it():
-    """Sixteen 30 × 30 rectangles with a padding of 1 fill a 128² page exactly (32 a cell):
-    one page, every texel used."""
-    packed = packing.pack(np.full((16, 2), 30), 1, 128)
-    assert packed.pages == 1 and (packed.width, packed.height) == (128, 128)
+    """Sixteen 30 × 30 rectangles with a padding of 1 fill a 126² page exactly (2 texels
+    apart, none at the page's sides): one page, every texel but the gaps used."""
+    packed = packing.pack(np.full((16, 2), 30), 1, 126)
+    assert packed.pages == 1 and (packed.width, packed.height) == (126, 126)
 
 
 def _charts_by_part(atlas, world, scene) -> list[tuple[int, np.ndarray, bool]]:
@@ -200,8 +200,12 @@ def _charts_by_part(atlas, world, scene) -> list[tuple[int, np.ndarray, bool]]:
         corners = uv[inst.triangles]
         name = scene.document.nodes[scene.instances[inst.instance].node].name
         flat = name in ("crown", "grass")
-        # Charts: the pieces of triangles joined by shared (split) vertices.
-        label, before = np.arange(len(inst.uv)), None
+        # Charts: the pieces of triangles joined by shared UV points (touching leaves, their
+        # corners welded, are charted together).
+        page = np.zeros(len(inst.uv))
+        page[inst.triangles.reshape(-1)] = np.repeat(inst.pages, 3)
+        _, point = np.unique(np.c_[inst.uv, page], axis=0, return_inverse=True)
+        label, before = point.reshape(-1).copy(), None
         while before is None or (label != before).any():
             before, least = label.copy(), label[inst.triangles].min(axis=1)
             np.minimum.at(label, inst.triangles.ravel(), np.repeat(least, 3))
@@ -238,12 +242,14 @@ def test_the_atlas_keeps_flat_parts_true_to_size_on_their_own_texels(
         on_page = [(corners, flat) for p, corners, flat in charts if p == page_index]
         masks = [_touched(corners, atlas.width, atlas.height) for corners, _flat in on_page]
         for (corners, flat), mask in zip(on_page, masks):
-            if flat:  # exactly the texels of its rectangle: ceil of its sides
+            if flat and len(corners) == 2:  # a quad: exactly the texels of its rectangle
                 low, high = corners.reshape(-1, 2).min(0), corners.reshape(-1, 2).max(0)
                 assert mask.sum() == np.prod(np.floor(high - low + 2 * _MARGIN) + 1)
         owner = np.full((atlas.height, atlas.width), -1)
-        for n, mask in enumerate(masks):
-            assert (owner[mask] == -1).all()  # no texel shared between charts
+        is_flat = np.array([flat for _corners, flat in on_page] + [False])
+        for n, mask in enumerate(masks):  # no texel of a flat part shared with another chart
+            assert not (is_flat[n] and (owner[mask] >= 0).any())
+            assert not is_flat[owner[mask]].any()
             owner[mask] = n
         near = _dilated(owner, gap)
         for n, ((_corners, flat), mask) in enumerate(zip(on_page, masks)):

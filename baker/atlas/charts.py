@@ -7,13 +7,15 @@ so a bake at another density packs the same charts again. Each distinct mesh is 
 in forked children beside each other (one per core; ``forked.py``: xatlas's threads can crash
 a process), the meshes dealt by triangles; each result is cached by the mesh's content
 (``unwrap_cache.py``): instances of one mesh stretched alike share one charting, and a bake
-with one mesh edited charts only that one again. Both ways are pure functions of the mesh, so
+with one mesh edited charts only that one again; the charts of all of a scene's meshes are kept
+as one entry too, which the next bake of the same meshes reads in one go. Both ways are pure functions of the mesh, so
 the charts do not depend on the cores, the order the children end in, or the cache.
 """
 
 from __future__ import annotations
 
 import functools
+import mmap
 
 import numpy as np
 import xatlas
@@ -22,6 +24,7 @@ from baker.atlas import planar, unwrap_cache
 from baker.atlas.layout import Charts
 from baker.run.forked import call_forked_together
 from baker.run.parallel import cores
+from baker.run.progress import Steps
 
 _NO_PAGE = np.uint32(0xFFFFFFFF)  # xatlas's page index for vertices of faces it could not place
 # xatlas charts a mesh scaled to this many of its units² of surface: every chart many units
@@ -36,16 +39,24 @@ _SECONDS, _SECONDS_PER_TRIANGLE = 5.0, 2e-3
 Mesh = tuple[np.ndarray, np.ndarray]  # positions (n, 3) float64 world units, triangles (m, 3) int64
 
 
-def chart_meshes(meshes: list[Mesh], threads: int) -> list[Charts]:
+def chart_meshes(meshes: list[Mesh], threads: int, steps: Steps | None = None
+                 ) -> list[Charts]:
     """Every mesh's ``Charts``, in order: each distinct mesh once, from the cache or charted
     in forked children (at most ``threads`` at once, 0: one per core); the split changes only
-    who charts what, not the charts."""
+    who charts what, not the charts. The charts of all the distinct meshes are also kept as
+    one entry (named by theirs), read back in one go by the next bake of the same meshes
+    (hundreds of small files cost a millisecond or two each). ``steps``: the triangles to
+    chart and charted, counted as the children go."""
     names = [chart_name(mesh) for mesh in meshes]
     first = {name: m for m, name in reversed(list(enumerate(names)))}  # each distinct mesh's first
-    charted: dict[str, Charts] = {}
+    together = unwrap_cache.key([], ("together", *first))
+    charted = _read_together(together, first, meshes)
+    if charted is not None:
+        return [charted[name] for name in names]
+    charted = {}
     for name, m in first.items():
         stored = unwrap_cache.read(name, 1)
-        found = _from_entry(stored, meshes[m]) if stored is not None else None
+        found = _from_entry(stored[0], stored[1][0], meshes[m]) if stored is not None else None
         if found is not None:
             charted[name] = found
     missing = sorted((m for name, m in first.items() if name not in charted),
@@ -55,16 +66,36 @@ def chart_meshes(meshes: list[Mesh], threads: int) -> list[Charts]:
         groups = _balanced(missing, weights, min(threads or cores(), cores()))
         limit = max(_SECONDS + _SECONDS_PER_TRIANGLE * sum(len(meshes[m][1]) for m in group)
                     for group in groups)
+        steps = steps or Steps()
+        steps.expect(sum(weights))
+        charted_so_far = np.frombuffer(mmap.mmap(-1, 8 * len(groups)), np.int64)  # shared
         runs = call_forked_together(
-            [functools.partial(_chart_group, meshes, group) for group in groups],
-            "the chart builder", limit)
+            [functools.partial(_chart_group, meshes, group, charted_so_far, k)
+             for k, group in enumerate(groups)], "the chart builder", limit,
+            tick=lambda: steps.done_so_far(int(charted_so_far.sum())))
+        steps.done_so_far(steps.total)
         for group, results in zip(groups, runs):
             for m, charts in zip(group, results):
                 charted[names[m]] = charts
-                unwrap_cache.write(names[m], (len(charts.sides),), (_entry(charts),),
-                                   prune=False)
-        unwrap_cache.prune_entries()
+    unwrap_cache.write(together, tuple(len(charted[name].sides) for name in first),
+                       tuple(_entry(charted[name]) for name in first))
     return [charted[name] for name in names]
+
+
+def _read_together(name: str, first: dict[str, int], meshes: list[Mesh]
+                   ) -> dict[str, Charts] | None:
+    """The charts of the distinct meshes (``first``: name → a mesh of it) from their joint
+    entry ``name``, or None when there is none whole."""
+    stored = unwrap_cache.read(name, len(first))
+    if stored is None or len(stored[0]) != len(first):
+        return None
+    charted = {}
+    for (mesh_name, m), count, arrays in zip(first.items(), stored[0], stored[1]):
+        found = _from_entry((count,), arrays, meshes[m])
+        if found is None:
+            return None
+        charted[mesh_name] = found
+    return charted
 
 
 @functools.cache
@@ -80,9 +111,20 @@ def chart_name(mesh: Mesh) -> str:
     return unwrap_cache.key([mesh], _charting())
 
 
-def _chart_group(meshes: list[Mesh], group: list[int]) -> list[Charts]:
-    """The charts of the meshes ``group`` (indices into ``meshes``), in turn (one child's)."""
-    return [chart(*meshes[m]) for m in group]
+def _chart_group(meshes: list[Mesh], group: list[int], charted_so_far: np.ndarray, slot: int
+                 ) -> list[Charts]:
+    """The charts of the meshes ``group`` (indices into ``meshes``), in turn (one child's),
+    each kept in the cache as it is made (by the child: the cores write side by side); the
+    triangles charted so far are kept in ``charted_so_far[slot]`` (memory shared with the
+    parent, which shows them)."""
+    out = []
+    charted_so_far[slot] = 0  # a child run again starts again
+    for m in group:
+        out.append(chart(*meshes[m]))
+        unwrap_cache.write(chart_name(meshes[m]), (len(out[-1].sides),), (_entry(out[-1]),),
+                           prune=False)
+        charted_so_far[slot] += len(meshes[m][1])
+    return out
 
 
 def chart(positions: np.ndarray, triangles: np.ndarray) -> Charts:
@@ -175,11 +217,12 @@ def _entry(charts: Charts) -> tuple[np.ndarray, ...]:
     return charts.vertices, charts.triangles, charts.uv, charts.chart, charts.sides
 
 
-def _from_entry(stored: tuple[tuple[int, ...], tuple[tuple[np.ndarray, ...], ...]],
-                mesh: Mesh) -> Charts | None:
-    """The charts of a cache entry (``unwrap_cache.read``), or None when it has not the
-    shapes, types and index ranges a charting of ``mesh`` gives (it is charted again)."""
-    header, ((vertices, faces, uv, owner, sides),) = stored
+def _from_entry(header: tuple[int, ...], arrays: tuple[np.ndarray, ...], mesh: Mesh
+                ) -> Charts | None:
+    """The charts of a cache entry's mesh (its header and arrays, ``unwrap_cache.read``), or
+    None when they have not the shapes, types and index ranges a charting of ``mesh`` gives
+    (it is charted again)."""
+    vertices, faces, uv, owner, sides = arrays
     k, count = len(vertices), len(sides)
     if (header != (count,) or vertices.dtype != np.int64 or faces.dtype != np.int64
             or uv.dtype != np.float64 or owner.dtype != np.int64 or sides.dtype != np.float64

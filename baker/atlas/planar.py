@@ -10,8 +10,8 @@ million triangles in about a second.
 ``project``: the triangles are joined across edges (corners at the same position, so that
 vertices split for normals or UVs do not cut a chart), and charts grown from the largest
 triangle not yet charted across edges while each triangle's normal stays within ``CONE`` of
-the seed's. A chart is projected along its area-weighted normal (every normal within 2·CONE of
-it, so no triangle turns over), scaled so that its area is its surface's, and turned so that
+the seed's. A chart is projected along its area-weighted normal (every normal within 2·CONE <
+90° of it, so no triangle turns over), scaled so that its area is its surface's, and turned so that
 its bounding rectangle is the least one a side of its convex hull gives. A mesh is left to
 xatlas (None) when a chart overlaps itself once projected (a helical ramp), or when its
 surface is so crumpled that the charts average fewer than ``LEAST_TRIANGLES`` triangles (a
@@ -28,12 +28,13 @@ import numpy as np
 from baker.atlas.layout import Charts
 from baker.jit import inline, jit
 
-CONE = 30.0  # degrees: every normal of a chart within this of its seed's
+CONE = 40.0  # degrees: every normal of a chart within this of its seed's (under 45°)
 LEAST_TRIANGLES = 6.0  # a mesh whose cut charts average fewer triangles is left to xatlas
 _OVERLAP = 1e-9  # of a chart's size: triangles closer than this to apart are apart
+_EQUAL = 1e-9  # rectangles' areas this close (relative) are equal (``_turned``)
 # Everything besides a mesh that decides its charts, for the unwrap cache's key; the first
 # entries are bumped when the method changes.
-KEY = ("projection", 1, CONE, LEAST_TRIANGLES, _OVERLAP)
+KEY = ("projection", 2, CONE, LEAST_TRIANGLES, _OVERLAP, _EQUAL)
 
 
 def project(positions: np.ndarray, triangles: np.ndarray) -> Charts | None:
@@ -225,15 +226,45 @@ def _overlapping(flat, corners, by_chart, start, tolerance):
         for r in range(last - first):
             for gx in range(box[r, 0], box[r, 2] + 1):
                 for gy in range(box[r, 1], box[r, 3] + 1):
-                    members[at[gx * side + gy]] = by_chart[first + r]
+                    members[at[gx * side + gy]] = first + r
                     at[gx * side + gy] += 1
         for g in range(side * side):
             for i in range(fill[g], fill[g + 1]):
                 for j in range(i + 1, fill[g + 1]):
-                    if _apart(flat, corners[members[i]], corners[members[j]], tolerance * size):
+                    a, b = members[i] - first, members[j] - first
+                    if _tested_elsewhere(box, members, by_chart, first, i, j, g, side):
                         continue
-                    return True
+                    if _share_an_edge(corners[by_chart[first + a]], corners[by_chart[first + b]]):
+                        continue
+                    if not _apart(flat, corners[by_chart[first + a]],
+                                  corners[by_chart[first + b]], tolerance * size):
+                        return True
     return False
+
+
+@inline
+def _tested_elsewhere(box, members, by_chart, first, i, j, g, side):
+    """Whether the pair of cell entries ``i``, ``j`` (rows of ``box``) is tested in another
+    cell than ``g``, or need not be: their cell boxes do not meet, or meet first (their
+    common box's lowest cell) elsewhere."""
+    a, b = members[i] - first, members[j] - first
+    x = max(box[a, 0], box[b, 0])
+    y = max(box[a, 1], box[b, 1])
+    if x > min(box[a, 2], box[b, 2]) or y > min(box[a, 3], box[b, 3]):
+        return True
+    return x * side + y != g
+
+
+@inline
+def _share_an_edge(a, b):
+    """Whether triangles ``a`` and ``b`` (corner rows) have two corners in common: turned the
+    same way, they lie on either side of that edge and cannot overlap."""
+    shared = 0
+    for k in range(3):
+        for m in range(3):
+            if a[k] == b[m]:
+                shared += 1
+    return shared >= 2
 
 
 @inline
@@ -265,10 +296,11 @@ def _apart(flat, a, b, tolerance):
 
 @jit
 def _turned(flat, order, start):
-    """Each chart's vertices (``start[c]:start[c + 1]`` of ``flat`` (k, 2); ``order``: the
-    same ranges sorted by x, then y) turned so that their bounding rectangle is the least of
-    those with a side along a side of their convex hull (the first of equals), moved to start
-    at (0, 0): (k, 2) and the (c, 2) rectangles' sides."""
+    """Each chart's vertices (``start[c]:start[c + 1]`` of ``flat`` (k, 2), in the order of
+    their mesh vertices; ``order``: the same ranges sorted by x, then y) turned so that their
+    bounding rectangle is the least of those with a side along a side of their convex hull,
+    of equals (within ``_EQUAL``) the one whose x axis is most along the chart's first two
+    vertices, moved to start at (0, 0): (k, 2) and the (c, 2) rectangles' sides."""
     uv = np.empty_like(flat)
     sides = np.zeros((len(start) - 1, 2))
     hull = np.empty(len(flat) + 1, np.int64)
@@ -282,22 +314,35 @@ def _turned(flat, order, start):
         for i in range(last - 1, first - 1, -1):
             h = _pushed(flat, hull, base, h, order[i])
         h = max(h - 1, 1)
-        best, cos_best, sin_best = np.inf, 1.0, 0.0
+        # The mesh's own direction in the chart: from its vertex of least index to the next
+        # (vertices are in order of index within a chart), to choose among equal rectangles
+        # the same way however the mesh is turned or mirrored in its frame.
+        ref_x, ref_y = 0.0, 0.0
+        if last - first > 1:
+            ref_x, ref_y = flat[first + 1, 0] - flat[first, 0], flat[first + 1, 1] - flat[first, 1]
+        best, best_along, cos_best, sin_best = np.inf, -np.inf, 1.0, 0.0
         for e in range(h):
             p, q = hull[e], hull[(e + 1) % h]
             dx, dy = flat[q, 0] - flat[p, 0], flat[q, 1] - flat[p, 1]
             length = np.sqrt(dx * dx + dy * dy)
             if length == 0:
                 continue
-            cs, sn = dx / length, dy / length
-            lo_x, hi_x, lo_y, hi_y = np.inf, -np.inf, np.inf, -np.inf
-            for f in range(h):
-                x = cs * flat[hull[f], 0] + sn * flat[hull[f], 1]
-                y = cs * flat[hull[f], 1] - sn * flat[hull[f], 0]
-                lo_x, hi_x = min(lo_x, x), max(hi_x, x)
-                lo_y, hi_y = min(lo_y, y), max(hi_y, y)
-            if (hi_x - lo_x) * (hi_y - lo_y) < best:
-                best, cos_best, sin_best = (hi_x - lo_x) * (hi_y - lo_y), cs, sn
+            for quarter in range(4):  # the rectangle along this side, each way round
+                cs, sn = dx / length, dy / length
+                for _ in range(quarter):
+                    cs, sn = -sn, cs
+                lo_x, hi_x, lo_y, hi_y = np.inf, -np.inf, np.inf, -np.inf
+                for f in range(h):
+                    x = cs * flat[hull[f], 0] + sn * flat[hull[f], 1]
+                    y = cs * flat[hull[f], 1] - sn * flat[hull[f], 0]
+                    lo_x, hi_x = min(lo_x, x), max(hi_x, x)
+                    lo_y, hi_y = min(lo_y, y), max(hi_y, y)
+                area = (hi_x - lo_x) * (hi_y - lo_y)
+                along = cs * ref_x + sn * ref_y
+                if area < best * (1 - _EQUAL) or (area <= best * (1 + _EQUAL)
+                                                   and along > best_along):
+                    best = min(best, area)
+                    best_along, cos_best, sin_best = along, cs, sn
         lo_x, lo_y, hi_x, hi_y = np.inf, np.inf, -np.inf, -np.inf
         for i in range(first, last):
             uv[i, 0] = cos_best * flat[i, 0] + sin_best * flat[i, 1]

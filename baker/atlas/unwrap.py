@@ -24,9 +24,11 @@ from baker.atlas.layout import Atlas, Charts, InstanceUV
 from baker.errors import SettingsError
 from baker.geometry.world import World, triangle_cross
 from baker.gltf.scene import Scene
+from baker.jit import jit
+from baker.run.progress import Steps
 from baker.settings import Resolved
 
-_MARGIN = 0.01  # texels: a chart is kept this far inside its rectangle's texels
+_MARGIN = 0.01  # texels: a chart is kept this far inside its rectangle's texels, centred
 # A derived density whose charts spill onto a second page is lowered by this factor at a time,
 # down to this share of itself at most, until they fit one (``_fitted``).
 _FIT_STEP, _FIT_FLOOR = 0.95, 0.5
@@ -111,20 +113,22 @@ def frame_meshes(scene: Scene, world: World, instances: list[int]
             for i in instances]
 
 
-def unwrap(scene: Scene, world: World, settings: Resolved, fit_one_page: bool = False) -> Atlas:
+def unwrap(scene: Scene, world: World, settings: Resolved, fit_one_page: bool = False,
+           steps: Steps | None = None) -> Atlas:
     """Unwrap the baked instances into pages of at most ``settings.page_size`` texels a side.
 
     One page sized to the charts when they fit in one, else as many ``page_size``² pages as
     they need (``packing.py``). ``fit_one_page`` (the derived, default density): when the
     charts spill onto a second page, the density is lowered until they fit one (``_fitted``);
-    the atlas's ``texel_density`` is then the one used.
+    the atlas's ``texel_density`` is then the one used. ``steps``: the triangles charted,
+    as they are (``charts.chart_meshes``).
     """
     instances = baked_instances(scene)
     if not instances:
         return Atlas(width=0, height=0, page_count=0, texel_density=settings.texel_density,
                      padding=settings.padding, instances=())
     _check_triangles_fit(world, scene, instances, settings)
-    charts = chart_meshes(frame_meshes(scene, world, instances), settings.threads)
+    charts = chart_meshes(frame_meshes(scene, world, instances), settings.threads, steps)
     _check_charts_fit(charts, scene, instances, settings)
     density = settings.texel_density
     packed = _packed(charts, density, settings)
@@ -141,8 +145,8 @@ def unwrap(scene: Scene, world: World, settings: Resolved, fit_one_page: bool = 
 def _cells(charts: list[Charts], density: float) -> tuple[np.ndarray, np.ndarray]:
     """Every instance's charts in turn: their sides at ``density`` (c, 2) texels, and the
     rectangles of whole texels that hold them (c, 2) int64, ``_MARGIN`` inside."""
-    extent = np.concatenate([c.sides for c in charts]) * density
-    return extent, np.floor(extent + 2 * _MARGIN).astype(np.int64) + 1
+    wanted = np.concatenate([c.sides for c in charts]) * density
+    return wanted, np.floor(wanted + 2 * _MARGIN).astype(np.int64) + 1
 
 
 def _packed(charts: list[Charts], density: float, settings: Resolved) -> packing.Packed:
@@ -171,17 +175,18 @@ def _placed(charts: list[Charts], instances: list[int], density: float,
     """Each instance's ``InstanceUV``: its charts' vertices scaled to ``density``, each chart
     in the middle of its rectangle, turned where the packing turned it, in page UV."""
     extent, cells = _cells(charts, density)
+    inset = (cells - extent) / 2
     size = np.array([packed.width, packed.height], np.float64)
     out, first = [], 0
     for mesh, i in zip(charts, instances):
         rect = first + mesh.chart
         first += len(mesh.sides)
         x, y = mesh.uv[:, 0] * density, mesh.uv[:, 1] * density
-        (ex, ey), (cx, cy) = extent[rect].T, cells[rect].T
+        ex, (ix, iy) = extent[rect, 0], inset[rect].T
         turned = packed.turned[rect]
         at = packed.corner[rect].astype(np.float64)
-        page_x = at[:, 0] + np.where(turned, (cy - ey) / 2 + y, (cx - ex) / 2 + x)
-        page_y = at[:, 1] + np.where(turned, (cx - ex) / 2 + (ex - x), (cy - ey) / 2 + y)
+        page_x = at[:, 0] + np.where(turned, iy + y, ix + x)
+        page_y = at[:, 1] + np.where(turned, ix + (ex - x), iy + y)
         uv = np.stack([page_x, page_y], axis=1) / size
         pages = packed.page[rect[mesh.triangles[:, 0]]] if len(rect) else np.zeros(0, np.int64)
         out.append(InstanceUV(instance=i, vertices=mesh.vertices, triangles=mesh.triangles,
@@ -193,7 +198,7 @@ def _check_charts_fit(charts: list[Charts], scene: Scene, instances: list[int],
                       settings: Resolved) -> None:
     """Raise PageTooSmall when a chart's rectangle is larger than a page holds at the density
     asked for (``texel_density`` of the error: the highest at which it fits)."""
-    room = settings.page_size - 2 * settings.padding
+    room = settings.page_size
     extent, cells = _cells(charts, settings.texel_density)
     if not len(cells) or cells.max() <= room:
         return
@@ -201,7 +206,7 @@ def _check_charts_fit(charts: list[Charts], scene: Scene, instances: list[int],
     owner = int(np.searchsorted(np.cumsum([len(c.sides) for c in charts]), worst, side="right"))
     side = float(extent[worst].max()) / settings.texel_density
     fits = _round_down((room - 1) / side)
-    page = int(2 ** np.ceil(np.log2(extent[worst].max() + 2 * settings.padding + 2)))
+    page = int(2 ** np.ceil(np.log2(extent[worst].max() + 2)))
     bigger = f", or --page-size {page} or more" if page <= 16384 else ""
     inst = scene.instances[instances[owner]]
     prim = scene.primitives[inst.primitive]
@@ -223,10 +228,8 @@ def _check_triangles_fit(world: World, scene: Scene, instances: list[int], setti
     tris = np.concatenate([world.instance_triangles(i) for i in instances])
     if not len(tris):
         return
-    a, b, c = world.corners(tris)
-    edges = np.stack([np.linalg.norm(p - q, axis=1) for p, q in ((a, b), (b, c), (c, a))], 1)
-    worst = int(np.argmax(edges.max(axis=1)))
-    longest, owner = float(edges[worst].max()), int(world.tri_instance[tris[worst]])
+    longest, worst = _longest_edge(world.positions, world.triangles, tris)
+    owner = int(world.tri_instance[tris[worst]])
     if longest * settings.texel_density <= room:
         return
     fits = _round_down(room / longest * 0.98)
@@ -240,6 +243,23 @@ def _check_triangles_fit(world: World, scene: Scene, instances: list[int], setti
         f"{longest * settings.texel_density:.3g} texels long, more than a page of "
         f"{settings.page_size} holds", texel_density=fits,
         fix=f"use --texel-density {fits:g} or less{bigger}, or look for stray vertices")
+
+
+@jit
+def _longest_edge(positions, triangles, tris):
+    """The longest edge of the triangles ``tris`` (world units) and its triangle's place in
+    ``tris`` (the first of equals; 0 when every length is NaN)."""
+    best, worst = 0.0, 0
+    for i in range(len(tris)):
+        for k in range(3):
+            p, q = triangles[tris[i], k], triangles[tris[i], (k + 1) % 3]
+            dx = positions[p, 0] - positions[q, 0]
+            dy = positions[p, 1] - positions[q, 1]
+            dz = positions[p, 2] - positions[q, 2]
+            length = np.sqrt(dx * dx + dy * dy + dz * dz)
+            if length > best:
+                best, worst = length, i
+    return best, worst
 
 
 def _round_down(value: float, digits: int = 3) -> float:

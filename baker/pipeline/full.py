@@ -68,7 +68,7 @@ from baker.pipeline import cluster
 from baker.pipeline.parts import PerTexel, Tally, TexelPoints, part_slices
 from baker.pipeline.plan import Plan, make_plan
 from baker.rays.trace import Tracer
-from baker.run.progress import Meter, StageLines, bar, wanted
+from baker.run.progress import Meter, StageLines, Steps, bar, wanted
 from baker.run.spill import Spill
 from baker.errors import SettingsError
 from baker.settings import Resolved, Settings, resolve
@@ -259,11 +259,11 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True,
         area, diagonal = bounds_of_baked(world, scene)
         resolved = resolve(settings, area, diagonal)
         lit = lighting(scene, world, resolved, times)
-    with timed(times, "unwrap"), log.stage("unwrap"):
+    with timed(times, "unwrap"), log.stage("unwrap", "triangles") as steps:
         if settings.uv is not None:  # the artist's lightmap UVs: no unwrap
             atlas = authored_atlas(scene, world, resolved)
         else:
-            atlas, resolved = _unwrapped(scene, world, settings, resolved)
+            atlas, resolved = _unwrapped(scene, world, settings, resolved, steps)
     with timed(times, "rasterise"), log.stage("rasterise"):
         coverage = cover(atlas, world)
         owned = owners(atlas, world, coverage)
@@ -283,21 +283,22 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True,
             pages, last = _bake_parts(baking, spill, times, quiet)
         per_texel = (PerTexel.spilled(spill, atlas, world) if spill is not None
                      else last.held())
-        with log.stage("post-process"):
-            return _finish_pages(baking, per_texel, pages, times, staging)
+        with log.stage("post-process", "texels") as steps:
+            return _finish_pages(baking, per_texel, pages, times, staging, steps=steps)
     except BaseException:  # an error or Ctrl-C: no spilled rows left behind
         if spill is not None:
             spill.close()
         raise
 
 
-def _unwrapped(scene: Scene, world: World, settings: Settings, resolved: Resolved
-               ) -> tuple[Atlas, Resolved]:
+def _unwrapped(scene: Scene, world: World, settings: Settings, resolved: Resolved,
+               steps: Steps) -> tuple[Atlas, Resolved]:
     """The atlas and the settings with the density it used: a derived density is
-    lowered to fit a page (``unwrap.py``); the user's is kept or refused with what fits."""
+    lowered to fit a page (``unwrap.py``); the user's is kept or refused with what fits.
+    ``steps``: the triangles charted, as they are."""
     derived = settings.texel_density is None
     try:
-        atlas = unwrap(scene, world, resolved, fit_one_page=derived)
+        atlas = unwrap(scene, world, resolved, fit_one_page=derived, steps=steps)
     except PageTooSmall as error:
         if not derived:  # the user's density: say what fits
             raise
@@ -516,22 +517,28 @@ def writes_occlusion(settings: Resolved) -> bool:
 
 
 def _finish_pages(baking: Baking, per_texel: PerTexel, pages: _Pages, times: dict[str, float],
-                  staging: StateSink | None = None, fingerprint: dict | None = None
-                  ) -> Computed:
+                  staging: StateSink | None = None, fingerprint: dict | None = None,
+                  steps: Steps | None = None) -> Computed:
     """Start writing the bake state (``staging``, if any: the texels are final), then denoise
-    (if asked) and post-process the composed pages."""
+    (if asked) and post-process the composed pages; ``steps``: a pass over the pages' texels
+    for the denoiser, one for the seams, and the post-process's own, counted as done."""
     if staging is not None:
         staging.start(baking, per_texel, fingerprint)
     resolved, lightmaps, masks = baking.settings, pages.lightmaps, pages.masks
+    steps = steps or Steps()
+    texels = lightmaps.covered.size
+    steps.expect(texels * (2 if resolved.denoise else 1))
     denoised = None
     if resolved.denoise:  # per chart, before the fill of invalid texels and dilation (denoise.py)
         with timed(times, "denoise"):
             lightmaps, denoised = denoise(lightmaps, per_texel.texels, *masks,
                                           threads=resolved.threads,
                                           visibility=writes_occlusion(resolved))
+        steps.advance(texels)
     with timed(times, "compose"):
-        lightmaps = postprocess(lightmaps, resolved.padding, *masks,
-                                seams=find_seams(baking.atlas, baking.world))
+        seams = find_seams(baking.atlas, baking.world)
+        steps.advance(texels)
+        lightmaps = postprocess(lightmaps, resolved.padding, *masks, seams=seams, steps=steps)
     return Computed(scene=baking.scene, world=baking.world, settings=resolved,
                     ambient=baking.ambient, plan=baking.lit.plan, atlas=baking.atlas,
                     per_texel=per_texel, tally=pages.tally, lightmaps=lightmaps,
