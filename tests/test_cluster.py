@@ -293,6 +293,67 @@ def test_an_unreachable_cluster_stops_a_rebake_before_any_work(tmp_path, capsys)
     assert {p.name: p.read_bytes() for p in local.parent.iterdir()} == before
 
 
+class _NotAHead:
+    """A server on loopback that is not a Ray head: it answers every connection once with
+    ``reply`` (an HTTP/1 error page, or an HTTP/2 SETTINGS frame and nothing after), then
+    hangs up; stops with the block."""
+
+    def __init__(self, reply: bytes):
+        import socket
+
+        self.reply = reply
+        self.listener = socket.create_server(("127.0.0.1", 0))
+        self.listener.settimeout(0.2)
+        self.address = f"127.0.0.1:{self.listener.getsockname()[1]}"
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self._serve, daemon=True)
+
+    def _serve(self) -> None:
+        import socket
+
+        while not self.stop.is_set():
+            try:
+                connection, _ = self.listener.accept()
+            except socket.timeout:
+                continue
+            with connection:
+                try:
+                    connection.settimeout(2.0)
+                    connection.recv(1 << 16)
+                    connection.sendall(self.reply)
+                except OSError:
+                    pass
+
+    def __enter__(self) -> "_NotAHead":
+        self.thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop.set()
+        self.thread.join()
+        self.listener.close()
+
+
+@pytest.mark.parametrize("reply", [b"HTTP/1.1 404 Not Found\r\nContent-Length: 0\r\n\r\n",
+                                   bytes([0, 0, 0, 4, 0, 0, 0, 0, 0])],
+                         ids=["http1", "http2 but not ray"])
+def test_something_else_at_the_address_is_a_clear_error_within_30_s(tmp_path, reply):
+    """A server that is not a Ray head at the address (the README's example address often
+    is one: a proxy): exit 1 within 30 s with a message naming the address, not Ray's log
+    lines, nothing written."""
+    source = cornell_box().save(tmp_path / "cornell.glb")
+    with _NotAHead(reply) as server:
+        started = time.monotonic()
+        run = subprocess.run([sys.executable, "-m", "baker.cli.main", "bake", str(source), "-o",
+                              str(tmp_path / "baked.glb"), "--cluster", server.address],
+                             capture_output=True, text=True, cwd=ROOT, timeout=60)
+        seconds = time.monotonic() - started
+    assert run.returncode == 1 and seconds < 30, (run.returncode, seconds, run.stderr)
+    assert f"no Ray cluster answers at {server.address}" in run.stderr
+    assert not re.search(r"gcs_client|\.cc:\d+|Traceback", run.stderr), run.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cornell.glb"]
+
+
 def test_foliage_on_a_cluster_is_refused_before_any_work(tmp_path):
     source = cornell_box().save(tmp_path / "cornell.glb")
     with pytest.raises(baker.SettingsError, match="--foliage approx does not run on a cluster"):

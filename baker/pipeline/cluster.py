@@ -34,6 +34,7 @@ import logging
 import os
 import platform
 import socket
+import sys
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
@@ -54,11 +55,16 @@ _RETRIES = 4  # times Ray runs a part again whose worker process died
 _REACH_SECONDS = 5.0  # how long to wait for the head's port to answer
 _IDENTITY_SECONDS = 120.0  # how long each node may take to start a worker and answer
 _WAIT_SECONDS = 0.1  # how often the driver looks at the parts (progress, Ctrl-C)
+_ASKS = 8  # times Ray asks a head for its cluster's identity, a second apart (``_ray``)
+_CONNECT_SECONDS = 20.0  # how long Ray may take to connect to a head that answers
 _LIBRARIES = ("ray", "numpy", "numba", "embreex", "xatlas", "pygltflib")
 
 
 def _ray():
-    """The ``ray`` module, or a SettingsError saying how to install it."""
+    """The ``ray`` module, or a SettingsError saying how to install it. Ray asks an address for
+    its cluster's identity ``_ASKS`` times, a second apart (its default: 20), before it gives
+    up: set before Ray is first imported (it reads it then), unless the user set it."""
+    os.environ.setdefault("RAY_NUM_REDIS_GET_RETRIES", str(_ASKS))
     try:
         import ray
     except ImportError:
@@ -165,15 +171,32 @@ def connect(address: str, threads: int, identity: Callable[[], dict[str, str]]) 
                             fix="give the address `ray start --head` printed, e.g. "
                                 "10.0.0.1:6379")
     try:
-        socket.create_connection((host, int(port)), timeout=_REACH_SECONDS).close()
+        answer = _first_frame(host, int(port))
     except OSError as error:
         raise SettingsError(f"no Ray cluster answers at {address} ({error.strerror or error})",
                             fix=f"start one with `ray start --head --port {port}` on {host}, "
                                 "or give the address of a running head") from None
+    if len(answer) < 9 or answer[3] != _SETTINGS_FRAME:
+        raise SettingsError(f"no Ray cluster answers at {address}: something listens there, "
+                            f"but not a Ray head (it does not speak gRPC)",
+                            fix=f"give the address `ray start --head` printed on the head (its "
+                                f"GCS port, 6379 by default), or start one with `ray start "
+                                f"--head --port {port}` on {host}")
     connected_here = not ray.is_initialized()
     if connected_here:
-        ray.init(address=address, logging_level=logging.WARNING, log_to_driver=False,
-                 configure_logging=True)
+        try:
+            with _stderr_kept(dropped := []):
+                _within(_CONNECT_SECONDS, lambda: ray.init(
+                    address=address, logging_level=logging.WARNING, log_to_driver=False,
+                    configure_logging=True))
+        except (ConnectionError, RuntimeError, TimeoutError) as error:
+            said = f" ({dropped[0]})" if dropped else ""
+            raise SettingsError(
+                f"no Ray cluster answers at {address}: something listens there, but no Ray "
+                f"head ({error or type(error).__name__}){said}",
+                fix=f"give the address `ray start --head` printed on the head (its GCS port, "
+                    f"6379 by default), or start one with `ray start --head --port {port}` on "
+                    f"{host}") from None
     try:
         nodes = [n for n in ray.nodes() if n["Alive"] and n["Resources"].get("CPU", 0) > 0]
         if not nodes:
@@ -193,6 +216,77 @@ def connect(address: str, threads: int, identity: Callable[[], dict[str, str]]) 
         raise
     return Session(address, sum(int(n["Resources"]["CPU"]) for n in nodes), len(nodes),
                    connected_here, threads)
+
+
+def _within(seconds: float, call: Callable[[], object]) -> object:
+    """``call()``'s value, or its error, if it ends within ``seconds``; else TimeoutError
+    (the call goes on in a daemon thread: Ray's connection to a server that speaks gRPC but
+    is no Ray head retries for minutes, past any timeout it takes)."""
+    import threading
+
+    outcome: list = []
+
+    def run() -> None:
+        try:
+            outcome.append((True, call()))
+        except BaseException as error:  # handed to the caller's thread
+            outcome.append((False, error))
+
+    thread = threading.Thread(target=run, daemon=True)
+    thread.start()
+    thread.join(seconds)
+    if not outcome:
+        raise TimeoutError(f"no answer in {seconds:.0f} s")
+    ok, value = outcome[0]
+    if not ok:
+        raise value
+    return value
+
+
+_PREFACE = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n" + bytes([0, 0, 0, 4, 0, 0, 0, 0, 0])
+_SETTINGS_FRAME = 4  # an HTTP/2 frame's type, its header's fourth byte
+
+
+def _first_frame(host: str, port: int) -> bytes:
+    """The first bytes (up to an HTTP/2 frame header's 9) that ``host:port`` answers to an
+    HTTP/2 client's preface and empty SETTINGS frame within ``_REACH_SECONDS``: a Ray head's
+    GCS (gRPC) answers with its own SETTINGS frame at once; anything else (another server, or
+    none that answers) would keep Ray's connection retrying for minutes. OSError when nothing
+    accepts the connection."""
+    with socket.create_connection((host, port), timeout=_REACH_SECONDS) as connection:
+        connection.sendall(_PREFACE)
+        answer = b""
+        try:
+            while len(answer) < 9:
+                part = connection.recv(9 - len(answer))
+                if not part:
+                    break
+                answer += part
+        except (socket.timeout, ConnectionError):
+            pass
+        return answer
+
+
+@contextmanager
+def _stderr_kept(dropped: list[str]) -> Iterator[None]:
+    """Send what is written to this process's standard error (file descriptor 2: Ray's C++
+    core logs there, a line a second while it waits for a head that does not answer) to a
+    file for the block, and put its last line in ``dropped`` instead of on the terminal."""
+    import tempfile
+
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as kept:
+        os.dup2(kept.fileno(), 2)
+        try:
+            yield
+        finally:
+            sys.stderr.flush()
+            os.dup2(saved, 2)
+            os.close(saved)
+            kept.seek(0)
+            lines = kept.read().decode(errors="replace").strip().splitlines()
+            dropped.extend(lines[-1:])
 
 
 def _check_nodes(ray, address: str, nodes: list[dict], identity: Callable) -> None:
