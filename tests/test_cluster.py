@@ -82,6 +82,25 @@ def test_the_demo_scene_baked_on_the_cluster_is_the_local_bake(ray_cluster, smal
     assert report["bytes_from_workers"] > report["bytes_to_workers"] > 0
 
 
+def test_a_bake_is_cut_into_four_parts_a_worker_whatever_its_size(ray_cluster, tmp_path,
+                                                                  monkeypatch):
+    """At the parts' default size the demo at a 128² page is one part locally; on a cluster
+    of two one-CPU workers it is cut into eight (``cluster.part_texels``), with the same
+    bytes, and each worker takes parts as it ends its last. Its meshes are charted on the
+    workers (no cache), and the atlas packed here from their charts is the local one."""
+    from baker.pipeline import cluster
+
+    monkeypatch.setattr(cluster, "_LEAST_PART", 100)
+    monkeypatch.setenv("BAKER_CACHE_DIR", "off")
+    source = cornell_box().save(tmp_path / "cornell.glb")
+    result = _bake_both(source, tmp_path, ray_cluster.address, rays=4, page_size=128)
+    assert len(parts.part_slices(result.texels)) == 1
+    report = result.report["cluster"]
+    assert report["parts"] == 8 and report["parts_run_again"] == []
+    assert report["meshes_charted"] >= 3  # the room's walls, the blocks
+    assert len(report["workers"]) >= 2  # both nodes took parts
+
+
 def test_a_shared_scene_with_lights_is_the_local_bake_on_one_thread(ray_cluster, small_parts,
                                                                      tmp_path):
     """Punctual lights (direct light per texel) and glass-free leaves of a real scene, against
@@ -191,6 +210,8 @@ def _with_a_worker_killed(cluster: LocalCluster, bake) -> "baker.BakeResult":
     assert killed, "no worker was seen running a part"
     assert not any(f" pid {killed[0]}" in name and w["texels"]
                    for name, w in result.report["cluster"]["workers"].items())
+    again = result.report["cluster"]["parts_run_again"]  # the part lost, and its worker
+    assert again and all("Worker" in lost["error"] or "Node" in lost["error"] for lost in again)
     return result
 
 

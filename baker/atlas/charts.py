@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import functools
 import mmap
+from typing import Callable
 
 import numpy as np
 import xatlas
@@ -39,14 +40,17 @@ _SECONDS, _SECONDS_PER_TRIANGLE = 5.0, 2e-3
 Mesh = tuple[np.ndarray, np.ndarray]  # positions (n, 3) float64 world units, triangles (m, 3) int64
 
 
-def chart_meshes(meshes: list[Mesh], threads: int, steps: Steps | None = None
+def chart_meshes(meshes: list[Mesh], threads: int, steps: Steps | None = None,
+                 elsewhere: Callable[[list[Mesh], Steps], list[Charts]] | None = None
                  ) -> list[Charts]:
     """Every mesh's ``Charts``, in order: each distinct mesh once, from the cache or charted
     in forked children (at most ``threads`` at once, 0: one per core); the split changes only
     who charts what, not the charts. The charts of all the distinct meshes are also kept as
     one entry (named by theirs), read back in one go by the next bake of the same meshes
     (hundreds of small files cost a millisecond or two each). ``steps``: the triangles to
-    chart and charted, counted as the children go."""
+    chart and charted, counted as the children go. ``elsewhere(meshes, steps)``: the charts
+    of the meshes not cached, made elsewhere (on a cluster's workers:
+    ``pipeline.cluster.chart_on_workers``) instead of in forked children here."""
     names = [chart_name(mesh) for mesh in meshes]
     first = {name: m for m, name in reversed(list(enumerate(names)))}  # each distinct mesh's first
     together = unwrap_cache.key([], ("together", *first))
@@ -61,12 +65,16 @@ def chart_meshes(meshes: list[Mesh], threads: int, steps: Steps | None = None
             charted[name] = found
     missing = sorted((m for name, m in first.items() if name not in charted),
                      key=lambda m: (-len(meshes[m][1]), m))
-    if missing:
+    steps = steps or Steps()
+    if missing and elsewhere is not None:
+        for m, charts in zip(missing, elsewhere([meshes[m] for m in missing], steps)):
+            charted[names[m]] = charts
+            unwrap_cache.write(names[m], (len(charts.sides),), (_entry(charts),), prune=False)
+    elif missing:
         weights = [len(meshes[m][1]) for m in missing]
-        groups = _balanced(missing, weights, min(threads or cores(), cores()))
+        groups = balanced(missing, weights, min(threads or cores(), cores()))
         limit = max(_SECONDS + _SECONDS_PER_TRIANGLE * sum(len(meshes[m][1]) for m in group)
                     for group in groups)
-        steps = steps or Steps()
         steps.expect(sum(weights))
         charted_so_far = np.frombuffer(mmap.mmap(-1, 8 * len(groups)), np.int64)  # shared
         runs = call_forked_together(
@@ -111,6 +119,11 @@ def chart_name(mesh: Mesh) -> str:
     return unwrap_cache.key([mesh], _charting())
 
 
+def chart_list(meshes: list[Mesh]) -> list[Charts]:
+    """Each of ``meshes``' charts (``chart``), in order: a cluster worker's task."""
+    return [chart(*mesh) for mesh in meshes]
+
+
 def _chart_group(meshes: list[Mesh], group: list[int], charted_so_far: np.ndarray, slot: int
                  ) -> list[Charts]:
     """The charts of the meshes ``group`` (indices into ``meshes``), in turn (one child's),
@@ -136,7 +149,7 @@ def chart(positions: np.ndarray, triangles: np.ndarray) -> Charts:
     return projected if projected is not None else _xatlas_charts(positions, triangles)
 
 
-def _balanced(items: list[int], weights: list[int], count: int) -> list[list[int]]:
+def balanced(items: list[int], weights: list[int], count: int) -> list[list[int]]:
     """``items`` (heaviest first) dealt into at most ``count`` non-empty groups of about equal
     summed ``weights``: each to the lightest group so far (the first of equals)."""
     groups: list[list[int]] = [[] for _ in range(max(1, min(count, len(items))))]

@@ -15,6 +15,7 @@ bit for bit as it was (incremental rebake).
 from __future__ import annotations
 
 import functools
+from typing import Callable
 
 import numpy as np
 
@@ -114,21 +115,23 @@ def frame_meshes(scene: Scene, world: World, instances: list[int]
 
 
 def unwrap(scene: Scene, world: World, settings: Resolved, fit_one_page: bool = False,
-           steps: Steps | None = None) -> Atlas:
+           steps: Steps | None = None, chart_elsewhere: Callable | None = None) -> Atlas:
     """Unwrap the baked instances into pages of at most ``settings.page_size`` texels a side.
 
     One page sized to the charts when they fit in one, else as many ``page_size``² pages as
     they need (``packing.py``). ``fit_one_page`` (the derived, default density): when the
     charts spill onto a second page, the density is lowered until they fit one (``_fitted``);
     the atlas's ``texel_density`` is then the one used. ``steps``: the triangles charted,
-    as they are (``charts.chart_meshes``).
+    as they are; ``chart_elsewhere``: who charts the meshes not cached, if not forked children
+    here (``charts.chart_meshes``: a cluster's workers).
     """
     instances = baked_instances(scene)
     if not instances:
         return Atlas(width=0, height=0, page_count=0, texel_density=settings.texel_density,
                      padding=settings.padding, instances=())
     _check_triangles_fit(world, scene, instances, settings)
-    charts = chart_meshes(frame_meshes(scene, world, instances), settings.threads, steps)
+    charts = chart_meshes(frame_meshes(scene, world, instances), settings.threads, steps,
+                          chart_elsewhere)
     _check_charts_fit(charts, scene, instances, settings)
     density = settings.texel_density
     packed = _packed(charts, density, settings)

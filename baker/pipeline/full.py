@@ -268,7 +268,9 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True,
         coverage = cover(atlas, world)
         owned = owners(atlas, world, coverage)
     count = len(coverage.key)
-    spill = Spill(spill_folder) if len(part_slices(count)) > 1 else None
+    slices = part_slices(count, cluster.part_texels(count) if resolved.cluster is not None
+                         else None)
+    spill = Spill(spill_folder) if len(slices) > 1 else None
     baking = Baking(scene, world, resolved, lit, atlas, coverage, owned, Faces(scene, world),
                     surfaces_of(scene, world))
     check_ray_budget(baking, count)
@@ -280,7 +282,7 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True,
                     effective_r_ave(lit.ambient, resolved.rho))))
     try:
         with log.stage(f"texels and rays ({count:,} texels)"):
-            pages, last = _bake_parts(baking, spill, times, quiet)
+            pages, last = _bake_parts(baking, slices, spill, times, quiet)
         per_texel = (PerTexel.spilled(spill, atlas, world) if spill is not None
                      else last.held())
         with log.stage("post-process", "texels") as steps:
@@ -297,13 +299,16 @@ def _unwrapped(scene: Scene, world: World, settings: Settings, resolved: Resolve
     lowered to fit a page (``unwrap.py``); the user's is kept or refused with what fits.
     ``steps``: the triangles charted, as they are."""
     derived = settings.texel_density is None
+    elsewhere = cluster.chart_on_workers if resolved.cluster is not None else None
     try:
-        atlas = unwrap(scene, world, resolved, fit_one_page=derived, steps=steps)
+        atlas = unwrap(scene, world, resolved, fit_one_page=derived, steps=steps,
+                       chart_elsewhere=elsewhere)
     except PageTooSmall as error:
         if not derived:  # the user's density: say what fits
             raise
         resolved = replace(resolved, texel_density=error.texel_density)  # derived: shrink it
-        atlas = unwrap(scene, world, resolved, fit_one_page=True)
+        atlas = unwrap(scene, world, resolved, fit_one_page=True, steps=steps,
+                       chart_elsewhere=elsewhere)
     return atlas, replace(resolved, texel_density=atlas.texel_density)
 
 
@@ -379,19 +384,18 @@ class _Stages:
         return advance
 
 
-def _bake_parts(baking: Baking, spill: Spill | None, times: dict[str, float], quiet: bool
-                ) -> tuple["_Pages", BakedPart]:
-    """Bake the texels a part at a time, each composed into the pages as it is done and, with
-    a ``spill``, its rows appended to it. Returns the composed ``_Pages``, and the last
-    ``BakedPart`` — all the texels' when there is one part."""
+def _bake_parts(baking: Baking, slices: list[slice], spill: Spill | None,
+                times: dict[str, float], quiet: bool) -> tuple["_Pages", BakedPart]:
+    """Bake the texels a part (``slices``) at a time, each composed into the pages as it is
+    done and, with a ``spill``, its rows appended to it. Returns the composed ``_Pages``, and
+    the last ``BakedPart`` — all the texels' when there is one part."""
     count = len(baking.coverage.key)
     pages = _Pages.blank(baking)
     with bar("baking", wanted(quiet)) as meter:
         stages = _Stages.of(meter, baking, count)
-        made = (cluster.parts(_bake_part, baking, part_slices(count), times,
-                              stages.whole_parts())
+        made = (cluster.parts(_bake_part, baking, slices, times, stages.whole_parts())
                 if baking.settings.cluster is not None else
-                (_bake_part(baking, rows, times, stages) for rows in part_slices(count)))
+                (_bake_part(baking, rows, times, stages) for rows in slices))
         for part in made:
             with timed(times, "compose"):
                 pages.add(baking, part.texels, part.validity, part.terms, part.direct,
