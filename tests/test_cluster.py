@@ -375,6 +375,33 @@ def test_something_else_at_the_address_is_a_clear_error_within_30_s(tmp_path, re
     assert sorted(p.name for p in tmp_path.iterdir()) == ["cornell.glb"]
 
 
+@pytest.mark.long
+def test_the_head_lost_mid_bake_is_exit_1_with_a_word_and_no_rows_left(tmp_path):
+    """The head of a cluster of its own killed mid-bake (its session: GCS and all): Ray ends
+    the driver at once (exit 1); the spill's watcher removes the rows it left and says why;
+    nothing is written. (Measured: exit 1.6 s after the kill.)"""
+    source = cornell_box().save(tmp_path / "cornell.glb")
+    out = tmp_path / "out"
+    out.mkdir()
+    with LocalCluster(workers=1) as cluster:
+        bake = subprocess.Popen([sys.executable, "-m", "baker.cli.main", "bake", str(source),
+                                 "-o", str(out / "baked.glb"), "--cluster", cluster.address,
+                                 "--rays", "512", "--page-size", "256"],
+                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, cwd=ROOT)
+        deadline = time.monotonic() + 120
+        while not list(out.glob(".baker-spill-*")) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert list(out.glob(".baker-spill-*")), "the bake made no spill"
+        time.sleep(1.0)  # parts running
+        os.killpg(cluster._head.pid, signal.SIGKILL)
+        cluster._head.wait()
+        cluster._head = None
+        said = bake.communicate(timeout=60)[1].decode()
+    assert bake.returncode == 1
+    assert "the bake ended abruptly" in said and "cluster's head was lost" in said
+    assert list(out.iterdir()) == []
+
+
 def test_foliage_on_a_cluster_is_refused_before_any_work(tmp_path):
     source = cornell_box().save(tmp_path / "cornell.glb")
     with pytest.raises(baker.SettingsError, match="--foliage approx does not run on a cluster"):
