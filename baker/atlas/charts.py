@@ -23,6 +23,7 @@ import xatlas
 
 from baker.atlas import planar, unwrap_cache
 from baker.atlas.layout import Charts
+from baker.geometry.world import triangle_cross
 from baker.run.forked import call_forked_together
 from baker.run.parallel import cores
 from baker.run.progress import Steps
@@ -186,8 +187,7 @@ def _xatlas_charts(positions: np.ndarray, triangles: np.ndarray) -> Charts:
     leaves out (degenerate ones) take the chart and place of the nearest placed vertex."""
     p = np.asarray(positions, np.float64)
     t = np.asarray(triangles, np.int64)
-    cross = np.cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]])
-    area = 0.5 * float(np.linalg.norm(cross, axis=1).sum())
+    area = 0.5 * float(np.linalg.norm(triangle_cross(p, t), axis=1).sum())
     scale = np.sqrt(_XATLAS_AREA / area) if area > 0 else 1.0
     atlas = xatlas.Atlas()
     atlas.add_mesh((p * scale).astype(np.float32), t.astype(np.uint32))

@@ -26,6 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from baker.atlas.layout import Charts
+from baker.geometry.world import triangle_cross
 from baker.jit import inline, jit
 
 CONE = 40.0  # degrees: every normal of a chart within this of its seed's (under 45°)
@@ -46,7 +47,7 @@ def project(positions: np.ndarray, triangles: np.ndarray) -> Charts | None:
     t = np.asarray(triangles, np.int64)
     if not len(t):
         return None
-    cross = np.cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]])
+    cross = triangle_cross(p, t)
     double_area = np.linalg.norm(cross, axis=1)
     valid = np.isfinite(double_area) & (double_area > 0)
     normals = np.divide(cross, double_area[:, None], out=np.zeros_like(cross),
