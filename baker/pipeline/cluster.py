@@ -46,10 +46,9 @@ from typing import Callable, Iterator
 import numpy as np
 
 from baker.atlas.charts import balanced, chart_list
-from baker.atlas.rasterise import Coverage, owners, texels_of
+from baker.atlas.rasterise import Coverage, texels_of
 from baker.atlas.validity import Faces
 from baker.errors import SettingsError
-from baker.geometry.world import build_world
 from baker.light.hemisphere import surfaces_of
 from baker.pipeline import parts as parts_module
 from baker.pipeline.parts import TexelPoints
@@ -561,31 +560,23 @@ def _received(baking, rows: slice, returned: _BakedRemotely, times: dict[str, fl
 
 
 def _shipped(baking):
-    """What every worker needs of ``baking`` (``full.Baking``), once: the scene as the file
-    has it (distinct meshes and their instances' matrices), not the world it flattens to, nor
-    Embree's scene, the back faces, the surfaces and what the texels take from their
-    triangles, which a worker makes from the scene (``_ready_bake``: the same bits); and
-    without the texels' coverage, whose rows each part carries (the per-triangle texel counts
-    stay)."""
+    """What every worker needs of ``baking`` (``full.Baking``), once: without Embree's scene,
+    the back faces and the surfaces, which a worker builds from the scene and world
+    (``_ready_bake``), and without the texels' coverage, whose rows each part carries (the
+    per-triangle texel counts stay)."""
     coverage = baking.coverage
     empty = Coverage(coverage.key[:0], coverage.triangle[:0], coverage.triangle_texels)
-    return replace(baking, world=None, owned=None, lit=replace(baking.lit, tracer=None),
-                   faces=None, surfaces=None, coverage=empty)
+    return replace(baking, lit=replace(baking.lit, tracer=None), faces=None, surfaces=None,
+                   coverage=empty)
 
 
 def _ready_bake(shipped: tuple):
-    """In a worker: the part function and the shipped bake with the world built from its
-    scene as the driver built it (``build_world``), what the texels take from their triangles
-    (``rasterise.owners``, of the triangles that own texels), Embree's scene, the back faces
-    and the surfaces, with the task's CPUs as threads."""
+    """In a worker: the part function and the shipped bake with Embree's scene, the back
+    faces and the surfaces built from its scene and world, with the task's CPUs as threads."""
     part, baking = shipped
-    scene, coverage = baking.scene, baking.coverage
-    world = build_world(scene)
-    owning = Coverage(coverage.key, np.flatnonzero(coverage.triangle_texels),
-                      coverage.triangle_texels)
+    scene, world = baking.scene, baking.world
     threads = max(1, baking.settings.threads)
-    return part, replace(baking, world=world, owned=owners(baking.atlas, world, owning),
-                         lit=replace(baking.lit, tracer=Tracer(world)),
+    return part, replace(baking, lit=replace(baking.lit, tracer=Tracer(world)),
                          faces=Faces(scene, world), surfaces=surfaces_of(scene, world),
                          settings=replace(baking.settings, threads=threads))
 
