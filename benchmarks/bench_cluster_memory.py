@@ -1,6 +1,8 @@
 """Benchmark: what a cluster bake ships to each node and what a worker and the driver hold, on
-the level of 400 distinct meshes (``assets/many_objects.level``, 1,024,812 triangles) at default
-settings (docs/cluster.md, "Memory").
+the level of 400 distinct meshes (``assets/many_objects.level``, 1,024,812 triangles) or, with
+``--instances N``, a room of N instances of one box mesh of 48 triangles
+(``many_objects.boxes_and_sphere(instanced=True)``), at default settings (docs/cluster.md,
+"Memory").
 
 The full bake is run on this machine up to its parts (``full.compute`` with ``_bake_parts``
 stopped): then ``cluster._shipped`` of its ``Baking`` (what every node receives once) is measured
@@ -9,7 +11,7 @@ memory at that point is printed; a new process unpickles the shipped bake and bu
 worker builds from it (``cluster._ready_bake``: Embree's scene, back faces, surfaces), and its
 resident memory's growth is printed.
 
-    python benchmarks/bench_cluster_memory.py [--count 400]
+    python benchmarks/bench_cluster_memory.py [--count 400] [--instances 20000]
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from assets.many_objects import level  # noqa: E402
+from assets.many_objects import boxes_and_sphere, level  # noqa: E402
 from baker.gltf.load import load  # noqa: E402
 from baker.pipeline import cluster, full  # noqa: E402
 from baker.settings import Settings  # noqa: E402
@@ -48,12 +50,15 @@ def resident_mib() -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--count", type=int, default=400, help="distinct meshes of the level")
+    parser.add_argument("--instances", type=int, help="instances of one mesh, not the level")
     parser.add_argument("--worker", help=argparse.SUPPRESS)  # the child: a pickled bake's path
     args = parser.parse_args()
     if args.worker:
         return worker(args.worker)
     with tempfile.TemporaryDirectory() as folder:
-        scene = load(level(args.count).save(Path(folder) / "level.glb"))
+        built = (boxes_and_sphere(args.instances, cuts=2, sphere_rings=4, instanced=True)
+                 if args.instances else level(args.count))
+        scene = load(built.save(Path(folder) / "level.glb"))
     before = resident_mib()
     full._bake_parts = _stop
     try:
