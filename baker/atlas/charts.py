@@ -52,7 +52,12 @@ def chart_meshes(meshes: list[Mesh], threads: int, steps: Steps | None = None,
     chart and charted, counted as the children go. ``elsewhere(meshes, steps)``: the charts
     of the meshes not cached, made elsewhere (on a cluster's workers:
     ``pipeline.cluster.chart_on_workers``) instead of in forked children here."""
-    names = [chart_name(mesh) for mesh in meshes]
+    names, named = [], {}
+    for mesh in meshes:
+        shared = (id(mesh[0]), id(mesh[1]))  # one mesh's arrays for many instances: named once
+        if shared not in named:
+            named[shared] = chart_name(mesh)
+        names.append(named[shared])
     first = {name: m for m, name in reversed(list(enumerate(names)))}  # each distinct mesh's first
     together = unwrap_cache.key([], ("together", *first))
     charted = _read_together(together, first, meshes)

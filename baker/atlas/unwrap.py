@@ -108,10 +108,19 @@ def frame_meshes(scene: Scene, world: World, instances: list[int]
                  ) -> list[tuple[np.ndarray, np.ndarray]]:
     """Each instance's mesh as it is charted: positions in its rigid-free frame
     (``frame_positions``, (n, 3) float64 world units) and triangles (m, 3) int64, corners in
-    ``World.triangles``' order."""
-    return [(frame_positions(scene, i),
-             world.triangles[world.instance_triangles(i)] - world.vertex_start[i])
-            for i in instances]
+    ``World.triangles``' order. Instances of one primitive whose matrices stretch it alike
+    share the same two arrays (the same objects: 20,000 instances of a crate are one mesh to
+    name and chart, ``charts.chart_meshes``)."""
+    made: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
+    out = []
+    for i in instances:
+        inst = scene.instances[i]
+        triangles = world.triangles[world.instance_triangles(i)] - world.vertex_start[i]
+        alike = (inst.primitive, stretch(inst.world[:3, :3]).tobytes())
+        if alike not in made or not np.array_equal(made[alike][1], triangles):
+            made[alike] = (frame_positions(scene, i), triangles)
+        out.append(made[alike])
+    return out
 
 
 def unwrap(scene: Scene, world: World, settings: Resolved, fit_one_page: bool = False,
@@ -180,20 +189,25 @@ def _placed(charts: list[Charts], instances: list[int], density: float,
     extent, cells = _cells(charts, density)
     inset = (cells - extent) / 2
     size = np.array([packed.width, packed.height], np.float64)
-    out, first = [], 0
-    for mesh, i in zip(charts, instances):
-        rect = first + mesh.chart
-        first += len(mesh.sides)
+    first = np.cumsum([0] + [len(mesh.sides) for mesh in charts])[:-1]
+    alike: dict[int, list[int]] = {}  # the instances of each Charts object, by its id
+    for k, mesh in enumerate(charts):
+        alike.setdefault(id(mesh), []).append(k)
+    out: list[InstanceUV | None] = [None] * len(charts)
+    for group in alike.values():  # every instance of one mesh at once: (g, k) arrays
+        mesh = charts[group[0]]
+        rect = first[group][:, None] + mesh.chart[None, :]
         x, y = mesh.uv[:, 0] * density, mesh.uv[:, 1] * density
-        ex, (ix, iy) = extent[rect, 0], inset[rect].T
+        ex, ix, iy = extent[rect, 0], inset[rect, 0], inset[rect, 1]
         turned = packed.turned[rect]
         at = packed.corner[rect].astype(np.float64)
-        page_x = at[:, 0] + np.where(turned, iy + y, ix + x)
-        page_y = at[:, 1] + np.where(turned, ix + (ex - x), iy + y)
-        uv = np.stack([page_x, page_y], axis=1) / size
-        pages = packed.page[rect[mesh.triangles[:, 0]]] if len(rect) else np.zeros(0, np.int64)
-        out.append(InstanceUV(instance=i, vertices=mesh.vertices, triangles=mesh.triangles,
-                              uv=uv, pages=pages))
+        page_x = at[..., 0] + np.where(turned, iy + y, ix + x)
+        page_y = at[..., 1] + np.where(turned, ix + (ex - x), iy + y)
+        uv = np.stack([page_x, page_y], axis=-1) / size
+        pages = packed.page[rect[:, mesh.triangles[:, 0]]]
+        for row, k in enumerate(group):
+            out[k] = InstanceUV(instance=instances[k], vertices=mesh.vertices,
+                                triangles=mesh.triangles, uv=uv[row], pages=pages[row])
     return out
 
 
