@@ -8,7 +8,7 @@ The pipeline, stage by stage (docs/design.md §3); each stage hands a frozen dat
     gltf.load.load               glTF file → Scene (instances with float64 world matrices)
     geometry.world.build_world   Scene → World (every triangle in world space)
     pipeline.plan.make_plan      Scene + lights → Plan (what runs, what is left out, why)
-    atlas.unwrap.unwrap          World → Atlas (xatlas lightmap pages)
+    atlas.unwrap.unwrap          World → Atlas (lightmap pages)
     atlas.rasterise.cover        Atlas → Coverage (which triangle owns each texel)
     atlas.rasterise.texels_of    Coverage → Texels (world sample point of every texel of a part)
     atlas.validity.check_texels  Texels → Texels + Validity (points inside geometry moved/flagged)

@@ -200,15 +200,19 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
             resolved = done.settings
             # closing(): the rows the state is written from (parts.py), if on disk, are
             # removed once the state is written.
-            with closing(done.per_texel), timed(times, "write"), log.stage("write"):
+            with closing(done.per_texel), timed(times, "write"), \
+                    log.stage("write", "steps") as steps:
+                texels = done.lightmaps.covered.size  # the pages' texels encoded: as many steps
+                steps.expect(texels)
                 pages = encode(carried(done), resolved.encoding, writes_occlusion(resolved),
                                resolved.clip_percentile)
+                steps.advance(texels)
                 info = write(scene, done.atlas, pages, output,
                              WriteOptions(encoding=resolved.encoding, occlusion=resolved.occlusion,
                                           clip_percentile=resolved.clip_percentile,
                                           carrier=resolved.carrier,
                                           baked_lights=resolved.baked_lights,
-                                          authored_uv=resolved.uv), outputs)
+                                          authored_uv=resolved.uv), outputs, steps)
                 if lightmaps_dir is not None:
                     write_page_files(outputs.folder(Path(lightmaps_dir)), output.stem, pages,
                                      done.lightmaps.light, lightmaps_format, outputs.stage)

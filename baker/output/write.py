@@ -50,6 +50,7 @@ from baker.gltf.scene import Material, Scene
 from baker.image.encode import PNG_SIGNATURE, EncodedPage
 from baker.output.specular import dielectric_f0, mixed_pair, without_diffuse
 from baker.run.atomic import Outputs
+from baker.run.progress import Steps
 from baker.settings import BAKED_LIGHTS, CARRIERS, ENCODINGS, OCCLUSION_MODES
 
 LIGHTMAP_EXTENSION = "MOZ_lightmap"
@@ -139,14 +140,16 @@ class WriteInfo:
 
 
 def write(scene: Scene, atlas: Atlas, pages: Sequence[EncodedPage], output: Path,
-          options: WriteOptions = WriteOptions(), outputs: Outputs | None = None) -> WriteInfo:
+          options: WriteOptions = WriteOptions(), outputs: Outputs | None = None,
+          steps: Steps | None = None) -> WriteInfo:
     """Write ``scene`` with the lightmaps of ``atlas``/``pages`` to ``output`` (.glb or .gltf).
 
     ``pages[p]`` is atlas page p. Nothing is written unless everything succeeds: an existing
     output is replaced atomically. ``outputs``: stage the files there, for the caller to put in
     place with its other files (``staging.Outputs.commit``); None: put them in place now.
     Raises ``OutputError`` when the output cannot be written, ``InputError`` when the input's
-    buffers or images cannot be read.
+    buffers or images cannot be read. ``steps``: the baked triangles, counted as their nodes
+    are written.
     """
     output = Path(output)
     kind = _output_kind(output)
@@ -154,8 +157,11 @@ def write(scene: Scene, atlas: Atlas, pages: Sequence[EncodedPage], output: Path
         raise ValueError(f"{len(pages)} encoded pages for an atlas of {atlas.page_count}")
     builder = _Builder(scene, output, options)
     builder.add_pages(pages)
+    steps = steps or Steps()
+    steps.expect(sum(len(unwrap.triangles) for unwrap in atlas.instances))
     for node, baked in _baked_by_node(scene, atlas).items():
         builder.bake_node(node, baked)
+        steps.advance(sum(len(unwrap.triangles) for unwrap in baked.values()))
     builder.record_asset()
     if options.baked_lights == "remove" and builder.material_copies:
         builder.remove_lights()

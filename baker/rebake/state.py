@@ -45,7 +45,7 @@ from baker.run.spill import Column, Group
 from baker.settings import MAX_TEXELS
 
 FORMAT = "baker-bake-state"
-VERSION = 16
+VERSION = 17
 SUFFIX = ".bake"
 _NPY_HEAD = 1 << 16  # bytes enough for any .npy header baker writes (version 1.0: < 64 KiB)
 
