@@ -1208,9 +1208,12 @@ def _moved_reach(scene: Scene, start: _Compared, lit: Lighting, stored: _Stored,
                                             (tracer_before, Faces(scene, before))))
     search.tested += n
     # Texels touching other geometry: which coincident triangle a probe or ray meets there
-    # depends on Embree's BVH, which the move changed (``Validity.touching``).
+    # depends on Embree's BVH, which the move changed (``Validity.touching``). Far texels whose
+    # points moved: whether they might was judged by probes from where they were, which the
+    # probes compared above (from where they are) do not cover.
     redo = np.union1d(np.union1d(np.flatnonzero(close), far[meets]),
-                      np.flatnonzero(old_validity.touching))
+                      np.union1d(np.flatnonzero(old_validity.touching),
+                                 far[old_validity.moved_by[far] > 0]))
     checked, fresh = check_texels(scene, world, tracer, take(raw, redo), resolved.d_max,
                                   faces=faces)
     search.tested += len(redo) * (validity_module.HEMISPHERE_RAYS + validity_module.TANGENT_RAYS
