@@ -356,15 +356,18 @@ def bake_or_rebake(scene: Scene, settings: Settings, state_path, incremental: bo
     (``pipeline.full.compute``); ``staging``: where the bake state is written (``rebake.staging.StateStaging``)."""
     if not incremental and not relight:
         return compute(scene, settings, quiet, spill_folder, staging), None
+    prepared = None
     if state_path is None:
         reason = "no bake state (state=False)"
     else:
         try:
             rebaked = rebake(scene, settings, state_path, quiet, relight, staging)
             return rebaked.computed, rebaked
-        except FullBake as why:
-            reason = str(why)
+        except FullBake as why:  # keeping what the rebake kept (a derived d_max) and made
+            reason, settings, prepared = str(why), why.settings or settings, why.prepared
+            if staging is not None:
+                staging.asked = settings
     if relight:
         raise InputError(f"cannot relight without tracing: {reason}", file=str(scene.path),
                          fix="use `baker bake` (it rebakes only what changed)")
-    return compute(scene, settings, quiet, spill_folder, staging), reason
+    return compute(scene, settings, quiet, spill_folder, staging, prepared), reason

@@ -538,6 +538,29 @@ def test_a_small_move_at_the_edge_of_the_scene_still_rebakes(tmp_path):
                  settings)
 
 
+def test_a_box_moved_out_of_the_room_keeps_the_derived_d_max(tmp_path, capsys):
+    """A box pushed out through a wall grows the baked bounds, whose diagonal the automatic
+    d_max follows (a quarter octave of it): the bake keeps the last one's instead
+    (``incremental.kept_d_max``), says so and records it as asked. The tracer's frame moved
+    with the bounds, so it bakes fully — with the kept d_max: the bytes of a full bake given
+    it."""
+    before = _room().save(tmp_path / "before.glb")
+    after = _room(moved(BOXES, "box1", at=(4.0, 0.0))).save(tmp_path / "after.glb")
+    first = baker.bake(before, tmp_path / "incremental.glb", SETTINGS)
+    derived = baker.bake(after, tmp_path / "fresh.glb", SETTINGS).settings.d_max
+    assert derived != first.settings.d_max
+    assert main(["bake", str(after), "-o", str(tmp_path / "incremental.glb"), "--rays", "16",
+                 "--page-size", "128", "--shadow-rays", "4", "--threads", "1"]) == 0
+    said = capsys.readouterr().out
+    assert "full bake: the scene's bounds changed" in said, said
+    assert (f"d_max {first.settings.d_max:.4g} kept from the last bake (the scene's bounds now "
+            f"derive {derived:.4g}: --d-max {derived:.4g} to take it)") in said, said
+    baker.bake(after, tmp_path / "full.glb", replace(SETTINGS, d_max=first.settings.d_max))
+    assert (tmp_path / "incremental.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()
+    assert (default_path(tmp_path / "incremental.glb").read_bytes()
+            == default_path(tmp_path / "full.glb").read_bytes())
+
+
 def test_texels_touching_a_corner_follow_the_full_bake_after_any_move(tmp_path):
     """Sample points clamped into a room's corners would lie in the walls and floor, where which
     of the triangles there a probe meets first depends on Embree's BVH of the whole scene, which
@@ -826,18 +849,62 @@ def test_a_rebake_dearer_than_a_full_bake_falls_back_to_one(tmp_path, dear):
     assert info["incremental"] is (not dear), info.get("full_bake_reason")
     if dear:
         assert "a rebake would cost more than a full bake" in info["full_bake_reason"]
-        assert "of the last full bake (1.00 s)" in info["full_bake_reason"]
+        assert "(the last took 1.00 s)" in info["full_bake_reason"]
 
 
 def test_rebake_cost_prices_the_texels_by_the_stages_of_a_full_bake():
     """Half the texels redone whole at ``REDO_COST`` times their validity, trace and direct
     light (0.8 of the full bake), the rest searched at ``SEARCH_COST`` times their probes
-    (validity 0.4), compose and write 0.1 both ways; the full bake redoes all but its 0.1 of
+    (validity 0.4); compose and write 0.1; a full bake from there redoes all but its 0.1 of
     loading."""
     stages = {"load": 1.0, "validity": 4.0, "trace": 3.0, "direct": 1.0, "compose": 0.5,
               "write": 0.5}
-    cost, full = baker.rebake.incremental.rebake_cost(stages, 0.5, 0.5)
+    scaling, tail, full = baker.rebake.incremental.rebake_cost(stages, 0.5, 0.5)
     redo, search = baker.rebake.incremental.REDO_COST, baker.rebake.incremental.SEARCH_COST
-    assert cost == pytest.approx(0.5 * redo * 0.8 + 0.5 * search * 0.4 + 0.1)
-    assert full == pytest.approx(0.9)
-    assert baker.rebake.incremental.rebake_cost(stages, 0.0, 0.0)[0] == pytest.approx(0.1)
+    assert scaling == pytest.approx(0.5 * redo * 0.8 + 0.5 * search * 0.4)
+    assert tail == pytest.approx(0.1) and full == pytest.approx(0.9)
+    assert baker.rebake.incremental.rebake_cost(stages, 0.0, 0.0)[0] == 0.0
+
+
+def test_a_rebake_measures_itself_and_the_next_one_of_the_state_goes_by_it(tmp_path):
+    """A rebake records beside the state what its search and rays took over the cost model's
+    figure (``rebake_measured``); the next rebake of that state scales the model by it: told
+    that the last rebake took 8× the model (the most it believes), a move the model alone
+    would rebake bakes fully, and says why, with a full bake's bytes."""
+    before = _room().save(tmp_path / "before.glb")
+    after = EDITS["box moved across the room"]().save(tmp_path / "after.glb")
+    baker.bake(before, tmp_path / "out.glb", SETTINGS)
+    state = default_path(tmp_path / "out.glb")
+    shutil.copy(state, tmp_path / "first.bake")
+    shutil.copy(baker.rebake.state.timing_path(state),
+                baker.rebake.state.timing_path(tmp_path / "first.bake"))
+    result = baker.bake(after, tmp_path / "out.glb", SETTINGS, incremental=True)
+    assert result.rebake["incremental"], result.rebake.get("full_bake_reason")
+    record = baker.rebake.state.last_full_bake(state)
+    stages = result.report["stage_seconds"]
+    spent = stages["dirty"] + stages["trace"] + stages["direct"]
+    modelled = result.rebake["modelled_seconds"]
+    assert record["rebake_correction"] == pytest.approx(spent / modelled, rel=1e-3)
+    first = baker.rebake.state.last_full_bake(tmp_path / "first.bake")
+    assert record["full_bake_seconds"] == first["full_bake_seconds"]
+    shutil.copy(tmp_path / "first.bake", state)
+    baker.rebake.state.save_full_bake_seconds(state, first["full_bake_seconds"],
+                                              stages=first["stage_seconds"],
+                                              rebake_correction=1e6)
+    again = baker.bake(after, tmp_path / "out.glb", SETTINGS, incremental=True)
+    reason = again.rebake.get("full_bake_reason", "")
+    assert "× 8.00 as the last rebake of this state measured" in reason, reason
+    baker.bake(after, tmp_path / "full.glb", SETTINGS)
+    assert (tmp_path / "out.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()
+    # The time a rebake took besides its search and rays is measured too; when it is more
+    # than the whole full bake, the next rebake of that state does not even read it.
+    assert record["rebake_overhead"] == pytest.approx(
+        result.rebake["seconds"] - result.rebake["compile_seconds"] - spent, abs=0.02)
+    shutil.copy(tmp_path / "first.bake", state)
+    baker.rebake.state.save_full_bake_seconds(state, 0.5, stages=first["stage_seconds"],
+                                              rebake_overhead=0.6)
+    third = baker.bake(after, tmp_path / "out.glb", SETTINGS, incremental=True)
+    assert third.rebake["full_bake_reason"] == (
+        "a rebake would cost more than a full bake: the last rebake of this state took 0.60 s "
+        "besides its search and rays, the last full bake 0.50 s in all")
+    assert (tmp_path / "out.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()
