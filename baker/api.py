@@ -134,7 +134,7 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
          report_path: str | os.PathLike | None = None,
          lightmaps_dir: str | os.PathLike | None = None, lightmaps_format: str = "png",
          error_map_dir: str | os.PathLike | None = None,
-         quiet: bool = True, overwrite: bool = False, incremental: bool = False,
+         quiet: bool = True, overwrite: bool = False, incremental: bool | str = False,
          state: str | os.PathLike | bool | None = None, relight: bool = False,
          contained: bool = False) -> BakeResult:
     """Bake the glTF scene at ``input`` into ``output`` (.glb or .gltf) with lightmaps.
@@ -150,8 +150,10 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
     ``state``: the bake state (docs/bake_state.md) written after the bake, ``<output>.bake`` by
     default (None/True), another path, or False for none. ``incremental=True`` starts from that
     state: only the texels the edit can reach are recomputed, bit-identical to a full bake; a
-    missing, damaged or mismatched state, or an edit that changes the atlas, falls back to a
-    full bake. ``BakeResult.rebake`` says which (``full_bake_reason``), what changed, and names
+    missing, damaged or mismatched state, an edit that changes the atlas, or one whose rebake
+    the last bakes' measured times say would cost more than a full bake, falls back to a full
+    bake; ``incremental="always"`` leaves out the last (a rebake whenever it can follow: to
+    measure it, or test it). ``BakeResult.rebake`` says which (``full_bake_reason``), what changed, and names
     the recomputed texels (``dirty_keys``, ``dirty_reasons``). ``relight=True``: only light
     colours and intensities may have changed; the lightmaps are recomposed from the state with
     no ray cast, and anything else is an InputError (nothing written). ``contained``: the scene
@@ -365,7 +367,7 @@ def write_page_files(folder: Path, stem: str, pages, light=None, format: str = "
     return paths
 
 
-def bake_or_rebake(scene: Scene, settings: Settings, state_path, incremental: bool,
+def bake_or_rebake(scene: Scene, settings: Settings, state_path, incremental: bool | str,
                    quiet: bool = True, relight: bool = False, spill_folder=None, staging=None):
     """(``pipeline.full.Computed``, Rebaked | str | None): a rebake from the state at ``state_path`` when
     ``incremental`` and it can follow, else a full bake and the one-line reason (a str), or None
@@ -375,15 +377,19 @@ def bake_or_rebake(scene: Scene, settings: Settings, state_path, incremental: bo
     (``pipeline.full.compute``); ``staging``: where the bake state is written (``rebake.staging.StateStaging``)."""
     if not incremental and not relight:
         return compute(scene, settings, quiet, spill_folder, staging), None
+    prepared = None
     if state_path is None:
         reason = "no bake state (state=False)"
     else:
         try:
-            rebaked = rebake(scene, settings, state_path, quiet, relight, staging)
+            rebaked = rebake(scene, settings, state_path, quiet, relight, staging,
+                             priced=incremental != "always")
             return rebaked.computed, rebaked
-        except FullBake as why:
-            reason = str(why)
+        except FullBake as why:  # keeping what the rebake kept (a derived d_max) and made
+            reason, settings, prepared = str(why), why.settings or settings, why.prepared
+            if staging is not None:
+                staging.asked = settings
     if relight:
         raise InputError(f"cannot relight without tracing: {reason}", file=str(scene.path),
                          fix="use `baker bake` (it rebakes only what changed)")
-    return compute(scene, settings, quiet, spill_folder, staging), reason
+    return compute(scene, settings, quiet, spill_folder, staging, prepared), reason

@@ -157,7 +157,7 @@ def test_a_rebake_on_the_cluster_is_the_local_rebake_and_a_full_bake(ray_cluster
     monkeypatch.setattr(parts, "PART_TEXELS", 500)  # the 2,566 dirty texels make 6 parts
     settings = dict(rays=16, page_size=128)
     edited, local, remote = _rebakes(tmp_path, settings)
-    here = baker.bake(edited, local, baker.Settings(**settings), incremental=True)
+    here = baker.bake(edited, local, baker.Settings(**settings), incremental="always")
     assert main(["rebake", str(edited), "-o", str(remote), "--cluster", ray_cluster.address,
                  "--report", str(tmp_path / "report.json")]) == 0
     _same_bake(local, remote)
@@ -234,9 +234,9 @@ def test_a_worker_killed_in_a_rebake_leaves_the_bytes_as_they_were(ray_cluster, 
                                                                      tmp_path):
     settings = dict(rays=256, page_size=128)
     edited, local, remote = _rebakes(tmp_path, settings)
-    baker.bake(edited, local, baker.Settings(**settings), incremental=True)
+    baker.bake(edited, local, baker.Settings(**settings), incremental="always")
     result = _with_a_worker_killed(ray_cluster, lambda: baker.bake(edited, remote, baker.Settings(
-        cluster=ray_cluster.address, **settings), incremental=True))
+        cluster=ray_cluster.address, **settings), incremental="always"))
     assert result.rebake["incremental"], result.rebake.get("full_bake_reason")
     _same_bake(local, remote)
     on = result.report["cluster"]

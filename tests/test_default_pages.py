@@ -96,7 +96,7 @@ def test_a_fitted_default_bakes_one_page_and_rebakes_like_a_full_bake(tmp_path):
     assert done.settings.texel_density < plain.texel_density
     edited = box_room(moved(BOXES, "box3", at=(1.1, -1.2)), room=ROOM).save(tmp_path / "b.glb")
     shutil.copy(default_path(tmp_path / "baked.glb"), default_path(tmp_path / "again.glb"))
-    again = baker.bake(edited, tmp_path / "again.glb", SETTINGS, incremental=True)
+    again = baker.bake(edited, tmp_path / "again.glb", SETTINGS, incremental="always")
     baker.bake(edited, tmp_path / "full.glb", SETTINGS)
     assert again.rebake["incremental"] is True, again.rebake.get("full_bake_reason")
     assert (tmp_path / "again.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()

@@ -255,23 +255,26 @@ class StateSink(Protocol):
 
 def compute(scene: Scene, settings: Settings, quiet: bool = True,
             spill_folder: str | os.PathLike | None = None,
-            staging: StateSink | None = None) -> Computed:
+            staging: StateSink | None = None,
+            prepared: tuple[World, Lighting] | None = None) -> Computed:
     """Run every stage from the loaded scene up to the post-processed float lightmaps.
 
     The texels are made, traced and composed a part at a time (``parts.py``); when there are
     several parts, each part's results go to a temporary folder in ``spill_folder`` (None: the
     system's) until the bake state is written (``Computed.per_texel``). ``staging``: where the
-    bake state starts to be written once the texels are done.
+    bake state starts to be written once the texels are done. ``prepared``: the scene's world
+    and ``Lighting`` with these settings, already made (by a rebake that fell back to this
+    bake, ``rebake.incremental.FullBake``): the same objects this bake would make.
     """
     times: dict[str, float] = {}
     log = StageLines(not quiet)
     with log.stage("lights and plan"):
         with timed(times, "load"):
-            world = build_world(scene)
+            world = build_world(scene) if prepared is None else prepared[0]
         area, diagonal = bounds_of_baked(world, scene)
         resolved = resolve(settings, area, diagonal, normal_maps=has_normal_maps(scene),
                            lights_needed=scene.lights_needed())
-        lit = lighting(scene, world, resolved, times)
+        lit = lighting(scene, world, resolved, times) if prepared is None else prepared[1]
     with timed(times, "unwrap"), log.stage("unwrap", "triangles") as steps:
         if settings.uv is not None:  # the artist's lightmap UVs: no unwrap
             atlas = authored_atlas(scene, world, resolved)
