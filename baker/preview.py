@@ -359,10 +359,11 @@ def _carried_texture(document, material, carrier: str, encoding: str):
 
 def _carrier_transform(material, carrier: str) -> tuple[float, ...] | None:
     """The KHR_texture_transform (``TextureRef.transform``) through which ``material`` reads the
-    emissive carrier's page: an instance sharing another's lightmap UVs (``output/write.py``)."""
-    if carrier == "emissive" and material.emissive_texture is not None:
-        return material.emissive_texture.transform
-    return None
+    emissive or occlusion carrier's page: an instance sharing another's lightmap UVs
+    (``output/write.py``), or UVs quantized by gltfpack."""
+    ref = {"emissive": material.emissive_texture,
+           "occlusion": material.occlusion_texture}.get(carrier)
+    return None if ref is None else ref.transform
 
 
 def sample_bilinear(page: np.ndarray, uv: np.ndarray) -> np.ndarray:

@@ -11,7 +11,7 @@ import io
 import baker
 from assets.make_scenes import cornell_box, three_instances, vase_room
 from baker.gltf.load import load, read_accessor
-from tests.bakehelp import REAL_SCENES, carried, saved
+from tests.bakehelp import REAL_SCENES, carried, page_uv, saved
 from tests.gltf_validator import describe, issue_codes, validate
 
 FAST = dict(texel_density=8.0, rays=16)
@@ -102,7 +102,8 @@ def test_a_mesh_on_three_nodes_gets_three_lightmap_areas(tmp_path):
         ext = carried(doc.materials[prim.material])
         page = doc.textures[ext["index"]].source
         size = _image_size(doc, page)
-        uv = read_accessor(doc, buffers, getattr(prim.attributes, f"TEXCOORD_{ext['texCoord']}"))
+        uv = page_uv(read_accessor(doc, buffers, getattr(prim.attributes,
+                                                         f"TEXCOORD_{ext['texCoord']}")), ext)
         corners = read_accessor(doc, buffers, prim.indices).reshape(-1, 3)
         mask = Image.new("1", size)
         draw = ImageDraw.Draw(mask)

@@ -850,6 +850,8 @@ def _read_material(ctx: _Context, i: int, material: pygltflib.Material) -> Mater
         **base,
         emissive=_emission(ctx, emissive, strength, where),
         emissive_texture=_texture_ref(ctx, material.emissiveTexture, f"{where}.emissiveTexture"),
+        occlusion_texture=_texture_ref(ctx, material.occlusionTexture,
+                                       f"{where}.occlusionTexture"),
         alpha_mode=alpha_mode,
         alpha_cutoff=value({"alphaCutoff": material.alphaCutoff}, "alphaCutoff", 0.5, 0.0,
                            math.inf, where),

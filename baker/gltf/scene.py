@@ -80,6 +80,9 @@ class Material:
     attenuation_color: np.ndarray = field(default_factory=lambda: np.ones(3))  # (3,) linear
     diffuse_transmission: float = 0.0  # KHR_materials_diffuse_transmission factor
     diffuse_transmission_color: np.ndarray = field(default_factory=lambda: np.ones(3))  # (3,)
+    # occlusionTexture (linear, R): read only where it carries a bake (the occlusion carrier,
+    # baker preview), its UV set and transform as the other textures'; None when absent.
+    occlusion_texture: TextureRef | None = None
 
 
 @dataclass(frozen=True)
