@@ -351,7 +351,8 @@ def test_model_viewer_shows_what_the_preview_shows(browser, baked, model_viewer,
     _assert_same(shown, preview, f"model-viewer cornell {carrier}", tmp_path)
 
 
-@pytest.mark.parametrize("name", ["cornell", "metal_glass"])
+@pytest.mark.parametrize("name", [pytest.param("cornell", marks=pytest.mark.long),
+                                  "metal_glass"])
 def test_model_viewer_s_own_lighting_adds_reflections_to_the_default(browser, baked,
                                                                       model_viewer, name,
                                                                       tmp_path):

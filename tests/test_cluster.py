@@ -102,6 +102,7 @@ def test_a_bake_is_cut_into_four_parts_a_worker_whatever_its_size(ray_cluster, t
     assert len(report["workers"]) >= 2  # both nodes took parts
 
 
+@pytest.mark.long
 def test_a_shared_scene_with_lights_is_the_local_bake_on_one_thread(ray_cluster, small_parts,
                                                                      tmp_path):
     """Punctual lights (direct light per texel) and glass-free leaves of a real scene, against
@@ -230,6 +231,7 @@ def test_a_worker_killed_in_a_part_leaves_the_bytes_as_they_were(ray_cluster, sm
     _same_bake(local, remote)
 
 
+@pytest.mark.long
 def test_a_worker_killed_in_a_rebake_leaves_the_bytes_as_they_were(ray_cluster, small_parts,
                                                                      tmp_path):
     settings = dict(rays=256, page_size=128)
@@ -243,6 +245,7 @@ def test_a_worker_killed_in_a_rebake_leaves_the_bytes_as_they_were(ray_cluster, 
     assert sum(w["texels"] for w in on["workers"].values()) == result.rebake["dirty_texels"]
 
 
+@pytest.mark.long
 def test_ctrl_c_leaves_no_output_and_the_cluster_as_it_was(ray_cluster, tmp_path):
     source = cornell_box().save(tmp_path / "cornell.glb")
     deadline = time.monotonic() + 60  # an earlier test's worker may still be named for its part:
@@ -359,9 +362,10 @@ class _NotAHead:
         self.listener.close()
 
 
-@pytest.mark.parametrize("reply", [b"HTTP/1.1 404 Not Found\r\nContent-Length: 0\r\n\r\n",
-                                   bytes([0, 0, 0, 4, 0, 0, 0, 0, 0])],
-                         ids=["http1", "http2 but not ray"])
+@pytest.mark.parametrize("reply", [
+    pytest.param(b"HTTP/1.1 404 Not Found\r\nContent-Length: 0\r\n\r\n", id="http1"),
+    pytest.param(bytes([0, 0, 0, 4, 0, 0, 0, 0, 0]), id="http2 but not ray",
+                 marks=pytest.mark.long)])  # a gRPC server given up after 15 s
 def test_something_else_at_the_address_is_a_clear_error_within_30_s(tmp_path, reply):
     """A server that is not a Ray head at the address (the README's example address often
     is one: a proxy): exit 1 within 30 s with a message naming the address, not Ray's log

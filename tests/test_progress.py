@@ -137,6 +137,7 @@ def test_the_total_after_a_tenth_of_the_work_is_within_a_quarter(tmp_path, monke
     assert 0.75 <= (total - n) / (final - n) <= 1.25, (n, total, final)
 
 
+@pytest.mark.long
 @pytest.mark.parametrize("method", ["obscurance", "gi"])
 def test_an_adaptive_bake_s_bar_does_not_stand_at_its_total_while_rounds_run(tmp_path,
                                                                              monkeypatch, method):
