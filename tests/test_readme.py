@@ -4,11 +4,11 @@ folder, in the order the README gives them: a new user who types them gets no er
 The mapping from the README to this test, and nothing else, is:
 
 - ``python3 -m venv .venv && . .venv/bin/activate`` is not run, and ``pip install . && `` and
-  ``pip install ".[test]" &&`` are dropped: the checkout is on PYTHONPATH and ``baker`` is the
+  ``pip install -e ".[test]" &&`` are dropped: the checkout is on PYTHONPATH and ``baker`` is the
   console script pyproject.toml's ``[project.scripts]`` names (made here as pip makes it).
   ``bash .ci/run`` runs those lines as written, in a new virtual environment.
-- ``pip install ".[test]" && npm ci … && python -m pytest`` is not run: it is the command that
-  runs this test.
+- ``pip install -e ".[test]" && npm ci … && python -m pytest`` is not run: it is the command
+  that runs this test.
 - The scene files the README names (``level.glb``, ``level.gltf``, ``prop.glb``) are the demo
   Cornell box that the README's first line makes.
 - Small settings, so the whole README runs in well under a minute: ``--rays N`` becomes
@@ -41,7 +41,7 @@ README = ROOT / "README.md"
 SMALL_RAYS = "4"
 SMALL_PAGE = "128"
 NOT_RUN = ("python -m pytest", "python3 -m venv")  # this suite's line; the venv is CI's (.ci/run)
-DROPPED = ('pip install ".[test]" && ', "pip install . && ")  # the checkout is on PYTHONPATH
+DROPPED = ('pip install -e ".[test]" && ', "pip install . && ")  # the checkout is on PYTHONPATH
 
 
 def fenced_blocks(text: str) -> list[tuple[str, str]]:
