@@ -17,13 +17,14 @@ from baker.gltf.load import load
 from baker.gltf.scene import Scene
 from baker.image.carriers import emissive_lightmaps, viewer_notes
 from baker.image.compose import Lightmaps
-from baker.image.encode import encode
+from baker.image.encode import EncodedPage, encode
 from baker.image.errormap import write_error_maps
 from baker.image.hdr import check_format, page_file
 from baker.light.gi import MAX_BOUNCES
-from baker.output.write import DIRECTIONAL_EXTENSION, WriteOptions, image_file_name, write
+from baker.output.write import (DIRECTIONAL_EXTENSION, WriteInfo, WriteOptions, image_file_name,
+                                write)
 from baker.pipeline import cluster
-from baker.pipeline.full import compute, timed, writes_occlusion
+from baker.pipeline.full import Computed, compute, timed, writes_occlusion
 from baker.pipeline.input_warnings import input_warnings
 from baker.pipeline.plan import Plan
 from baker.rebake.incremental import (
@@ -206,15 +207,9 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
                     log.stage("write", "steps") as steps:
                 texels = done.lightmaps.covered.size  # the pages' texels encoded: as many steps
                 steps.expect(texels)
-                pages = encode(carried(done), resolved.encoding, writes_occlusion(resolved),
-                               resolved.clip_percentile)
+                pages = encode_pages(done)
                 steps.advance(texels)
-                info = write(scene, done.atlas, pages, output,
-                             WriteOptions(encoding=resolved.encoding, occlusion=resolved.occlusion,
-                                          clip_percentile=resolved.clip_percentile,
-                                          carrier=resolved.carrier,
-                                          baked_lights=resolved.baked_lights,
-                                          authored_uv=resolved.uv), outputs, steps)
+                info = write_output(done, pages, output, outputs, steps)
                 if lightmaps_dir is not None:
                     write_page_files(outputs.folder(Path(lightmaps_dir)), output.stem, pages,
                                      done.lightmaps.light, lightmaps_format, outputs.stage)
@@ -243,6 +238,25 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
                       rays=done.tally.rays, pages=done.atlas.page_count, seconds=seconds,
                       rmse_estimate=report["rmse_estimate"], report=report,
                       rebake=details(report["rebake"], rebaked))
+
+
+def encode_pages(done: Computed) -> list[EncodedPage]:
+    """``done``'s pages as the output carries them (``carried``), encoded as its settings say
+    (8-bit PNG: ``image.encode.encode``)."""
+    s = done.settings
+    return encode(carried(done), s.encoding, writes_occlusion(s), s.clip_percentile)
+
+
+def write_output(done: Computed, pages: list[EncodedPage], output: str | os.PathLike,
+                 outputs: Outputs | None = None, steps=None) -> WriteInfo:
+    """Write ``done``'s scene with its lightmap ``pages`` (``encode_pages``) to ``output`` (.glb
+    or .gltf) as its settings say (``output.write.write``); ``outputs``: stage the files there
+    for the caller to put in place with its others (None: in place now, atomically)."""
+    s = done.settings
+    options = WriteOptions(encoding=s.encoding, occlusion=s.occlusion,
+                           clip_percentile=s.clip_percentile, carrier=s.carrier,
+                           baked_lights=s.baked_lights, authored_uv=s.uv)
+    return write(done.scene, done.atlas, pages, Path(output), options, outputs, steps)
 
 
 def cluster_identity() -> dict[str, str]:

@@ -198,3 +198,14 @@ def test_files_written_beside_the_output_get_the_usual_permissions(tmp_path):
                tmp_path / "report.json", *sorted((tmp_path / "pages").iterdir())]
     for path in written:
         assert stat.S_IMODE(path.stat().st_mode) == 0o644, path
+
+
+def test_the_bake_in_memory_stage_by_stage_gives_the_bytes_of_baker_bake(tmp_path):
+    """``baker.load`` → ``baker.compute`` → ``baker.encode`` → ``baker.write``, the public
+    stages, write the file ``baker.bake`` writes, byte for byte."""
+    source = saved(cornell_box(), tmp_path)
+    settings = baker.Settings(rays=4, page_size=128)
+    baker.bake(source, tmp_path / "whole.glb", settings, state=False)
+    done = baker.compute(baker.load(source), settings)
+    baker.write(done, baker.encode(done), tmp_path / "staged.glb")
+    assert (tmp_path / "staged.glb").read_bytes() == (tmp_path / "whole.glb").read_bytes()
