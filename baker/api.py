@@ -29,7 +29,9 @@ from baker.pipeline.input_warnings import input_warnings
 from baker.pipeline.plan import Plan
 from baker.rebake.incremental import (
     FullBake,
+    asked_settings,
     details,
+    node_names,
     rebake,
     record_full_bake,
     summary,
@@ -238,6 +240,21 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
                       rays=done.tally.rays, pages=done.atlas.page_count, seconds=seconds,
                       rmse_estimate=report["rmse_estimate"], report=report,
                       rebake=details(report["rebake"], rebaked))
+
+
+def last_settings(output: str | os.PathLike, state: str | os.PathLike | None = None,
+                  **overrides) -> Settings:
+    """The ``Settings`` the last bake of ``output`` was given, read from its bake state
+    (``state``; default ``<output>.bake``), with ``overrides``: what ``baker rebake`` and
+    ``relight`` bake with. The settings a state never gives (``settings.CALLER_ONLY``) are the
+    defaults unless ``overrides`` give them; SettingsError when there is no usable state."""
+    return asked_settings(Path(state) if state else default_state_path(Path(output)),
+                          **overrides)
+
+
+def scene_node_names(scene: str | os.PathLike) -> dict[int, str]:
+    """Node index → name (or ``nodes[i]``) of the glTF file ``scene``, for messages."""
+    return node_names(scene)
 
 
 def encode_pages(done: Computed) -> list[EncodedPage]:

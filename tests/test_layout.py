@@ -10,6 +10,7 @@ run, are left out. The checker is tested on made-up graphs too, so that it is kn
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1] / "baker"
@@ -185,3 +186,20 @@ def test_the_design_table_names_every_module():
             if row is None or f"`{path.stem}`" not in row:
                 missing.append(f"{parts[0]}/{path.name}")
     assert missing == []
+
+
+def test_the_command_line_goes_through_the_api():
+    """The command line reaches the bake only through the API (``baker``'s public names,
+    ``baker.api``, ``preview``, ``study``, ``view``), never into the pipeline's stages, so the
+    stages can change behind the API without the CLI noticing."""
+    stages = ("baker.pipeline", "baker.rebake", "baker.light", "baker.atlas", "baker.image",
+              "baker.output", "baker.geometry", "baker.rays")
+    modules = {module_name(path) for path in PACKAGE.rglob("*.py")}
+    reached = {module_name(path): sorted(m for m in imports_of(path, modules)
+                                         if m.startswith(stages))
+               for path in (PACKAGE / "cli").glob("*.py")}
+    text = {name: found for name, found in reached.items() if found}
+    attribute = {str(path.name): sorted(set(re.findall(r"\bbaker\.(?:%s)\.\w+" % "|".join(
+        s.split(".")[1] for s in stages), path.read_text())))
+        for path in (PACKAGE / "cli").glob("*.py")}
+    assert text == {} and {k: v for k, v in attribute.items() if v} == {}
