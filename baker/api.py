@@ -24,7 +24,7 @@ from baker.light.gi import MAX_BOUNCES
 from baker.output.write import (DIRECTIONAL_EXTENSION, WriteInfo, WriteOptions, image_file_name,
                                 write)
 from baker.pipeline import cluster
-from baker.pipeline.full import Computed, compute, timed, writes_occlusion
+from baker.pipeline.full import Computed, compute, writes_occlusion
 from baker.pipeline.input_warnings import input_warnings
 from baker.pipeline.plan import Plan
 from baker.rebake.incremental import (
@@ -43,6 +43,7 @@ from baker.rebake.state import timing_path
 from baker.run.atomic import Outputs, destination, write_atomically
 from baker.run.compile_clock import CompileClock
 from baker.run.progress import StageLines
+from baker.run.stages import timed
 from baker.settings import Resolved, Settings
 
 

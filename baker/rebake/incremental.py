@@ -72,7 +72,6 @@ from baker.pipeline.full import (
     bounds_of_baked,
     finish,
     lighting,
-    timed,
 )
 from baker.pipeline.parts import PerTexel, TexelPoints, part_slices, take
 from baker.rays.dimensions import OBSCURANCE
@@ -99,6 +98,7 @@ from baker.rebake.retrace import Retracing, retraced
 from baker.rebake.sobol_cells import cap_boxes, net_solve, sobol_cell_sample
 from baker.run.parallel import cores, even_slices, run_chunks
 from baker.run.progress import StageLines
+from baker.run.stages import timed
 from baker.settings import CALLER_ONLY, TECHNIQUES, Resolved, Settings, resolve
 
 # Extra reach (in texel sides of each texel) beyond d_max: the validity probes move a sample

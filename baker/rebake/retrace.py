@@ -35,10 +35,11 @@ from baker.light.direct import (
 from baker.light.hemisphere import Surfaces, Terms, surfaces_of
 from baker.light.integrate import integrate
 from baker.pipeline import cluster
-from baker.pipeline.full import Lighting, timed
+from baker.pipeline.full import Lighting
 from baker.pipeline.parts import part_slices, take, texel_rows
 from baker.rays.dimensions import light_dimension
 from baker.rays.trace import Tracer
+from baker.run.stages import timed
 from baker.settings import Resolved
 
 
