@@ -62,8 +62,8 @@ def test_blocks_give_the_same_values_as_one_block(done, monkeypatch):
     nothing (the bytes of a bake do not depend on the block sizes)."""
     whole = _composed(done)
     pages = encode(done.lightmaps, "srgb", True)
-    means = integrate_module._means(np.arange(7 * 1000.0).reshape(1000, 7) % 17,
-                                    np.arange(1000) % 40)
+    means = integrate_module.terms_of_sums(np.arange(7 * 1000.0).reshape(1000, 7) % 17,
+                                           np.arange(1000) % 40)
     monkeypatch.setattr(compose_module, "_TEXELS_AT_ONCE", 7)
     monkeypatch.setattr(encode_module, "_ROWS", 5)
     monkeypatch.setattr(integrate_module, "_MEAN_ROWS", 3)
@@ -72,8 +72,8 @@ def test_blocks_give_the_same_values_as_one_block(done, monkeypatch):
     assert np.array_equal(blocked.visibility, whole.visibility)
     assert [(p.png, p.occlusion_png, p.intensity) for p in encode(done.lightmaps, "srgb", True)] \
         == [(p.png, p.occlusion_png, p.intensity) for p in pages]
-    again = integrate_module._means(np.arange(7 * 1000.0).reshape(1000, 7) % 17,
-                                    np.arange(1000) % 40)
+    again = integrate_module.terms_of_sums(np.arange(7 * 1000.0).reshape(1000, 7) % 17,
+                                           np.arange(1000) % 40)
     for name in ("w_hit", "escaped", "hit_sq", "half_split"):
         assert np.array_equal(getattr(again, name), getattr(means, name)), name
 

@@ -242,7 +242,7 @@ def test_probe_frames_are_numpys_cross_products_to_the_bit():
     """The probes' tangent frames (compiled) are the cross products numpy gives, bit for bit
     (the probes' directions, so the bakes, do not depend on which computes them), and
     orthonormal; at the x axis the helper switches to y."""
-    from baker.atlas.validity import _frames
+    from baker.atlas.validity import probe_frames
 
     rng = np.random.default_rng(3)
     normal = rng.normal(size=(20_000, 3))
@@ -252,7 +252,7 @@ def test_probe_frames_are_numpys_cross_products_to_the_bit():
     helper = np.where((np.abs(normal[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
     t1 = np.cross(normal, helper)
     t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
-    got = _frames(normal)
+    got = probe_frames(normal)
     assert np.array_equal(got[0], t1) and np.array_equal(got[1], np.cross(normal, t1))
     frame = np.stack([got[0], got[1], normal], axis=1)
     assert np.allclose(frame @ frame.transpose(0, 2, 1), np.eye(3), atol=1e-4)

@@ -779,14 +779,14 @@ def _probes_meet(tracer: RayCaster, texels: Texels, rows: np.ndarray, d_max: flo
     is judged to have changed; and the rays cast."""
     meets = np.zeros(len(rows), bool)
     m = validity_module.HEMISPHERE_RAYS
-    x, y, z = np.ascontiguousarray(validity_module._hemisphere_directions(m).T)
+    x, y, z = np.ascontiguousarray(validity_module.hemisphere_directions(m).T)
 
     def work(part: slice) -> None:
         chosen = rows[part]
         normal = texels.geometric_normal(chosen)
         starts, radii = _starts(tracer, texels.position[chosen], normal, texels.size(chosen),
                                 d_max)
-        some = np.flatnonzero(_fixed_may_meet(x, y, z, starts, *validity_module._frames(normal),
+        some = np.flatnonzero(_fixed_may_meet(x, y, z, starts, *validity_module.probe_frames(normal),
                                               normal, tracer.sphere_centres, radii, d_max))
         if not len(some):
             return
