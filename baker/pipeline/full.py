@@ -369,7 +369,7 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True,
     system's) until the bake state is written (``Computed.per_texel``). ``staging``: where the
     bake state starts to be written once the texels are done. ``prepared``: the scene's world
     and ``Lighting`` with these settings, already made (by a rebake that fell back to this
-    bake, ``rebake.incremental.FullBake``): the same objects this bake would make.
+    bake, ``rebake.fallback.FullBake``): the same objects this bake would make.
     """
     underway = Underway(scene, settings, quiet, spill_folder, staging, prepared, times={})
     return run_stages(STAGES, underway, StageLines(not quiet)).computed

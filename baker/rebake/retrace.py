@@ -1,6 +1,6 @@
 """A rebake's traced work, a part at a time, on this machine or on a Ray cluster (``--cluster``).
 
-Once the dirty search has said which texels a change reaches (``incremental._dirty_search``),
+Once the dirty search has said which texels a change reaches (``dirty.dirty_search``),
 a rebake casts rays again for three kinds of rows: the obscurance rays of the dirty texels
 whose terms cannot follow from their stored ones, the shadow and sky rays of every dirty
 texel, and, for each light placed anew, the shadow rays of every clean texel. Each texel's

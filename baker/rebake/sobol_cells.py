@@ -128,7 +128,7 @@ def sobol_cell_sample(columns, column, row, bits, scrambles, solve):
     [0, 1)²; bits ≤ 24, ``solve`` = ``net_solve(bits)``. The first 2^bits points of each texel
     form a (0, bits, 2)-net, so exactly one lies in each such cell: a texel's rays that can go
     in a narrow cone of directions are found without drawing the others
-    (``incremental._cell_candidates``), in the grid whose cells a box of the cone crosses
+    (``near_rays._cell_candidates``), in the grid whose cells a box of the cone crosses
     fewest of (columns = bits: strips of x; 0: strips of y). Both coordinates are
     Owen-scrambled values of the index, and the index an Owen-scrambled sample number: each
     scramble is undone a bit at a time (``_laine_karras_preimage``); x gives the index's low
