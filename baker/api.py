@@ -13,7 +13,8 @@ from pathlib import Path
 from typing import Callable
 
 from baker.errors import BakerError, InputError, OutputError
-from baker.gltf.load import load, read_document
+from baker.gltf.container import read_document
+from baker.gltf.load import load
 from baker.gltf.scene import Scene
 from baker.image.carriers import emissive_lightmaps, viewer_notes
 from baker.image.compose import Lightmaps

@@ -43,7 +43,9 @@ from baker.errors import InputError, OutputError, SettingsError
 from baker.geometry.surface import (LUMINANCE, SRGB_TO_LINEAR, albedo, base_colour, emission,
                                     transformed_uv, viewer_diffuse_weight_at)
 from baker.geometry.world import World, build_world
-from baker.gltf.load import image_pixels, load, trs_matrices
+from baker.gltf.load import load
+from baker.gltf.read_images import image_pixels
+from baker.gltf.read_nodes import trs_matrices
 from baker.gltf.scene import Scene
 from baker.light.viewer_lights import punctual_shading
 from baker.image.encode import linear_to_srgb, png_bytes
