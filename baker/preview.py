@@ -266,7 +266,7 @@ def read_lightmaps(scene: Scene, world: World) -> SceneLightmaps:
         found = _carried_texture(document, scene.materials[prim.material], carrier, encoding)
         if found is None or found[1] >= len(prim.texcoords):
             continue
-        directional.add(scene, world, i, found[1])
+        directional.add(scene, world, i)
         texture, texcoord, scale, curve, red = found
         source = document.textures[texture].source
         key = (source, scale, curve, red)
@@ -303,7 +303,7 @@ class _DirectionalReader:
         self.images: list[np.ndarray] = []
         self.maps: list[np.ndarray] = []
 
-    def add(self, scene: Scene, world: World, instance: int, lightmap_uv: int) -> None:
+    def add(self, scene: Scene, world: World, instance: int) -> None:
         """The directional page and the normal map of ``instance``'s material, when it has
         both (``BAKER_lightmap_directional`` on the lightmap's UV set, a normalTexture)."""
         prim = scene.primitives[scene.instances[instance].primitive]

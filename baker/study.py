@@ -5,6 +5,9 @@ of rays per texel, the obscurance terms are estimated again and timed. Each run'
 (I_A·W, luminance) is compared with a converged reference — the same estimator with many more
 rays — to give the measured RMSE, next to the RMSE the bake itself estimates from its samples'
 variance (what every bake reports). Units are lightmap units, as in the report.
+
+``calibration`` asks the other question, whether those estimates hold: a bake's estimated
+error against its measured one, texel by texel (docs/model.md, ``benchmarks/bench_calibration.py``).
 """
 
 from __future__ import annotations

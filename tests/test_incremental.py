@@ -20,11 +20,11 @@ from baker.geometry.world import build_world
 from baker.rebake.fallback import FullBake
 from baker.rebake.incremental import rebake
 from baker.gltf.load import load
-from baker.atlas.rasterise import rasterise
 from baker.settings import resolve
 from baker.rebake.state import default_path
 from baker.atlas.unwrap import frame_area, stretch, unwrap
 from baker.cli.main import main
+from tests.bakehelp import rasterised
 
 ROOM = (4.0, 3.0, 4.0)
 BOXES = grid_boxes(4, room=ROOM, size=0.4)
@@ -132,7 +132,7 @@ def test_atlas_and_texels_do_not_change_under_a_rigid_move(tmp_path):
         world = build_world(scene)
         settings = resolve(SETTINGS, frame_area(scene, world), 1.0)
         atlas = unwrap(scene, world, settings)
-        out.append((settings, atlas, rasterise(atlas, world)))
+        out.append((settings, atlas, rasterised(atlas, world)))
     (s0, a0, t0), (s1, a1, t1) = out
     assert s0.texel_density == s1.texel_density
     assert (a0.width, a0.height, a0.page_count) == (a1.width, a1.height, a1.page_count)

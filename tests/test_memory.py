@@ -10,11 +10,10 @@ from assets.make_scenes import cornell_box
 from baker.image import compose as compose_module
 from baker.image import encode as encode_module
 from baker.light import hemisphere as integrate_module
-from baker.image.compose import compose
 from baker.image.encode import encode
 from baker.image.postprocess import postprocess
 from baker.image.seams import find_seams
-from tests.bakehelp import computed
+from tests.bakehelp import composed, computed
 
 
 @pytest.fixture(scope="module")
@@ -24,8 +23,7 @@ def done(tmp_path_factory):
 
 
 def _composed(done):
-    return compose(done.atlas, done.texels, done.terms, done.ambient, done.settings.rho,
-                   done.direct)
+    return composed(done, done.direct)
 
 
 def _extra_bytes(run) -> int:

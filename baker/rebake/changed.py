@@ -24,8 +24,7 @@ def _small_world(corners: np.ndarray, center: np.ndarray) -> World:
     return World(positions=corners.reshape(-1, 3), normals=np.zeros((3 * k, 3)),
                  smooth=np.zeros(3 * k, bool), texcoords=(), colors=np.ones((3 * k, 4)),
                  triangles=np.arange(3 * k, dtype=np.int64).reshape(-1, 3), tri_instance=empty,
-                 tri_local=empty, tri_material=empty, vertex_start=empty, tri_start=empty,
-                 center=center)
+                 tri_material=empty, vertex_start=empty, tri_start=empty, center=center)
 
 
 @jit
