@@ -52,15 +52,9 @@ from baker.light.adaptive import (
 )
 from baker.light.ambient import Ambient, ambient_terms
 from baker.light.environment import environment
-from baker.light.direct import (
-    Direct,
-    Power,
-    Sources,
-    adaptive_direct_light,
-    delivered_power,
-    direct_light,
-    light_sources,
-)
+from baker.light.direct import Direct, adaptive_direct_light, direct_light
+from baker.light.power import Power, delivered_power
+from baker.light.sources import Sources, light_sources
 from baker.light.foliage import (
     FitInputs,
     Foliage,
@@ -114,7 +108,7 @@ class Computed:
     tally: Tally
     lightmaps: Lightmaps
     stage_seconds: dict[str, float]
-    sources: Sources | None = None  # what lights the scene directly (direct.py)
+    sources: Sources | None = None  # what lights the scene directly (sources.py)
     power: Power | None = None  # what each source lays on the surfaces, for I_A
     denoised: DenoiseInfo | None = None  # what --denoise did (denoise.py); None: not denoised
     foliage: Foliage | None = None  # --foliage approx: the crowns and their fit (foliage.py)

@@ -19,8 +19,8 @@ The numbers come from three streams, whose hashes never take the same words:
   (``trace._coin``), keyed by no texel at all.
 
 Keys are texel keys, a texel's other side (``inner.OTHER_SIDE``), the power-estimate points
-(``direct._POWER_KEY_BASE``), the sources whose power is traced from them
-(``direct._TRACED_KEY_BASE``) or the GI paths' vertices (``gi._bounce_keys``); a range says
+(``power._POWER_KEY_BASE``), the sources whose power is traced from them
+(``power._TRACED_KEY_BASE``) or the GI paths' vertices (``gi._bounce_keys``); a range says
 which.
 """
 

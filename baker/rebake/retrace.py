@@ -24,14 +24,8 @@ from baker.geometry.surface import LUMINANCE
 from baker.gltf.scene import Scene
 from baker.geometry.world import World
 from baker.image.compose import effective_r_ave
-from baker.light.direct import (
-    Direct,
-    aim_of,
-    direct_light,
-    mean_and_variance,
-    punctual_samples,
-    texel_receivers,
-)
+from baker.light.direct import Direct, aim_of, direct_light, texel_receivers
+from baker.light.direct_estimators import mean_and_variance, punctual_samples
 from baker.light.hemisphere import Surfaces, Terms, surfaces_of
 from baker.light.integrate import integrate
 from baker.pipeline import cluster

@@ -42,8 +42,8 @@ def _row_keys(points: np.ndarray) -> np.ndarray:
 def may_shadow(texels: Texels, rows: np.ndarray, changed: RayCaster, sources) -> np.ndarray:
     """(k,) bool, conservative: whether a shadow ray of the texels ``rows`` may pass through
     one of the ``changed`` geometry's bounding spheres. Exact on the geometry of the rays
-    (``direct.punctual_irradiance``): a point or spot light's rays run from the lifted sample
-    point O towards its sphere (radius ρ, 0 when hard) and stop before it, so they stay
+    (``direct_estimators.punctual_irradiance``): a point or spot light's rays run from the lifted
+    sample point O towards its sphere (radius ρ, 0 when hard) and stop before it, so they stay
     within ρ of the segment from O to its centre; a directional light's stay within its cone
     (half-angle ρ) around the direction to it. Emitters and the sky send rays anywhere: with
     either, every texel may."""
