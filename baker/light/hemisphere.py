@@ -697,18 +697,40 @@ def _chunk_sums(surfaces: Surfaces, tracer: Tracer, texels: Texels, rows: np.nda
            if settings.supersample > 1 else None)
     origins, directions = hemisphere_rays(texels, rows, rays, settings.seed, tracer.center,
                                           settings.sampling, first, sub, settings.rays)
-    hits = tracer.cast_local(origins, directions, np.full(len(origins), settings.d_max, np.float32))
+    lengths = np.full(len(origins), settings.d_max, np.float32)
     chains = _Chains(np.zeros(len(rows), np.int64), np.zeros(len(rows), np.int64))
+    sums = np.zeros((len(rows), columns(settings.directional_pages)))
+    aims = directions if settings.directional_pages else _NO_DIRECTIONS
+    if blocking_only(surfaces, settings):
+        blocked = tracer.blocked_local(origins, directions, lengths)
+        _accumulate_kernel(rays, blocked, lengths, np.float32(settings.d_max),
+                           RHO_KINDS[settings.rho], *_BLOCKER, LUMINANCE, sums, *_TEXEL_MAJOR,
+                           1.0, aims)
+        return sums, chains
+    hits = tracer.cast_local(origins, directions, lengths)
     kind, ray_albedo = _shading(surfaces, settings, hits)
     if surfaces.special:
         _special_hits(surfaces, tracer, origins, directions, hits, texels.key[rows], first, rays,
                       settings, ray_albedo, chains)
-    sums = np.zeros((len(rows), columns(settings.directional_pages)))
     _accumulate_kernel(rays, hits.triangle, hits.distance, np.float32(settings.d_max),
                        RHO_KINDS[settings.rho], surfaces.table, kind, ray_albedo, LUMINANCE,
-                       sums, *_TEXEL_MAJOR, 1.0,
-                       directions if settings.directional_pages else _NO_DIRECTIONS)
+                       sums, *_TEXEL_MAJOR, 1.0, aims)
     return sums, chains
+
+
+# ``_accumulate_kernel``'s (table, kind, ray_albedo) for rays whose primitive is
+# ``Tracer.blocked_local``'s 0 (blocked) or −1: one triangle, constant, its albedo never read
+# but × ρ = 0 (``blocking_only``).
+_BLOCKER = (np.zeros((1, 3)), np.zeros(1, np.uint8), np.zeros((0, 4)))
+
+
+def blocking_only(surfaces: Surfaces, settings: Resolved) -> bool:
+    """Whether a ray's value depends only on whether it meets something within d_max: with
+    ``--rho step`` a hit's value is R·ρ = 0 whatever R and the distance, a miss's 1, unless
+    a mirror, glass or translucent surface sends the ray on (``Surfaces.special``). Such rays
+    are cast as occlusion queries (``Tracer.blocked_local``), the same sums as nearest hits
+    give (for albedos that are finite: R·0 = 0)."""
+    return settings.rho == "step" and not surfaces.special
 
 
 def hemisphere_terms(scene: Scene, world: World, tracer: Tracer, texels: Texels,
