@@ -43,15 +43,18 @@ from baker.light.adaptive import WITHIN, neighbours_among, pooled_gain
 from baker.light.obscurance import RHO_KINDS, UNIT_REFLECTIVITY, rho
 from baker.rays.dimensions import OBSCURANCE, material_dimension
 from baker.rays.sampling import (
+    extend_nets,
     fill_cosine,
+    fill_points,
     fold,
     frame,
     hash_u32,
     net_points,
+    net_word,
 )
 from baker.rays.trace import LocalHits, Tracer, ray_lift
 from baker.run.parallel import cores, even_slices, run_chunks, texels_per_chunk
-from baker.settings import Resolved
+from baker.settings import TECHNIQUES, Resolved
 
 _SPLIT_MAX = 1e100  # |halves' differences| beyond this (garbage albedos) are clipped, so
 # that their mean square cannot overflow float64: such an estimate is meaningless anyway
@@ -260,7 +263,7 @@ def _to_world_kernel(rays, first, starts, normals, geometric, offsets, center, x
         for r in range(i * rays, (i + 1) * rays):
             if not every and not keep[r]:
                 continue
-            j = (first + r - i * rays) % count
+            j = 0 if count == 1 else (first + r - i * rays) % count  # no division per ray
             origins[q, 0] = starts[i, j, 0] - center[0] + offsets[i] * gx
             origins[q, 1] = starts[i, j, 1] - center[1] + offsets[i] * gy
             origins[q, 2] = starts[i, j, 2] - center[2] + offsets[i] * gz
@@ -303,8 +306,40 @@ def hemisphere_rays(texels: Texels, rows: np.ndarray | slice, rays: int, seed: i
     (texel i's rays are rows i·rays … i·rays + rays − 1). Computed in float64 (points, then
     directions, in flat arrays that the compiler vectorises), rounded once at the end.
     """
-    x, y, z = cosine_directions(texels.key[rows], rays, seed, technique, first, start)
-    return world_rays(texels, rows, rays, x, y, z, center, first=first, sub=sub)
+    keys = texels.key[rows]
+    origins = np.empty((len(keys) * rays, 3), np.float32)
+    directions = np.empty((len(keys) * rays, 3), np.float32)
+    extend = bool(start and first and technique == "sobol")  # as ``net_points`` decides
+    _rays_kernel(TECHNIQUES.index(technique), np.uint64(seed), keys, first, rays,
+                 np.uint64(OBSCURANCE), extend, net_word(np.uint64(OBSCURANCE), start // 2),
+                 texels.position[rows][:, None, :] if sub is None else sub,
+                 texels.hemisphere_normal(rows), texels.geometric_normal(rows),
+                 ray_lift(texels.position[rows], texels.size(rows), center), center,
+                 origins, directions)
+    return origins, directions
+
+
+@jit
+def _rays_kernel(technique, seed, keys, first, rays, dimension, extend, second, starts, normals,
+                 geometric, offsets, center, origins, directions):
+    """``hemisphere_rays`` texel by texel: each texel's points (``sampling.fill_points``, or
+    ``extend_nets`` with ``extend``, its second net's word ``second``), their cosine
+    directions (``fill_cosine``) and its rays (``_to_world_kernel``), the same bits as those
+    kernels give over all texels at once (``cosine_directions`` then ``world_rays``) without
+    their (k·rays,) float64 arrays in between: 45 → 20 ns a ray at 20,000 texels of 64 rays,
+    25 → 20 at a chunk's 4096."""
+    u, v = np.empty(rays), np.empty(rays)
+    x, y, z = np.empty(rays), np.empty(rays), np.empty(rays)
+    every = np.zeros(0, np.bool_)
+    for i in range(len(keys)):
+        if extend:
+            extend_nets(seed, keys[i:i + 1], first // 2, rays // 2, second, dimension, u, v)
+        else:
+            fill_points(technique, seed, keys[i:i + 1], first, rays, dimension, u, v)
+        fill_cosine(u, v, x, y, z)
+        ray = slice(i * rays, (i + 1) * rays)
+        _to_world_kernel(rays, first, starts[i:i + 1], normals[i:i + 1], geometric[i:i + 1],
+                         offsets[i:i + 1], center, x, y, z, every, origins[ray], directions[ray])
 
 
 def world_rays(texels: Texels, rows: np.ndarray | slice, rays: int, x: np.ndarray,
