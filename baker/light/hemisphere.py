@@ -364,6 +364,7 @@ def world_rays(texels: Texels, rows: np.ndarray | slice, rays: int, x: np.ndarra
 # Columns of the per-texel sums the kernel accumulates.
 _RGB, _ESCAPED, _SQUARE = slice(0, 3), 3, 4
 _HALF = slice(5, 7)  # (hit luminance, escaped) over the first half of the rays
+_HALF_ESCAPED = _HALF.stop - 1
 _COLUMNS = 7
 # With directions (``Resolved.directional_pages``): luminance of R·ρ and escaped weight, each
 # × the ray's direction, over all rays, then over the first half.
@@ -738,9 +739,12 @@ def _chunk_sums(surfaces: Surfaces, tracer: Tracer, texels: Texels, rows: np.nda
     aims = directions if settings.directional_pages else _NO_DIRECTIONS
     if blocking_only(surfaces, settings):
         blocked = tracer.blocked_local(origins, directions, lengths)
-        _accumulate_kernel(rays, blocked, lengths, np.float32(settings.d_max),
-                           RHO_KINDS[settings.rho], *_BLOCKER, LUMINANCE, sums, *_TEXEL_MAJOR,
-                           1.0, aims)
+        if settings.directional_pages:
+            _accumulate_kernel(rays, blocked, lengths, np.float32(settings.d_max),
+                               RHO_KINDS[settings.rho], *_BLOCKER, LUMINANCE, sums,
+                               *_TEXEL_MAJOR, 1.0, aims)
+        else:
+            _escapes_kernel(rays, blocked, sums)
         return sums, chains
     hits = tracer.cast_local(origins, directions, lengths)
     kind, ray_albedo = _shading(surfaces, settings, hits)
@@ -757,6 +761,24 @@ def _chunk_sums(surfaces: Surfaces, tracer: Tracer, texels: Texels, rows: np.nda
 # ``Tracer.blocked_local``'s 0 (blocked) or −1: one triangle, constant, its albedo never read
 # but × ρ = 0 (``blocking_only``).
 _BLOCKER = (np.zeros((1, 3)), np.zeros(1, np.uint8), np.zeros((0, 4)))
+
+
+@jit
+def _escapes_kernel(rays, blocked, sums):
+    """Add to ``sums`` (k, 7) what ``_accumulate_kernel`` adds for rays laid out texel by
+    texel that are only blocked (0) or not (−1) (``Tracer.blocked_local``, ``blocking_only``:
+    an escaped ray's value is 1, a blocked one's R·ρ = 0): the escaped rays counted, over all
+    and over the first half, and 0 to every other column. The same bits, without a branch
+    per ray."""
+    half = rays // 2
+    for i in range(len(blocked) // rays):
+        first = rest = 0
+        for r in range(i * rays, i * rays + half):
+            first += blocked[r] < 0
+        for r in range(i * rays + half, (i + 1) * rays):
+            rest += blocked[r] < 0
+        sums[i, _ESCAPED] += first + rest
+        sums[i, _HALF_ESCAPED] += first
 
 
 def blocking_only(surfaces: Surfaces, settings: Resolved) -> bool:
