@@ -304,7 +304,7 @@ def hemisphere_rays(texels: Texels, rows: np.ndarray | slice, rays: int, seed: i
     j mod S. Returns origins and directions,
     each (k·rays, 3) float32 in the tracer's recentred frame (world − ``center``), texel-major
     (texel i's rays are rows i·rays … i·rays + rays − 1). Computed in float64 (points, then
-    directions, in flat arrays that the compiler vectorises), rounded once at the end.
+    directions, a texel at a time: ``_rays_kernel``), rounded once at the end.
     """
     keys = texels.key[rows]
     origins = np.empty((len(keys) * rays, 3), np.float32)
