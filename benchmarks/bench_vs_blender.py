@@ -6,7 +6,7 @@
 ``--blender bpy`` (the default): Blender 4.5 LTS from PyPI (the ``bpy`` wheel, Blender as a
 Python module, for Python 3.11 only), installed by this benchmark into a venv of its own
 (``--bpy-venv``, made with ``python -m venv`` and ``pip install "bpy==4.5.*"`` when missing:
-about 400 MB; not a dependency of baker). ``--blender system``: ``blender`` on PATH (Debian:
+about 1 GB; not a dependency of baker). ``--blender system``: ``blender`` on PATH (Debian:
 ``apt-get install blender python3-numpy``; measured with 3.4.1). Both need the OpenEXR
 package (``--format exr``). Not run in CI.
 
