@@ -14,18 +14,21 @@ Stein's unbiased risk estimate of the filtered texel's squared error is
     SURE_i = ((F y)_i − y_i)² + (2 F_ii − 1) σ²_i
 
 (E[SURE_i] = E[((F y)_i − x_i)²]: the squared bias and the filtered noise together). With σ²_i
-replaced by an unbiased estimate from the texel's own rays (``hemisphere.Terms.split_errors``:
-its two independent halves), the mean of SURE over the texels estimates the filtered map's
-mean squared error without knowing x. But that mean is a difference of two sums of the size
-of the raw noise: where smoothing leaves far less error than the noise (a wide width on a
-smooth wall at few rays), its own noise is as large as what it measures, and the least of
-several such means is low by chance. So each width is judged by an upper bound, the mean
-SURE plus ``BOUND`` of its standard errors (from the spread of the texels' SURE), and the
-width (in texel sides, one for the whole map) is the one of ``WIDTHS`` whose bound is least;
-that bound is the estimate of the filtered map's mean squared error (``Filtered.error``).
-Width 0 leaves the values as they are (its SURE is σ², today's estimate, taken as it is), so
-the filter is used only where even its bound is lower. Stein, "Estimation of the mean of a multivariate normal distribution" (1981);
-Li, Wu and Chuang, "SURE-based optimization for adaptive sampling and reconstruction" (2012).
+replaced by an unbiased estimate from the texel's own rays (e², e half the difference of its
+two independent halves' means; not ``hemisphere.Terms.split_errors``, whose floor for texels
+whose rays all agree is no unbiased estimate: SURE subtracts it), the mean of SURE over the
+texels estimates the filtered map's mean squared error without knowing x. But that mean is a
+difference of two sums of the size of the raw noise: where smoothing leaves far less error than
+the noise (a wide width on a smooth wall at few rays), its own noise is as large as what it
+measures, and the least of several such means is low by chance. So each width is judged by an
+upper bound, the mean SURE plus ``BOUND`` of its standard errors (from the spread of the
+texels' SURE), and the width (in texel sides, one for the whole map) is the one of ``WIDTHS``
+whose bound is least (the wider ``STAGES`` tried only when the narrower's widest is); that
+bound is the estimate of the filtered map's mean squared error (``Filtered.error``). Width 0
+leaves the values as they are (its SURE is σ², today's estimate, taken as it is), so the filter
+is used only where even its bound is lower. Stein, "Estimation of the mean of a multivariate
+normal distribution" (1981); Li, Wu and Chuang, "SURE-based optimization for adaptive sampling
+and reconstruction" (2012).
 """
 
 from __future__ import annotations
@@ -37,7 +40,9 @@ import numpy as np
 from baker.jit import jit
 from baker.run.parallel import cores, even_slices, run_chunks
 
-WIDTHS = (0.0, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0)  # Gaussian σ, texel sides
+STAGES = ((0.0, 0.5, 0.75, 1.0, 1.5), (2.0, 3.0))  # Gaussian σ tried, texel sides: a
+# neighbour search costs as the square of the widest, so the wider are tried only when needed
+WIDTHS = sum(STAGES, ())
 REACH = 2.0  # neighbours within this many σ
 PLANE = 0.5  # texel sides: a neighbour off the texel's plane by more is not on its surface
 FACING = 0.9  # least cosine between the two texels' normals
@@ -71,19 +76,21 @@ def smooth(position: np.ndarray, normal: np.ndarray, size: np.ndarray, values: n
     luminance: (N,) what the error is measured in (the values' luminance, or the values
     themselves for one channel); variance: (N,) an unbiased estimate of each texel's noise
     variance in those units (independent between texels)."""
-    widths = np.array(WIDTHS)
-    cell = REACH * float(widths.max()) * float(size.max()) if len(size) else 1.0
-    order, starts, cells = _grid(position, cell)
-    smoothed, self_weight = _apply(position, normal, size, luminance[:, None], widths, order,
-                                   starts, cells, cell)
-    sures = (smoothed[:, :, 0] - luminance) ** 2 + (2.0 * self_weight - 1.0) * variance
-    tried = {float(w): _bound(sure, w) for w, sure in zip(widths, sures)}
-    best = min(range(len(widths)), key=lambda k: (tried[float(widths[k])], widths[k]))
-    width = float(widths[best])
+    tried, sures = {}, {}
+    for stage in STAGES:  # the wider stage only when the narrower's widest was best
+        widths = np.array(stage)
+        grid = _grid(position, REACH * float(widths.max()) * float(size.max())
+                     if len(size) else 1.0)
+        smoothed, self_weight = _apply(position, normal, size, luminance[:, None], widths, grid)
+        for w, mean, weight in zip(stage, smoothed[:, :, 0], self_weight):
+            sures[w] = (mean - luminance) ** 2 + (2.0 * weight - 1.0) * variance
+            tried[w] = _bound(sures[w], w)
+        width = min(tried, key=lambda w: (tried[w], w))
+        if width < max(stage):
+            break
     out = values if width == 0.0 else _apply(position, normal, size, values,
-                                             widths[best:best + 1], order, starts, cells,
-                                             cell)[0][0]
-    return Filtered(out, width, sures[best], tried)
+                                             np.array([width]), grid)[0][0]
+    return Filtered(out, width, sures[width], tried)
 
 
 def _bound(sure: np.ndarray, width: float) -> float:
@@ -94,21 +101,24 @@ def _bound(sure: np.ndarray, width: float) -> float:
     return float(sure.mean()) + spread
 
 
-def _grid(position: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _grid(position: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """The texels sorted by grid cell of side ``cell``: (order (N,), starts (M + 1,) of each
-    occupied cell's run in ``order``, cells (M, 3) int64 those cells' coordinates, sorted)."""
+    occupied cell's run in ``order``, cells (M, 3) int64 those cells' coordinates, sorted,
+    and ``cell``)."""
     coords = np.floor(position / cell).astype(np.int64)
     order = np.lexsort((coords[:, 2], coords[:, 1], coords[:, 0]))
     sorted_coords = coords[order]
     new = np.ones(len(order), bool)
     new[1:] = (sorted_coords[1:] != sorted_coords[:-1]).any(axis=1)
     first = np.flatnonzero(new)
-    return order, np.append(first, len(order)), sorted_coords[first]
+    return order, np.append(first, len(order)), sorted_coords[first], cell
 
 
-def _apply(position, normal, size, values, widths, order, starts, cells, cell):
+def _apply(position, normal, size, values, widths, grid):
     """(F values (W, N, C), F_ii (W, N)) of the filter at each of ``widths`` (W,) texel sides
-    (width 0: the values themselves), from one search for every texel's neighbours."""
+    (width 0: the values themselves), from one search for every texel's neighbours in
+    ``grid`` (``_grid``'s, cells of at least ``REACH`` × the widest width)."""
+    order, starts, cells, cell = grid
     out = np.empty((len(widths), len(position), values.shape[1]))
     self_weight = np.empty((len(widths), len(position)))
     values, widths = np.ascontiguousarray(values, np.float64), np.asarray(widths, np.float64)
@@ -140,10 +150,11 @@ def _find_cell(cells, x, y, z):
 @jit
 def _filter_kernel(position, normal, size, values, widths, reach, plane, facing, order, starts,
                    cells, cell, first, last, out, self_weight):
-    """For every texel i of ``first`` … ``last`` − 1 and width σ_w = widths[w] × size[i]: out[w, i] = Σ_j w_ij values[j] /
-    Σ_j w_ij over its neighbours j (the texels of the 27 grid cells around it within
-    ``reach`` σ_w, within ``plane`` texel sides of i's plane, normals within ``facing``),
-    w_ij = exp(−d²/2σ_w²), w_ii = 1; self_weight[w, i] = 1 / Σ_j w_ij. Width 0: values[i], 1."""
+    """For every texel i of ``first`` … ``last`` − 1 and width σ_w = widths[w] × size[i]:
+    out[w, i] = Σ_j w_ij values[j] / Σ_j w_ij over its neighbours j (the texels of the 27 grid
+    cells around it within ``reach`` σ_w, within ``plane`` texel sides of i's plane, normals
+    within ``facing``), w_ij = exp(−d²/2σ_w²), w_ii = 1; self_weight[w, i] = 1 / Σ_j w_ij.
+    Width 0: values[i], 1."""
     channels = values.shape[1]
     count = len(widths)
     total = np.empty((count, channels))
