@@ -238,6 +238,49 @@ def icosphere_on_floor(radius: float = 0.5, subdivisions: int = 1, floor_size: f
     return b
 
 
+def panels_on_floor(floor_size: float = 6.0, light=(0.0, 1.5, 1.2)) -> GltfBuilder:
+    """Single-sided panels standing on a floor in the open, the floor's texels on both sides of
+    them: an opaque wall and a clear glass pane (each 2 × 1.2 m, facing +z, in the plane
+    z = 0.02 on either side of x = 0), a card (0.8 × 0.5 m, facing −z, at z = −1.52) and an
+    alpha-cut fence (vertical bars, 1.6 × 0.8 m, facing +x, at x = 2.02), all from y = 0 up,
+    and a hard point light of 1 cd at ``light``: in front of the wall and the pane, behind
+    the card and the fence. Floor: a ``floor_size``² quad at y = 0 facing up.
+
+    ``info``: nodes (name → index) and panels: name → dict(kind ("opaque", "glass" or
+    "fence"), centre (3,), normal (3,) the front, axes ((3,), (3,)) unit in-plane directions
+    and half (2,) the half extents along them), light (3,)."""
+    from assets.light_scenes import _add_light
+
+    b = GltfBuilder()
+    white = b.material("white", WHITE)
+    grey = b.material("grey", (0.5, 0.5, 0.5))
+    glass = b.material("glass", (1.0, 1.0, 1.0), roughness=0.0, extensions={
+        "KHR_materials_transmission": {"transmissionFactor": 1.0}})
+    bars = np.full((8, 8, 4), 255, np.uint8)
+    bars[:, 1::2, 3] = 0  # every other column of texels clear: vertical bars
+    fence = b.material("fence", (0.5, 0.4, 0.3), alpha_mode="MASK", alpha_cutoff=0.5,
+                       base_color_image=bars)
+    nodes = {"floor": b.node("floor", b.shape_mesh("floor", quad(floor_size, floor_size),
+                                                   material=white))}
+    x, y, z = (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)
+    panels = {  # name: (kind, material, width, height, facing, centre, normal, axes)
+        "wall": ("opaque", grey, 2.0, 1.2, "+z", (-1.6, 0.6, 0.02), z, (x, y)),
+        "pane": ("glass", glass, 2.0, 1.2, "+z", (1.6, 0.6, 0.02), z, (x, y)),
+        "card": ("opaque", grey, 0.8, 0.5, "-z", (0.0, 0.25, -1.52), (0.0, 0.0, -1.0), (x, y)),
+        "fence": ("fence", fence, 0.8, 1.6, "+x", (2.02, 0.4, -1.8), x, (y, z)),
+    }
+    info = {}
+    for name, (kind, material, width, height, facing, centre, normal, axes) in panels.items():
+        # (for "+x", make_scenes.panel turns the quad's width upright: axes (y, z))
+        shape = panel(width, height, facing, centre)
+        nodes[name] = b.node(name, b.shape_mesh(name, shape, material=material))
+        info[name] = dict(kind=kind, centre=centre, normal=normal, axes=axes,
+                          half=(width / 2, height / 2))
+    _add_light(b, "point", light, (0.0, -1.0, 0.0), intensity=1.0)
+    b.info.update(nodes=nodes, panels=info, light=tuple(light))
+    return b
+
+
 def main(out_dir: Path) -> list[Path]:
     """Write the scenes into ``out_dir``; return their paths."""
     out_dir.mkdir(parents=True, exist_ok=True)

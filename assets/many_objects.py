@@ -23,7 +23,7 @@ if __package__ in (None, ""):  # run as a script: make the repository root impor
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from assets.gltf_builder import (  # noqa: E402
-    GltfBuilder, Shape, box, cylinder, merged, quat_axis_angle, uv_sphere)
+    GltfBuilder, Shape, box, cylinder, lathe, merged, quat_axis_angle, uv_sphere)
 
 ROOM = (12.0, 3.0, 12.0)
 
@@ -110,6 +110,52 @@ def strewn_props(count: int, seed: int = 0) -> GltfBuilder:
         builder.node(f"prop{k}", builder.shape_mesh(f"prop{k}", shape, material=grey),
                      translation=rng.uniform(-5.0, 5.0, 3))
     return builder
+
+
+LEVEL_ROOM = (40.0, 6.0, 40.0)
+
+
+def level(count: int = 400, seed: int = 0) -> GltfBuilder:
+    """A level of ``count`` distinct meshes of about 2,500 triangles each (1,024,812 triangles
+    for 400): crates (boxes of 15 × 15 squares a face, 2,700), turned columns (a lathed profile
+    of 20 rings, 66 segments: 2,508), balls (spheres of 36 rings, 2,520) and rocks (the same
+    spheres, their radius bumped by smooth noise: 2,520), in turns, on a jittered grid on the
+    floor of a closed 40 × 6 × 40 m room, each its own mesh (sizes and bumps drawn per object),
+    turned about the vertical at random: what a level's unwrap costs per distinct mesh.
+    Deterministic in ``seed``."""
+    rng = np.random.default_rng(seed)
+    b = GltfBuilder()
+    wall = b.material("wall", (0.73, 0.73, 0.73))
+    props = [b.material(name, colour) for name, colour in (
+        ("crate", (0.55, 0.45, 0.3)), ("stone", (0.5, 0.5, 0.48)), ("ball", (0.6, 0.6, 0.7)))]
+    b.node("room", b.shape_mesh("room", box(LEVEL_ROOM, inward=True), material=wall),
+           translation=(0.0, LEVEL_ROOM[1] / 2, 0.0))
+    side = int(np.ceil(np.sqrt(count)))
+    cell = LEVEL_ROOM[0] * 0.9 / side
+    for k in range(count):
+        i, j = divmod(k, side)
+        x, z = (np.array([i, j]) + 0.5 + rng.uniform(-0.2, 0.2, 2)) * cell - LEVEL_ROOM[0] * 0.45
+        size = rng.uniform(0.4, 1.4, 3)
+        kind = k % 4
+        if kind == 0:
+            shape, material, height = grid_box(size, 15), props[0], size[1]
+        elif kind == 1:
+            t = np.linspace(0.0, 1.0, 20)
+            radius = size[0] / 2 * (0.6 + 0.25 * np.sin(np.pi * t * rng.uniform(1, 3)) ** 2)
+            shape = lathe(np.stack([radius, (t - 0.5) * 2 * size[1]], axis=1), 66)
+            material, height = props[1], 2 * size[1]
+        else:
+            positions, triangles, normals, uv = uv_sphere(size[0] / 2, 36, 36)
+            if kind == 3:
+                phase = rng.uniform(0, 2 * np.pi, (3, 3))
+                bump = sum(0.08 * np.sin(f * normals @ np.cos(phase[n]) + phase[n, 0])
+                           for n, f in enumerate((3.0, 5.0, 7.0)))
+                positions = positions * (1.0 + bump)[:, None]
+            shape, material, height = (positions, triangles, normals, uv), props[1 + kind // 3], size[0]
+        turn = quat_axis_angle((0, 1, 0), float(rng.uniform(0, 360)))
+        b.node(f"prop{k}", b.shape_mesh(f"prop{k}", shape, material=material),
+               translation=(float(x), float(height / 2), float(z)), rotation=turn)
+    return b
 
 
 if __name__ == "__main__":

@@ -23,19 +23,24 @@ DIFFUSE_TRANSMISSION = {"KHR_materials_diffuse_transmission": {
 UNLIT = {"KHR_materials_unlit": {}}
 
 
-def mirror_wall(size: float = 4.0, height: float = 2.0, mirror: bool = True) -> GltfBuilder:
+def mirror_wall(size: float = 4.0, height: float = 2.0, mirror: bool = True,
+                colour=(0.9, 0.9, 0.9)) -> GltfBuilder:
     """A ``size``-metre white floor and, along its x = size/2 edge, a wall ``height`` tall
-    facing −x: a perfect mirror (metallic 1, roughness 0, base 0.9), or diffuse grey 0.9 when
-    not ``mirror``. info: floor, wall (nodes), wall_x (its plane)."""
+    facing −x: a perfect mirror (metallic 1, roughness 0, base ``colour``), or diffuse of that
+    colour when not ``mirror``. info: floor, wall (nodes), wall_x (its plane), and the wall as
+    a rectangle (``tests/plane_reference.py``: centre, normal, axes, half)."""
     b = GltfBuilder()
     floor = b.material("floor", (0.8, 0.8, 0.8))
-    wall = b.material("mirror" if mirror else "wall", (0.9, 0.9, 0.9),
+    wall = b.material("mirror" if mirror else "wall", colour,
                       metallic=1.0 if mirror else 0.0, roughness=0.0 if mirror else 1.0)
     b.info["floor"] = b.node("floor", b.shape_mesh("floor", quad(size, size), material=floor))
     face = transformed(box_face((0.0, height, size), "-x"),
                        translation=(size / 2, height / 2, 0.0))
     b.info["wall"] = b.node("wall", b.shape_mesh("wall", face, material=wall))
     b.info["wall_x"] = size / 2
+    b.info["rectangle"] = dict(centre=(size / 2, height / 2, 0.0), normal=(-1.0, 0.0, 0.0),
+                               axes=((0.0, 1.0, 0.0), (0.0, 0.0, 1.0)),
+                               half=(height / 2, size / 2))
     return b
 
 

@@ -42,14 +42,19 @@ def _material(b: GltfBuilder, kind: str, colour) -> int:
     return b.material(f"diffuse {colour}", colour)
 
 
-def random_room(seed: int) -> dict[str, Any]:
-    """A room spec drawn from ``seed``: 2–5 props on the floor, 0–2 punctual lights (mostly 1
+def random_room(seed: int, crowd: int | None = None) -> dict[str, Any]:
+    """A room spec drawn from ``seed``: 2–5 props on the floor (``crowd`` props instead, in a
+    room grown to give each as much floor: a crowded level), 0–2 punctual lights (mostly 1
     or 2), maybe sky, and the bake's rays (8 or 16), texel density (3 or 5 a metre) and
     supersampling (2 in one room of ten: the rebake does not follow it yet, a full bake)."""
     rng = np.random.default_rng(seed)
     size = [float(rng.uniform(2.5, 4.0)), float(rng.uniform(2.0, 3.0)), float(rng.uniform(2.5, 4.0))]
+    count = int(rng.integers(2, 6))
+    if crowd is not None:
+        count = crowd
+        size[0], size[2] = (float(side * np.sqrt(crowd / 3.5)) for side in (size[0], size[2]))
     props = []
-    for i in range(int(rng.integers(2, 6))):
+    for i in range(count):
         kind = str(rng.choice(KINDS))
         props.append({"name": f"prop{i}", "kind": kind,
                       "shape": "panel" if kind in ("alpha", "emissive") else "box",

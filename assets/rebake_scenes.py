@@ -46,8 +46,9 @@ def grid_boxes(count: int, room: tuple[float, float, float] = (6.0, 3.0, 6.0),
 
 def box_room(boxes: list[dict[str, Any]], room: tuple[float, float, float] = (6.0, 3.0, 6.0),
              colours: dict[str, tuple[float, float, float]] | None = None,
-             lamp: dict[str, Any] | None = None) -> GltfBuilder:
-    """A closed room (floor at y = 0) with the given floor-standing boxes.
+             lamp: dict[str, Any] | None = None, roof: bool = True) -> GltfBuilder:
+    """A closed room (floor at y = 0) with the given floor-standing boxes; open to the sky
+    without its ceiling when not ``roof``.
 
     ``colours`` overrides ``COLOURS`` entries; ``lamp`` adds a point light node "lamp" with keys
     ``at`` (3,), ``intensity`` (candela), ``colour`` (3,), ``radius`` (extras.radius, metres).
@@ -56,7 +57,9 @@ def box_room(boxes: list[dict[str, Any]], room: tuple[float, float, float] = (6.
     palette = dict(COLOURS, **(colours or {}))
     b = GltfBuilder()
     materials = {name: b.material(name, colour) for name, colour in palette.items()}
-    walls = b.shape_mesh("room", box(room, inward=True), material=materials["wall"])
+    shape = box(room, inward=True) if roof else box(
+        room, inward=True, faces=("-x", "+x", "-y", "-z", "+z"))
+    walls = b.shape_mesh("room", shape, material=materials["wall"])
     nodes = {"room": b.node("room", walls, translation=(0.0, room[1] / 2, 0.0))}
     meshes: dict[str, int] = {}
     for spec in boxes:

@@ -3,12 +3,18 @@
     import baker
     result = baker.bake("level.glb", "level_baked.glb", baker.Settings(rays=128))
 
+or in memory, stage by stage (the same bytes, without the bake state and report):
+
+    scene = baker.load("level.glb")
+    done = baker.compute(scene, baker.Settings(rays=128))
+    baker.write(done, baker.encode(done), "level_baked.glb")
+
 The pipeline, stage by stage (docs/design.md §3); each stage hands a frozen dataclass on:
 
     gltf.load.load               glTF file → Scene (instances with float64 world matrices)
     geometry.world.build_world   Scene → World (every triangle in world space)
     pipeline.plan.make_plan      Scene + lights → Plan (what runs, what is left out, why)
-    atlas.unwrap.unwrap          World → Atlas (xatlas lightmap pages)
+    atlas.unwrap.unwrap          World → Atlas (lightmap pages)
     atlas.rasterise.cover        Atlas → Coverage (which triangle owns each texel)
     atlas.rasterise.texels_of    Coverage → Texels (world sample point of every texel of a part)
     atlas.validity.check_texels  Texels → Texels + Validity (points inside geometry moved/flagged)
@@ -34,13 +40,19 @@ from __future__ import annotations
 import importlib
 
 __all__ = ["bake", "BakeResult", "Settings", "BakerError", "InputError", "OutputError",
-           "SettingsError"]
+           "SettingsError", "load", "compute", "encode", "write"]
 __version__ = "0.1.0"
 
 _LIGHT = {"Settings": "baker.settings", "BakerError": "baker.errors",
           "InputError": "baker.errors", "OutputError": "baker.errors",
           "SettingsError": "baker.errors"}
 """Public names of modules that import no more than the standard library's small modules."""
+
+_IN_MEMORY = {"load": ("baker.gltf.load", "load"), "compute": ("baker.pipeline.full", "compute"),
+              "encode": ("baker.api", "encode_pages"), "write": ("baker.api", "write_output")}
+"""The bake in memory, stage by stage: ``load`` a file into a Scene, ``compute`` its lightmaps,
+``encode`` them into 8-bit pages, ``write`` the scene with them (what ``bake`` does, less its
+bake state and report)."""
 
 
 def __getattr__(name: str):
@@ -57,6 +69,8 @@ def __getattr__(name: str):
     api = importlib.import_module("baker.api")  # the whole pipeline, as ``import baker`` was
     if name in ("bake", "BakeResult"):
         return getattr(api, name)
+    if name in _IN_MEMORY:
+        return getattr(importlib.import_module(_IN_MEMORY[name][0]), _IN_MEMORY[name][1])
     try:
         return importlib.import_module(f"baker.{name}")
     except ModuleNotFoundError:

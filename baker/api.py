@@ -13,23 +13,25 @@ from pathlib import Path
 from typing import Callable
 
 from baker.errors import BakerError, InputError, OutputError
-from baker.gltf.files import inside
 from baker.gltf.load import load
 from baker.gltf.scene import Scene
 from baker.image.carriers import emissive_lightmaps, viewer_notes
 from baker.image.compose import Lightmaps
-from baker.image.encode import encode
+from baker.image.encode import EncodedPage, encode
 from baker.image.errormap import write_error_maps
 from baker.image.hdr import check_format, page_file
 from baker.light.gi import MAX_BOUNCES
-from baker.output.write import DIRECTIONAL_EXTENSION, WriteOptions, image_file_name, write
+from baker.output.write import (DIRECTIONAL_EXTENSION, WriteInfo, WriteOptions, image_file_name,
+                                write)
 from baker.pipeline import cluster
-from baker.pipeline.full import compute, timed, writes_occlusion
+from baker.pipeline.full import Computed, compute, timed, writes_occlusion
 from baker.pipeline.input_warnings import input_warnings
 from baker.pipeline.plan import Plan
 from baker.rebake.incremental import (
     FullBake,
+    asked_settings,
     details,
+    node_names,
     rebake,
     record_full_bake,
     summary,
@@ -37,7 +39,8 @@ from baker.rebake.incremental import (
 from baker.rebake.diff import code_fingerprint
 from baker.rebake.staging import StateStaging
 from baker.rebake.state import default_path as default_state_path
-from baker.run.atomic import Outputs, write_atomically
+from baker.rebake.state import timing_path
+from baker.run.atomic import Outputs, destination, write_atomically
 from baker.run.compile_clock import CompileClock
 from baker.run.progress import StageLines
 from baker.settings import Resolved, Settings
@@ -64,11 +67,12 @@ def check_output(input_path: Path, output: Path, overwrite: bool = False,
                  folders: tuple[Path | None, ...] = ()) -> None:
     """Refuse, before any work, an output that cannot be written or would replace the input.
 
-    The output ends in .glb or .gltf; it, the report and the bake state are files (not
-    folders) in folders that can be written to, or are missing below a folder that can (the
-    bake makes them, ``Outputs.folder``, as for ``-o out/level.gltf``); ``folders`` (``--lightmaps``,
-    ``--error-map``) are not files; the output is the input itself only with ``overwrite``
-    (the input is then replaced atomically).
+    The output ends in .glb or .gltf; it, the report, the bake state and its timing record are
+    regular files or missing (``run.atomic.destination``: never a folder, a device or a link to
+    one; a FIFO is written into) in folders that can be written to, or are missing below a
+    folder that can (the bake makes them, ``Outputs.folder``, as for ``-o out/level.gltf``);
+    ``folders`` (``--lightmaps``, ``--error-map``) are not files; the output is the input
+    itself only with ``overwrite`` (the input is then replaced atomically).
     """
     if output.suffix.lower() not in (".glb", ".gltf"):
         raise OutputError(f"the output must end in .glb or .gltf, not {output.suffix or '(none)'}",
@@ -77,13 +81,10 @@ def check_output(input_path: Path, output: Path, overwrite: bool = False,
         raise OutputError("the output is the input file: baker replaces its input only when asked",
                           file=str(output), fix="give another output path with -o, or add --overwrite "
                                                 "to replace the input with its bake")
-    for path in (output, report_path, state_path):
-        if path is None:
-            continue
-        if path.is_dir():
-            raise OutputError("the path is a folder, not a file", file=str(path),
-                              fix="give a file name, or move the folder away")
-        _check_writable(path, _existing_folder(path))
+    timing = None if state_path is None else timing_path(state_path)
+    for path in (output, report_path, state_path, timing):
+        if path is not None and destination(path) == "replace":
+            _check_writable(path, _existing_folder(path))
     for folder in folders:
         if folder is not None and folder.exists() and not folder.is_dir():
             raise OutputError("is a file, not a folder", file=str(folder),
@@ -118,42 +119,27 @@ def _check_writable(path: Path, folder: Path) -> None:
     os.unlink(probe)
 
 
-def check_input_kept(scene: Scene, output: Path, overwrite: bool = False) -> None:
-    """Refuse an output whose files would replace a file the input uses (its .bin, its images),
-    unless ``overwrite``.
-
-    A ``.gltf`` output writes ``<stem>.bin`` beside it, and in another folder than the input's
-    copies the images the input names by URI beside it (``write.image_file_name``); a ``.glb``
-    holds them.
-    """
-    if overwrite:
-        return
+def output_files(scene: Scene, output: Path) -> list[Path]:
+    """The files of the output itself: ``output``, and for a ``.gltf`` output the ``<stem>.bin``
+    it writes beside it and, in another folder than the input's, the copies of the images the
+    input names by URI (``write.image_file_name``; a ``.glb`` holds them): those
+    ``--overwrite`` lets replace files the input uses."""
     gltf = output.suffix.lower() == ".gltf"
     written = [output] + ([output.with_name(output.stem + ".bin")] if gltf else [])
-    folder = scene.path.parent
-    if gltf and output.parent.resolve() != folder.resolve():
+    if gltf and output.parent.resolve() != scene.path.parent.resolve():
         written += [output.with_name(image_file_name(output, i, image.uri))
                     for i, image in enumerate(scene.document.images)
                     if isinstance(image.uri, str) and not image.uri.startswith("data:")]
-    fix = "choose another output name or folder, or add --overwrite to replace it"
-    for kind, items in (("buffers", scene.document.buffers), ("images", scene.document.images)):
-        for i, item in enumerate(items):
-            uri = item.uri
-            if not isinstance(uri, str) or not uri or uri.startswith("data:"):
-                continue
-            source = inside(uri, folder, str(scene.path), f"{kind}[{i}]")
-            for target in written:
-                if target.exists() and source.exists() and os.path.samefile(source, target):
-                    raise OutputError(f"the output would replace {source}, which the input uses",
-                                      file=str(output), where=f"{kind}[{i}].uri", fix=fix)
+    return written
 
 
 def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings = Settings(), *,
          report_path: str | os.PathLike | None = None,
          lightmaps_dir: str | os.PathLike | None = None, lightmaps_format: str = "png",
          error_map_dir: str | os.PathLike | None = None,
-         quiet: bool = True, overwrite: bool = False, incremental: bool = False,
-         state: str | os.PathLike | bool | None = None, relight: bool = False) -> BakeResult:
+         quiet: bool = True, overwrite: bool = False, incremental: bool | str = False,
+         state: str | os.PathLike | bool | None = None, relight: bool = False,
+         contained: bool = False) -> BakeResult:
     """Bake the glTF scene at ``input`` into ``output`` (.glb or .gltf) with lightmaps.
 
     ``report_path`` writes the JSON report; ``lightmaps_dir`` also writes each page as a file,
@@ -167,11 +153,18 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
     ``state``: the bake state (docs/bake_state.md) written after the bake, ``<output>.bake`` by
     default (None/True), another path, or False for none. ``incremental=True`` starts from that
     state: only the texels the edit can reach are recomputed, bit-identical to a full bake; a
-    missing, damaged or mismatched state, or an edit that changes the atlas, falls back to a
-    full bake. ``BakeResult.rebake`` says which (``full_bake_reason``), what changed, and names
+    missing, damaged or mismatched state, an edit that changes the atlas, or one whose rebake
+    the last bakes' measured times say would cost more than a full bake, falls back to a full
+    bake; ``incremental="always"`` leaves out the last (a rebake whenever it can follow: to
+    measure it, or test it). ``BakeResult.rebake`` says which (``full_bake_reason``), what changed, and names
     the recomputed texels (``dirty_keys``, ``dirty_reasons``). ``relight=True``: only light
     colours and intensities may have changed; the lightmaps are recomposed from the state with
-    no ray cast, and anything else is an InputError (nothing written).
+    no ray cast, and anything else is an InputError (nothing written). ``contained``: the scene
+    file itself is opened as the files it names are (inside its folder, no link out, one
+    name: ``gltf.load.load``), for scenes as untrusted as their contents (``baker hook``).
+
+    No file the bake writes ever replaces one the scene is read from, whatever its name; with
+    ``overwrite``, the output's own files may (``output_files``).
     """
     input_path, output = Path(input), Path(output)
     state_path = None if state is False else (
@@ -186,12 +179,17 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
     log = StageLines(not quiet)
     with timed(loading, "load"), log.stage("load"):
         scene = load(input_path, settings.mirror_roughness, settings.animated,
-                     settings.allow_hard_links)
-    check_input_kept(scene, output, overwrite)
+                     settings.allow_hard_links, contained)
+    # every file of the bake, put in place together, none over a file the scene reads
+    # (run/atomic.py): checked here before any work, and again before the first rename
+    own = output_files(scene, output)
+    outputs = Outputs(scene.inputs, own, overwrite)
+    state_files = [] if state_path is None else [state_path, timing_path(state_path)]
+    for path in own + state_files + ([] if report_path is None else [Path(report_path)]):
+        outputs.check(path)
     with ThreadPoolExecutor(1) as beside, CompileClock() as compiling, \
             cluster.session(settings.cluster, settings.threads, cluster_identity) as on_cluster:
         staging = None if state_path is None else StateStaging(beside, state_path, settings)
-        outputs = Outputs()  # every file of the bake, put in place together (run/atomic.py)
         try:
             for path in (output, report_path, state_path):  # made if missing, like mkdir -p
                 if path is not None:
@@ -207,15 +205,13 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
             resolved = done.settings
             # closing(): the rows the state is written from (parts.py), if on disk, are
             # removed once the state is written.
-            with closing(done.per_texel), timed(times, "write"), log.stage("write"):
-                pages = encode(carried(done), resolved.encoding, writes_occlusion(resolved),
-                               resolved.clip_percentile)
-                info = write(scene, done.atlas, pages, output,
-                             WriteOptions(encoding=resolved.encoding, occlusion=resolved.occlusion,
-                                          clip_percentile=resolved.clip_percentile,
-                                          carrier=resolved.carrier,
-                                          baked_lights=resolved.baked_lights,
-                                          authored_uv=resolved.uv), outputs)
+            with closing(done.per_texel), timed(times, "write"), \
+                    log.stage("write", "steps") as steps:
+                texels = done.lightmaps.covered.size  # the pages' texels encoded: as many steps
+                steps.expect(texels)
+                pages = encode_pages(done)
+                steps.advance(texels)
+                info = write_output(done, pages, output, outputs, steps)
                 if lightmaps_dir is not None:
                     write_page_files(outputs.folder(Path(lightmaps_dir)), output.stem, pages,
                                      done.lightmaps.light, lightmaps_format, outputs.stage)
@@ -244,6 +240,40 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
                       rays=done.tally.rays, pages=done.atlas.page_count, seconds=seconds,
                       rmse_estimate=report["rmse_estimate"], report=report,
                       rebake=details(report["rebake"], rebaked))
+
+
+def last_settings(output: str | os.PathLike, state: str | os.PathLike | None = None,
+                  **overrides) -> Settings:
+    """The ``Settings`` the last bake of ``output`` was given, read from its bake state
+    (``state``; default ``<output>.bake``), with ``overrides``: what ``baker rebake`` and
+    ``relight`` bake with. The settings a state never gives (``settings.CALLER_ONLY``) are the
+    defaults unless ``overrides`` give them; SettingsError when there is no usable state."""
+    return asked_settings(Path(state) if state else default_state_path(Path(output)),
+                          **overrides)
+
+
+def scene_node_names(scene: str | os.PathLike) -> dict[int, str]:
+    """Node index → name (or ``nodes[i]``) of the glTF file ``scene``, for messages."""
+    return node_names(scene)
+
+
+def encode_pages(done: Computed) -> list[EncodedPage]:
+    """``done``'s pages as the output carries them (``carried``), encoded as its settings say
+    (8-bit PNG: ``image.encode.encode``)."""
+    s = done.settings
+    return encode(carried(done), s.encoding, writes_occlusion(s), s.clip_percentile)
+
+
+def write_output(done: Computed, pages: list[EncodedPage], output: str | os.PathLike,
+                 outputs: Outputs | None = None, steps=None) -> WriteInfo:
+    """Write ``done``'s scene with its lightmap ``pages`` (``encode_pages``) to ``output`` (.glb
+    or .gltf) as its settings say (``output.write.write``); ``outputs``: stage the files there
+    for the caller to put in place with its others (None: in place now, atomically)."""
+    s = done.settings
+    options = WriteOptions(encoding=s.encoding, occlusion=s.occlusion,
+                           clip_percentile=s.clip_percentile, carrier=s.carrier,
+                           baked_lights=s.baked_lights, authored_uv=s.uv)
+    return write(done.scene, done.atlas, pages, Path(output), options, outputs, steps)
 
 
 def cluster_identity() -> dict[str, str]:
@@ -368,7 +398,7 @@ def write_page_files(folder: Path, stem: str, pages, light=None, format: str = "
     return paths
 
 
-def bake_or_rebake(scene: Scene, settings: Settings, state_path, incremental: bool,
+def bake_or_rebake(scene: Scene, settings: Settings, state_path, incremental: bool | str,
                    quiet: bool = True, relight: bool = False, spill_folder=None, staging=None):
     """(``pipeline.full.Computed``, Rebaked | str | None): a rebake from the state at ``state_path`` when
     ``incremental`` and it can follow, else a full bake and the one-line reason (a str), or None
@@ -378,15 +408,19 @@ def bake_or_rebake(scene: Scene, settings: Settings, state_path, incremental: bo
     (``pipeline.full.compute``); ``staging``: where the bake state is written (``rebake.staging.StateStaging``)."""
     if not incremental and not relight:
         return compute(scene, settings, quiet, spill_folder, staging), None
+    prepared = None
     if state_path is None:
         reason = "no bake state (state=False)"
     else:
         try:
-            rebaked = rebake(scene, settings, state_path, quiet, relight, staging)
+            rebaked = rebake(scene, settings, state_path, quiet, relight, staging,
+                             priced=incremental != "always")
             return rebaked.computed, rebaked
-        except FullBake as why:
-            reason = str(why)
+        except FullBake as why:  # keeping what the rebake kept (a derived d_max) and made
+            reason, settings, prepared = str(why), why.settings or settings, why.prepared
+            if staging is not None:
+                staging.asked = settings
     if relight:
         raise InputError(f"cannot relight without tracing: {reason}", file=str(scene.path),
                          fix="use `baker bake` (it rebakes only what changed)")
-    return compute(scene, settings, quiet, spill_folder, staging), reason
+    return compute(scene, settings, quiet, spill_folder, staging, prepared), reason

@@ -41,9 +41,9 @@ import numpy as np
 
 from baker.errors import InputError, OutputError, SettingsError
 from baker.geometry.surface import (LUMINANCE, SRGB_TO_LINEAR, albedo, base_colour, emission,
-                                    viewer_diffuse_weight_at)
+                                    transformed_uv, viewer_diffuse_weight_at)
 from baker.geometry.world import World, build_world
-from baker.gltf.load import _Context, _decode_image, load, resolve_buffers, trs_matrices
+from baker.gltf.load import image_pixels, load, trs_matrices
 from baker.gltf.scene import Scene
 from baker.light.viewer_lights import punctual_shading
 from baker.image.encode import linear_to_srgb, png_bytes
@@ -253,14 +253,12 @@ def read_lightmaps(scene: Scene, world: World) -> SceneLightmaps:
     recorded = ((extras.get("baker") or {}) if isinstance(extras, dict) else {})
     encoding = recorded.get("lightmap_encoding") or "linear"
     carrier = recorded.get("carrier") or "moz"
-    ctx = _Context(document, resolve_buffers(document, scene.path), str(scene.path),
-                   Path(scene.path).parent)
     pages: list[np.ndarray] = []
     page_of_key: dict[tuple, int] = {}
     count = len(world.triangles)
     tri_page = np.full(count, -1, np.int64)
     tri_uv = np.zeros((count, 3, 2))
-    directional = _DirectionalReader(ctx, count)
+    directional = _DirectionalReader(scene, count)
     for i, inst in enumerate(scene.instances):
         prim = scene.primitives[inst.primitive]
         found = _carried_texture(document, scene.materials[prim.material], carrier, encoding)
@@ -271,7 +269,7 @@ def read_lightmaps(scene: Scene, world: World) -> SceneLightmaps:
         source = document.textures[texture].source
         key = (source, scale, curve, red)
         if key not in page_of_key:
-            texels = _decode_image(ctx, source)[..., :3]
+            texels = image_pixels(scene, source)[..., :3]
             if red:
                 texels = np.repeat(texels[..., :1], 3, axis=-1)
             decoded = SRGB_TO_LINEAR[texels] if curve == "srgb" else texels / 255.0
@@ -280,7 +278,8 @@ def read_lightmaps(scene: Scene, world: World) -> SceneLightmaps:
         tris = world.instance_triangles(i)
         local = world.triangles[tris] - world.vertex_start[i]
         tri_page[tris] = page_of_key[key]
-        tri_uv[tris] = prim.texcoords[texcoord][local]
+        tri_uv[tris] = transformed_uv(prim.texcoords[texcoord][local],
+                                    _carrier_transform(scene.materials[prim.material], carrier))
     if not pages and not recorded:
         raise InputError("the scene has no lightmap: no material has a MOZ_lightmap extension",
                          file=str(scene.path),
@@ -293,8 +292,8 @@ def read_lightmaps(scene: Scene, world: World) -> SceneLightmaps:
 class _DirectionalReader:
     """Gathers ``Directional`` instance by instance (``read_lightmaps``)."""
 
-    def __init__(self, ctx, count: int):
-        self.ctx = ctx
+    def __init__(self, scene: Scene, count: int):
+        self.scene = scene
         self.pages: dict[int, int] = {}  # image index → row of ``Directional.pages``
         self.normals: dict[int, int] = {}
         self.page, self.normal_map = np.full(count, -1, np.int64), np.full(count, -1, np.int64)
@@ -309,7 +308,7 @@ class _DirectionalReader:
         index = scene.materials[prim.material].index
         if index is None:
             return
-        gltf = self.ctx.document.materials[index]
+        gltf = self.scene.document.materials[index]
         ext = (gltf.extensions or {}).get(DIRECTIONAL_EXTENSION)
         normal = gltf.normalTexture
         if not isinstance(ext, dict) or ext.get("index") is None or normal is None:
@@ -325,9 +324,9 @@ class _DirectionalReader:
         self.normal_scale[tris] = 1.0 if normal.scale is None else float(normal.scale)
 
     def _image(self, seen: dict, out: list, texture: int, decode) -> int:
-        source = self.ctx.document.textures[texture].source
+        source = self.scene.document.textures[texture].source
         if source not in seen:
-            out.append(decode(_decode_image(self.ctx, source)[..., :3]))
+            out.append(decode(image_pixels(self.scene, source)[..., :3]))
             seen[source] = len(out) - 1
         return seen[source]
 
@@ -356,6 +355,15 @@ def _carried_texture(document, material, carrier: str, encoding: str):
         return (gltf.occlusionTexture.index, int(gltf.occlusionTexture.texCoord or 0), 1.0,
                 "linear", True)
     return None
+
+
+def _carrier_transform(material, carrier: str) -> tuple[float, ...] | None:
+    """The KHR_texture_transform (``TextureRef.transform``) through which ``material`` reads the
+    emissive or occlusion carrier's page: an instance sharing another's lightmap UVs
+    (``output/write.py``), or UVs quantized by gltfpack."""
+    ref = {"emissive": material.emissive_texture,
+           "occlusion": material.occlusion_texture}.get(carrier)
+    return None if ref is None else ref.transform
 
 
 def sample_bilinear(page: np.ndarray, uv: np.ndarray) -> np.ndarray:

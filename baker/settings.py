@@ -35,6 +35,14 @@ INSTALL_FIX = ('pip install "baker[denoise]" (or pip install ".[denoise]" from a
                'baker), or leave out --denoise')
 
 
+CALLER_ONLY = ("threads", "chunk_texels", "cluster", "max_total_rays", "allow_hard_links")
+"""Settings that never change a bake's result, only where and how it runs and what it may take
+or read: its threads, the size of its work units (memory), the cluster it runs on (where the
+scene is sent), its ray budget and whether it reads files with several names. They come only
+from whoever runs the bake (the command line, the API), never from a file that travels with the
+scene: ``rebake.incremental.asked_settings`` drops them from a bake state, which is as
+untrusted as the scene it sits beside."""
+
 MAX_TOTAL_RAYS = 10 ** 10
 """``Settings.max_total_rays`` by default: 10¹⁰ rays, about half an hour at the 5 M rays/s of
 Embree on 2 cores (an 8192² page at 64 rays a texel is 4.3·10⁹); a scene of 3 KB can otherwise
@@ -148,7 +156,7 @@ class Settings:
         node's extras give none; None fits it to a few traced texels.
     allow_hard_links: read files a ``.gltf`` names that have other names too (hard links); by
         default they are refused, as a link to a file outside the scene's folder would be
-        read (gltf/files.py).
+        read (gltf/files.py). Like the rest of ``CALLER_ONLY``, never taken from a bake state.
     max_total_rays: the most rays one bake may cast: its texels × their rays (obscurance,
         direct light, GI paths, validity probes), checked once the texels are known and before
         any ray is cast; a bake that would need more is refused with its figures

@@ -254,10 +254,10 @@ def compare_with_gi(done: Computed, rays: int = 64, paths: int = 256) -> dict:
     indirect = indirect_light(done.scene, done.world, tracer, done.sources, done.texels,
                               settings, paths).irradiance @ LUMINANCE
     gi_seconds = time.perf_counter() - started
-    direct = done.direct.irradiance() @ LUMINANCE if done.direct is not None else 0.0
+    lit = done.direct.irradiance() @ LUMINANCE if done.direct is not None else 0.0
     ambient = _luminance(done, terms)
-    gi = direct + indirect
-    rmse = float(np.sqrt(np.mean((direct + ambient - gi) ** 2)))
+    gi = lit + indirect
+    rmse = float(np.sqrt(np.mean((lit + ambient - gi) ** 2)))
     return {"rays": rays, "paths": paths, "obscurance_seconds": obscurance_seconds,
             "gi_seconds": gi_seconds, "rmse": rmse, "gi_mean": float(gi.mean()),
             "relative": rmse / max(float(gi.mean()), 1e-30),
@@ -268,18 +268,13 @@ _ROUNDING = 2.0 ** -23  # float32's relative rounding: two bakes of an exact tex
 _RAY_KINDS = ("shadow_rays", "emissive_rays", "sky_rays")  # with ``rays``: every term's rays
 
 
-def _calibration_bake(scene: Scene, settings: dict, rays: int, seed: int, factor: int
+def _calibration_bake(scene: Scene, settings: dict, rays: int, seed: int
                       ) -> tuple[np.ndarray, np.ndarray, float]:
-    """A bake of ``scene`` at ``rays`` rays of every kind (and ``factor`` × the points of
-    I_A's power estimate): the baked texels' lightmap luminance, their ``texel_errors`` and
+    """A bake of ``scene`` at ``rays`` rays of every kind (I_A's power estimate follows them,
+    ``direct.power_samples``): the baked texels' lightmap luminance, their ``texel_errors`` and
     the ``rmse_estimate``."""
-    points = direct.POWER_POINTS
-    direct.POWER_POINTS = points * factor  # read when called (``direct.power_points``)
-    try:
-        done = compute(scene, Settings(rays=rays, seed=seed,
-                                       **{**settings, **dict.fromkeys(_RAY_KINDS, rays)}))
-    finally:
-        direct.POWER_POINTS = points
+    done = compute(scene, Settings(rays=rays, seed=seed,
+                                   **{**settings, **dict.fromkeys(_RAY_KINDS, rays)}))
     covered = done.lightmaps.covered
     pages = np.zeros(covered.shape)
     pages[done.texels.pixels()] = texel_errors(done)
@@ -291,16 +286,15 @@ def calibration(scene: Scene, settings: dict, rays: int, factor: int) -> dict:
 
     Bakes ``scene`` with ``settings`` (a dict of ``Settings`` fields) at ``rays`` rays of
     every kind a texel (obscurance rays or GI paths, shadow, emissive and sky rays), seed 1,
-    and a reference with ``factor`` × as many of each and as many points for I_A's power,
+    and a reference with ``factor`` × as many of each (and so of I_A's power samples),
     seed 2. Returns, over the baked texels' post-processed lightmap luminance: "reported"
     (the bake's ``rmse_estimate``), "measured" (the RMS difference × sqrt(f/(f + 1)): the
     reference's error taken out as if it fell as 1/sqrt(rays)), their "ratio", "2σ" and "3σ"
     (the share of texels within 2 and 3 of their error-map value, the reference's added in
     quadrature; an exact texel counts within), "reference" (its ``rmse_estimate``), "texels".
     """
-    value, sigma, reported = _calibration_bake(scene, settings, rays, 1, 1)
-    ref_value, ref_sigma, ref_reported = _calibration_bake(scene, settings, rays * factor, 2,
-                                                           factor)
+    value, sigma, reported = _calibration_bake(scene, settings, rays, 1)
+    ref_value, ref_sigma, ref_reported = _calibration_bake(scene, settings, rays * factor, 2)
     error = value - ref_value
     measured = float(np.sqrt(np.mean(error ** 2) * factor / (factor + 1)))
     band = np.sqrt(sigma ** 2 + ref_sigma ** 2) + _ROUNDING * np.abs(ref_value)

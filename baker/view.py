@@ -22,10 +22,12 @@ from http.server import SimpleHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 from urllib.parse import quote, unquote
 
-from baker.errors import InputError
+from baker.errors import InputError, OutputError
 from baker.gltf.load import load
+from baker.run.atomic import write_atomically
 
 STATIC = Path(__file__).resolve().parent / "view_static"
+PLUGIN = "moz_lightmap.js"  # the GLTFLoader plugin: MOZ_lightmap and directional pages
 _PREVIEW_SIZE = (160, 120)  # pixels of the preview that sets the starting exposure
 _TYPES = {".js": "text/javascript", ".html": "text/html; charset=utf-8",
           ".json": "application/json", ".glb": "model/gltf-binary", ".gltf": "model/gltf+json"}
@@ -105,3 +107,16 @@ def url_of(server: ThreadingHTTPServer) -> str:
     """The page's address."""
     host, port = server.server_address[:2]
     return f"http://{host}:{port}/"
+
+
+def write_plugin(folder: str | Path) -> Path:
+    """Write baker's three.js GLTFLoader plugin (``PLUGIN``: the moz carrier's MOZ_lightmap and
+    the directional pages; it imports "three") into ``folder``, made if missing, for an app
+    of the user's own (docs/viewers.md); returns the file's path."""
+    target = Path(folder) / PLUGIN
+    if Path(folder).exists() and not Path(folder).is_dir():
+        raise OutputError("is a file, not a folder", file=str(folder),
+                          fix="give a folder (it is made if missing)")
+    Path(folder).mkdir(parents=True, exist_ok=True)
+    write_atomically(target, (STATIC / PLUGIN).read_bytes())
+    return target

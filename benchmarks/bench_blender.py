@@ -2,21 +2,27 @@
 
     python benchmarks/bench_blender.py   # needs blender and numpy for it (Debian: apt-get install
                                          # blender python3-numpy)
+    python benchmarks/bench_blender.py --bpy V/bin/python --scenes cornell metal_glass MultiUVTest
+                                         # Blender 4.5 LTS as a module: python -m venv V &&
+                                         # V/bin/pip install "bpy==4.5.*" numpy (Python 3.11)
 
-Bakes the demo Cornell box with each carrier (texel density 8, 16 rays), then for each file runs
-Blender in background mode (``blender -b --factory-startup``): its bundled glTF importer reads
+Bakes the demo Cornell box (``--scenes``: also the room of metals and glass and the shared
+scenes) with each carrier (texel density 8, 16 rays), then for each file runs Blender in
+background mode (``blender -b --factory-startup``, or the ``bpy`` module): its glTF importer reads
 the file, and the script prints what the importer made of the bake in each baked material
 (which Principled BSDF input an image feeds, on which UV map, what the base colour is) and
 renders the scene with Cycles on the CPU (16 samples, no denoising, the world black: no light
 but the file's; Standard view transform, exposure log2 of the preview's) from the preview's
 camera (glTF's +y up is Blender's +z), back faces of single-sided materials see-through as the
-preview and glTF viewers cull them (Cycles ignores the importer's backface culling flag). The picture is compared with the preview's as
-tests/test_browser.py compares a browser's (median luminance ratio, log-luminance correlation,
-lit pixels black). Not a test: Blender is ~90 MB and a render takes seconds; README.md quotes it.
+preview and glTF viewers cull them (Cycles ignores the importer's backface culling flag). The
+picture is compared with the preview's as tests/test_browser.py compares a browser's (median
+luminance ratio, log-luminance correlation, lit pixels black). Not a test: Blender is 90–370 MB
+and a render takes seconds; docs/viewers.md quotes it.
 """
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import shutil
@@ -34,6 +40,8 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 import baker  # noqa: E402
 from assets.make_scenes import cornell_box  # noqa: E402
+from assets.material_scenes import metal_glass_room  # noqa: E402
+from tests.bakehelp import REAL_SCENES  # noqa: E402
 from tests.test_browser import SIZE, _compare, _view_and_preview  # noqa: E402
 
 CARRIERS = ("moz", "emissive", "occlusion")
@@ -84,7 +92,8 @@ for material in bpy.data.materials:
         "inputs": inputs,
         "base": list(bsdf.inputs["Base Color"].default_value)[:3] if bsdf else None,
         "emission strength": bsdf.inputs["Emission Strength"].default_value if bsdf else None,
-        "specular": bsdf.inputs["Specular"].default_value if bsdf else None}
+        "metallic": bsdf.inputs["Metallic"].default_value if bsdf else None,
+        "roughness": bsdf.inputs["Roughness"].default_value if bsdf else None}
     if material.use_backface_culling:
         cull_back_faces(material)
 found["uv maps"] = sorted({uv.name for o in bpy.data.objects if o.type == "MESH"
@@ -133,12 +142,13 @@ def _blender_env() -> dict:
     return env
 
 
-def blender_picture(blender: str, model: Path, png: Path, view, exposure: float) -> dict:
-    """Render ``model`` in Blender to ``png``; returns what the importer made of it."""
+def blender_picture(runner: list[str], model: Path, png: Path, view, exposure: float) -> dict:
+    """Render ``model`` with Blender (``runner``: the command that runs a Python script in it) to
+    ``png``; returns what the importer made of it."""
     right, up, back = view.axes
     values = [*view.origin, *right, *up, *back, view.yfov, exposure, *SIZE]
-    run = subprocess.run([blender, "-b", "--factory-startup", "--python-expr", _IN_BLENDER, "--",
-                          str(model), str(png), *(f"{x:.9g}" for x in values)],
+    run = subprocess.run([*runner, _IN_BLENDER, "--", str(model), str(png),
+                          *(f"{x:.9g}" for x in values)],
                          capture_output=True, text=True, timeout=900, env=_blender_env())
     lines = [line for line in run.stdout.splitlines() if line.startswith("BAKER-FOUND ")]
     if run.returncode != 0 or not lines:
@@ -146,28 +156,53 @@ def blender_picture(blender: str, model: Path, png: Path, view, exposure: float)
     return json.loads(lines[-1].split(" ", 1)[1])
 
 
-def main() -> None:
+SCENES = {"cornell": lambda folder: cornell_box().save(folder / "cornell.glb"),
+          "metal_glass": lambda folder: metal_glass_room().save(folder / "metal_glass.glb"),
+          **{name: (lambda folder, path=path: path) for name, path in REAL_SCENES.items()
+             if name != "SimpleInstancing"}}  # (GPU instances only: nothing baked)
+
+
+def runner(bpy_python: str | None) -> list[str]:
+    """The command that runs a Python script (``-c``-style, then ``--`` and its arguments) in
+    Blender: the ``bpy`` module in the Python at ``bpy_python`` (pip install bpy: Blender 4.5
+    LTS), else the ``blender`` program on PATH (Debian's)."""
+    if bpy_python is not None:
+        return [bpy_python, "-c"]
     blender = shutil.which("blender")
     if blender is None:
-        sys.exit("no blender on PATH (Debian: apt-get install blender)")
-    version = subprocess.run([blender, "--version"], capture_output=True, text=True,
-                             env=_blender_env()).stdout
-    print(version.splitlines()[0])
+        sys.exit("no blender on PATH (Debian: apt-get install blender), and no --bpy python")
+    return [blender, "-b", "--factory-startup", "--python-expr"]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--bpy", metavar="PYTHON",
+                        help="a Python with the bpy module (python -m venv V && V/bin/pip install "
+                             "bpy==4.5.* numpy) instead of the blender program")
+    parser.add_argument("--carriers", nargs="+", default=list(CARRIERS), choices=CARRIERS)
+    parser.add_argument("--scenes", nargs="+", default=["cornell"], choices=list(SCENES))
+    args = parser.parse_args()
+    command = runner(args.bpy)
+    version = subprocess.run([*command, "import bpy; print('Blender', bpy.app.version_string)",
+                              "--"], capture_output=True, text=True, env=_blender_env()).stdout
+    print(version.strip().splitlines()[-1] if version.strip() else "Blender (version unknown)")
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        source = cornell_box().save(folder / "cornell.glb")
-        for carrier in CARRIERS:
-            out = folder / f"cornell_{carrier}.glb"
-            baker.bake(source, out, baker.Settings(texel_density=8.0, rays=16, carrier=carrier),
-                       state=False)
-            view, preview = _view_and_preview(out)
-            png = folder / f"blender_{carrier}.png"
-            found = blender_picture(blender, out, png, view, preview.exposure)
-            print(f"\n{carrier}: images {found['images']}, UV maps {found['uv maps']}")
-            for name, material in found["materials"].items():
-                print(f"  {name}: {material}")
-            shown = np.asarray(Image.open(png).convert("RGB"))
-            _compare(shown, preview, f"blender_{carrier}", ROOT / "out")
+        for name in args.scenes:
+            source = SCENES[name](folder)
+            for carrier in args.carriers:
+                out = folder / f"{name}_{carrier}.glb"
+                density = 8.0 if name in ("cornell", "metal_glass") else 4.0
+                baker.bake(source, out, baker.Settings(texel_density=density, rays=16,
+                                                       carrier=carrier), state=False)
+                view, preview = _view_and_preview(out)
+                png = folder / f"blender_{name}_{carrier}.png"
+                found = blender_picture(command, out, png, view, preview.exposure)
+                print(f"\n{name} {carrier}: images {found['images']}, UV maps {found['uv maps']}")
+                for material_name, material in found["materials"].items():
+                    print(f"  {material_name}: {material}")
+                shown = np.asarray(Image.open(png).convert("RGB"))
+                _compare(shown, preview, f"blender_{name}_{carrier}", ROOT / "out")
 
 
 if __name__ == "__main__":

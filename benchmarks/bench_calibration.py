@@ -7,8 +7,9 @@ against the reference, their ratio (issue 22 asks for [0.67, 1.5]) and the share
 within 2σ / 3σ of their own ``--error-map`` value (normal errors: 95.4 % / 99.7 %).
 
 The set spans obscurance with ρ = sqrt, linear and step under a low ceiling, a Cornell room
-with its emissive lamp, a soft point light's penumbra, a floor under the sky and the
-path-traced GI (``--method gi``) of a glowing closed room and of the Cornell room.
+with its emissive lamp, a soft point light's penumbra, a floor under the sky, rooms lit by a
+lamp and through an open roof by the sky, and the path-traced GI (``--method gi``) of a glowing
+closed room and of the Cornell room.
 
     python benchmarks/bench_calibration.py [--rays 64] [--reference 16] [--only NAME]
 """
@@ -27,8 +28,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from assets.gltf_builder import GltfBuilder, box  # noqa: E402
 from assets.light_scenes import floor_under_box, penumbra  # noqa: E402
 from assets.make_scenes import cornell_box, parallel_planes  # noqa: E402
+from assets.rebake_scenes import box_room, grid_boxes  # noqa: E402
 from baker.gltf.load import load  # noqa: E402
 from baker.study import calibration  # noqa: E402
+
+
+ROOM = (4.0, 2.5, 4.0)
+CRATES = grid_boxes(8, room=ROOM, size=0.5)
+LAMP = {"at": (0.3, 2.2, -0.2), "intensity": 20.0, "radius": 0.1}
 
 
 def _glowing_room(albedo: float = 0.8) -> GltfBuilder:
@@ -56,6 +63,9 @@ SCENES = {
     "cornell (emissive lamp)": (cornell_box, dict(texel_density=8.0)),
     "soft light penumbra": (lambda: penumbra(0.2), dict(texel_density=40.0)),
     "sky over a box": (floor_under_box, dict(texel_density=10.0, sky=(0.3, 0.4, 0.6))),
+    "lamp-lit room": (lambda: box_room(CRATES, room=ROOM, lamp=LAMP), dict(texel_density=5.0)),
+    "sky-lit room (open roof)": (lambda: box_room(CRATES, room=ROOM, roof=False),
+                                 dict(texel_density=5.0, sky=(0.3, 0.4, 0.6))),
     "gi, glowing room a = 0.8": (_glowing_room, dict(texel_density=4.0, method="gi")),
     "gi, cornell (emissive lamp)": (cornell_box, dict(texel_density=4.0, method="gi")),
 }

@@ -1,11 +1,14 @@
-"""Benchmark: a user's first bake after ``pip install``, against the same bake once warm.
+"""Benchmark: a user's first bake after ``pip install``, against the same bake once warm, and
+the first rebake.
 
 Makes a fresh virtual environment, installs this checkout into it as a user does
 (``pip install <checkout>``: setup.py compiles the kernels into the wheel), then times the
 README's first bake (the demo Cornell box, default settings, a new ``baker`` process each
 time) ``--repeat`` times: the first run is the one a new user waits for, the others are warm.
-With ``--unwarmed`` it does the same in a second environment installed with
-``BAKER_NO_WARM=1`` (kernels compiled on first use), for comparison.
+Then a room of boxes is baked, one box moved, and ``baker rebake`` run in a new process: the
+kernels it compiled are counted (none, when the install compiled them). With ``--unwarmed``
+it does the same in a second environment installed with ``BAKER_NO_WARM=1`` (kernels compiled
+on first use), for comparison.
 
     python benchmarks/bench_first_bake.py [--repeat 3] [--unwarmed] [--keep DIR]
 """
@@ -57,6 +60,33 @@ def bake_seconds(venv: Path, scene: Path, folder: Path) -> tuple[float, float, i
     return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime), compiled
 
 
+def first_rebake(venv: Path, folder: Path) -> tuple[float, int]:
+    """(wall seconds, kernels compiled) of the first ``baker rebake`` in a new process after a
+    box of a room of 36 moved (``assets/rebake_scenes.py``)."""
+    make = ("import sys; sys.path.insert(0, {root!r})\n"
+            "from assets.rebake_scenes import box_room, grid_boxes, moved\n"
+            "boxes = grid_boxes(6)\n"
+            "room = box_room(moved(boxes, boxes[0]['name'], at=(1.0, 1.0)) if {edit} else boxes,"
+            " lamp={{'intensity': 20.0, 'radius': 0.1}})\n"
+            "room.save({path!r})\n")
+    scene, out = folder / "room.glb", folder / "room_baked.glb"
+    python, baker = str(venv / "bin" / "python"), str(venv / "bin" / "baker")
+    env = dict(os.environ, NUMBA_DEBUG_CACHE="1")
+    env.pop("PYTHONPATH", None)
+    env.pop("NUMBA_CACHE_DIR", None)
+    for edit in (False, True):
+        subprocess.run([python, "-c", make.format(root=str(ROOT), edit=edit, path=str(scene))],
+                       check=True, env=env, cwd=folder)
+        if not edit:
+            subprocess.run([baker, "bake", str(scene), "-o", str(out), "--quiet"], check=True,
+                           env=env, cwd=folder, capture_output=True)
+    started = time.perf_counter()
+    done = subprocess.run([baker, "rebake", str(scene), "-o", str(out), "--quiet"], check=True,
+                          env=env, cwd=folder, capture_output=True, text=True)
+    return (time.perf_counter() - started,
+            sum("data saved" in line for line in done.stdout.splitlines()))
+
+
 def measure(folder: Path, warm: bool, repeat: int) -> None:
     venv = folder / ("venv" if warm else "venv-unwarmed")
     seconds = install(venv, warm)
@@ -71,6 +101,8 @@ def measure(folder: Path, warm: bool, repeat: int) -> None:
         first, later = runs[0][i], statistics.median(run[i] for run in runs[1:])
         print(f"  {what}: first bake {first:.2f} s, warm {later:.2f} s (median of "
               f"{len(runs) - 1}): first / warm = {first / later:.2f}")
+    seconds, compiled = first_rebake(venv, folder)
+    print(f"  first rebake in a new process: {seconds:.2f} s, kernels compiled: {compiled}")
 
 
 def main() -> None:

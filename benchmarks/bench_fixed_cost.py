@@ -7,10 +7,10 @@ shows). For each, after one bake to load numba's kernels and fill a fresh unwrap
 (``baker/atlas/unwrap_cache.py``), ``--repeat`` bakes in this process (medians), printing every stage's seconds, µs per texel and per triangle, the share of the
 stages other than trace and direct light against the tracing, and the raw embreex rate on the
 bake's own rays measured in the same run (``bench_cornell.raw_embree_rate``: nearest hits, and
-the occlusion query that ``--rho step`` casts its rays with), the unwrap
-without the cache (xatlas run: the cold cost, what a first bake pays), and the unwrap after an
-edit of one mesh (the charts of the instance of median triangle count, a box, gone from the
-cache with the whole layouts: it is charted again and every instance's charts packed again).
+the occlusion query that ``--rho step`` casts its rays with), the unwrap without the cache
+(every mesh charted: the cold cost, what a first bake pays), and the unwrap after an edit of
+one mesh (the charts of the instance of median triangle count, a box, gone from the cache: it
+is charted again and every instance's charts packed again).
 Then the cost of a new process: Python with baker's imports, against Python alone (medians of ``--repeat``).
 
     python benchmarks/bench_fixed_cost.py [--rays 64] [--repeat 3] [--scenes cornell boxes]
@@ -31,8 +31,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from assets.make_scenes import cornell_box  # noqa: E402
 from assets.many_objects import boxes_and_sphere  # noqa: E402
-from baker.atlas.unwrap import baked_instances, chart_name, unwrap, xatlas_meshes  # noqa: E402
-from baker.atlas.unwrap_cache import CHARTS, FITS  # noqa: E402
+from baker.atlas.charts import chart_name  # noqa: E402
+from baker.atlas.unwrap import baked_instances, frame_meshes, unwrap  # noqa: E402
+from baker.atlas.unwrap_cache import entries  # noqa: E402
 from baker.gltf.load import load  # noqa: E402
 from baker.pipeline.full import compute  # noqa: E402
 from baker.run.parallel import cores  # noqa: E402
@@ -79,7 +80,7 @@ def bake_scene(name: str, rays: int, repeat: int) -> None:
     print(f"  obscurance rays {rate / 1e6:.2f} M/s end to end; raw embreex on {raw_rays:,} of "
           f"the same rays: {nearest / 1e6:.2f} M/s nearest hits ({rate / nearest:.0%}), "
           f"{raw / 1e6:.2f} M/s with the stage's query, {query} ({rate / raw:.0%})")
-    print(f"  unwrap cold (no cache, xatlas run): {cold_unwrap(done, repeat):.3f} s; "
+    print(f"  unwrap cold (no cache, every mesh charted): {cold_unwrap(done, repeat):.3f} s; "
           f"one mesh edited: {edited_unwrap(done, repeat):.3f} s; "
           f"from the cache (above): {stages['unwrap']:.3f} s")
 
@@ -97,18 +98,13 @@ def cold_unwrap(done, repeat: int) -> float:
 
 
 def edited_unwrap(done, repeat: int) -> float:
-    """Median seconds of the bake's unwrap with one mesh charted again: the whole layouts (and
-    fits) and the charts of the baked instance of median triangle count removed from the cache before
-    each run."""
-    instances = baked_instances(done.scene)
-    meshes = xatlas_meshes(done.scene, done.world, instances, done.settings)
+    """Median seconds of the bake's unwrap with one mesh charted again: the charts of the
+    baked instance of median triangle count removed from the cache before each run."""
+    meshes = frame_meshes(done.scene, done.world, baked_instances(done.scene))
     edited = sorted(range(len(meshes)), key=lambda m: (len(meshes[m][1]), m))[len(meshes) // 2]
-    place = Path(os.environ["BAKER_CACHE_DIR"]) / "unwrap"
     times = []
     for _ in range(repeat):
-        for entry in [*place.glob("*.npz"), *(place / FITS).glob("*.npz"),
-                      place / CHARTS / f"{chart_name(meshes[edited])}.npz"]:
-            entry.unlink(missing_ok=True)
+        (entries() / f"{chart_name(meshes[edited])}.npz").unlink(missing_ok=True)
         started = time.perf_counter()
         unwrap(done.scene, done.world, done.settings)
         times.append(time.perf_counter() - started)

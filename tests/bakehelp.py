@@ -45,14 +45,26 @@ def computed(builder, folder: Path, only_nodes=None, **settings) -> Computed:
 
 def carried(material) -> dict | None:
     """What carries the bake on a material of a baked file (pygltflib Material or its JSON
-    dict), whichever the carrier: {"index": texture, "texCoord": n}, from its MOZ_lightmap or,
-    for a lightmap copy of the emissive carrier ("… (lightmap page p)"), its emissiveTexture;
-    None for a material that carries none."""
+    dict), whichever the carrier: {"index": texture, "texCoord": n, "transform": its
+    KHR_texture_transform or None}, from its MOZ_lightmap or, for a lightmap copy of the
+    emissive carrier ("… (lightmap page p)"), its emissiveTexture; None for a material that
+    carries none. ``page_uv`` maps the UVs it reads to the page's."""
     data = material if isinstance(material, dict) else material.to_dict()
     extension = (data.get("extensions") or {}).get("MOZ_lightmap")
     if extension is not None:
-        return {"index": extension["index"], "texCoord": extension.get("texCoord", 0)}
+        return {"index": extension["index"], "texCoord": extension.get("texCoord", 0),
+                "transform": None}
     emissive = data.get("emissiveTexture")
     if emissive is not None and "(lightmap page" in (data.get("name") or ""):
-        return {"index": emissive["index"], "texCoord": emissive.get("texCoord", 0)}
+        return {"index": emissive["index"], "texCoord": emissive.get("texCoord", 0),
+                "transform": (emissive.get("extensions") or {}).get("KHR_texture_transform")}
     return None
+
+
+def page_uv(uv, info: dict):
+    """UVs (k, 2) as the carrier ``info`` (``carried``) reads them on its page: through its
+    KHR_texture_transform's scale and offset (baker writes no rotation), or as they are."""
+    transform = info["transform"]
+    if not transform:
+        return uv
+    return uv * transform.get("scale", [1.0, 1.0]) + transform.get("offset", [0.0, 0.0])

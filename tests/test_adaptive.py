@@ -221,6 +221,7 @@ def test_a_texel_that_stops_after_one_round_has_the_uniform_bakes_terms(tmp_path
 PENUMBRA = dict(texel_density=40.0, rays=16, max_rays=512)
 
 
+@pytest.mark.long
 def test_soft_light_rounds_meet_the_target_and_match_uniform_bakes(tmp_path):
     """A soft point light's penumbra (direct light only is noisy there, the obscurance rounds
     aim at E/√2): D's luminance within E of a 2048-shadow-ray reference at ≥ 95 % of texels

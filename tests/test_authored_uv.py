@@ -165,7 +165,7 @@ def test_a_rebake_with_authored_uvs_after_a_move_equals_a_full_bake(tmp_path):
     baker.bake(first, tmp_path / "baked.glb", SETTINGS)
     edited = authored_scene(box_at=(-0.4, 0.25, 0.3)).save(tmp_path / "moved.glb")
     shutil.copy(default_path(tmp_path / "baked.glb"), default_path(tmp_path / "again.glb"))
-    again = baker.bake(edited, tmp_path / "again.glb", SETTINGS, incremental=True)
+    again = baker.bake(edited, tmp_path / "again.glb", SETTINGS, incremental="always")
     baker.bake(edited, tmp_path / "full.glb", SETTINGS)
     assert again.rebake["incremental"] is True, again.rebake.get("full_bake_reason")
     assert (tmp_path / "again.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()

@@ -512,8 +512,9 @@ def test_an_interrupted_run_chunks_starts_no_further_chunk():
     assert sorted(ran) == [0, 1], ran
 
 
-@pytest.mark.parametrize("how,code", [(signal.SIGTERM, 143), (signal.SIGINT, 130)],
-                         ids=["SIGTERM", "SIGINT"])
+@pytest.mark.parametrize("how,code", [
+    pytest.param(signal.SIGTERM, 143, id="SIGTERM"),
+    pytest.param(signal.SIGINT, 130, id="SIGINT", marks=pytest.mark.long)])
 def test_a_terminated_bake_removes_its_spill_folder(tmp_path, how, code):
     """A bake of 3 parts (533,196 texels: its rows spill to ``.baker-spill-*`` beside the
     output) stopped by SIGTERM (``kill``, a CI timeout) after its first part cleans up as after
@@ -580,9 +581,10 @@ def _children_cpu_seconds() -> float:
     return usage.ru_utime + usage.ru_stime
 
 
-@pytest.mark.parametrize("how,threads", [(signal.SIGINT, "1"), (signal.SIGINT, "2"),
-                                         (signal.SIGKILL, "1")],
-                         ids=["SIGINT-1-thread", "SIGINT-2-threads", "SIGKILL"])
+@pytest.mark.parametrize("how,threads", [
+    pytest.param(signal.SIGINT, "1", id="SIGINT-1-thread"),
+    pytest.param(signal.SIGINT, "2", id="SIGINT-2-threads", marks=pytest.mark.long),
+    pytest.param(signal.SIGKILL, "1", id="SIGKILL", marks=pytest.mark.long)])
 def test_killing_a_real_bake_leaves_the_previous_output(tmp_path, how, threads):
     """With 2 threads, Ctrl-C cancels the chunks not yet started and waits only for the running
     ones (``parallel.texels_per_chunk``: 64 texels × 4096 rays here, tens of milliseconds): the

@@ -10,8 +10,8 @@ import io
 
 import baker
 from assets.make_scenes import cornell_box, three_instances, vase_room
-from baker.gltf.load import load, read_accessor, resolve_buffers
-from tests.bakehelp import REAL_SCENES, carried, saved
+from baker.gltf.load import load, read_accessor
+from tests.bakehelp import REAL_SCENES, carried, page_uv, saved
 from tests.gltf_validator import describe, issue_codes, validate
 
 FAST = dict(texel_density=8.0, rays=16)
@@ -95,14 +95,15 @@ def test_a_mesh_on_three_nodes_gets_three_lightmap_areas(tmp_path):
     meshes = {name: doc.nodes[node].mesh for name, node in boxes.items()}
     assert len(set(meshes.values())) == 3  # each instance got its own mesh
     # Each box's lightmap triangles, drawn on its page, cover texels no other box covers.
-    buffers = resolve_buffers(doc, out)
+    buffers = [doc.binary_blob()]
     masks = {}
     for name, mesh in meshes.items():
         prim = doc.meshes[mesh].primitives[0]
         ext = carried(doc.materials[prim.material])
         page = doc.textures[ext["index"]].source
         size = _image_size(doc, page)
-        uv = read_accessor(doc, buffers, getattr(prim.attributes, f"TEXCOORD_{ext['texCoord']}"))
+        uv = page_uv(read_accessor(doc, buffers, getattr(prim.attributes,
+                                                         f"TEXCOORD_{ext['texCoord']}")), ext)
         corners = read_accessor(doc, buffers, prim.indices).reshape(-1, 3)
         mask = Image.new("1", size)
         draw = ImageDraw.Draw(mask)
@@ -197,3 +198,14 @@ def test_files_written_beside_the_output_get_the_usual_permissions(tmp_path):
                tmp_path / "report.json", *sorted((tmp_path / "pages").iterdir())]
     for path in written:
         assert stat.S_IMODE(path.stat().st_mode) == 0o644, path
+
+
+def test_the_bake_in_memory_stage_by_stage_gives_the_bytes_of_baker_bake(tmp_path):
+    """``baker.load`` → ``baker.compute`` → ``baker.encode`` → ``baker.write``, the public
+    stages, write the file ``baker.bake`` writes, byte for byte."""
+    source = saved(cornell_box(), tmp_path)
+    settings = baker.Settings(rays=4, page_size=128)
+    baker.bake(source, tmp_path / "whole.glb", settings, state=False)
+    done = baker.compute(baker.load(source), settings)
+    baker.write(done, baker.encode(done), tmp_path / "staged.glb")
+    assert (tmp_path / "staged.glb").read_bytes() == (tmp_path / "whole.glb").read_bytes()

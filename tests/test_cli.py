@@ -30,7 +30,7 @@ def test_help_and_the_package_import_no_pipeline():
     heavy = ("numpy", "numba", "embreex", "PIL", "OpenEXR", "ray", "scipy", "pygltflib")
     code = ("import sys\nimport baker\nfrom baker.cli.main import build_parser\n"
             "parser = build_parser()\nfor name in ('bake', 'rebake', 'relight', 'watch', 'hook',"
-            " 'preview', 'view', 'study'):\n    try:\n        parser.parse_args([name, '--help'])\n"
+            " 'preview', 'view', 'plugin', 'study'):\n    try:\n        parser.parse_args([name, '--help'])\n"
             "    except SystemExit:\n        pass\n"
             f"print([m for m in {heavy!r} if m in sys.modules])")
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,

@@ -27,6 +27,7 @@ import pytest
 import baker
 from assets.make_scenes import cornell_box
 from baker.pipeline import parts
+from baker.rebake.state import default_path
 from tests.bakehelp import REAL_SCENES
 from tests.ray_cluster import ROOT, LocalCluster, free_port
 
@@ -82,6 +83,26 @@ def test_the_demo_scene_baked_on_the_cluster_is_the_local_bake(ray_cluster, smal
     assert report["bytes_from_workers"] > report["bytes_to_workers"] > 0
 
 
+def test_a_bake_is_cut_into_four_parts_a_worker_whatever_its_size(ray_cluster, tmp_path,
+                                                                  monkeypatch):
+    """At the parts' default size the demo at a 128² page is one part locally; on a cluster
+    of two one-CPU workers it is cut into eight (``cluster.part_texels``), with the same
+    bytes, and each worker takes parts as it ends its last. Its meshes are charted on the
+    workers (no cache), and the atlas packed here from their charts is the local one."""
+    from baker.pipeline import cluster
+
+    monkeypatch.setattr(cluster, "_LEAST_PART", 100)
+    monkeypatch.setenv("BAKER_CACHE_DIR", "off")
+    source = cornell_box().save(tmp_path / "cornell.glb")
+    result = _bake_both(source, tmp_path, ray_cluster.address, rays=4, page_size=128)
+    assert len(parts.part_slices(result.texels)) == 1
+    report = result.report["cluster"]
+    assert report["parts"] == 8 and report["parts_run_again"] == []
+    assert report["meshes_charted"] >= 3  # the room's walls, the blocks
+    assert len(report["workers"]) >= 2  # both nodes took parts
+
+
+@pytest.mark.long
 def test_a_shared_scene_with_lights_is_the_local_bake_on_one_thread(ray_cluster, small_parts,
                                                                      tmp_path):
     """Punctual lights (direct light per texel) and glass-free leaves of a real scene, against
@@ -117,9 +138,12 @@ def _short_block_moved():
 def _rebakes(folder: Path, settings: dict) -> tuple[Path, Path, Path]:
     """The demo scene baked here into ``folder``/local, its bake copied to ``folder``/cluster,
     and the edited scene (``_short_block_moved``): (its path, the local and the cluster
-    outputs, each with the state of the first bake beside it)."""
+    outputs, each with the state of the first bake beside it, without its timing record: the
+    move reaches most texels, and by the record's stage times a rebake may cost about what a
+    full bake does (``incremental.rebake_cost``), which these tests do not weigh)."""
     local, remote = _outputs(folder)
     baker.bake(cornell_box().save(folder / "cornell.glb"), local, baker.Settings(**settings))
+    Path(f"{default_path(local)}.json").unlink()
     for made in local.parent.iterdir():
         shutil.copyfile(made, remote.parent / made.name)
     return _short_block_moved().save(folder / "moved.glb"), local, remote
@@ -134,7 +158,7 @@ def test_a_rebake_on_the_cluster_is_the_local_rebake_and_a_full_bake(ray_cluster
     monkeypatch.setattr(parts, "PART_TEXELS", 500)  # the 2,566 dirty texels make 6 parts
     settings = dict(rays=16, page_size=128)
     edited, local, remote = _rebakes(tmp_path, settings)
-    here = baker.bake(edited, local, baker.Settings(**settings), incremental=True)
+    here = baker.bake(edited, local, baker.Settings(**settings), incremental="always")
     assert main(["rebake", str(edited), "-o", str(remote), "--cluster", ray_cluster.address,
                  "--report", str(tmp_path / "report.json")]) == 0
     _same_bake(local, remote)
@@ -191,6 +215,8 @@ def _with_a_worker_killed(cluster: LocalCluster, bake) -> "baker.BakeResult":
     assert killed, "no worker was seen running a part"
     assert not any(f" pid {killed[0]}" in name and w["texels"]
                    for name, w in result.report["cluster"]["workers"].items())
+    again = result.report["cluster"]["parts_run_again"]  # the part lost, and its worker
+    assert again and all("Worker" in lost["error"] or "Node" in lost["error"] for lost in again)
     return result
 
 
@@ -205,19 +231,21 @@ def test_a_worker_killed_in_a_part_leaves_the_bytes_as_they_were(ray_cluster, sm
     _same_bake(local, remote)
 
 
+@pytest.mark.long
 def test_a_worker_killed_in_a_rebake_leaves_the_bytes_as_they_were(ray_cluster, small_parts,
                                                                      tmp_path):
     settings = dict(rays=256, page_size=128)
     edited, local, remote = _rebakes(tmp_path, settings)
-    baker.bake(edited, local, baker.Settings(**settings), incremental=True)
+    baker.bake(edited, local, baker.Settings(**settings), incremental="always")
     result = _with_a_worker_killed(ray_cluster, lambda: baker.bake(edited, remote, baker.Settings(
-        cluster=ray_cluster.address, **settings), incremental=True))
-    assert result.rebake["incremental"]
+        cluster=ray_cluster.address, **settings), incremental="always"))
+    assert result.rebake["incremental"], result.rebake.get("full_bake_reason")
     _same_bake(local, remote)
     on = result.report["cluster"]
     assert sum(w["texels"] for w in on["workers"].values()) == result.rebake["dirty_texels"]
 
 
+@pytest.mark.long
 def test_ctrl_c_leaves_no_output_and_the_cluster_as_it_was(ray_cluster, tmp_path):
     source = cornell_box().save(tmp_path / "cornell.glb")
     deadline = time.monotonic() + 60  # an earlier test's worker may still be named for its part:
@@ -291,6 +319,95 @@ def test_an_unreachable_cluster_stops_a_rebake_before_any_work(tmp_path, capsys)
     assert main(["rebake", str(edited), "-o", str(local), "--cluster", address]) == 1
     assert f"no Ray cluster answers at {address}" in capsys.readouterr().err
     assert {p.name: p.read_bytes() for p in local.parent.iterdir()} == before
+
+
+class _NotAHead:
+    """A server on loopback that is not a Ray head: it answers every connection once with
+    ``reply`` (an HTTP/1 error page, or an HTTP/2 SETTINGS frame and nothing after), then
+    hangs up; stops with the block."""
+
+    def __init__(self, reply: bytes):
+        import socket
+
+        self.reply = reply
+        self.listener = socket.create_server(("127.0.0.1", 0))
+        self.listener.settimeout(0.2)
+        self.address = f"127.0.0.1:{self.listener.getsockname()[1]}"
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self._serve, daemon=True)
+
+    def _serve(self) -> None:
+        import socket
+
+        while not self.stop.is_set():
+            try:
+                connection, _ = self.listener.accept()
+            except socket.timeout:
+                continue
+            with connection:
+                try:
+                    connection.settimeout(2.0)
+                    connection.recv(1 << 16)
+                    connection.sendall(self.reply)
+                except OSError:
+                    pass
+
+    def __enter__(self) -> "_NotAHead":
+        self.thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop.set()
+        self.thread.join()
+        self.listener.close()
+
+
+@pytest.mark.parametrize("reply", [
+    pytest.param(b"HTTP/1.1 404 Not Found\r\nContent-Length: 0\r\n\r\n", id="http1"),
+    pytest.param(bytes([0, 0, 0, 4, 0, 0, 0, 0, 0]), id="http2 but not ray",
+                 marks=pytest.mark.long)])  # a gRPC server given up after 15 s
+def test_something_else_at_the_address_is_a_clear_error_within_30_s(tmp_path, reply):
+    """A server that is not a Ray head at the address (the README's example address often
+    is one: a proxy): exit 1 within 30 s with a message naming the address, not Ray's log
+    lines, nothing written."""
+    source = cornell_box().save(tmp_path / "cornell.glb")
+    with _NotAHead(reply) as server:
+        started = time.monotonic()
+        run = subprocess.run([sys.executable, "-m", "baker.cli.main", "bake", str(source), "-o",
+                              str(tmp_path / "baked.glb"), "--cluster", server.address],
+                             capture_output=True, text=True, cwd=ROOT, timeout=60)
+        seconds = time.monotonic() - started
+    assert run.returncode == 1 and seconds < 30, (run.returncode, seconds, run.stderr)
+    assert f"no Ray cluster answers at {server.address}" in run.stderr
+    assert not re.search(r"gcs_client|\.cc:\d+|Traceback", run.stderr), run.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cornell.glb"]
+
+
+@pytest.mark.long
+def test_the_head_lost_mid_bake_is_exit_1_with_a_word_and_no_rows_left(tmp_path):
+    """The head of a cluster of its own killed mid-bake (its session: GCS and all): Ray ends
+    the driver at once (exit 1); the spill's watcher removes the rows it left and says why;
+    nothing is written. (Measured: exit 1.6 s after the kill.)"""
+    source = cornell_box().save(tmp_path / "cornell.glb")
+    out = tmp_path / "out"
+    out.mkdir()
+    with LocalCluster(workers=1) as cluster:
+        bake = subprocess.Popen([sys.executable, "-m", "baker.cli.main", "bake", str(source),
+                                 "-o", str(out / "baked.glb"), "--cluster", cluster.address,
+                                 "--rays", "512", "--page-size", "256"],
+                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, cwd=ROOT)
+        deadline = time.monotonic() + 120
+        while not list(out.glob(".baker-spill-*")) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert list(out.glob(".baker-spill-*")), "the bake made no spill"
+        time.sleep(1.0)  # parts running
+        os.killpg(cluster._head.pid, signal.SIGKILL)
+        cluster._head.wait()
+        cluster._head = None
+        said = bake.communicate(timeout=60)[1].decode()
+    assert bake.returncode == 1
+    assert "the bake ended abruptly" in said and "cluster's head was lost" in said
+    assert list(out.iterdir()) == []
 
 
 def test_foliage_on_a_cluster_is_refused_before_any_work(tmp_path):

@@ -164,7 +164,7 @@ def test_a_rebake_gives_the_full_bakes_bytes(tmp_path):
     moved = saved(_with_box((-0.3, 0.15, 0.2)), tmp_path, "b.glb")
     out, full = tmp_path / "out.glb", tmp_path / "full.glb"
     baker.bake(first, out, settings)
-    again = baker.bake(moved, out, settings, incremental=True)
+    again = baker.bake(moved, out, settings, incremental="always")
     assert again.rebake["incremental"] and again.rebake["dirty_texels"] > 0
     baker.bake(moved, full, settings)
     assert out.read_bytes() == full.read_bytes()

@@ -4,6 +4,7 @@ spec-gloss workflow, texture transforms, and every file checked before any work 
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -303,15 +304,15 @@ def test_ktx2_without_its_decoder_uses_the_factor_with_a_warning(tmp_path, monke
     assert "factor used" in warning
 
 
-def test_a_tiny_png_declaring_16384_by_8192_is_refused_before_decoding(tmp_path):
-    """Its header says 512 MiB of RGBA; its 95 bytes cannot hold it (deflate: at most 1032
+def test_a_tiny_png_declaring_8192_by_4096_is_refused_before_decoding(tmp_path):
+    """Its header says 128 MiB of RGBA; its 95 bytes cannot hold it (deflate: at most 1032
     bytes out per byte in): refused from the header, in milliseconds, nothing allocated."""
     import time
     import tracemalloc
 
     from tests.test_bad_input import huge_png
 
-    data = huge_png(16384, 8192)
+    data = huge_png(8192, 4096)
     path = _texture_scene(tmp_path, data)
     tracemalloc.start()
     start = time.perf_counter()
@@ -320,28 +321,60 @@ def test_a_tiny_png_declaring_16384_by_8192_is_refused_before_decoding(tmp_path)
     seconds = time.perf_counter() - start
     peak = tracemalloc.get_traced_memory()[1]
     tracemalloc.stop()
-    assert "declares 16384×8192 pixels" in error.value.message
+    assert "declares 8192×4096 pixels" in error.value.message
     assert f"only {len(data)} bytes" in error.value.message
     assert seconds < 1.0 and peak < 64 << 20, (seconds, peak)
 
 
-def test_textures_past_the_scene_budget_are_left_out_with_the_figure(tmp_path, monkeypatch):
-    """Two 32×32 textures and a budget of 1500 pixels: the first is decoded, the second (whose
-    1024 pixels would pass it) is left out with a warning that names it and the budget."""
-    import baker.gltf.images as images
-    import baker.gltf.load as loader
-
-    monkeypatch.setattr(loader, "MAX_SCENE_PIXELS", 1500)
-    monkeypatch.setattr(images, "MAX_SCENE_PIXELS", 1500)
+def _two_textures(folder: Path) -> Path:
     b = GltfBuilder()
     for k in range(2):
         b.node(f"floor{k}", b.shape_mesh(f"floor{k}", quad(1.0, 1.0), material=b.material(
             f"floor{k}", base_color_image=GRADIENT)), translation=(2.0 * k, 0, 0))
-    scene = load(b.save(tmp_path / "scene.glb"))
+    return b.save(folder / "scene.glb")
+
+
+def test_images_past_the_scene_budget_are_refused_before_any_is_decoded(tmp_path, monkeypatch):
+    """Two 32×32 textures and a budget of 1500 pixels: the pixels of all the images together
+    (2048) are refused from their headers, naming the figures and the largest, and not one
+    image is decoded; a budget of exactly 2048 loads both."""
+    import baker.gltf.budget as budget
+    import baker.gltf.images as images
+
+    decoded = []
+    decode = images.decode
+    monkeypatch.setattr(images, "decode", lambda *a, **k: decoded.append(a) or decode(*a, **k))
+    monkeypatch.setattr(budget, "MAX_SCENE_PIXELS", 1500)
+    path = _two_textures(tmp_path)
+    with pytest.raises(InputError) as error:
+        load(path)
+    assert "2 images have 2,048 pixels in all" in error.value.message
+    assert "(1,500:" in error.value.message and error.value.where == "images[0]"
+    assert decoded == []
+    monkeypatch.setattr(budget, "MAX_SCENE_PIXELS", 2048)
+    scene = load(path)
+    assert all(m.base_color_texture is not None for m in scene.materials[:2])
+    assert len(decoded) == 2
+
+
+def test_textures_past_the_sampled_budget_are_left_out_with_the_figure(tmp_path, monkeypatch):
+    """Two 32×32 colour textures and 1500 pixels for the textures the bake keeps: the first
+    is kept, the second (whose 1024 pixels would pass it) left out with a warning that names
+    it and the budget, and still decoded once, to check it."""
+    import baker.gltf.budget as budget
+    import baker.gltf.images as images
+
+    kept = []
+    decode = images.decode
+    monkeypatch.setattr(images, "decode", lambda *a, **k: kept.append(k.get("keep", a[-1]))
+                        or decode(*a, **k))
+    monkeypatch.setattr(budget, "MAX_SAMPLED_PIXELS", 1500)
+    scene = load(_two_textures(tmp_path))
     assert scene.materials[0].base_color_texture is not None
     assert scene.materials[1].base_color_texture is None
     (warning,) = [s.reason for s in scene.skipped if s.where == "textures[1]"]
     assert "past 1,500 pixels" in warning and "(32×32)" in warning
+    assert kept == [True, False]
 
 
 # ---------------------------------------------------------------------------- animated nodes

@@ -208,12 +208,12 @@ def test_non_manifold_edge_shades_both_sides(tmp_path):
 
 
 def test_a_triangle_smaller_than_a_texel_bakes_a_few_texels(tmp_path):
-    """A 1 cm triangle at 10 texels per metre (a tenth of a texel): the atlas is one 2 × 2 page,
-    the triangle owns its few texels (conservative coverage: at most the 4 it may straddle) and
-    they see open sky (W = R_ave)."""
+    """A 1 cm triangle at 10 texels per metre (a tenth of a texel): its chart is kept inside
+    one texel, the atlas is that one texel, the triangle owns it and it sees open sky
+    (W = R_ave)."""
     done = computed(single_triangle(0.01), tmp_path, texel_density=10.0, rays=8)
-    assert (done.atlas.width, done.atlas.height, done.atlas.page_count) == (2, 2, 1)
-    assert 1 <= len(done.texels) <= 4
+    assert (done.atlas.width, done.atlas.height, done.atlas.page_count) == (1, 1, 1)
+    assert len(done.texels) == 1
     np.testing.assert_allclose(_w(done), effective_r_ave(done.ambient, done.settings.rho).mean(), rtol=1e-12)
 
 

@@ -141,12 +141,12 @@ def test_cpu_time_is_that_of_the_process_and_none_once_it_has_exited():
     assert forked.cpu_seconds_of(pid) is None
 
 
-def test_a_bake_whose_unwrapper_crashes_once_gives_the_same_bytes(tmp_path, monkeypatch):
-    """The unwrap goes through ``call_forked``: xatlas dying of SIGSEGV in its first run (as its
-    task scheduler's race makes it) costs a re-run, not the bake."""
-    import xatlas
+def test_a_bake_whose_chart_builder_crashes_once_gives_the_same_bytes(tmp_path, monkeypatch):
+    """The charting goes through ``call_forked``: a child dying of SIGSEGV in its first run (as
+    xatlas's task scheduler's race makes it) costs a re-run, not the bake."""
+    from baker.atlas import charts
 
-    monkeypatch.setenv("BAKER_CACHE_DIR", "off")  # both bakes run xatlas
+    monkeypatch.setenv("BAKER_CACHE_DIR", "off")  # both bakes chart every mesh
 
     import baker
     from assets.make_scenes import cornell_box
@@ -155,25 +155,15 @@ def test_a_bake_whose_unwrapper_crashes_once_gives_the_same_bytes(tmp_path, monk
     settings = baker.Settings(page_size=128, rays=4, shadow_rays=1, threads=1)
     baker.bake(scene, tmp_path / "calm.glb", settings, state=False)
     marker = tmp_path / "crashed"
-    real = xatlas.Atlas
+    real = charts.chart
 
-    class CrashesOnce:
-        def __init__(self):
-            self._atlas = real()
+    def crashes_once(positions, triangles):
+        if not marker.exists():
+            marker.write_text("crashed")
+            _crash()
+        return real(positions, triangles)
 
-        def __getattr__(self, name):
-            return getattr(self._atlas, name)
-
-        def __getitem__(self, mesh):
-            return self._atlas[mesh]
-
-        def generate(self, *options):
-            if not marker.exists():
-                marker.write_text("crashed")
-                _crash()
-            return self._atlas.generate(*options)
-
-    monkeypatch.setattr(xatlas, "Atlas", CrashesOnce)
+    monkeypatch.setattr(charts, "chart", crashes_once)
     baker.bake(scene, tmp_path / "crashed.glb", settings, state=False)
     assert marker.read_text() == "crashed"
     assert (tmp_path / "crashed.glb").read_bytes() == (tmp_path / "calm.glb").read_bytes()

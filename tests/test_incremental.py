@@ -61,7 +61,7 @@ def _rebake_and_full(base: Path, builder, folder: Path, settings=SETTINGS):
     """Rebake the edited scene from the base state, and bake it fully; return both results."""
     scene = builder.save(folder / "edited.glb")
     shutil.copy(default_path(base), default_path(folder / "incremental.glb"))
-    incremental = baker.bake(scene, folder / "incremental.glb", settings, incremental=True)
+    incremental = baker.bake(scene, folder / "incremental.glb", settings, incremental="always")
     full = baker.bake(scene, folder / "full.glb", settings)
     return incremental, full
 
@@ -92,7 +92,7 @@ def test_added_or_removed_node_names_the_reason(base, tmp_path):
     scene = _room().save(tmp_path / "room.glb")
     baker.bake(scene, tmp_path / "out.glb", density)
     edited = _room(BOXES[:3]).save(tmp_path / "edited.glb")
-    result = baker.bake(edited, tmp_path / "out.glb", density, incremental=True)
+    result = baker.bake(edited, tmp_path / "out.glb", density, incremental="always")
     assert result.rebake["incremental"] is False
     assert "removed" in result.rebake["full_bake_reason"]
 
@@ -104,7 +104,7 @@ def test_no_false_negatives_next_to_a_wall(tmp_path):
     before = _room(lamp=low).save(tmp_path / "before.glb")
     after = _room(moved(BOXES, "box1", at=(1.75, -0.5)), lamp=low).save(tmp_path / "after.glb")
     baker.bake(before, tmp_path / "out.glb", settings)
-    result = baker.bake(after, tmp_path / "out.glb", settings, incremental=True)
+    result = baker.bake(after, tmp_path / "out.glb", settings, incremental="always")
     assert result.rebake["incremental"]
     a, b = compute(load(before), settings), compute(load(after), settings)
     assert np.array_equal(a.texels.key, b.texels.key)
@@ -179,7 +179,7 @@ def test_unusable_state_means_a_full_bake_with_a_reason(base, tmp_path, damage):
     elif damage == "other scene":
         other = box_room(grid_boxes(3, room=ROOM, seed=5), room=ROOM).save(tmp_path / "other.glb")
         baker.bake(other, tmp_path / "out.glb", SETTINGS)
-    result = baker.bake(scene, tmp_path / "out.glb", SETTINGS, incremental=True)
+    result = baker.bake(scene, tmp_path / "out.glb", SETTINGS, incremental="always")
     assert result.rebake["incremental"] is False
     reason = result.rebake["full_bake_reason"]
     assert reason and "\n" not in reason
@@ -200,7 +200,7 @@ def test_a_state_of_another_build_of_baker_means_a_full_bake(base, tmp_path, mon
     shutil.copy(default_path(base), default_path(tmp_path / "out.glb"))
     assert diff_module.code_fingerprint() in default_path(base).read_bytes().decode("latin-1")
     monkeypatch.setattr(diff_module, "code_fingerprint", lambda: "another build")
-    result = baker.bake(scene, tmp_path / "out.glb", SETTINGS, incremental=True)
+    result = baker.bake(scene, tmp_path / "out.glb", SETTINGS, incremental="always")
     assert result.rebake["incremental"] is False
     assert "another build of baker" in result.rebake["full_bake_reason"]
 
@@ -232,7 +232,7 @@ def test_unchanged_scene_recomputes_nothing(base, tmp_path):
     shutil.copy(default_path(base), default_path(tmp_path / "out.glb"))
     with pytest.raises(FullBake):  # the library-level call refuses a missing state
         rebake(load(scene), SETTINGS, tmp_path / "nothing.bake")
-    result = baker.bake(scene, tmp_path / "out.glb", SETTINGS, incremental=True)
+    result = baker.bake(scene, tmp_path / "out.glb", SETTINGS, incremental="always")
     assert result.rebake["incremental"] and result.rebake["dirty_texels"] == 0
     assert (tmp_path / "out.glb").read_bytes() == base.read_bytes()
 
@@ -302,7 +302,7 @@ def test_relight_after_a_shrunk_default_density_casts_no_ray(tmp_path):
     assert first.settings.texel_density < 0.99 * baker.settings.default_texel_density(
         16.0, 256)  # the 4 m floor's derived density did not fit and was lowered
     edited = lit_floor("point", intensity=40.0, color=(1.0, 0.5, 0.5)).save(tmp_path / "b.glb")
-    again = baker.bake(edited, tmp_path / "lit.glb", settings, incremental=True)
+    again = baker.bake(edited, tmp_path / "lit.glb", settings, incremental="always")
     baker.bake(edited, tmp_path / "full.glb", settings)
     assert again.rebake["incremental"] is True, again.rebake.get("full_bake_reason")
     assert again.rebake["rays"] == 0
@@ -348,7 +348,7 @@ def test_moving_an_alpha_cut_quad_rebakes_like_a_full_bake(tmp_path):
     edited._nodes[edited.info["leaf"]].translation = [0.4, 0.0, -0.3]
     edited.save(tmp_path / "after.glb")
     result = baker.bake(tmp_path / "after.glb", tmp_path / "incremental.glb", settings,
-                        incremental=True)
+                        incremental="always")
     baker.bake(tmp_path / "after.glb", tmp_path / "full.glb", settings)
     assert result.rebake["incremental"], result.rebake.get("full_bake_reason")
     assert 0 < result.rebake["dirty_fraction"] < 1
@@ -365,7 +365,7 @@ def test_rebake_reports_its_time_against_the_last_full_bake(base, tmp_path, caps
                 baker.rebake.state.timing_path(default_path(tmp_path / "out.glb")))
     full = baker.rebake.state.last_full_bake_seconds(default_path(base))
     assert full is not None and full > 0
-    result = baker.bake(scene, tmp_path / "out.glb", SETTINGS, incremental=True)
+    result = baker.bake(scene, tmp_path / "out.glb", SETTINGS, incremental="always")
     assert result.rebake["last_full_bake_seconds"] == full
     assert 0 < result.rebake["seconds"] == result.seconds
     assert main(["rebake", str(scene), "-o", str(tmp_path / "out.glb")]) == 0
@@ -398,7 +398,7 @@ def test_a_failed_write_leaves_the_old_state_and_no_temporary(base, tmp_path, mo
     monkeypatch.setattr(bake_module, "write", failing_write)
     edited = _room(moved(BOXES, "box0", at=(-1.0, 1.3))).save(tmp_path / "edited.glb")
     with pytest.raises(OSError, match="disk full"):
-        baker.bake(edited, output, SETTINGS, incremental=True)
+        baker.bake(edited, output, SETTINGS, incremental="always")
     assert default_path(output).read_bytes() == before
     assert sorted(p.name for p in folder.iterdir()) == sorted(
         [output.name, default_path(output).name])
@@ -428,7 +428,7 @@ def test_the_state_a_rebake_replaces_is_freed_beside_it_and_leaves_nothing(base,
     real_remove_later = staging.remove_later
     monkeypatch.setattr(staging, "remove_later", remove_later)
     edited = _room(moved(BOXES, "box0", at=(-1.0, 1.3))).save(tmp_path / "edited.glb")
-    assert baker.bake(edited, output, SETTINGS, incremental=True).rebake["incremental"]
+    assert baker.bake(edited, output, SETTINGS, incremental="always").rebake["incremental"]
     assert [was_the_old_state for _, was_the_old_state in later].count(True) == 1
     assert all(Path(path).parent == folder for path, _ in later)
     for thread in threads:
@@ -520,7 +520,7 @@ def _crate_moved(tmp_path, make, start, end, settings):
     _with_crate(make(), end).save(tmp_path / "after.glb")
     baker.bake(tmp_path / "before.glb", tmp_path / "incremental.glb", settings)
     result = baker.bake(tmp_path / "after.glb", tmp_path / "incremental.glb", settings,
-                        incremental=True)
+                        incremental="always")
     baker.bake(tmp_path / "after.glb", tmp_path / "full.glb", settings)
     assert result.rebake["incremental"], result.rebake.get("full_bake_reason")
     assert (tmp_path / "incremental.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()
@@ -538,6 +538,29 @@ def test_a_small_move_at_the_edge_of_the_scene_still_rebakes(tmp_path):
                  settings)
 
 
+def test_a_box_moved_out_of_the_room_keeps_the_derived_d_max(tmp_path, capsys):
+    """A box pushed out through a wall grows the baked bounds, whose diagonal the automatic
+    d_max follows (a quarter octave of it): the bake keeps the last one's instead
+    (``incremental.kept_d_max``), says so and records it as asked. The tracer's frame moved
+    with the bounds, so it bakes fully — with the kept d_max: the bytes of a full bake given
+    it."""
+    before = _room().save(tmp_path / "before.glb")
+    after = _room(moved(BOXES, "box1", at=(4.0, 0.0))).save(tmp_path / "after.glb")
+    first = baker.bake(before, tmp_path / "incremental.glb", SETTINGS)
+    derived = baker.bake(after, tmp_path / "fresh.glb", SETTINGS).settings.d_max
+    assert derived != first.settings.d_max
+    assert main(["bake", str(after), "-o", str(tmp_path / "incremental.glb"), "--rays", "16",
+                 "--page-size", "128", "--shadow-rays", "4", "--threads", "1"]) == 0
+    said = capsys.readouterr().out
+    assert "full bake: the scene's bounds changed" in said, said
+    assert (f"d_max {first.settings.d_max:.4g} kept from the last bake (the scene's bounds now "
+            f"derive {derived:.4g}: --d-max {derived:.4g} to take it)") in said, said
+    baker.bake(after, tmp_path / "full.glb", replace(SETTINGS, d_max=first.settings.d_max))
+    assert (tmp_path / "incremental.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()
+    assert (default_path(tmp_path / "incremental.glb").read_bytes()
+            == default_path(tmp_path / "full.glb").read_bytes())
+
+
 def test_texels_touching_a_corner_follow_the_full_bake_after_any_move(tmp_path):
     """Sample points clamped into a room's corners would lie in the walls and floor, where which
     of the triangles there a probe meets first depends on Embree's BVH of the whole scene, which
@@ -553,7 +576,7 @@ def test_texels_touching_a_corner_follow_the_full_bake_after_any_move(tmp_path):
              room=room).save(tmp_path / "after.glb")
     baker.bake(tmp_path / "before.glb", tmp_path / "incremental.glb", settings)
     result = baker.bake(tmp_path / "after.glb", tmp_path / "incremental.glb", settings,
-                        incremental=True)
+                        incremental="always")
     baker.bake(tmp_path / "after.glb", tmp_path / "full.glb", settings)
     assert result.rebake["incremental"], result.rebake.get("full_bake_reason")
     # 795 texels near the crate's two places (2.3 %); with the corners' 2,080 it was 8.3 %
@@ -590,7 +613,7 @@ def test_the_shadow_ray_prefilter_keeps_every_texel_whose_rays_meet_the_move(tmp
             monkeypatch.setattr(incremental, "_may_shadow",
                                 lambda texels, rows, *_: np.ones(len(rows), bool))
         baker.bake(before, tmp_path / f"{name}.glb", settings)
-        result = baker.bake(after, tmp_path / f"{name}.glb", settings, incremental=True)
+        result = baker.bake(after, tmp_path / f"{name}.glb", settings, incremental="always")
         found[name] = (result.rebake["dirty_by_reason"], result.report["rebake"]["test_rays"],
                        (tmp_path / f"{name}.glb").read_bytes())
         monkeypatch.undo()
@@ -612,7 +635,7 @@ def test_moving_a_node_of_a_scene_with_nothing_baked(tmp_path):
     document.save(str(tmp_path / "after.glb"))
     settings = baker.Settings(page_size=64, rays=4)
     baker.bake(tmp_path / "before.glb", tmp_path / "inc.glb", settings)
-    result = baker.bake(tmp_path / "after.glb", tmp_path / "inc.glb", settings, incremental=True)
+    result = baker.bake(tmp_path / "after.glb", tmp_path / "inc.glb", settings, incremental="always")
     assert result.rebake["incremental"] and result.rebake["changes"] == ["node nodes[0] moved"]
     assert result.texels == 0 and result.rebake["dirty_texels"] == 0
     baker.bake(tmp_path / "after.glb", tmp_path / "full.glb", settings)
@@ -669,13 +692,15 @@ def test_rays_stopped_before_the_moved_box_leave_their_texels_clean(tmp_path, mo
                                 lambda self, *rays: judged(self, *rays) | True)
         out = tmp_path / f"{name}.glb"
         baker.bake(before, out, settings)
-        result = baker.bake(after, out, settings, incremental=True)
+        result = baker.bake(after, out, settings, incremental="always")
         assert result.rebake["incremental"]
         found[name] = result.rebake["dirty_by_reason"]["obscurance"]
         assert out.read_bytes() == (tmp_path / "full.glb").read_bytes()
         assert default_path(out).read_bytes() == default_path(tmp_path / "full.glb").read_bytes()
         monkeypatch.undo()
-    assert found["first hits only"] < 0.9 * found["every ray that meets it"], found
+    # Measured 0.88 (434 of 493) with xatlas's atlas, 0.91 (416 of 457) with charts packed
+    # as rectangles (atlas/packing.py): the texels behind the screen are about a tenth.
+    assert found["first hits only"] < 0.93 * found["every ray that meets it"], found
 
 
 def test_the_cell_search_finds_the_rays_drawing_them_all_finds():
@@ -760,7 +785,7 @@ def test_texels_whose_rays_the_move_changed_recast_only_those_rays(tmp_path, mon
         tmp_path / "after.glb")
     baker.bake(after, tmp_path / "full.glb", settings)
     baker.bake(before, tmp_path / "out.glb", settings)
-    result = baker.bake(after, tmp_path / "out.glb", settings, incremental=True)
+    result = baker.bake(after, tmp_path / "out.glb", settings, incremental="always")
     assert (tmp_path / "out.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()
     assert default_path(tmp_path / "out.glb").read_bytes() == default_path(
         tmp_path / "full.glb").read_bytes()
@@ -796,7 +821,7 @@ def test_far_texels_whose_probes_see_the_same_faces_keep_their_validity(tmp_path
             probed.__setitem__(name, len(args[3])) or check(*args, **kwargs)))
         out = tmp_path / f"{name}.glb"
         baker.bake(before, out, settings)
-        assert baker.bake(after, out, settings, incremental=True).rebake["incremental"]
+        assert baker.bake(after, out, settings, incremental="always").rebake["incremental"]
         assert out.read_bytes() == (tmp_path / "full.glb").read_bytes()
         assert default_path(out).read_bytes() == default_path(tmp_path / "full.glb").read_bytes()
         monkeypatch.undo()
@@ -826,18 +851,62 @@ def test_a_rebake_dearer_than_a_full_bake_falls_back_to_one(tmp_path, dear):
     assert info["incremental"] is (not dear), info.get("full_bake_reason")
     if dear:
         assert "a rebake would cost more than a full bake" in info["full_bake_reason"]
-        assert "of the last full bake (1.00 s)" in info["full_bake_reason"]
+        assert "(the last took 1.00 s)" in info["full_bake_reason"]
 
 
 def test_rebake_cost_prices_the_texels_by_the_stages_of_a_full_bake():
     """Half the texels redone whole at ``REDO_COST`` times their validity, trace and direct
     light (0.8 of the full bake), the rest searched at ``SEARCH_COST`` times their probes
-    (validity 0.4), compose and write 0.1 both ways; the full bake redoes all but its 0.1 of
+    (validity 0.4); compose and write 0.1; a full bake from there redoes all but its 0.1 of
     loading."""
     stages = {"load": 1.0, "validity": 4.0, "trace": 3.0, "direct": 1.0, "compose": 0.5,
               "write": 0.5}
-    cost, full = baker.rebake.incremental.rebake_cost(stages, 0.5, 0.5)
+    scaling, tail, full = baker.rebake.incremental.rebake_cost(stages, 0.5, 0.5)
     redo, search = baker.rebake.incremental.REDO_COST, baker.rebake.incremental.SEARCH_COST
-    assert cost == pytest.approx(0.5 * redo * 0.8 + 0.5 * search * 0.4 + 0.1)
-    assert full == pytest.approx(0.9)
-    assert baker.rebake.incremental.rebake_cost(stages, 0.0, 0.0)[0] == pytest.approx(0.1)
+    assert scaling == pytest.approx(0.5 * redo * 0.8 + 0.5 * search * 0.4)
+    assert tail == pytest.approx(0.1) and full == pytest.approx(0.9)
+    assert baker.rebake.incremental.rebake_cost(stages, 0.0, 0.0)[0] == 0.0
+
+
+def test_a_rebake_measures_itself_and_the_next_one_of_the_state_goes_by_it(tmp_path):
+    """A rebake records beside the state what its search and rays took over the cost model's
+    figure (``rebake_measured``); the next rebake of that state scales the model by it: told
+    that the last rebake took 8× the model (the most it believes), a move the model alone
+    would rebake bakes fully, and says why, with a full bake's bytes."""
+    before = _room().save(tmp_path / "before.glb")
+    after = EDITS["box moved across the room"]().save(tmp_path / "after.glb")
+    baker.bake(before, tmp_path / "out.glb", SETTINGS)
+    state = default_path(tmp_path / "out.glb")
+    shutil.copy(state, tmp_path / "first.bake")
+    shutil.copy(baker.rebake.state.timing_path(state),
+                baker.rebake.state.timing_path(tmp_path / "first.bake"))
+    result = baker.bake(after, tmp_path / "out.glb", SETTINGS, incremental=True)
+    assert result.rebake["incremental"], result.rebake.get("full_bake_reason")
+    record = baker.rebake.state.last_full_bake(state)
+    stages = result.report["stage_seconds"]
+    spent = stages["dirty"] + stages["trace"] + stages["direct"]
+    modelled = result.rebake["modelled_seconds"]
+    assert record["rebake_correction"] == pytest.approx(spent / modelled, rel=1e-3)
+    first = baker.rebake.state.last_full_bake(tmp_path / "first.bake")
+    assert record["full_bake_seconds"] == first["full_bake_seconds"]
+    shutil.copy(tmp_path / "first.bake", state)
+    baker.rebake.state.save_full_bake_seconds(state, first["full_bake_seconds"],
+                                              stages=first["stage_seconds"],
+                                              rebake_correction=1e6)
+    again = baker.bake(after, tmp_path / "out.glb", SETTINGS, incremental=True)
+    reason = again.rebake.get("full_bake_reason", "")
+    assert "× 8.00 as the last rebake of this state measured" in reason, reason
+    baker.bake(after, tmp_path / "full.glb", SETTINGS)
+    assert (tmp_path / "out.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()
+    # The time a rebake took besides its search and rays is measured too; when it is more
+    # than the whole full bake, the next rebake of that state does not even read it.
+    assert record["rebake_overhead"] == pytest.approx(
+        result.rebake["seconds"] - result.rebake["compile_seconds"] - spent, abs=0.02)
+    shutil.copy(tmp_path / "first.bake", state)
+    baker.rebake.state.save_full_bake_seconds(state, 0.5, stages=first["stage_seconds"],
+                                              rebake_overhead=0.6)
+    third = baker.bake(after, tmp_path / "out.glb", SETTINGS, incremental=True)
+    assert third.rebake["full_bake_reason"] == (
+        "a rebake would cost more than a full bake: the last rebake of this state took 0.60 s "
+        "besides its search and rays, the last full bake 0.50 s in all")
+    assert (tmp_path / "out.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()

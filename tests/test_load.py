@@ -21,7 +21,7 @@ from PIL import Image as PILImage
 
 from baker.gltf import load as load_module
 from baker.errors import InputError
-from baker.gltf.load import expand_triangles, load, read_accessor, resolve_buffers
+from baker.gltf.load import expand_triangles, load, read_accessor
 from baker.gltf.scene import CLAMP_TO_EDGE, MIRRORED_REPEAT
 
 from tests.bakehelp import SHARED_SCENES
@@ -236,7 +236,7 @@ def test_interleaved_view_normalized_attributes_and_sparse_substitution(tmp_path
     np.testing.assert_allclose(prim.colors, expected_colors)
     np.testing.assert_array_equal(prim.triangles, [[0, 1, 2]])
 
-    buffers = resolve_buffers(scene.document, path)
+    buffers = scene.buffers
     read = lambda index: read_accessor(scene.document, buffers, index)  # noqa: E731
     np.testing.assert_allclose(read(signed), [[-1, -1, 0, 1]])
     np.testing.assert_allclose(read(short), [[-1, 16384 / 32767, 1]])
@@ -252,7 +252,7 @@ def test_indices_are_int64_and_matrix_columns_are_aligned(tmp_path):
     mat2 = doc.add_accessor(bufferView=view, componentType=BYTE, count=1, type="MAT2")
     path = doc.save(tmp_path / "raw.glb")
     scene = load(path)
-    buffers = resolve_buffers(scene.document, path)
+    buffers = scene.buffers
     values = read_accessor(scene.document, buffers, indices)
     assert values.dtype == np.int64 and values.shape == (3, 1)
     np.testing.assert_array_equal(values[:, 0], [0, 70000, 5])
@@ -361,15 +361,19 @@ def test_gpu_instancing_gives_one_unbaked_instance_per_transform(tmp_path):
 
 
 def test_materials_textures_images_skins_and_unlit(tmp_path):
+    import alktx2
+
     doc = Doc()
     pixels = np.zeros((2, 3, 4), np.uint8)
     pixels[0] = [255, 0, 0, 255]  # top row red
     pixels[1] = [0, 0, 255, 128]
+    glow = np.full((4, 4, 4), 200, np.uint8)
+    ktx2 = alktx2.encode_raw_rgba_to_ktx2(glow.tobytes(), 4, 4, False, codec="uastc")
     gltf = doc.gltf
     gltf.images = [
         pygltflib.Image(bufferView=doc.view(png_bytes(pixels)), mimeType="image/png", name="checker"),
-        pygltflib.Image(bufferView=doc.view(b"\xabKTX 20\xbb\r\n\x1a\n" + bytes(60)), mimeType="image/ktx2"),
-        pygltflib.Image(uri="normal.png"),  # never decoded: not a colour texture (not a PNG either)
+        pygltflib.Image(bufferView=doc.view(ktx2), mimeType="image/ktx2"),
+        pygltflib.Image(uri="normal.png"),  # decoded to check it, not kept: not a colour texture
     ]
     gltf.samplers = [pygltflib.Sampler(wrapS=CLAMP_TO_EDGE, wrapT=MIRRORED_REPEAT)]
     gltf.textures = [
@@ -402,7 +406,7 @@ def test_materials_textures_images_skins_and_unlit(tmp_path):
     doc.node(mesh=mesh)
     skinned = doc.node(mesh=mesh, skin=0)
     gltf.skins = [pygltflib.Skin(joints=[skinned])]
-    (tmp_path / "normal.png").write_bytes(b"not decoded")
+    (tmp_path / "normal.png").write_bytes(png_bytes(np.full((2, 2, 4), 128, np.uint8)))
     scene = load(doc.save(tmp_path / "materials.glb"))
 
     painted, flat, default = scene.materials
@@ -412,8 +416,9 @@ def test_materials_textures_images_skins_and_unlit(tmp_path):
     assert (texture.image, texture.texcoord) == (0, 1)  # KHR_texture_transform's texCoord wins
     assert texture.transform == (2.0, 0.0, 0.0, -0.0, 2.0, 0.0)  # scale [2, 2]: u' = 2u, v' = 2v
     assert (texture.wrap_s, texture.wrap_t) == (CLAMP_TO_EDGE, MIRRORED_REPEAT)
-    assert painted.emissive_texture is None  # KTX2 image: pillow cannot decode it
-    assert any(s.where == "textures[1]" and "KHR_texture_basisu" in s.reason for s in scene.skipped)
+    assert painted.emissive_texture.image == 1  # KTX 2, through KHR_texture_basisu
+    assert np.abs(scene.images[1].pixels.astype(int) - 200).max() <= 2
+    assert scene.images[2].pixels.shape == (1, 1, 4)  # the normal map: checked, not kept
     assert (painted.metallic, painted.roughness) == (0.0, 1.0)
     assert (painted.alpha_mode, painted.alpha_cutoff) == ("MASK", 0.5)
     assert painted.double_sided and not painted.unlit

@@ -22,6 +22,8 @@ from baker.geometry.surface import LUMINANCE
 from baker.rays.trace import Tracer
 from baker.gltf.load import load
 from bakehelp import computed, loaded, saved
+from baker.image.compose import effective_r_ave
+from plane_reference import blocked
 from gltf_validator import issue_codes, validate
 
 
@@ -183,6 +185,29 @@ def test_mirror_strategy_b_is_less_dark_near_the_wall_than_a(mirror_bakes):
     assert mirror_bakes["b"].terms.chain_rays.sum() > 0
 
 
+def test_escapes_after_a_coloured_mirror_take_its_colour_per_channel(tmp_path):
+    """A red mirror wall beside an open floor: a floor ray that meets the mirror within d_max
+    and then escapes (strategy b: ρ = 1 past it) counts the mirror's colour × the escape's
+    colour (white: an open scene without lights), channel by channel, not their mean: W_c =
+    (1 − p) + p·c_c, p the cosine-weighted share of directions that meet the mirror, from an
+    independent numpy tracer (tests/plane_reference.py), within 3σ per texel."""
+    red = np.array([0.9, 0.1, 0.1])
+    scene = mirror_wall(colour=tuple(red))
+    rays, d_max = 256, 1.0
+    done = computed(scene, tmp_path, rays=rays, texel_density=6, d_max=d_max)
+    assert np.array_equal(effective_r_ave(done.ambient, "sqrt"), np.ones(3))
+    w = done.terms.obscurance(np.ones(3))
+    near, _ = _near_and_far(done, 2.0)
+    checked, worst = 0, 0.0
+    for k in np.flatnonzero(near):
+        p = blocked(done.texels.position[k], [scene.info["rectangle"]], d_max).mean()
+        expected = 1 - p + p * red
+        sigma = np.abs(1 - red) * np.sqrt(max(p * (1 - p), 1 / rays) / rays) + 1 / 512
+        worst = max(worst, float(np.max(np.abs(w[k] - expected) / sigma)))
+        checked += p > 0.1
+    assert checked > 10 and worst < 3.0, (checked, worst)
+
+
 def test_strategy_c_casts_no_extra_ray(mirror_bakes):
     c, b = mirror_bakes["c"], mirror_bakes["b"]
     assert c.terms.chain_rays.sum() == 0 and c.terms.rays == b.terms.rays
@@ -217,7 +242,7 @@ def test_a_ray_through_a_glass_slab_finds_the_colour_along_the_refracted_path(tm
     directions = np.tile(np.array([1.0, -1.0, 0.0]) / np.sqrt(2), (n, 1)).astype(np.float32)
     hits = tracer.cast_local(origins, directions, np.full(n, 10.0, np.float32))
     out = np.zeros((n, 4))
-    chains = _Chains(np.zeros(n, np.int64), np.zeros(n, np.int64))
+    chains = _Chains(np.zeros(n, np.int64), np.zeros(n, np.int64), np.zeros((n, 3)))
     _special_hits(surfaces_of(scene, world), tracer, origins, directions, hits,
                   np.arange(n, dtype=np.uint64), 0, 1, settings, out, chains)
     landed = out[:, :3].sum(axis=1) > 0  # the rest escaped (Fresnel, ≈ 4 % per face) or
@@ -466,7 +491,7 @@ def test_leaves_and_wax_survive_the_bake_state(tmp_path):
     relit = baker.bake(edited, tmp_path / "out.glb", settings, relight=True)
     assert relit.rebake["rays"] == 0
     assert (tmp_path / "out.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()
-    again = baker.bake(edited, tmp_path / "out.glb", settings, incremental=True)
+    again = baker.bake(edited, tmp_path / "out.glb", settings, incremental="always")
     assert again.rebake["incremental"] is True
     assert (tmp_path / "out.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()
 

@@ -8,6 +8,8 @@ from baker.image.compose import effective_r_ave
 from baker.light.hemisphere import Terms
 from tests.bakehelp import computed
 
+_NO_DIRECTIONS = np.zeros((0, 3))  # no directional pages: the rays' directions unused
+
 
 def _w(done) -> np.ndarray:
     return done.terms.obscurance(effective_r_ave(done.ambient, done.settings.rho))

@@ -183,3 +183,34 @@ def test_texel_points_keep_only_the_moved_sample_points():
     assert not points.moved_position[~points.moved].any()
     assert points.positions(made).tobytes() == position.tobytes()
     assert Column.of(points.moved_position).encoding == "sparse"
+
+
+def test_a_bake_killed_at_once_leaves_no_rows_and_says_why(tmp_path):
+    """SIGKILL (as Ray's hard exit when a cluster's head is lost) runs nothing more in the
+    bake's process: its spill's watcher removes the spilled rows at once and says why."""
+    import signal
+    import subprocess
+    import sys
+    import time
+    from pathlib import Path
+
+    from assets.make_scenes import cornell_box
+
+    scene = cornell_box().save(tmp_path / "cornell.glb")
+    script = ("import sys, baker, baker.pipeline.parts as parts\n"
+              "parts.PART_TEXELS = 500\n"
+              "baker.bake(sys.argv[1], sys.argv[2], baker.Settings(page_size=128, rays=256))\n")
+    out = tmp_path / "out" / "baked.glb"
+    out.parent.mkdir()
+    bake = subprocess.Popen([sys.executable, "-c", script, str(scene), str(out)],
+                            stderr=subprocess.PIPE, cwd=Path(__file__).resolve().parents[1])
+    deadline = time.monotonic() + 120
+    while not list(out.parent.glob(".baker-spill-*")) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert list(out.parent.glob(".baker-spill-*")), "the bake made no spill"
+    bake.send_signal(signal.SIGKILL)
+    # The watcher holds the bake's standard error too: it ends once the watcher has spoken.
+    said = bake.communicate(timeout=60)[1].decode()
+    assert bake.returncode == -signal.SIGKILL
+    assert list(out.parent.iterdir()) == []
+    assert "the bake ended abruptly" in said, said

@@ -21,7 +21,9 @@ import pygltflib
 import pytest
 
 import baker
+from assets.extreme_scenes import instanced_boxes
 from assets.make_scenes import cornell_box
+from assets.material_scenes import metal_glass_room
 from baker.geometry.surface import LUMINANCE
 from baker.gltf.load import load
 from baker.preview import render
@@ -48,7 +50,7 @@ def _gltfpack() -> list[str]:
 def _optimized(source, folder, name, carrier, tool="gltf-transform"):
     out = folder / f"{name}_{carrier}.glb"
     if not out.exists():
-        baker.bake(source, out, baker.Settings(texel_density=8 if name == "cornell" else 4,
+        baker.bake(source, out, baker.Settings(texel_density=4 if name in REAL_SCENES else 8,
                                                rays=16, carrier=carrier), state=False)
     optimized = folder / f"{name}_{carrier}_{tool}.glb"
     command = ([gltf_transform._node(), str(gltf_transform.TRANSFORM_DIR / "optimize.js"),
@@ -59,11 +61,20 @@ def _optimized(source, folder, name, carrier, tool="gltf-transform"):
     return out, optimized
 
 
+def _source(name: str, folder):
+    """The scene ``name``: the demo Cornell box, the room of metals and glass, 40 instances of a
+    box (their geometry shared, ``output/write.py``) or a shared scene."""
+    made = {"cornell": cornell_box, "metal_glass": metal_glass_room,
+            "instances": lambda: instanced_boxes(40)}
+    return saved(made[name](), folder) if name in made else REAL_SCENES[name]
+
+
 @pytest.mark.parametrize("name, carrier", [("cornell", "emissive"), ("cornell", "occlusion"),
-                                           ("MultiUVTest", "emissive")])
+                                           ("MultiUVTest", "emissive"),
+                                           ("metal_glass", "emissive"),
+                                           ("instances", "emissive")])
 def test_core_carriers_survive_optimize(tmp_path, name, carrier):
-    source = saved(cornell_box(), tmp_path) if name == "cornell" else REAL_SCENES[name]
-    out, optimized = _optimized(source, tmp_path, name, carrier)
+    out, optimized = _optimized(_source(name, tmp_path), tmp_path, name, carrier)
     before = render(load(out), "lit", SIZE, exposure=2.0)
     after = render(load(optimized), "lit", SIZE, exposure=2.0)
     assert after.lightmapped.sum() == before.lightmapped.sum() > 0
@@ -73,19 +84,23 @@ def test_core_carriers_survive_optimize(tmp_path, name, carrier):
     np.testing.assert_allclose(b[lit], a[lit], rtol=1e-3)
 
 
-@pytest.mark.parametrize("carrier", ["emissive", "occlusion"])
-def test_core_carriers_survive_gltfpack(tmp_path, carrier):
+@pytest.mark.parametrize("name, carrier", [("cornell", "emissive"), ("cornell", "occlusion"),
+                                           ("metal_glass", "emissive"),
+                                           ("instances", "emissive")])
+def test_core_carriers_survive_gltfpack(tmp_path, name, carrier):
     """gltfpack quantizes the UVs (KHR_mesh_quantization with KHR_texture_transform): the bake
     stays, the picture within a few per cent in the median: 1 %, or 3 standard errors of the
     median (1.253·σ/√n, σ from the ratios' interquartile range) where the pixels' ratios
     spread widely (the occlusion texture's: a quarter of them off by 18 % or more), so that
     the bound does not hang on one draw of the bake's random numbers."""
-    out, packed = _optimized(saved(cornell_box(), tmp_path), tmp_path, "cornell", carrier,
-                             "gltfpack")
+    out, packed = _optimized(_source(name, tmp_path), tmp_path, name, carrier, "gltfpack")
     before = render(load(out), "lit", SIZE, exposure=2.0)
     after = render(load(packed), "lit", SIZE, exposure=2.0)
-    assert after.lightmapped.sum() == before.lightmapped.sum() > 0
-    a, b = (p.radiance[before.lightmapped] @ LUMINANCE for p in (before, after))
+    assert before.lightmapped.sum() > 0  # positions quantized: a silhouette pixel may flip
+    assert abs(int(after.lightmapped.sum()) - int(before.lightmapped.sum())) <= (
+        0.01 * before.lightmapped.sum() + 2)
+    both = before.lightmapped & after.lightmapped
+    a, b = (p.radiance[both] @ LUMINANCE for p in (before, after))
     lit = a > 1e-3
     ratio = b[lit] / a[lit]
     spread = np.subtract(*np.percentile(ratio, [75, 25])) / 1.349  # σ of a normal's IQR

@@ -1,9 +1,12 @@
-"""Many small flat loose parts are charted by projection and packed in blocks (``planar.py``).
+"""Meshes charted by projection (``planar.py``) and charts' rectangles packed (``packing.py``).
 
-Checked on generated crowns and grass (random sizes, turns, counts), in the atlas ``unwrap``
-makes of them beside xatlas's charts: every part keeps its shape and size (texels per metre
-as asked), touches only the texels its rectangle needs, and keeps 2·padding free texels from
-every other chart; a rigid move of the node leaves the atlas bit for bit."""
+Checked on generated leaves, boxes, spheres, ramps and grids (random sizes, turns, counts):
+every chart keeps its surface's area, no triangle turns over or overlaps another, flat parts
+keep their shape; what projection cannot chart is left to xatlas; packed rectangles keep their
+padding apart. In the atlas ``unwrap`` makes of a tree: every leaf and blade is as long in
+texels as in metres × density, touches only the texels its rectangle needs, and keeps
+2·padding free texels from every other chart; a rigid move of the node leaves the atlas bit
+for bit."""
 
 from __future__ import annotations
 
@@ -11,9 +14,11 @@ import numpy as np
 import pytest
 
 from assets.foliage_scenes import leaves, tree
-from baker.atlas import planar
+from assets.gltf_builder import rotation_matrix, uv_sphere
+from assets.many_objects import grid_box
+from baker.atlas import packing, planar
 from baker.atlas.rasterise import _cover_kernel, _edge_terms
-from baker.atlas.unwrap import unwrap
+from baker.atlas.unwrap import _MARGIN, unwrap
 from baker.geometry.world import build_world
 from baker.settings import Settings, resolve
 from tests.bakehelp import loaded
@@ -30,56 +35,160 @@ def _touched(corners: np.ndarray, width: int, height: int) -> np.ndarray:
     return (owner >= 0).reshape(height, width)
 
 
-@pytest.mark.parametrize("seed", range(4))
-def test_flat_parts_keep_their_shape_and_get_the_smallest_edge_aligned_rectangle(seed):
-    """Leaf quads of random sizes and turns: every edge keeps its length in the chart, and a
-    quad's rectangle is its own two sides (the least-area one of its edges)."""
-    rng = np.random.default_rng(seed)
-    count = int(rng.integers(planar.MIN_PARTS, 400))
-    positions, triangles, _normals, _uv = leaves(count, (0, 0, 0), (30, 20, 30), 1.0, seed)
-    scale = rng.uniform(0.3, 6.0, (count, 1))  # sides from 0.3 to 6 texels
-    centres = positions.reshape(count, 4, 3).mean(axis=1, keepdims=True)
-    positions = (centres + (positions.reshape(count, 4, 3) - centres) * scale[:, None]).reshape(-1, 3)
-    flats = planar.flat_parts(positions.astype(np.float32), triangles.astype(np.uint32), 2, 500)
-    assert flats is not None and len(flats.faces) == len(triangles)
-    p = positions.astype(np.float32).astype(np.float64)[flats.vertices]
-    for k in range(3):
-        a, b = flats.triangles[:, k], flats.triangles[:, (k + 1) % 3]
-        np.testing.assert_allclose(np.linalg.norm(flats.uv[a] - flats.uv[b], axis=1),
-                                   np.linalg.norm(p[a] - p[b], axis=1), atol=1e-4)
-    for part in range(count):  # each quad (triangles part, part + count) spans side × side
-        corner = flats.uv[flats.triangles[np.flatnonzero(flats.faces % count == part)].ravel()]
-        np.testing.assert_allclose(np.sort(np.ptp(corner, axis=0)), [scale[part, 0]] * 2,
-                                   atol=1e-4)
+def _check_charts(charts, positions, triangles):
+    """The invariants of any ``Charts`` of a mesh: every triangle once, its corners its own
+    vertices; each chart inside its rectangle from (0, 0); each chart's UV area its surface's
+    (the projection's scale); no triangle turned over or overlapping another of its chart."""
+    p = np.asarray(positions, np.float64)
+    np.testing.assert_array_equal(charts.vertices[charts.triangles], triangles)
+    assert (charts.uv >= -1e-9).all()
+    assert (charts.uv <= charts.sides[charts.chart] + 1e-9).all()
+    for c in range(len(charts.sides)):
+        assert np.isclose(charts.uv[charts.chart == c].min(axis=0), 0).all()
+    corner = charts.uv[charts.triangles]
+    e, f = corner[:, 1] - corner[:, 0], corner[:, 2] - corner[:, 0]
+    uv_area = 0.5 * (e[:, 0] * f[:, 1] - e[:, 1] * f[:, 0])
+    surface = 0.5 * np.linalg.norm(np.cross(p[triangles[:, 1]] - p[triangles[:, 0]],
+                                            p[triangles[:, 2]] - p[triangles[:, 0]]), axis=1)
+    assert (uv_area > -1e-12).all(), "a triangle turned over"
+    chart_of = charts.chart[charts.triangles[:, 0]]
+    count = len(charts.sides)
+    np.testing.assert_allclose(np.bincount(chart_of, uv_area, count),
+                               np.bincount(chart_of, surface, count), rtol=1e-9)
+    for c in range(count):
+        _assert_apart(corner[(chart_of == c) & (uv_area > 0)])
 
 
-def test_too_few_or_bent_or_large_parts_are_left_to_xatlas():
-    """Fewer than MIN_PARTS parts, or parts folded out of their plane, or longer than
-    MAX_SIDE texels: no flat charts."""
-    positions, triangles, _n, _uv = leaves(planar.MIN_PARTS - 1, (0, 0, 0), (9, 9, 9), 2.0)
-    assert planar.flat_parts(positions, triangles, 2, 500) is None
-    positions, triangles, _n, _uv = leaves(200, (0, 0, 0), (99, 99, 99), 2.0)
-    bent = positions.copy()
-    bent[2::4] += np.cross(bent[1::4] - bent[0::4], bent[3::4] - bent[0::4]) * 0.2  # folded
-    assert planar.flat_parts(bent, triangles, 2, 500) is None
-    large = positions * (planar.MAX_SIDE / 1.5)
-    assert planar.flat_parts(large, triangles, 2, 500) is None
+def _assert_apart(corners):
+    """No two triangles (t, 3, 2) share an inner point: for every pair, some edge of one has
+    the whole other on its outer side (every pair tested, no grid)."""
+    if len(corners) < 2:
+        return
+    apart = np.zeros((len(corners), len(corners)), bool)
+    size = np.ptp(corners.reshape(-1, 2), axis=0).max()
+    for k in range(3):  # triangles counter-clockwise: (dy, -dx) points out of edge a → b
+        a, b = corners[:, k], corners[:, (k + 1) % 3]
+        normal = np.stack([b[:, 1] - a[:, 1], a[:, 0] - b[:, 0]], axis=1)
+        reach = 1e-9 * size * np.linalg.norm(normal, axis=1)
+        edge = np.einsum("ij,ij->i", a, normal)
+        nearest = np.einsum("pkj,ij->ipk", corners, normal).min(axis=2)  # (i, p)
+        apart |= nearest >= edge[:, None] - reach[:, None]
+    apart |= apart.T
+    np.fill_diagonal(apart, True)
+    assert apart.all(), "two triangles of a chart overlap"
 
 
 @pytest.mark.parametrize("seed", range(3))
-def test_shelves_keep_every_rectangle_apart_inside_its_block(seed):
-    """Random rectangles: inside their block, and no two of one block within ``gap`` texels."""
+def test_leaves_keep_their_shape_and_get_the_smallest_edge_aligned_rectangle(seed):
+    """Leaf quads of random sizes and turns: one chart each, every edge its length, and a
+    quad's rectangle its own two sides (the least-area one of its hull's sides)."""
     rng = np.random.default_rng(seed)
-    cells = rng.integers(1, 9, (500, 2))
-    gap, side = int(rng.integers(0, 5)), 40
-    block, at, sizes = planar.shelves(cells, gap, side)
-    assert (at >= 0).all() and (at + cells <= sizes[block]).all() and (sizes <= side).all()
-    for b in range(len(sizes)):
-        inside = np.flatnonzero(block == b)
-        low, high = at[inside], at[inside] + cells[inside] + gap
-        apart = ((low[:, None] >= high[None]) | (low[None] >= high[:, None])).any(axis=2)
-        np.fill_diagonal(apart, True)
-        assert apart.all()
+    count = int(rng.integers(20, 400))
+    positions, triangles, _normals, _uv = leaves(count, (0, 0, 0), (30, 20, 30), 1.0, seed)
+    scale = rng.uniform(0.3, 6.0, (count, 1))
+    centres = positions.reshape(count, 4, 3).mean(axis=1, keepdims=True)
+    positions = (centres + (positions.reshape(count, 4, 3) - centres) * scale[:, None]).reshape(-1, 3)
+    charts = planar.project(positions, triangles)
+    assert charts is not None and len(charts.sides) == count
+    _check_charts(charts, positions, triangles)
+    p = positions[charts.vertices]
+    for k in range(3):
+        a, b = charts.triangles[:, k], charts.triangles[:, (k + 1) % 3]
+        np.testing.assert_allclose(np.linalg.norm(charts.uv[a] - charts.uv[b], axis=1),
+                                   np.linalg.norm(p[a] - p[b], axis=1), rtol=1e-9)
+    quad_of = np.arange(len(triangles)) % count  # triangles part and part + count: one quad
+    sides = np.sort(charts.sides[charts.chart[charts.triangles[np.argsort(quad_of)[::2], 0]]])
+    np.testing.assert_allclose(sides, np.repeat(scale, 2, axis=1), rtol=1e-9)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_a_turned_box_of_split_faces_is_six_charts_of_its_faces(seed):
+    """A box of random sides and turn, each face cut in squares with vertices of its own (flat
+    normals): six charts, each its face's two sides."""
+    rng = np.random.default_rng(seed)
+    size = rng.uniform(0.1, 3.0, 3)
+    positions, triangles, _n, _uv = grid_box(size, int(rng.integers(1, 8)))
+    positions = positions @ rotation_matrix(rng.normal(size=3), rng.uniform(0, 360)).T
+    charts = planar.project(positions, triangles)
+    assert charts is not None and len(charts.sides) == 6
+    _check_charts(charts, positions, triangles)
+    faces = sorted(tuple(sorted(size[[a, b]])) for a, b in ((0, 1), (1, 2), (0, 2)) * 2)
+    found = np.sort(charts.sides, axis=1)
+    found = found[np.lexsort((found[:, 1].round(6), found[:, 0].round(6)))]
+    np.testing.assert_allclose(found, faces, rtol=1e-9)
+
+
+@pytest.mark.parametrize("rings", [6, 24, 56])
+def test_a_sphere_is_charted_in_caps_within_the_cone(rings):
+    """A sphere: charts whose normals lie within ``CONE`` of one another's seed, so within
+    2·CONE of each other; every invariant of a chart holds."""
+    positions, triangles, _n, _uv = uv_sphere(0.8, rings, 2 * rings)
+    charts = planar.project(positions, triangles)
+    assert charts is not None
+    _check_charts(charts, positions, triangles)
+    p = positions[triangles]
+    normal = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    chart_of = charts.chart[charts.triangles[:, 0]]
+    for c in range(len(charts.sides)):
+        n = normal[chart_of == c]
+        assert (n @ n.T).min() >= np.cos(np.radians(2 * planar.CONE)) - 1e-9
+
+
+def test_a_helical_ramp_and_a_crumpled_surface_are_left_to_xatlas():
+    """A ramp winding twice round (its normals all near up: one chart, overlapping itself once
+    projected) and a grid of random heights (charts of a triangle or two): None."""
+    turns, steps = 2, 160
+    angle = np.linspace(0, 2 * np.pi * turns, steps + 1)
+    inner = np.stack([np.cos(angle), angle * 0.05, np.sin(angle)], axis=1)
+    positions = np.concatenate([inner, inner * [2.0, 1.0, 2.0]])
+    k = np.arange(steps)
+    triangles = np.concatenate([np.stack([k, k + 1, k + steps + 1], 1),
+                                np.stack([k + 1, k + steps + 2, k + steps + 1], 1)])
+    assert planar.project(positions, triangles) is None
+    assert planar.project(positions[:, [0, 1, 2]], triangles[: steps // 3]) is not None  # a third
+    rng = np.random.default_rng(0)
+    side = 20
+    x, z = np.meshgrid(np.arange(side + 1.0), np.arange(side + 1.0), indexing="ij")
+    heights = rng.uniform(-1.0, 1.0, x.shape)
+    grid = np.stack([x.ravel(), heights.ravel(), z.ravel()], axis=1)
+    a = (np.arange(side)[:, None] * (side + 1) + np.arange(side)).ravel()
+    cells = np.concatenate([np.stack([a, a + 1, a + side + 2], 1),
+                            np.stack([a, a + side + 2, a + side + 1], 1)])
+    assert planar.project(grid, cells) is None
+    assert planar.project(grid * [1.0, 0.01, 1.0], cells) is not None  # flattened: one chart
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_packing_keeps_every_rectangle_and_its_padding_apart_on_its_page(seed):
+    """Random rectangles (many small, some large): every one inside its page, no two sharing
+    a texel with their padding round them (``2·padding`` apart); one page is cut to its
+    rectangles, several are whole pages; the same input gives the same bits."""
+    rng = np.random.default_rng(seed)
+    cells = np.concatenate([rng.integers(1, 12, (int(rng.integers(1, 600)), 2)),
+                            rng.integers(20, 120, (int(rng.integers(0, 8)), 2))])
+    padding, page = int(rng.integers(0, 4)), int(rng.choice([128, 256]))
+    packed = packing.pack(cells, padding, page)
+    p = padding  # the drawing has the padding beyond the page's sides too
+    drawn = np.zeros((packed.pages, packed.height + 2 * p, packed.width + 2 * p), np.int64)
+    for cell, at, turned, on in zip(cells, packed.corner, packed.turned, packed.page):
+        w, h = cell[::-1] if turned else cell
+        x, y = at
+        assert x >= 0 and y >= 0 and x + w <= packed.width and y + h <= packed.height
+        drawn[on, y:y + h + 2 * p, x:x + w + 2 * p] += 1
+    assert drawn.max() == 1
+    assert packed.pages >= 1 and (packed.pages == 1 or packed.width == packed.height == page)
+    assert max(packed.width, packed.height) <= page
+    again = packing.pack(cells.copy(), padding, page)
+    for name in ("page", "corner", "turned"):
+        np.testing.assert_array_equal(getattr(again, name), getattr(packed, name))
+
+
+def test_rectangles_that_fill_a_square_pack_into_it():
+    """Sixteen 30 × 30 rectangles with a padding of 1 fill a 126² page exactly (2 texels
+    apart, none at the page's sides): one page, every texel but the gaps used."""
+    packed = packing.pack(np.full((16, 2), 30), 1, 126)
+    assert packed.pages == 1 and (packed.width, packed.height) == (126, 126)
 
 
 def _charts_by_part(atlas, world, scene) -> list[tuple[int, np.ndarray, bool]]:
@@ -91,8 +200,12 @@ def _charts_by_part(atlas, world, scene) -> list[tuple[int, np.ndarray, bool]]:
         corners = uv[inst.triangles]
         name = scene.document.nodes[scene.instances[inst.instance].node].name
         flat = name in ("crown", "grass")
-        # Charts: the pieces of triangles joined by shared (split) vertices.
-        label, before = np.arange(len(inst.uv)), None
+        # Charts: the pieces of triangles joined by shared UV points (touching leaves, their
+        # corners welded, are charted together).
+        page = np.zeros(len(inst.uv))
+        page[inst.triangles.reshape(-1)] = np.repeat(inst.pages, 3)
+        _, point = np.unique(np.c_[inst.uv, page], axis=0, return_inverse=True)
+        label, before = point.reshape(-1).copy(), None
         while before is None or (label != before).any():
             before, least = label.copy(), label[inst.triangles].min(axis=1)
             np.minimum.at(label, inst.triangles.ravel(), np.repeat(least, 3))
@@ -106,7 +219,7 @@ def _charts_by_part(atlas, world, scene) -> list[tuple[int, np.ndarray, bool]]:
 @pytest.mark.parametrize("leaf_count,grass_count,page", [(300, 120, 256), (1500, 0, 512)])
 def test_the_atlas_keeps_flat_parts_true_to_size_on_their_own_texels(
         tmp_path, leaf_count, grass_count, page):
-    """A tree (crown and grass as flat parts, trunk and ground by xatlas): every crown and grass
+    """A tree (crown and grass as flat parts, trunk and ground beside them): every crown and grass
     triangle is as long in texels as in metres × density; a flat part touches just the texels
     of its rectangle; no texel of a flat part is within 2·padding of another chart's."""
     scene = loaded(tree(leaf_count=leaf_count, grass_count=grass_count), tmp_path)
@@ -129,12 +242,14 @@ def test_the_atlas_keeps_flat_parts_true_to_size_on_their_own_texels(
         on_page = [(corners, flat) for p, corners, flat in charts if p == page_index]
         masks = [_touched(corners, atlas.width, atlas.height) for corners, _flat in on_page]
         for (corners, flat), mask in zip(on_page, masks):
-            if flat:  # exactly the texels of its rectangle: ceil of its sides
+            if flat and len(corners) == 2:  # a quad: exactly the texels of its rectangle
                 low, high = corners.reshape(-1, 2).min(0), corners.reshape(-1, 2).max(0)
-                assert mask.sum() == np.prod(np.floor(high - low + 2 * planar._MARGIN) + 1)
+                assert mask.sum() == np.prod(np.floor(high - low + 2 * _MARGIN) + 1)
         owner = np.full((atlas.height, atlas.width), -1)
-        for n, mask in enumerate(masks):
-            assert (owner[mask] == -1).all()  # no texel shared between charts
+        is_flat = np.array([flat for _corners, flat in on_page] + [False])
+        for n, mask in enumerate(masks):  # no texel of a flat part shared with another chart
+            assert not (is_flat[n] and (owner[mask] >= 0).any())
+            assert not is_flat[owner[mask]].any()
             owner[mask] = n
         near = _dilated(owner, gap)
         for n, ((_corners, flat), mask) in enumerate(zip(on_page, masks)):

@@ -137,6 +137,7 @@ def test_the_total_after_a_tenth_of_the_work_is_within_a_quarter(tmp_path, monke
     assert 0.75 <= (total - n) / (final - n) <= 1.25, (n, total, final)
 
 
+@pytest.mark.long
 @pytest.mark.parametrize("method", ["obscurance", "gi"])
 def test_an_adaptive_bake_s_bar_does_not_stand_at_its_total_while_rounds_run(tmp_path,
                                                                              monkeypatch, method):
@@ -222,3 +223,56 @@ def test_quiet_prints_no_stage_line(tmp_path):
     process = _bake_with_stderr_on(subprocess.PIPE, env, tmp_path, "--quiet")
     _, err = process.communicate(timeout=300)
     assert process.returncode == 0 and err == b""
+
+
+def test_a_stage_s_steps_are_drawn_with_the_time_left_once_it_has_run_its_delay(
+        capsys, monkeypatch):
+    """A stage counting its steps draws, on a terminal, a bar of them with the time left at
+    its mean pace so far once it has run ``Steps.DELAY``; a stage that ends sooner draws
+    nothing but its line."""
+    import tqdm.std
+
+    clock = [0.0]
+    monkeypatch.setattr(tqdm.std, "time", lambda: clock[0])
+    steps = progress.Steps("unwrap", "triangles", draw=True)
+    steps.expect(1000)
+    clock[0] = 1.0
+    steps.advance(100)  # 1 s in: not drawn yet
+    assert "baker: unwrap" not in capsys.readouterr().err
+    clock[0] = 4.0
+    steps.advance(300)  # 400 in 4 s: 600 more at that pace is 6 s
+    drawn = capsys.readouterr().err
+    assert re.search(r"baker: unwrap:  40%\|[^|]*\| 400/1\.0*k triangles \[00:04<00:06\]", drawn)
+    steps.done_so_far(1000)
+    steps.close()
+    quick = progress.Steps("write", "steps", draw=True)
+    quick.expect(10)
+    quick.advance(10)
+    quick.close()
+    assert "baker: write" not in capsys.readouterr().err
+
+
+def test_the_long_stages_count_their_steps_to_the_end(tmp_path, capsys, monkeypatch):
+    """A bake on a terminal whose stages all run longer than ``Steps.DELAY`` (0 here): unwrap,
+    post-process and write each draw a bar of their steps, and count every one they announced."""
+    monkeypatch.setattr(progress, "wanted", lambda quiet: not quiet)
+    monkeypatch.setattr(progress.Steps, "DELAY", 0.0)
+    monkeypatch.setenv("BAKER_CACHE_DIR", "off")
+    counted = {}
+    close = progress.Steps.close
+
+    def recorded(steps):
+        counted[steps._name] = (steps.done, steps.total)
+        close(steps)
+
+    monkeypatch.setattr(progress.Steps, "close", recorded)
+    import baker
+    scene = cornell_box().save(tmp_path / "cornell.glb")
+    baker.bake(scene, tmp_path / "out.glb", baker.Settings(page_size=64, rays=2), state=False,
+               quiet=False)
+    drawn = capsys.readouterr().err
+    for stage, unit in (("unwrap", "triangles"), ("post-process", "texels"), ("write", "steps")):
+        assert re.search(rf"baker: {re.escape(stage)}: +\d+%\|[^|]*\| [\d.]+k?/[\d.]+k? {unit}",
+                         drawn)
+        done, total = counted[stage]
+        assert done == total > 0

@@ -9,14 +9,23 @@ metre, 8 or 16 rays, few shadow, sky and emissive rays, chains of at most 4 boun
 ``CASES`` rooms × ``EDITS_PER_ROOM`` edits run in the normal suite; ``BAKER_LONG=1`` runs
 ``LONG_CASES`` rooms.
 
+Crowded rooms (issue 39: a box moved in a room of 60 differed by one 8-bit step): ``CROWD``
+props of every kind in a room grown to match, baked at the default settings — the default
+page (1024, ``LONG_CROWDED_CASES`` rooms × ``LONG_CROWDED_EDITS`` edits with ``BAKER_LONG=1``)
+or a 256 page (``CROWDED_CASES`` × ``CROWDED_EDITS`` in the normal suite) — so that every ray
+kind (obscurance, shadow, emissive, sky) and every sum over a page's texels (its encode scale,
+I_A and R_ave, dilation, seams) is in play. Every case compares the float pages too (the
+``--lightmaps`` .exr files), beside the output and the state.
+
 An edit the rebake cannot follow (a scale: a new atlas; an emissive panel moved; the sky
 switched; supersampling) is a full bake on both sides, and equal bytes say little. So the
 rebakes that were incremental must be at least ``INCREMENTAL_SHARE`` of all (measured 0.66 over
-rooms 0–49, 300 edits), and a failure prints every fallback's reason. A case that fails is added
+rooms 0–49, 300 edits; the normal suite's 25 rooms, 150 edits, keep its time budget), and a failure prints every fallback's reason. A case that fails is added
 to ``REGRESSIONS`` (room seed, edit seed) once fixed, and runs in both modes; the first two were
 rebakes of rooms with sky or with glass and mirrors that fell back to full bakes on every
 edit ("the bake state is unusable": a sky colour read back as a list; escaped weights above 1
-from Russian roulette). The same check runs with ``--foliage approx`` on the first
+from Russian roulette). An edit that moves the room's bounds so that it would derive another
+d_max keeps the last one (``incremental.kept_d_max``): its full bake is given that d_max. The same check runs with ``--foliage approx`` on the first
 ``FOLIAGE_CASES`` rooms that have an alpha-cut panel (a crown of one leaf: fitted, shading the
 room in closed form), or ``LONG_FOLIAGE_CASES`` with ``BAKER_LONG=1``.
 """
@@ -25,6 +34,7 @@ from __future__ import annotations
 
 import os
 import shutil
+from dataclasses import replace
 
 import pytest
 
@@ -33,8 +43,11 @@ from assets.random_rooms import build, random_edit, random_room
 from baker.rebake.state import default_path
 
 LONG = bool(os.environ.get("BAKER_LONG"))
-CASES, LONG_CASES, EDITS_PER_ROOM = 50, 400, 6
+CASES, LONG_CASES, EDITS_PER_ROOM = 25, 400, 6
 FOLIAGE_CASES, LONG_FOLIAGE_CASES = 2, 30
+CROWD = 60
+CROWDED_CASES, CROWDED_EDITS, CROWDED_PAGE = 1, 2, 256
+LONG_CROWDED_CASES, LONG_CROWDED_EDITS = 40, 25  # 1,000 edits at the default page
 INCREMENTAL_SHARE = 0.45
 REGRESSIONS: list[tuple[int, int]] = [(3, 3000), (12, 12000)]
 
@@ -60,31 +73,54 @@ def _foliage_cases() -> list[tuple[int, list[int]]]:
     return [(room, [1000 * room + e for e in range(3)]) for room, _ in zip(rooms, range(wanted))]
 
 
-def check_case(folder, room_seed: int, edit_seeds, foliage: str = "none"
+def _crowded_settings(spec, page_size: int) -> baker.Settings:
+    """The default settings but the page, with the room's sky."""
+    return baker.Settings(page_size=page_size, sky=(0.2, 0.25, 0.3) if spec["sky"] else None)
+
+
+def check_case(folder, room_seed: int, edit_seeds, foliage: str = "none",
+               crowd: int | None = None, page_size: int | None = None
                ) -> tuple[list[str], list[str]]:
-    """Bake room ``room_seed``, then for each edit seed rebake and fully bake the edited room
-    (``foliage``: the --foliage mode). Returns (a line per edit whose bytes differ, a line per
-    edit the rebake did as a full bake, with its reason)."""
-    spec = random_room(room_seed)
+    """Bake room ``room_seed`` (``random_room(room_seed, crowd)``; with ``crowd``, at the default
+    settings on a ``page_size`` page), then for each edit seed rebake and fully bake the edited
+    room (``foliage``: the --foliage mode), each writing its float pages as .exr files too.
+    Returns (a line per edit whose bytes differ, a line per edit the rebake did as a full
+    bake, with its reason)."""
+    def settings(spec):
+        return (_settings(spec, foliage) if crowd is None
+                else _crowded_settings(spec, page_size))
+
+    spec = random_room(room_seed, crowd)
     build(spec).save(folder / "room.glb")
-    baker.bake(folder / "room.glb", folder / "base.glb", _settings(spec, foliage))
+    baker.bake(folder / "room.glb", folder / "base.glb", settings(spec))
     failures, fallbacks = [], []
     for edit_seed in edit_seeds:
         what, edited = random_edit(spec, edit_seed)
         scene = build(edited).save(folder / "edited.glb")
         shutil.copy(default_path(folder / "base.glb"), default_path(folder / "incremental.glb"))
-        result = baker.bake(scene, folder / "incremental.glb", _settings(edited, foliage),
-                            incremental=True)
-        baker.bake(scene, folder / "full.glb", _settings(edited, foliage))
+        pages, given = {}, settings(edited)
+        for name, incremental in (("incremental", "always"), ("full", False)):
+            shutil.rmtree(folder / f"{name}_pages", ignore_errors=True)
+            result = baker.bake(scene, folder / f"{name}.glb", given,
+                                incremental=incremental, lightmaps_dir=folder / f"{name}_pages",
+                                lightmaps_format="exr")
+            pages[name] = [f.read_bytes() for f in sorted((folder / f"{name}_pages").iterdir())]
+            if incremental:
+                rebake = result.rebake
+                said = " ".join(rebake.get("changes", []) + [rebake.get("full_bake_reason", "")])
+                if "kept from the last bake" in said:  # a full bake given the d_max it kept
+                    given = replace(given, d_max=result.settings.d_max)
         same_output = (folder / "incremental.glb").read_bytes() == (folder / "full.glb").read_bytes()
         same_state = (default_path(folder / "incremental.glb").read_bytes()
                       == default_path(folder / "full.glb").read_bytes())
-        line = f"room {room_seed}, edit {edit_seed} ({what})"
-        if not result.rebake["incremental"]:
-            fallbacks.append(f"{line}: {result.rebake['full_bake_reason']}")
-        if not (same_output and same_state):
-            failures.append(f"{line}, incremental {result.rebake['incremental']}: output same "
-                            f"{same_output}, state same {same_state}")
+        same_floats = pages["incremental"] == pages["full"]
+        line = f"room {room_seed}{f' of {crowd}' if crowd else ''}, edit {edit_seed} ({what})"
+        if not rebake["incremental"]:
+            fallbacks.append(f"{line}: {rebake['full_bake_reason']}")
+        if not (same_output and same_state and same_floats):
+            failures.append(f"{line}, incremental {rebake['incremental']}: output same "
+                            f"{same_output}, state same {same_state}, float pages same "
+                            f"{same_floats}")
     return failures, fallbacks
 
 
@@ -116,3 +152,19 @@ def test_foliage_rebake_equals_a_full_bake_on_generated_rooms(tmp_path, room_see
     failures, fallbacks = check_case(tmp_path, room_seed, edit_seeds, "approx")
     assert failures == [] and not [f for f in fallbacks if "foliage" in f], "\n".join(
         failures + fallbacks)
+
+
+def _crowded_cases() -> list[tuple[int, list[int], int]]:
+    """(room seed, edit seeds, page size) of the crowded rooms: the default page in long mode."""
+    rooms, edits, page = ((LONG_CROWDED_CASES, LONG_CROWDED_EDITS, baker.Settings().page_size)
+                          if LONG else (CROWDED_CASES, CROWDED_EDITS, CROWDED_PAGE))
+    return [(500 + room, [500_000 + 1000 * room + e for e in range(edits)], page)
+            for room in range(rooms)]
+
+
+@pytest.mark.parametrize("room_seed, edit_seeds, page_size", _crowded_cases())
+def test_rebake_equals_a_full_bake_in_crowded_rooms(tmp_path, room_seed, edit_seeds, page_size):
+    """Rooms of ``CROWD`` props at the default settings: equal bytes (output, state, float
+    pages) after every edit."""
+    failures, _ = check_case(tmp_path, room_seed, edit_seeds, crowd=CROWD, page_size=page_size)
+    assert failures == [], "\n".join(failures)

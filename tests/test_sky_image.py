@@ -206,11 +206,11 @@ def test_a_rebake_follows_the_image_bytes(tmp_path):
     copy = tmp_path / "b.hdr"
     copy.write_bytes(image.read_bytes())
     again = baker.bake(scene, out, baker.Settings(sky_image=str(copy), **settings),
-                       incremental=True)
+                       incremental="always")
     assert again.rebake["incremental"]
     sky_images.save_hdr(sky_images.constant((0.6, 0.5, 0.5), height=8), copy)
     edited = baker.bake(scene, out, baker.Settings(sky_image=str(copy), **settings),
-                        incremental=True)
+                        incremental="always")
     assert not edited.rebake["incremental"]
 
 

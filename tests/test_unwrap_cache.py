@@ -1,6 +1,7 @@
-"""Unwraps cached across bakes (``baker/atlas/unwrap_cache.py``): the bytes of a bake do not
-depend on whether the cache was hit, missed, off, corrupted or unwritable, and an entry is used
-exactly when xatlas's input is the same (a rigid move of a node keeps it)."""
+"""Charts cached across bakes (``baker/atlas/unwrap_cache.py``, ``charts.py``): the bytes of a
+bake do not depend on whether the cache was hit, missed, off, corrupted or unwritable; an entry
+is used exactly when the charting's input is the same (a rigid move of a node keeps it, and so
+does another texel density, which only packs the charts again)."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ import pytest
 import baker
 from assets.make_scenes import cornell_box
 from assets.rebake_scenes import box_room, grid_boxes, moved
+from baker.atlas import charts as charts_module
 from baker.atlas import unwrap as unwrap_module
 from baker.atlas import unwrap_cache
 
@@ -27,14 +29,22 @@ def cache(tmp_path, monkeypatch):
 
 
 def _entries(place):
-    return sorted((place / "unwrap").glob("*.npz")) if (place / "unwrap").is_dir() else []
+    """Every entry: one per distinct mesh charted, and one of all a scene's meshes together."""
+    folder = place / "unwrap" / "charts"
+    return sorted(folder.glob("*.npz")) if folder.is_dir() else []
 
 
-def _no_xatlas(monkeypatch):
-    """From here on, running xatlas fails the test: the unwrap must come from the cache."""
+def _meshes_in(entry) -> int:
+    """How many meshes' charts an entry holds."""
+    with np.load(entry) as arrays:
+        return len(arrays["lengths"])
+
+
+def _no_charting(monkeypatch):
+    """From here on, charting any mesh fails the test: the charts must come from the cache."""
     def refuse(*args, **kwargs):
-        raise AssertionError("xatlas ran although its input was cached")
-    monkeypatch.setattr(unwrap_module, "call_forked_together", refuse)
+        raise AssertionError("a mesh was charted although its charts were cached")
+    monkeypatch.setattr(charts_module, "call_forked_together", refuse)
 
 
 def _bake(scene, out, settings=SETTINGS):
@@ -45,58 +55,54 @@ def _bake(scene, out, settings=SETTINGS):
 def test_a_bake_from_the_cache_has_the_bytes_of_one_without(tmp_path, cache, monkeypatch):
     scene = cornell_box().save(tmp_path / "cornell.glb")
     cold = _bake(scene, tmp_path / "cold.glb")
-    assert len(_entries(cache)) == 1
+    counts = sorted(_meshes_in(entry) for entry in _entries(cache))
+    assert counts[:-1] == [1] * (len(counts) - 1) and counts[-1] == len(counts) - 1 < 8
     with monkeypatch.context() as m:
-        _no_xatlas(m)
+        _no_charting(m)
         assert _bake(scene, tmp_path / "hit.glb") == cold
     monkeypatch.setenv("BAKER_CACHE_DIR", "off")
     assert _bake(scene, tmp_path / "off.glb") == cold
 
 
-def test_a_fit_to_one_page_is_read_back_without_the_layouts_on_its_way(tmp_path, cache,
-                                                                        monkeypatch):
-    """A derived density that spills onto two pages is lowered to fit one (``unwrap._fitted``),
-    and what that came to is kept (``unwrap_cache.FITS``): the next bake of the same meshes
-    reads the atlas and its density back without asking for any layout, with the same bytes,
-    as a bake without the cache has."""
-    room = (4.0, 3.0, 4.0)
-    scene = box_room(grid_boxes(16, room=room, size=0.4), room=room).save(tmp_path / "r.glb")
-    cold = _bake(scene, tmp_path / "cold.glb")
-    assert len(list((cache / "unwrap" / unwrap_cache.FITS).glob("*.npz"))) == 1
-
-    def refuse(*args, **kwargs):
-        raise AssertionError("a layout was asked for although the fit was cached")
-
+def test_another_texel_density_packs_the_cached_charts_again(tmp_path, cache, monkeypatch):
+    """A bake at one density, then at another: no mesh is charted again, the atlas is the
+    other density's (more texels, a larger page), and the bytes are those of a bake at that
+    density without any cache."""
+    scene = box_room(grid_boxes(8)).save(tmp_path / "room.glb")
+    low = baker.Settings(page_size=256, rays=4, shadow_rays=1, threads=1, texel_density=8.0)
+    high = baker.Settings(page_size=256, rays=4, shadow_rays=1, threads=1, texel_density=12.0)
+    first = baker.bake(scene, tmp_path / "low.glb", low, state=False)
     with monkeypatch.context() as m:
-        m.setattr(unwrap_module, "_packed", refuse)
-        done = baker.bake(scene, tmp_path / "hit.glb", SETTINGS, state=False)
-        assert done.report["atlas"]["pages"] == 1
-        assert (tmp_path / "hit.glb").read_bytes() == cold
+        _no_charting(m)
+        second = baker.bake(scene, tmp_path / "high.glb", high, state=False)
+    assert second.texels > 2 * first.texels
     monkeypatch.setenv("BAKER_CACHE_DIR", "off")
-    assert _bake(scene, tmp_path / "off.glb") == cold
+    assert _bake(scene, tmp_path / "uncached.glb", high) == (tmp_path / "high.glb").read_bytes()
 
 
 @pytest.mark.parametrize("damage", ["truncated", "flipped", "wrong arrays", "empty"])
 def test_a_damaged_entry_is_ignored_and_written_again(tmp_path, cache, damage):
     scene = cornell_box().save(tmp_path / "cornell.glb")
     cold = _bake(scene, tmp_path / "cold.glb")
-    [entry] = _entries(cache)
-    data = entry.read_bytes()
-    if damage == "truncated":
-        entry.write_bytes(data[: len(data) // 2])
-    elif damage == "flipped":  # a bit of the arrays' data (the zip's CRC no longer matches)
-        flipped = bytearray(data)
-        flipped[len(data) // 2] ^= 0x10
-        entry.write_bytes(bytes(flipped))
-    elif damage == "wrong arrays":
-        np.savez(entry.with_suffix(""), header=np.zeros(4, np.int64))
-    else:
-        entry.write_bytes(b"")
-    assert unwrap_cache.read(entry.stem, 8) is None
+    entries = {entry: _meshes_in(entry) for entry in _entries(cache)}
+    for entry, meshes in entries.items():  # every one damaged
+        data = entry.read_bytes()
+        if damage == "truncated":
+            entry.write_bytes(data[: len(data) // 2])
+        elif damage == "flipped":  # a bit of the arrays' data (the zip's CRC no longer matches)
+            flipped = bytearray(data)
+            flipped[len(data) // 2] ^= 0x10
+            entry.write_bytes(bytes(flipped))
+        elif damage == "wrong arrays":
+            np.savez(entry.with_suffix(""), header=np.zeros(4, np.int64))
+        else:
+            entry.write_bytes(b"")
+        assert unwrap_cache.read(entry.stem, meshes) is None
     assert _bake(scene, tmp_path / "again.glb") == cold
-    assert _entries(cache) == [entry]
-    header, meshes = unwrap_cache.read(entry.stem, 8)  # the room's 8 baked instances
-    assert header[0] > 0 and len(meshes) == 8
+    assert _entries(cache) == sorted(entries)
+    for entry, meshes in entries.items():
+        header, arrays = unwrap_cache.read(entry.stem, meshes)
+        assert min(header) > 0 and len(arrays) == meshes
 
 
 def test_a_rigid_move_hits_the_cache_and_a_changed_mesh_misses(tmp_path, cache, monkeypatch):
@@ -105,20 +111,21 @@ def test_a_rigid_move_hits_the_cache_and_a_changed_mesh_misses(tmp_path, cache, 
     turned = box_room(moved(boxes, "box2", at=(1.9, -1.7), turn=33.0)).save(tmp_path / "after.glb")
     grown = box_room(moved(boxes, "box2", size=(0.5, 0.3, 0.3))).save(tmp_path / "grown.glb")
     _bake(before, tmp_path / "before_baked.glb")
+    count = len(_entries(cache))
     with monkeypatch.context() as m:
-        _no_xatlas(m)
+        _no_charting(m)
         _bake(turned, tmp_path / "after_baked.glb")
-    assert len(_entries(cache)) == 1
-    _bake(grown, tmp_path / "grown_baked.glb")  # a stretched box is new xatlas input
-    assert len(_entries(cache)) == 2
+    assert len(_entries(cache)) == count
+    _bake(grown, tmp_path / "grown_baked.glb")  # a stretched box is a new mesh to chart
+    assert len(_entries(cache)) == count + 2  # its charts, and the scene's together
 
 
 def test_the_key_is_every_bit_of_the_input_and_every_option():
-    positions = np.random.default_rng(1).random((5, 3)).astype(np.float32)
-    triangles = np.array([[0, 1, 2], [2, 3, 4]], np.uint32)
+    positions = np.random.default_rng(1).random((5, 3))
+    triangles = np.array([[0, 1, 2], [2, 3, 4]], np.int64)
     base = unwrap_cache.key([(positions, triangles)], ("v1", {"padding": 2}))
     nudged = positions.copy()
-    nudged[3, 1] = np.nextafter(nudged[3, 1], np.float32(2))
+    nudged[3, 1] = np.nextafter(nudged[3, 1], 2.0)
     assert unwrap_cache.key([(nudged, triangles)], ("v1", {"padding": 2})) != base
     assert unwrap_cache.key([(positions, triangles[::-1].copy())], ("v1", {"padding": 2})) != base
     assert unwrap_cache.key([(positions, triangles)], ("v1", {"padding": 3})) != base
@@ -138,14 +145,32 @@ def test_an_unwritable_cache_costs_nothing_but_the_cache(tmp_path, monkeypatch):
 
 
 def test_only_the_most_recently_used_entries_are_kept(tmp_path, cache, monkeypatch):
-    monkeypatch.setattr(unwrap_cache, "KEEP", 2)
-    arrays = ((np.zeros(1, np.uint32),) * 5,)
+    monkeypatch.setattr(unwrap_cache, "KEEP_CHARTS", 2)
+    arrays = ((np.zeros(1, np.int64),) * unwrap_cache.PER_MESH,)
     for n, name in enumerate(("a", "b", "c")):
-        unwrap_cache.write(name, (1, 1, 1, 1), arrays)
-        path = cache / "unwrap" / f"{name}.npz"
-        os.utime(path, (1000 + n, 1000 + n))
-    unwrap_cache.write("d", (1, 1, 1, 1), arrays)
+        unwrap_cache.write(name, (1,), arrays)
+        os.utime(cache / "unwrap" / "charts" / f"{name}.npz", (1000 + n, 1000 + n))
+    unwrap_cache.write("d", (1,), arrays)
     assert [p.stem for p in _entries(cache)] == ["c", "d"]
+
+
+def test_the_charting_time_limit_grows_with_the_triangles(tmp_path, monkeypatch):
+    """The watchdog gives a child charting meshes 5 s and 2 ms a triangle of CPU time."""
+    monkeypatch.setenv("BAKER_CACHE_DIR", "off")
+    given = []
+
+    class Stop(Exception):
+        pass
+
+    def record(functions, what, seconds, tick=None):
+        given.append(seconds)
+        raise Stop
+
+    monkeypatch.setattr(charts_module, "call_forked_together", record)
+    boxes = grid_boxes(6)
+    with pytest.raises(Stop):
+        _unwrapped(box_room(boxes).save(tmp_path / "boxes.glb"), page_size=128, threads=1)
+    assert given == [pytest.approx(5.0 + 2e-3 * (12 + 6 * 12))]  # the room and six boxes
 
 
 def _unwrapped(path, **settings):
@@ -161,62 +186,19 @@ def _unwrapped(path, **settings):
     return scene, world, resolved, unwrap_module.unwrap(scene, world, resolved)
 
 
-def test_the_two_packings_made_at_once_give_the_atlas_made_one_after_the_other(tmp_path,
-                                                                               monkeypatch):
-    """Where the page xatlas sizes itself may exceed a page, it and the run into whole pages
-    are made at once (threads > 1): the atlas is the one the runs made in turn give."""
-    monkeypatch.setenv("BAKER_CACHE_DIR", "off")
-    path = box_room(grid_boxes(40)).save(tmp_path / "boxes.glb")
-    *_, in_turn = _unwrapped(path, page_size=128, threads=1)
-    *_, at_once = _unwrapped(path, page_size=128, threads=2)
-    assert in_turn.page_count > 1  # the first run came out larger than a page
-    assert (in_turn.width, in_turn.height, in_turn.page_count) == (
-        at_once.width, at_once.height, at_once.page_count)
-    for a, b in zip(in_turn.instances, at_once.instances):
-        assert np.array_equal(a.uv, b.uv) and np.array_equal(a.triangles, b.triangles)
-
-
-def test_the_unwrappers_time_limit_grows_with_the_texels_it_packs(tmp_path, monkeypatch):
-    """A few triangles at a high density are little charting but much packing: the watchdog
-    gives the xatlas run 10 µs per expected texel beyond its 5 s."""
-    from assets.make_scenes import open_plane
-
-    monkeypatch.setenv("BAKER_CACHE_DIR", "off")
-    given = []
-
-    class Stop(Exception):
-        pass
-
-    def record(functions, what, seconds):
-        given.append(seconds)
-        raise Stop
-
-    monkeypatch.setattr(unwrap_module, "call_forked_together", record)
-    path = open_plane(10.0).save(tmp_path / "plane.glb")  # 100 m², 2 triangles
-    with pytest.raises(Stop):
-        _unwrapped(path, page_size=8192, texel_density=500.0, threads=1)
-    texels = 100.0 * 500.0 ** 2
-    assert given and given[0] >= 5.0 + 1e-5 * texels
-
-
-def _charts(place):
-    folder = place / "unwrap" / unwrap_cache.CHARTS
-    return sorted(folder.glob("*.npz")) if folder.is_dir() else []
-
-
 def _counting_charts(monkeypatch, tmp_path):
     """From here on every mesh charted (in whichever forked child) adds a line to the file
-    returned."""
+    returned: its triangle count."""
     log = tmp_path / "charted"
     log.write_text("")
-    real = unwrap_module._chart
+    real = charts_module.chart
 
-    def counted(mesh):
+    def counted(positions, triangles):
         with open(log, "a") as out:
-            out.write(f"{len(mesh[1])}\n")
-        return real(mesh)
+            out.write(f"{len(triangles)}\n")
+        return real(positions, triangles)
 
-    monkeypatch.setattr(unwrap_module, "_chart", counted)
+    monkeypatch.setattr(charts_module, "chart", counted)
     return log
 
 
@@ -230,7 +212,7 @@ def test_instances_stretched_alike_are_charted_once_and_each_gets_its_own_texels
     path = box_room(boxes).save(tmp_path / "alike.glb")
     log = _counting_charts(monkeypatch, tmp_path)
     scene, world, _, atlas = _unwrapped(path, page_size=256, threads=2)
-    assert len(log.read_text().split()) == 2 and len(_charts(cache)) == 2
+    assert len(log.read_text().split()) == 2 and len(_entries(cache)) == 3  # and together
     coverage = cover(atlas, world)
     instance_of = np.searchsorted(world.tri_start, coverage.triangle, side="right") - 1
     counts = np.bincount(instance_of, minlength=len(scene.instances))[1:]  # 0: the room
@@ -238,67 +220,39 @@ def test_instances_stretched_alike_are_charted_once_and_each_gets_its_own_texels
 
 
 def test_a_bake_with_one_mesh_edited_charts_only_that_mesh_again(tmp_path, cache, monkeypatch):
-    """Box 2 stretched: its unwrap input is new, the room's and the other boxes' are not (at a
-    texel density given: one derived from the scene's area changes with it, and with it every
-    mesh's input); the bake's bytes are those of a bake without any cache."""
-    settings = baker.Settings(page_size=128, rays=4, shadow_rays=1, threads=1,
-                              texel_density=12.0)
+    """Box 2 stretched: its charting input is new, the room's and the other boxes' are not
+    (whatever the density: the charts hold none); the bake's bytes are those of a bake
+    without any cache."""
     boxes = grid_boxes(6)
-    _bake(box_room(boxes).save(tmp_path / "before.glb"), tmp_path / "before_baked.glb", settings)
+    _bake(box_room(boxes).save(tmp_path / "before.glb"), tmp_path / "before_baked.glb")
     grown = box_room(moved(boxes, "box2", size=(0.5, 0.3, 0.3))).save(tmp_path / "grown.glb")
     with monkeypatch.context() as m:
         log = _counting_charts(m, tmp_path)
-        cached = _bake(grown, tmp_path / "grown_baked.glb", settings)
+        cached = _bake(grown, tmp_path / "grown_baked.glb")
         assert log.read_text().split() == ["12"]  # the unit box's 12 triangles, once
     monkeypatch.setenv("BAKER_CACHE_DIR", "off")
-    assert _bake(grown, tmp_path / "uncached.glb", settings) == cached
+    assert _bake(grown, tmp_path / "uncached.glb") == cached
 
 
 def test_the_atlas_does_not_depend_on_the_cores_or_on_which_charts_were_cached(
         tmp_path, monkeypatch):
-    """Charted by one child or by two (the meshes dealt differently), or packed from charts
-    read back from the cache: the same atlas, bit for bit."""
+    """Charted by one child or by three (the meshes dealt differently), or packed from charts
+    read back from the cache, some of them only: the same atlas, bit for bit."""
     path = box_room(grid_boxes(12)).save(tmp_path / "boxes.glb")
     monkeypatch.setenv("BAKER_CACHE_DIR", "off")
     *_, alone = _unwrapped(path, page_size=256, threads=1)
-    monkeypatch.setattr(unwrap_module, "cores", lambda: 3)
+    monkeypatch.setattr(charts_module, "cores", lambda: 3)
     *_, beside = _unwrapped(path, page_size=256, threads=3)
     place = tmp_path / "cache"
     monkeypatch.setenv("BAKER_CACHE_DIR", str(place))
     _unwrapped(path, page_size=256, threads=2)
-    for entry in _entries(place):  # the whole unwrap gone: packed again from cached charts
-        entry.unlink()
-    with monkeypatch.context() as m:
-        log = _counting_charts(m, tmp_path)
-        *_, from_charts = _unwrapped(path, page_size=256, threads=2)
-        assert log.read_text() == ""
+    singles = [entry for entry in _entries(place) if _meshes_in(entry) == 1]
+    for entry in set(_entries(place)) - set(singles) | set(singles[::2]):
+        entry.unlink()  # the scene's joint entry gone, and half the meshes charted again
+    *_, from_charts = _unwrapped(path, page_size=256, threads=2)
     for other in (beside, from_charts):
         assert (alone.width, alone.height, alone.page_count) == (
             other.width, other.height, other.page_count)
         for a, b in zip(alone.instances, other.instances, strict=True):
             assert np.array_equal(a.vertices, b.vertices) and np.array_equal(a.uv, b.uv)
             assert np.array_equal(a.triangles, b.triangles) and np.array_equal(a.pages, b.pages)
-
-
-def test_a_scene_of_one_large_mesh_is_charted_and_packed_in_one_run(tmp_path, cache,
-                                                                      monkeypatch):
-    """A terrain of 3,200 triangles in a room of 12: no mesh is charted alone (one xatlas run
-    charts and packs both), and the atlas is the same with one worker or two, and cached."""
-    from benchmarks.bench_million import terrain
-
-    path = terrain(40).save(tmp_path / "terrain.glb")
-    log = _counting_charts(monkeypatch, tmp_path)
-    scene, world, _, alone = _unwrapped(path, page_size=256, threads=1)
-    assert log.read_text() == "" and not _charts(cache)
-    assert sum(len(inst.triangles) for inst in alone.instances) == 3212
-    monkeypatch.setenv("BAKER_CACHE_DIR", "off")
-    *_, beside = _unwrapped(path, page_size=256, threads=2)
-    monkeypatch.setenv("BAKER_CACHE_DIR", str(cache))
-    with monkeypatch.context() as m:
-        _no_xatlas(m)
-        *_, cached = _unwrapped(path, page_size=256, threads=1)
-    for other in (beside, cached):
-        assert (alone.width, alone.height, alone.page_count) == (
-            other.width, other.height, other.page_count)
-        for a, b in zip(alone.instances, other.instances, strict=True):
-            assert np.array_equal(a.uv, b.uv) and np.array_equal(a.triangles, b.triangles)

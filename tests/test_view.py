@@ -63,12 +63,18 @@ def test_nothing_outside_the_package_and_the_files_folder(served):
 
 
 def test_the_page_imports_only_shipped_files():
-    """Every import of the page's modules is a relative path to a file in view_static (nothing
-    is fetched from the internet), and three.js's licence ships beside it."""
+    """Every import of the page's modules is a relative path to a file in view_static or
+    "three", which the page's import map makes the shipped bundle (nothing is fetched from
+    the internet; the plugin imports "three" so that it works in a user's own app too), and
+    three.js's licence ships beside it."""
+    page = (STATIC / "index.html").read_text()
+    (mapped,) = re.findall(r'"three":\s*"\./([^"]+)"', page)
+    assert (STATIC / mapped).is_file()
     for script in ("viewer.js", "moz_lightmap.js"):
         text = (STATIC / script).read_text()
-        for target in re.findall(r"from\s+'([^']+)'", text):
-            assert target.startswith("./") and (STATIC / target[2:]).is_file(), target
+        for target in re.findall(r"^import\b[^;]*?\bfrom\s+'([^']+)'", text, flags=re.M):
+            assert target == "three" or (target.startswith("./")
+                                         and (STATIC / target[2:]).is_file()), target
     bundle = (STATIC / "three.min.js").read_text()
     assert not re.search(r"\bimport\s*[\w{}*,\s]*from\s*[\"']", bundle)  # self-contained
     assert "MIT License" in (STATIC / "three.LICENSE").read_text()

@@ -23,7 +23,7 @@ from baker.run import atomic as staging
 from baker.atlas.layout import Atlas, InstanceUV
 from baker.image.encode import EncodedPage
 from baker.errors import OutputError
-from baker.gltf.scene import Instance, Material, Primitive, Scene
+from baker.gltf.scene import Image, Instance, Material, Primitive, Scene
 from baker.output.write import WriteOptions, write
 
 import gltf_validator
@@ -201,8 +201,13 @@ def _scene(path: Path) -> Scene:
         Instance(node=4, primitive=0, world=moved(0, -2), baked=False, reason="test"),
     )
     materials = (_material(0, "wall"), _material(1, "floor"), _material(None, "default"))
+    buffers = tuple(document.binary_blob() if b.uri is None else (path.parent / b.uri).read_bytes()
+                    for b in document.buffers)
+    images = tuple(Image(pixels=np.full((1, 1, 4), 255, np.uint8),
+                         data=(path.parent / image.uri).read_bytes() if image.uri else None)
+                   for image in document.images or [])
     return Scene(path=path, document=document, primitives=primitives, instances=instances,
-                 materials=materials, images=())
+                 materials=materials, images=images, buffers=buffers)
 
 
 def _atlas() -> Atlas:
@@ -520,6 +525,34 @@ def test_gltf_output_copies_referenced_images(tmp_path):
     _assert_valid(output)
 
 
+@pytest.mark.parametrize("beside", [True, False])
+def test_a_glb_output_holds_the_images_its_input_names_by_uri(tmp_path, beside):
+    """A .gltf whose texture is a file beside it, baked to a .glb (in its folder or another):
+    the .glb is one file, its image a bufferView with its mimeType, its bytes the file's."""
+    source_dir = tmp_path / "src"
+    (source_dir / "textures").mkdir(parents=True)
+    (source_dir / "textures" / "brick.png").write_bytes(_png(128))
+    doc = _input_doc()
+    doc.json["images"] = [{"uri": "textures/brick.png"}]
+    doc.json["textures"] = [{"source": 0}]
+    doc.json["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = {"index": 0}
+    source = source_dir / "level.gltf"
+    doc.gltf(source)
+    output = (source_dir if beside else tmp_path / "out") / "level_baked.glb"
+    output.parent.mkdir(exist_ok=True)
+    before = sorted(p.name for p in output.parent.iterdir())
+    write(_scene(source), _atlas(), _pages(), output, WriteOptions())
+    assert sorted(p.name for p in output.parent.iterdir()) == sorted(before + [output.name])
+    data = output.read_bytes()
+    gltf = json.loads(data[20:20 + struct.unpack("<I", data[12:16])[0]])
+    (image,) = [i for i in gltf["images"] if i.get("name") is None]
+    assert "uri" not in image and image["mimeType"] == "image/png"
+    view = gltf["bufferViews"][image["bufferView"]]
+    blob = data[28 + struct.unpack("<I", data[12:16])[0]:]
+    assert blob[view.get("byteOffset", 0):][:view["byteLength"]] == _png(128)
+    _assert_valid(output)
+
+
 def test_missing_folder_raises_and_writes_nothing(tmp_path, baked):
     source, _, _ = baked
     output = tmp_path / "nowhere" / "level.glb"
@@ -622,3 +655,91 @@ def test_compiled_quantiser_gives_quantise_bytes():
         out = np.empty(values.shape, np.uint8)
         _quantise_linear(values * scale, scale, out)
         assert np.array_equal(out, quantise(values * scale / scale, "linear")), scale
+
+
+def _glb_json(path: Path) -> dict:
+    data = path.read_bytes()
+    return json.loads(data[20:20 + struct.unpack("<I", data[12:16])[0]])
+
+
+def test_instances_share_their_geometry_and_grow_the_output_by_little(tmp_path):
+    """200 nodes of one box mesh: every instance's positions, normals and indices are written
+    once and shared (one POSITION accessor in the whole file), so the output beyond its images
+    grows by less than 1 KB per instance over the input (issue 43); it validates, and every
+    instance keeps its own lightmap area."""
+    import baker
+    from assets.extreme_scenes import instanced_boxes
+
+    count = 200
+    source = instanced_boxes(count).save(tmp_path / "boxes.glb")
+    out = tmp_path / "boxes_baked.glb"
+    baker.bake(source, out, baker.Settings(texel_density=5.0, rays=4, d_max=0.5), state=False)
+    data = _glb_json(out)
+    primitives = [p for node in data["nodes"] if "mesh" in node
+                  for p in data["meshes"][node["mesh"]]["primitives"]]
+    assert len(primitives) == count
+    assert len({p["attributes"]["POSITION"] for p in primitives}) == 1
+    assert len({p["indices"] for p in primitives}) == 1
+    images = sum(data["bufferViews"][image["bufferView"]]["byteLength"]
+                 for image in data["images"])
+    grown = out.stat().st_size - images - source.stat().st_size
+    assert grown <= 1024 * count, grown / count
+    report = gltf_validator.validate(out)
+    assert not gltf_validator.issue_codes(report, gltf_validator.ERROR), \
+        gltf_validator.describe(report, gltf_validator.ERROR)
+    uvs = {p["attributes"]["TEXCOORD_1"] for p in primitives}
+    copies = {p["material"] for p in primitives}
+    assert len(uvs) * len(copies) >= count  # each instance reads its own place on the page
+
+
+def test_an_instance_moved_as_a_block_reads_the_shared_uvs_through_a_transform(tmp_path):
+    """Two instances of a box whose second's lightmap UVs are the first's scaled by 0.5 and
+    moved (its charts packed as one block): it shares the first's UV accessor, and its material
+    copy reads the page through a KHR_texture_transform that gives back its own UVs to 1e-6;
+    the file validates and the preview reads the page where the viewer does."""
+    import dataclasses
+
+    from assets.extreme_scenes import instanced_boxes
+    from baker.geometry.world import build_world
+    from baker.gltf.load import load
+    from baker.preview import read_lightmaps
+    from tests.bakehelp import computed
+
+    done = computed(instanced_boxes(2), tmp_path, texel_density=5.0, rays=4)
+    first, second = done.atlas.instances
+    moved = dataclasses.replace(second, vertices=first.vertices, triangles=first.triangles,
+                                uv=first.uv * 0.5 + [0.25, 0.125], pages=first.pages)
+    atlas = dataclasses.replace(done.atlas, instances=(first, moved))
+    out = tmp_path / "out.glb"
+    pages = [EncodedPage(png=_png(128), intensity=1.0)] * atlas.page_count
+    write(done.scene, atlas, pages, out, WriteOptions(carrier="emissive", encoding="srgb"))
+    data = _glb_json(out)
+    (a,), (b,) = (data["meshes"][node["mesh"]]["primitives"]
+                  for node in data["nodes"] if "mesh" in node)
+    assert a["attributes"]["TEXCOORD_1"] == b["attributes"]["TEXCOORD_1"]
+    info = data["materials"][b["material"]]["emissiveTexture"]
+    transform = info["extensions"]["KHR_texture_transform"]
+    np.testing.assert_allclose(transform["scale"], [0.5, 0.5], atol=1e-6)
+    np.testing.assert_allclose(transform["offset"], [0.25, 0.125], atol=1e-6)
+    assert "KHR_texture_transform" in data["extensionsUsed"]
+    assert not gltf_validator.issue_codes(gltf_validator.validate(out), gltf_validator.ERROR)
+    scene = load(out)
+    world = build_world(scene)
+    read = read_lightmaps(scene, world)
+    tris = world.instance_triangles(1)
+    expected = moved.uv[moved.triangles]
+    np.testing.assert_allclose(read.uv[tris], expected.astype(np.float32), atol=1e-6)
+
+
+def test_uv_transforms_are_found_only_where_the_uvs_moved_as_one_block():
+    from baker.output.write import _uv_transform
+
+    rng = np.random.default_rng(3)
+    reference = rng.random((50, 2)).astype(np.float32)
+    assert _uv_transform(reference, reference.astype(np.float64)) == {}
+    found = _uv_transform(reference, reference * [0.5, 0.25] + [0.3, 0.6])
+    np.testing.assert_allclose(found["scale"], [0.5, 0.25], atol=1e-6)
+    np.testing.assert_allclose(found["offset"], [0.3, 0.6], atol=1e-6)
+    shuffled = reference.astype(np.float64).copy()
+    shuffled[:10] += 0.01  # one chart moved on its own
+    assert _uv_transform(reference, shuffled) is None

@@ -172,13 +172,18 @@ rng = np.random.default_rng(22)
 inputs = [np.array([3818, 3200, 3818]).tobytes()] + [  # the counts that first varied
     rng.integers(0, 1 << int(rng.integers(4, 16)), int(rng.integers(1, 40))).tobytes()
     for _ in range(300)]
-print(hashlib.sha256(b"".join(zipwriter.deflate(b) for b in inputs)).hexdigest())
+from baker.image.encode import png_bytes
+pages = [rng.integers(0, 256, (h, w, 3)).astype(np.uint8) // k
+         for h, w, k in ((8, 8, 1), (49, 49, 16), (70, 130, 64))]
+print(hashlib.sha256(b"".join([zipwriter.deflate(b) for b in inputs]
+                              + [png_bytes(page) for page in pages])).hexdigest())
 """
 
 
 def test_small_arrays_deflate_to_the_same_bytes_in_every_process():
     """``zipwriter.deflate`` (what ``state._deflates`` judges a member by, and how members are
-    deflated) gives the same bytes for the same inputs in fresh processes. ISA-L's one-shot
+    deflated) and ``encode.png_bytes`` (the pages in the output) give the same bytes for the
+    same inputs in fresh processes. ISA-L's one-shot
     compressor did not: a 24-byte array of three counts deflated to 14, 15 or 16 bytes from
     one process to the next (in 2 of 40), and a bake in parts stored a member that the bake
     at once deflated. 301 short arrays of small integers, in 16 processes."""

@@ -1,7 +1,8 @@
 """The lightmap atlas: where every baked triangle lies in which lightmap page.
 
-Made by ``unwrap.py`` (xatlas), read by the rasteriser and by the writer, which carries every
-vertex attribute onto the split vertices through ``InstanceUV.vertices``.
+Made by ``unwrap.py`` from each mesh's ``Charts`` (``planar.py``, ``charts.py``), read by the
+rasteriser and by the writer, which carries every vertex attribute onto the split vertices
+through ``InstanceUV.vertices``.
 """
 
 from __future__ import annotations
@@ -11,6 +12,27 @@ from dataclasses import dataclass
 import numpy as np
 
 from baker.frozen import read_only
+
+
+@dataclass(frozen=True)
+class Charts:
+    """One mesh's charts, in its rigid-free frame (``unwrap.frame_positions``), world units:
+    no texel density in them, so that a density change only packs them again.
+
+    Vertices are split along chart seams: chart vertex j copies the mesh's vertex
+    ``vertices[j]``; ``triangles[t]`` is the mesh's triangle t over the chart vertices, corners
+    in the same order. Each chart lies in its own rectangle: ``uv`` (k, 2) from (0, 0) to
+    ``sides[chart[j]]``, one world unit a unit (its surface's area kept: ``planar.py``).
+    """
+
+    vertices: np.ndarray  # (k,) int64, the mesh vertex of each chart vertex
+    triangles: np.ndarray  # (m, 3) int64 into the chart vertices
+    uv: np.ndarray  # (k, 2) float64, world units from its chart's corner
+    chart: np.ndarray  # (k,) int64, the chart of each vertex
+    sides: np.ndarray  # (c, 2) float64, each chart's rectangle, world units
+
+    def __post_init__(self) -> None:
+        read_only(self)
 
 
 @dataclass(frozen=True)

@@ -1,278 +1,372 @@
-"""Chart a mesh's many small flat loose parts (leaves, grass blades, decals) without xatlas.
+"""Chart a mesh by projection: flat and gently curved parts, without xatlas.
 
-A crown of 100,000 alpha-cut leaf quads is 100,000 charts: xatlas charts and packs them one by
-one, 696 s for 100k leaves on this machine, and pads each to about seven texels a side. A loose
-part (triangles joined by shared vertices, none shared with the rest) that is flat and a few
-texels across needs no charting: its projection onto its own plane is a chart without
-distortion. ``flat_parts`` finds such parts, turns each so that its bounding rectangle is the
-smallest one an edge of it gives, and ``shelves`` packs their rectangles row by row into
-blocks of at most ``BLOCK`` texels a side; ``unwrap.py`` hands xatlas one rectangle per block to
-place among the other charts, and moves each block's parts to where its rectangle went.
+A level is mostly flat faces (walls, crates, steps) and gently curved ones (columns, balls,
+terrain), and a crown or a lawn is many small flat loose parts (leaves, blades). Such a
+surface needs no optimised parameterisation: its projection onto a plane is a chart whose
+distortion the plane's choice bounds. xatlas charts each mesh in 0.1–1 s per thousand
+triangles (a 12,000-triangle sphere 0.8 s, a crown of 100,000 leaves 696 s); this charts a
+million triangles in about a second.
 
-Everything here works in the instance's rigid-free frame in texel units (``unwrap.xatlas_meshes``),
-so the charts are a pure function of the mesh and the settings, unchanged by a rigid move.
+``project``: the triangles are joined across edges (corners at the same position, so that
+vertices split for normals or UVs do not cut a chart), and charts grown from the largest
+triangle not yet charted across edges while each triangle's normal stays within ``CONE`` of
+the seed's. A chart is projected along its area-weighted normal (every normal within 2·CONE <
+90° of it, so no triangle turns over), scaled so that its area is its surface's, and turned so that
+its bounding rectangle is the least one a side of its convex hull gives. A mesh is left to
+xatlas (None) when a chart overlaps itself once projected (a helical ramp), or when its
+surface is so crumpled that the charts average fewer than ``LEAST_TRIANGLES`` triangles (a
+rock's noise: xatlas's charts follow it with less seam).
+
+Everything is a pure function of the mesh (positions in its rigid-free frame, world units), so
+the charts are the same bits however the meshes are dealt to cores, and after a rigid move.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
+from baker.atlas.layout import Charts
+from baker.geometry.world import triangle_cross
 from baker.jit import inline, jit
 
-MIN_PARTS = 64  # a mesh with fewer small flat loose parts leaves them all to xatlas
-MAX_SIDE = 16.0  # texels: a larger part is left to xatlas
-MAX_TRIANGLES = 64  # a loose part of more triangles is left to xatlas
-BLOCK = 64  # texels: the largest side of a block of parts (at most the page's room)
-_FLAT_COS = 0.9998  # every triangle's normal within about 1.1° of its part's
-_FLAT_DISTANCE = 0.02  # texels: every vertex this close to its part's plane
-_MARGIN = 0.01  # texels: a part's rectangle is kept this far inside its cell's texels
-# Everything besides a mesh and the padding that decides its flat charts, for the unwrap
-# cache's key; the first entry is bumped when the method changes.
-KEY = ("planar", 1, MIN_PARTS, MAX_SIDE, MAX_TRIANGLES, BLOCK, _FLAT_COS, _FLAT_DISTANCE, _MARGIN)
+CONE = 40.0  # degrees: every normal of a chart within this of its seed's (under 45°)
+LEAST_TRIANGLES = 6.0  # a mesh whose cut charts average fewer triangles is left to xatlas
+_OVERLAP = 1e-9  # of a chart's size: triangles closer than this to apart are apart
+_EQUAL = 1e-9  # rectangles' areas this close (relative) are equal (``_turned``)
+# Everything besides a mesh that decides its charts, for the unwrap cache's key; the first
+# entries are bumped when the method changes.
+KEY = ("projection", 2, CONE, LEAST_TRIANGLES, _OVERLAP, _EQUAL)
 
 
-@dataclass(frozen=True)
-class FlatParts:
-    """A mesh's small flat loose parts, charted and packed into blocks (texel units).
+def project(positions: np.ndarray, triangles: np.ndarray) -> Charts | None:
+    """The charts of a mesh by projection (``Charts``), or None where xatlas should chart it.
 
-    faces: (f,) int64 the mesh's triangles that belong to the parts, ascending.
-    vertices: (k,) int64 the mesh vertices of those triangles, each once.
-    triangles: (f, 3) int64 the faces' corners as indices into ``vertices``.
-    uv: (k, 2) float64 each vertex's place in its block, in texels from the block's corner.
-    block: (k,) int64 the block of each vertex.
-    sizes: (b, 2) int64 each block's width and height in texels: its parts' texels and the
-    padding between them, none around the outside (xatlas pads the block as a chart).
-    parts: how many parts.
-    """
-
-    faces: np.ndarray
-    vertices: np.ndarray
-    triangles: np.ndarray
-    uv: np.ndarray
-    block: np.ndarray
-    sizes: np.ndarray
-    parts: int
-
-
-def least_texels(parts: int, padding: int) -> int:
-    """Texels of page that ``parts`` charts need at any density: each touches at least one
-    texel and keeps ``padding`` free around it."""
-    return parts * (1 + 2 * int(padding)) ** 2
-
-
-def flat_parts(positions: np.ndarray, triangles: np.ndarray, padding: int, room: int
-               ) -> FlatParts | None:
-    """The small flat loose parts of a mesh, charted by projection and packed (``FlatParts``),
-    or None when it has fewer than ``MIN_PARTS``.
-
-    positions (n, 3) and triangles (m, 3) as xatlas takes them (texel units); ``padding``: the
-    free texels every part keeps around it (two parts' texels are 2·padding apart, as xatlas
-    spaces its charts); ``room``: texels a block may span (a page less its padding)."""
-    p = positions.astype(np.float64)
-    t = triangles.astype(np.int64)
-    if len(t) < MIN_PARTS:
+    positions (n, 3) float64 world units (the instance's rigid-free frame), triangles (m, 3)
+    int64."""
+    p = np.asarray(positions, np.float64)
+    t = np.asarray(triangles, np.int64)
+    if not len(t):
         return None
-    found = _small_flat(p, t, _loose_parts(t, len(p)))
-    if found is None:
+    cross = triangle_cross(p, t)
+    double_area = np.linalg.norm(cross, axis=1)
+    valid = np.isfinite(double_area) & (double_area > 0)
+    normals = np.divide(cross, double_area[:, None], out=np.zeros_like(cross),
+                        where=valid[:, None])
+    neighbours = _neighbours(_welded(p)[t])
+    seeds = np.lexsort((np.arange(len(t)), -np.where(valid, double_area, 0.0)))
+    chart, count = _grow(normals, valid, neighbours, seeds, np.cos(np.radians(CONE)))
+    if _crumpled(chart, count, neighbours):
         return None
-    faces, part = found
-    vertices, corners = np.unique(t[faces], return_inverse=True)
+    axis = np.stack([np.bincount(chart, np.where(valid, cross[:, k], 0.0), count)
+                     for k in range(3)], axis=1)
+    u, v = _bases(axis)
+    keys, corners = np.unique(chart[:, None] * len(p) + t, return_inverse=True)
+    vertex, owner = keys % len(p), keys // len(p)
     corners = corners.reshape(-1, 3)
-    owner = np.empty(len(vertices), np.int64)
-    owner[corners.ravel()] = np.repeat(part, 3)
-    local, extent = _projected(p[vertices], corners, owner, int(part.max()) + 1)
-    cells = np.floor(extent + 2 * _MARGIN).astype(np.int64) + 1  # texels each part touches
-    block, at, sizes = shelves(cells, 2 * int(padding), min(BLOCK, int(room)))
-    centred = at[owner] + (cells[owner] - extent[owner]) / 2  # the rectangle mid-cell
-    return FlatParts(faces=faces, vertices=vertices, triangles=corners,
-                     uv=local + centred, block=block[owner], sizes=sizes,
-                     parts=len(cells))
+    flat = np.stack([np.einsum("ij,ij->i", p[vertex], u[owner]),
+                     np.einsum("ij,ij->i", p[vertex], v[owner])], axis=1)
+    flat *= _area_scale(flat, corners, chart, double_area, count)[owner, None]
+    by_chart = np.argsort(chart, kind="stable")
+    start = np.searchsorted(chart[by_chart], np.arange(count + 1))
+    if _overlapping(flat, corners, by_chart, start, _OVERLAP):
+        return None
+    hull_order = np.lexsort((flat[:, 1], flat[:, 0], owner))
+    vertex_start = np.searchsorted(owner, np.arange(count + 1))
+    uv, sides = _turned(flat, hull_order, vertex_start)
+    return Charts(vertices=vertex, triangles=corners, uv=uv, chart=owner, sides=sides)
 
 
-def _loose_parts(triangles: np.ndarray, vertex_count: int) -> np.ndarray:
-    """(m,) int64 label of each triangle's loose part (triangles joined by shared vertices):
-    the least vertex index in the part."""
-    if not len(triangles):
-        return np.zeros(0, np.int64)
-    return _least_vertex(triangles, vertex_count)[triangles[:, 0]]
+def _welded(p: np.ndarray) -> np.ndarray:
+    """(n,) int64 the same number for vertices at the same position (the first's index)."""
+    order = np.lexsort((p[:, 2], p[:, 1], p[:, 0]))
+    ordered = p[order]
+    new = np.ones(len(p), bool)
+    new[1:] = np.any(ordered[1:] != ordered[:-1], axis=1)
+    first = order[np.flatnonzero(new)][np.cumsum(new) - 1]
+    welded = np.empty(len(p), np.int64)
+    welded[order] = first
+    return welded
+
+
+def _neighbours(corners: np.ndarray) -> np.ndarray:
+    """(m, 3) int64 the triangle across each edge (corner k to k + 1) of each triangle, -1 at
+    an open edge or one shared by more than two triangles. ``corners`` (m, 3) welded vertices."""
+    a = corners.reshape(-1)
+    b = corners[:, [1, 2, 0]].reshape(-1)
+    keys = np.minimum(a, b) * (int(corners.max(initial=0)) + 1) + np.maximum(a, b)
+    order = np.argsort(keys, kind="stable")
+    return _pair_edges(keys, order, len(corners))
 
 
 @jit
-def _least_vertex(triangles, vertex_count):
-    """Union–find over the triangles' corners: (n,) the least vertex index joined to each."""
-    parent = np.arange(vertex_count)
-    for t in range(len(triangles)):
-        for k in range(1, 3):
-            a, b = triangles[t, 0], triangles[t, k]
-            while parent[a] != a:  # roots, halving the paths on the way
-                parent[a] = parent[parent[a]]
-                a = parent[a]
-            while parent[b] != b:
-                parent[b] = parent[parent[b]]
-                b = parent[b]
-            if a < b:
-                parent[b] = a
-            elif b < a:
-                parent[a] = b
-    for v in range(vertex_count):  # ascending: a vertex's root is final before it is read
-        parent[v] = parent[parent[v]]
-    return parent
+def _pair_edges(keys, order, count):
+    """``_neighbours``' work on the edges' keys sorted by ``order``."""
+    across = np.full((count, 3), -1, np.int64)
+    i = 0
+    while i < len(order):
+        j = i + 1
+        while j < len(order) and keys[order[j]] == keys[order[i]]:
+            j += 1
+        if j - i == 2:
+            e, f = order[i], order[i + 1]
+            if e // 3 != f // 3:
+                across[e // 3, e % 3] = f // 3
+                across[f // 3, f % 3] = e // 3
+        i = j
+    return across
 
 
-def _small_flat(p: np.ndarray, t: np.ndarray, part: np.ndarray
-                ) -> tuple[np.ndarray, np.ndarray] | None:
-    """The triangles (ascending) of the loose parts that are flat, at most ``MAX_TRIANGLES``
-    and ``MAX_SIDE`` texels across, and their parts renumbered 0…; None when fewer than
-    ``MIN_PARTS`` parts are."""
-    _labels, part, size = np.unique(part, return_inverse=True, return_counts=True)
-    keep = (size <= MAX_TRIANGLES)[part]
-    if np.count_nonzero(size <= MAX_TRIANGLES) < MIN_PARTS:
-        return None
-    labels, part = np.unique(part[keep], return_inverse=True)
-    faces = np.flatnonzero(keep)
-    a, b, c = (p[t[faces, k]] for k in range(3))
-    cross = np.cross(b - a, c - a)
-    area = np.linalg.norm(cross, axis=1)
-    count = len(labels)
-    normal = _unit(np.stack([np.bincount(part, cross[:, k], count) for k in range(3)], axis=1))
-    facing = np.einsum("ij,ij->i", cross, normal[part])
-    low = np.full(count, np.inf)
-    high = np.full(count, -np.inf)
-    for q in (a, b, c):
-        height = np.einsum("ij,ij->i", q, normal[part])
-        np.minimum.at(low, part, height)
-        np.maximum.at(high, part, height)
-    span = np.zeros(count)
-    anchor = a[_first_of(part, count)]
-    for q in (a, b, c):  # an upper bound of the part's size: its corners' distances to one
-        np.maximum.at(span, part, np.linalg.norm(q - anchor, axis=1))
-    bad = ~(facing >= _FLAT_COS * area) | ~(area > 0)  # NaN positions are bad too
-    ok = (np.bincount(part, bad, count) == 0) & (high - low <= _FLAT_DISTANCE) & (span <= MAX_SIDE)
-    if ok.sum() < MIN_PARTS:
-        return None
-    chosen = ok[part]
-    renumber = np.cumsum(ok) - 1
-    return faces[chosen], renumber[part[chosen]]
+@jit
+def _grow(normals, valid, neighbours, seeds, cone_cos):
+    """Charts grown breadth-first from each seed (``seeds``: triangles, largest first) not yet
+    charted, across edges, to triangles whose normal is within the cone of the seed's
+    (degenerate ones, ``valid`` False, join any chart that reaches them). Returns (m,) the
+    chart of each triangle and the chart count."""
+    chart = np.full(len(normals), -1, np.int64)
+    queue = np.empty(len(normals), np.int64)
+    count = 0
+    for s in seeds:
+        if chart[s] >= 0:
+            continue
+        chart[s] = count
+        queue[0] = s
+        head, tail = 0, 1
+        while head < tail:
+            t = queue[head]
+            head += 1
+            for k in range(3):
+                w = neighbours[t, k]
+                if w < 0 or chart[w] >= 0:
+                    continue
+                if valid[w] and (normals[s, 0] * normals[w, 0] + normals[s, 1] * normals[w, 1]
+                                 + normals[s, 2] * normals[w, 2]) < cone_cos:
+                    continue
+                chart[w] = count
+                queue[tail] = w
+                tail += 1
+        count += 1
+    return chart, count
 
 
-def _first_of(part: np.ndarray, count: int) -> np.ndarray:
-    """(m,) index of the first triangle of each triangle's part (parts numbered 0…count-1)."""
-    first = np.full(count, len(part), np.int64)
-    np.minimum.at(first, part, np.arange(len(part)))
-    return first[part]
+def _crumpled(chart: np.ndarray, count: int, neighbours: np.ndarray) -> bool:
+    """Whether the charts cut from connected pieces of surface average fewer than
+    ``LEAST_TRIANGLES`` triangles (loose parts charted whole do not count: a leaf is one chart
+    of two triangles, and rightly so)."""
+    inner = neighbours >= 0
+    rows = np.repeat(np.arange(len(chart)), 3)[inner.reshape(-1)]
+    cut = np.zeros(count, bool)
+    cut[chart[rows]] |= chart[rows] != chart[neighbours[inner]]
+    cut_triangles = np.count_nonzero(cut[chart])
+    return cut_triangles >= 64 and cut_triangles < LEAST_TRIANGLES * np.count_nonzero(cut)
 
 
-def _unit(v: np.ndarray) -> np.ndarray:
-    """Rows of ``v`` scaled to unit length (zero rows stay zero)."""
-    length = np.linalg.norm(v, axis=1, keepdims=True)
-    return np.divide(v, length, out=np.zeros(v.shape), where=length > 0)
+def _bases(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit (u, v) spanning the plane normal to each of ``axis`` (c, 3), u × v along it (the
+    z axis for a zero one): u the axis crossed with the coordinate axis least along it."""
+    length = np.linalg.norm(axis, axis=1, keepdims=True)
+    n = np.where(length > 0, axis / np.where(length > 0, length, 1.0), [0.0, 0.0, 1.0])
+    least = np.eye(3)[np.argmin(np.abs(n), axis=1)]
+    u = np.cross(n, least)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    return u, np.cross(n, u)
 
 
-def _projected(p: np.ndarray, corners: np.ndarray, owner: np.ndarray, count: int
-               ) -> tuple[np.ndarray, np.ndarray]:
-    """Each part's vertices in its plane, turned so that its bounding rectangle is the least
-    of those aligned with one of its edges, and moved to start at 0: (k, 2) per vertex and the
-    (parts, 2) rectangles' sides, texels. A rectangle's least-area bounding box has a side along
-    the convex hull, which for a leaf quad or a blade is one of its edges.
+def _area_scale(flat: np.ndarray, corners: np.ndarray, chart: np.ndarray,
+                double_area: np.ndarray, count: int) -> np.ndarray:
+    """(c,) the factor that gives each chart's projection its surface's area (1 for one of no
+    area): a texel then covers 1 / density² of surface on average over the chart."""
+    a, b, c = flat[corners[:, 0]], flat[corners[:, 1]], flat[corners[:, 2]]
+    projected = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+    surface = np.bincount(chart, np.where(np.isfinite(double_area), double_area, 0.0), count)
+    shadow = np.bincount(chart, projected, count)
+    ok = (shadow > 0) & (surface > 0)
+    return np.sqrt(np.divide(surface, shadow, out=np.ones(count), where=ok))
 
-    p (k, 3) the parts' vertices, corners (f, 3) their triangles into p, owner (k,) the part of
-    each vertex (0…count-1)."""
-    vertex_order = np.argsort(owner, kind="stable")
-    triangle_order = np.argsort(owner[corners[:, 0]], kind="stable")
-    vertex_start = np.searchsorted(owner[vertex_order], np.arange(count + 1))
-    triangle_start = np.searchsorted(owner[corners[triangle_order, 0]], np.arange(count + 1))
-    return _project_parts(p, corners, vertex_order, vertex_start, triangle_order,
-                          triangle_start)
+
+@jit
+def _overlapping(flat, corners, by_chart, start, tolerance):
+    """Whether two triangles of one chart overlap in ``flat`` (k, 2): each chart's triangles
+    (``by_chart[start[c]:start[c + 1]]``) binned on a grid of about one triangle a cell, the
+    pairs sharing a cell tested by their separating axes."""
+    for c in range(len(start) - 1):
+        first, last = start[c], start[c + 1]
+        if last - first < 2:
+            continue
+        low = np.full(2, np.inf)
+        high = np.full(2, -np.inf)
+        for i in range(first, last):
+            for k in range(3):
+                for d in range(2):
+                    low[d] = min(low[d], flat[corners[by_chart[i], k], d])
+                    high[d] = max(high[d], flat[corners[by_chart[i], k], d])
+        size = max(high[0] - low[0], high[1] - low[1])
+        if not size > 0:
+            continue
+        side = int(np.sqrt(last - first)) + 1
+        cell = size / side * (1 + 1e-9)
+        box = np.empty((last - first, 4), np.int64)
+        fill = np.zeros(side * side + 1, np.int64)
+        for i in range(first, last):
+            lo_x, lo_y, hi_x, hi_y = np.inf, np.inf, -np.inf, -np.inf
+            for k in range(3):
+                x, y = flat[corners[by_chart[i], k], 0], flat[corners[by_chart[i], k], 1]
+                lo_x, hi_x = min(lo_x, x), max(hi_x, x)
+                lo_y, hi_y = min(lo_y, y), max(hi_y, y)
+            r = i - first
+            box[r, 0] = min(int((lo_x - low[0]) / cell), side - 1)
+            box[r, 1] = min(int((lo_y - low[1]) / cell), side - 1)
+            box[r, 2] = min(int((hi_x - low[0]) / cell), side - 1)
+            box[r, 3] = min(int((hi_y - low[1]) / cell), side - 1)
+            for gx in range(box[r, 0], box[r, 2] + 1):
+                for gy in range(box[r, 1], box[r, 3] + 1):
+                    fill[gx * side + gy + 1] += 1
+        for g in range(side * side):
+            fill[g + 1] += fill[g]
+        members = np.empty(fill[-1], np.int64)
+        at = fill[:-1].copy()
+        for r in range(last - first):
+            for gx in range(box[r, 0], box[r, 2] + 1):
+                for gy in range(box[r, 1], box[r, 3] + 1):
+                    members[at[gx * side + gy]] = first + r
+                    at[gx * side + gy] += 1
+        for g in range(side * side):
+            for i in range(fill[g], fill[g + 1]):
+                for j in range(i + 1, fill[g + 1]):
+                    a, b = members[i] - first, members[j] - first
+                    if _tested_elsewhere(box, members, by_chart, first, i, j, g, side):
+                        continue
+                    if _share_an_edge(corners[by_chart[first + a]], corners[by_chart[first + b]]):
+                        continue
+                    if not _apart(flat, corners[by_chart[first + a]],
+                                  corners[by_chart[first + b]], tolerance * size):
+                        return True
+    return False
 
 
 @inline
-def _dot(a, b):
-    """a · b of two 3-vectors, summed by hand: numba's ``np.dot`` calls BLAS through scipy,
-    which is not one of baker's dependencies."""
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+def _tested_elsewhere(box, members, by_chart, first, i, j, g, side):
+    """Whether the pair of cell entries ``i``, ``j`` (rows of ``box``) is tested in another
+    cell than ``g``, or need not be: their cell boxes do not meet, or meet first (their
+    common box's lowest cell) elsewhere."""
+    a, b = members[i] - first, members[j] - first
+    x = max(box[a, 0], box[b, 0])
+    y = max(box[a, 1], box[b, 1])
+    if x > min(box[a, 2], box[b, 2]) or y > min(box[a, 3], box[b, 3]):
+        return True
+    return x * side + y != g
+
+
+@inline
+def _share_an_edge(a, b):
+    """Whether triangles ``a`` and ``b`` (corner rows) have two corners in common: turned the
+    same way, they lie on either side of that edge and cannot overlap."""
+    shared = 0
+    for k in range(3):
+        for m in range(3):
+            if a[k] == b[m]:
+                shared += 1
+    return shared >= 2
+
+
+@inline
+def _apart(flat, a, b, tolerance):
+    """Whether triangles ``a`` and ``b`` (corner rows into ``flat``) have no inner point in
+    common: an edge of either separates them (touching counts as apart), or either has no
+    area."""
+    for tri in (a, b):
+        ax, ay = flat[tri[0], 0], flat[tri[0], 1]
+        area = ((flat[tri[1], 0] - ax) * (flat[tri[2], 1] - ay)
+                - (flat[tri[1], 1] - ay) * (flat[tri[2], 0] - ax))
+        if not area > 0:
+            return True
+    for first in (a, b):
+        for k in range(3):
+            p, q = first[k], first[(k + 1) % 3]
+            nx, ny = flat[p, 1] - flat[q, 1], flat[q, 0] - flat[p, 0]
+            slack = tolerance * np.sqrt(nx * nx + ny * ny)
+            lo_a, hi_a, lo_b, hi_b = np.inf, -np.inf, np.inf, -np.inf
+            for j in range(3):
+                s = nx * flat[a[j], 0] + ny * flat[a[j], 1]
+                lo_a, hi_a = min(lo_a, s), max(hi_a, s)
+                s = nx * flat[b[j], 0] + ny * flat[b[j], 1]
+                lo_b, hi_b = min(lo_b, s), max(hi_b, s)
+            if hi_a <= lo_b + slack or hi_b <= lo_a + slack:
+                return True
+    return False
 
 
 @jit
-def _project_parts(p, corners, vertex_order, vertex_start, triangle_order, triangle_start):
-    """``_projected``'s work, a part at a time: its normal (the sum of its triangles' area
-    vectors), each edge's direction in the plane as a candidate axis, the first of least
-    bounding area kept."""
-    count = len(vertex_start) - 1
-    flat = np.zeros((len(p), 2))
-    sides = np.zeros((count, 2))
-    for part in range(count):
-        n = np.zeros(3)
-        for j in range(triangle_start[part], triangle_start[part + 1]):
-            a, b, c = corners[triangle_order[j]]
-            n += np.cross(p[b] - p[a], p[c] - p[a])
-        n /= np.sqrt(_dot(n, n))
-        best, best_u, best_v = np.inf, np.zeros(3), np.zeros(3)
-        for j in range(triangle_start[part], triangle_start[part + 1]):
-            t = triangle_order[j]
-            for k in range(3):
-                e = p[corners[t, (k + 1) % 3]] - p[corners[t, k]]
-                e -= _dot(e, n) * n
-                length = np.sqrt(_dot(e, e))
-                if length == 0:
-                    continue
-                e /= length
-                v = np.cross(n, e)
-                lo_u, hi_u, lo_v, hi_v = np.inf, -np.inf, np.inf, -np.inf
-                for i in range(vertex_start[part], vertex_start[part + 1]):
-                    q = p[vertex_order[i]]
-                    x, y = _dot(q, e), _dot(q, v)
-                    lo_u, hi_u = min(lo_u, x), max(hi_u, x)
-                    lo_v, hi_v = min(lo_v, y), max(hi_v, y)
-                if (hi_u - lo_u) * (hi_v - lo_v) < best:
-                    best = (hi_u - lo_u) * (hi_v - lo_v)
-                    best_u, best_v = e, v
-                    sides[part, 0], sides[part, 1] = hi_u - lo_u, hi_v - lo_v
-        lo_u, lo_v = np.inf, np.inf
-        for i in range(vertex_start[part], vertex_start[part + 1]):
-            q = p[vertex_order[i]]
-            lo_u, lo_v = min(lo_u, _dot(q, best_u)), min(lo_v, _dot(q, best_v))
-        for i in range(vertex_start[part], vertex_start[part + 1]):
-            q = p[vertex_order[i]]
-            flat[vertex_order[i], 0] = _dot(q, best_u) - lo_u
-            flat[vertex_order[i], 1] = _dot(q, best_v) - lo_v
-    return flat, sides
+def _turned(flat, order, start):
+    """Each chart's vertices (``start[c]:start[c + 1]`` of ``flat`` (k, 2), in the order of
+    their mesh vertices; ``order``: the same ranges sorted by x, then y) turned so that their
+    bounding rectangle is the least of those with a side along a side of their convex hull,
+    of equals (within ``_EQUAL``) the one whose x axis is most along the chart's first two
+    vertices, moved to start at (0, 0): (k, 2) and the (c, 2) rectangles' sides."""
+    uv = np.empty_like(flat)
+    sides = np.zeros((len(start) - 1, 2))
+    hull = np.empty(len(flat) + 1, np.int64)
+    for c in range(len(start) - 1):
+        first, last = start[c], start[c + 1]
+        h = 0  # Andrew's monotone chain: the lower hull, then the upper
+        for i in range(first, last):
+            h = _pushed(flat, hull, 0, h, order[i])
+        h -= 1  # each half's last point is the other's first
+        base = h
+        for i in range(last - 1, first - 1, -1):
+            h = _pushed(flat, hull, base, h, order[i])
+        h = max(h - 1, 1)
+        # The mesh's own direction in the chart: from its vertex of least index to the next
+        # (vertices are in order of index within a chart), to choose among equal rectangles
+        # the same way however the mesh is turned or mirrored in its frame.
+        ref_x, ref_y = 0.0, 0.0
+        if last - first > 1:
+            ref_x, ref_y = flat[first + 1, 0] - flat[first, 0], flat[first + 1, 1] - flat[first, 1]
+        best, best_along, cos_best, sin_best = np.inf, -np.inf, 1.0, 0.0
+        for e in range(h):
+            p, q = hull[e], hull[(e + 1) % h]
+            dx, dy = flat[q, 0] - flat[p, 0], flat[q, 1] - flat[p, 1]
+            length = np.sqrt(dx * dx + dy * dy)
+            if length == 0:
+                continue
+            for quarter in range(4):  # the rectangle along this side, each way round
+                cs, sn = dx / length, dy / length
+                for _ in range(quarter):
+                    cs, sn = -sn, cs
+                lo_x, hi_x, lo_y, hi_y = np.inf, -np.inf, np.inf, -np.inf
+                for f in range(h):
+                    x = cs * flat[hull[f], 0] + sn * flat[hull[f], 1]
+                    y = cs * flat[hull[f], 1] - sn * flat[hull[f], 0]
+                    lo_x, hi_x = min(lo_x, x), max(hi_x, x)
+                    lo_y, hi_y = min(lo_y, y), max(hi_y, y)
+                area = (hi_x - lo_x) * (hi_y - lo_y)
+                along = cs * ref_x + sn * ref_y
+                if area < best * (1 - _EQUAL) or (area <= best * (1 + _EQUAL)
+                                                   and along > best_along):
+                    best = min(best, area)
+                    best_along, cos_best, sin_best = along, cs, sn
+        lo_x, lo_y, hi_x, hi_y = np.inf, np.inf, -np.inf, -np.inf
+        for i in range(first, last):
+            uv[i, 0] = cos_best * flat[i, 0] + sin_best * flat[i, 1]
+            uv[i, 1] = cos_best * flat[i, 1] - sin_best * flat[i, 0]
+            lo_x, hi_x = min(lo_x, uv[i, 0]), max(hi_x, uv[i, 0])
+            lo_y, hi_y = min(lo_y, uv[i, 1]), max(hi_y, uv[i, 1])
+        for i in range(first, last):
+            uv[i, 0] -= lo_x
+            uv[i, 1] -= lo_y
+        sides[c, 0], sides[c, 1] = hi_x - lo_x, hi_y - lo_y
+    return uv, sides
 
 
-def shelves(cells: np.ndarray, gap: int, side: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Pack rectangles of ``cells`` (n, 2) int64 texels into blocks of at most ``side`` a side,
-    ``gap`` texels apart: tallest first (ties by index), left to right in rows, rows top to
-    bottom, a new block when a row does not fit. Returns each rectangle's block (n,) and corner
-    in it (n, 2), and the blocks' sizes (b, 2): a pure function of its input."""
-    order = np.lexsort((np.arange(len(cells)), -cells[:, 1]))
-    block, at, sizes = _shelves(cells[order], int(gap), int(max(side, cells.max(initial=1))))
-    out_block = np.empty_like(block)
-    out_at = np.empty_like(at)
-    out_block[order], out_at[order] = block, at
-    return out_block, out_at, sizes
-
-
-@jit
-def _shelves(cells, gap, side):
-    """``shelves`` on rectangles sorted tallest first."""
-    n = len(cells)
-    block = np.zeros(n, np.int64)
-    at = np.zeros((n, 2), np.int64)
-    sizes = np.zeros((n, 2), np.int64)
-    b, x, y, row = 0, 0, 0, 0
-    for i in range(n):
-        w, h = cells[i, 0], cells[i, 1]
-        if x > 0 and x + w > side:  # the row is full: the next one under it
-            y += row + gap
-            x, row = 0, 0
-        if y > 0 and y + h > side:  # the block is full: a new one
-            b += 1
-            x, y, row = 0, 0, 0
-        block[i] = b
-        at[i, 0], at[i, 1] = x, y
-        row = max(row, h)
-        sizes[b, 0] = max(sizes[b, 0], x + w)
-        sizes[b, 1] = max(sizes[b, 1], y + h)
-        x += w + gap
-    return block, at, sizes[: b + 1]
+@inline
+def _pushed(flat, hull, base, h, q):
+    """Point ``q`` put on the hull chain ``hull[base:h]``, the points it makes turn right or
+    go straight taken off first; the chain's new end."""
+    while h >= base + 2:
+        o, a = hull[h - 2], hull[h - 1]
+        turn = ((flat[a, 0] - flat[o, 0]) * (flat[q, 1] - flat[o, 1])
+                - (flat[a, 1] - flat[o, 1]) * (flat[q, 0] - flat[o, 0]))
+        if turn > 0:
+            break
+        h -= 1
+    hull[h] = q
+    return h + 1

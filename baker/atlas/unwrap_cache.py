@@ -1,24 +1,19 @@
-"""Unwraps kept across bakes, keyed by a hash of everything xatlas is given.
+"""Meshes' charts kept across bakes, keyed by a hash of everything the charting is given.
 
-An xatlas run is a pure function of its input (the meshes' float32 positions in texel units and
-uint32 triangles, the chart and pack options, xatlas's version), so its result is stored under
-the SHA-256 of that input and a later bake of the same meshes at the same settings reads it back
-instead of running xatlas: the result is the same arrays either way, so the bake's bytes do not
-depend on whether the cache was hit. A rigid move of a node leaves its unwrap input bit-identical
-(``unwrap.frame_positions``), so a rebake after moving objects hits.
-
-Three kinds of entry (``unwrap.py``): a whole unwrap (every baked instance, packed into pages),
-one mesh's charts (``CHARTS``: charted alone, so that a bake with one mesh edited charts only
-that mesh again and packs the cached charts of the others with it), and what fitting a derived
-density to one page came to (``FITS``: the last unwrap and, in its header, the density).
+A mesh's charting is a pure function of its input (its positions in the instance's rigid-free
+frame and its triangles, the chart builder's constants, xatlas's version and options), so its
+result (``charts.py``) is stored under the SHA-256 of that input and a later bake of the same
+mesh reads it back instead of charting it: the result is the same arrays either way, so the
+bake's bytes do not depend on whether the cache was hit. The charts hold no texel density, so a
+bake at another density hits too and only packs them again; a rigid move of a node leaves its
+input bit-identical (``unwrap.frame_positions``), so a rebake after moving objects hits.
 
 The folder is ``$BAKER_CACHE_DIR`` if set (``off`` or empty: no cache), else
-``$XDG_CACHE_HOME/baker`` or ``~/.cache/baker``; entries are ``unwrap/<hash>.npz``,
-``unwrap/charts/<hash>.npz`` and ``unwrap/fits/<hash>.npz`` (NumPy's zip of arrays, no pickle),
-written atomically, at most ``KEEP`` (``KEEP_CHARTS``) of each kind (the least recently used go
-first). An entry that cannot be read whole (truncated, a bad CRC, arrays of the wrong shape) is
-ignored, and the fresh result written over it. A cache that cannot be written (read-only, full)
-only costs the next bake the xatlas run.
+``$XDG_CACHE_HOME/baker`` or ``~/.cache/baker``; entries are ``unwrap/charts/<hash>.npz``
+(NumPy's zip of arrays, no pickle), written atomically, at most ``KEEP_CHARTS`` (the least
+recently used go first). An entry that cannot be read whole (truncated, a bad CRC, arrays of
+the wrong shape) is ignored, and the fresh result written over it. A cache that cannot be
+written (read-only, full) only costs the next bake the charting.
 """
 
 from __future__ import annotations
@@ -35,11 +30,9 @@ import numpy as np
 from baker.errors import BakerError
 from baker.run.atomic import write_atomically
 
-FORMAT = b"baker unwrap cache 3"  # bump when what an entry holds, or how it is keyed, changes
-WHOLE, CHARTS, FITS = "unwrap", "charts", "fits"  # the kinds of entry
-KEEP = 256  # whole unwraps (and fits) kept; one of the 100k-triangle test scene is ~4 MB
+FORMAT = b"baker unwrap cache 4"  # bump when what an entry holds, or how it is keyed, changes
 KEEP_CHARTS = 16384  # meshes' charts kept (a scene has one per distinct mesh; most are small)
-PER_MESH = 5  # arrays per mesh: vertices, triangles, uv, page and chart of each vertex
+PER_MESH = 5  # arrays per mesh: vertices, triangles, uv and chart of each vertex, chart sides
 _NAMES = ("header", "lengths") + tuple(f"joined{k}" for k in range(PER_MESH))
 
 
@@ -53,8 +46,8 @@ def folder() -> Path | None:
 
 
 def key(meshes: Iterable[tuple[np.ndarray, np.ndarray]], options: Iterable[object]) -> str:
-    """Hex SHA-256 of the xatlas input: each mesh's (positions float32 (n, 3), triangles uint32
-    (m, 3)) with their shapes, and ``options`` (their ``repr``s: settings and versions)."""
+    """Hex SHA-256 of the charting's input: each mesh's (positions (n, 3), triangles (m, 3))
+    with their types and shapes, and ``options`` (their ``repr``s: constants and versions)."""
     digest = hashlib.sha256(FORMAT)
     for option in options:
         digest.update(repr(option).encode() + b"\0")
@@ -65,24 +58,22 @@ def key(meshes: Iterable[tuple[np.ndarray, np.ndarray]], options: Iterable[objec
     return digest.hexdigest()
 
 
-def _place(kind: str) -> Path | None:
-    """The folder of the entries of ``kind``, or None when caching is off."""
+def entries() -> Path | None:
+    """The folder of the entries, or None when caching is off."""
     place = folder()
-    if place is None:
-        return None
-    return place / "unwrap" if kind == WHOLE else place / "unwrap" / kind
+    return None if place is None else place / "unwrap" / "charts"
 
 
-def _path(name: str, kind: str) -> Path | None:
-    place = _place(kind)
+def _path(name: str) -> Path | None:
+    place = entries()
     return None if place is None else place / f"{name}.npz"
 
 
-def read(name: str, mesh_count: int, kind: str = WHOLE
+def read(name: str, mesh_count: int
          ) -> tuple[tuple[int, ...], tuple[tuple[np.ndarray, ...], ...]] | None:
-    """The entry ``name`` of ``kind``: (header ints, per mesh ``PER_MESH`` arrays), or None
+    """The entry ``name``: (header ints, per mesh ``PER_MESH`` arrays), or None
     when there is none or it cannot be read whole (it is then rewritten by the next ``write``)."""
-    path = _path(name, kind)
+    path = _path(name)
     if path is None or not path.is_file():
         return None
     try:
@@ -104,12 +95,12 @@ def read(name: str, mesh_count: int, kind: str = WHOLE
 
 
 def write(name: str, header: tuple[int, ...], meshes: tuple[tuple[np.ndarray, ...], ...],
-          kind: str = WHOLE, prune: bool = True) -> None:
-    """Store an entry of ``kind`` (atomically): the header, each array's length per mesh, and
+          prune: bool = True) -> None:
+    """Store an entry (atomically): the header, each array's length per mesh, and
     per kind of array all meshes' joined (a few large arrays read much faster than thousands of
-    small ones). Then (``prune``) drop the least recently used beyond ``KEEP``. Any failure to
+    small ones). Then (``prune``) drop the least recently used beyond ``KEEP_CHARTS``. Any failure to
     write leaves the cache as it was, and the bake goes on."""
-    path = _path(name, kind)
+    path = _path(name)
     if path is None or not meshes:
         return
     arrays = {"header": np.asarray(header, np.int64),
@@ -124,16 +115,16 @@ def write(name: str, header: tuple[int, ...], meshes: tuple[tuple[np.ndarray, ..
     except (OSError, BakerError):
         return
     if prune:
-        prune_kind(kind)
+        prune_entries()
 
 
-def prune_kind(kind: str) -> None:
-    """Remove all but the most recently used entries of ``kind`` (``KEEP``, ``KEEP_CHARTS``);
-    once after writing many entries, not after each (a folder scan each)."""
-    place = _place(kind)
+def prune_entries() -> None:
+    """Remove all but the ``KEEP_CHARTS`` most recently used entries; once after writing many
+    entries, not after each (a folder scan each)."""
+    place = entries()
     if place is not None and place.is_dir():
         try:
-            _prune(place, KEEP_CHARTS if kind == CHARTS else KEEP)
+            _prune(place, KEEP_CHARTS)
         except OSError:
             pass
 

@@ -12,14 +12,24 @@ What the mature bakers do (Bakery, Godot's LightmapperRD, Unity's backface toler
    surface (``Texels.terminator``, rasterise.py), unless a ray along the push (lifted like a ray
    origin, ``RAISE_MARGIN`` texel sides longer) meets something: a sphere's underside resting on
    a floor is never pushed through the floor.
-1. Tangent probes: from the sample point, lifted off the surface by the integrator's offset,
+1. Hemisphere probes from the sample point: ``HEMISPHERE_RAYS`` fixed cosine-spread rays up to
+   d_max; the fraction that meets back faces of single-sided surfaces says whether the point
+   is inside geometry (at least ``BACKFACE_TOLERANCE``: under a box, in a thick wall) or in
+   the open, maybe behind a single-sided panel (a wall, a pane, a fence, a card standing on a
+   floor: its back faces fill at most half of the hemisphere).
+2. Tangent probes: from the sample point, lifted off the surface by the integrator's offset,
    ``TANGENT_RAYS`` short rays in the texel's plane, ``PROBE_RADIUS`` texel sides long. A ray
    that meets the *back* of a single-sided surface first means the sample is behind it: the
    point moves along that ray past the nearest such face, ``PUSH`` texel sides into the open
-   (the point stays in the texel's plane, within about a texel of where it was). Repeated up to
-   ``TANGENT_ROUNDS`` times, so a point behind two walls (a corner) gets out too.
-2. Hemisphere probes from the final point: ``HEMISPHERE_RAYS`` fixed cosine-spread rays up to
-   d_max. The fraction that meets back faces of single-sided surfaces decides:
+   (the point stays in the texel's plane, within about a texel of where it was), where the
+   move may go: anywhere within reach for a point inside geometry (its rays would see only
+   the inside), but for a point in the open only through a face that crosses the texel's own
+   square (a floor texel straddling a wall takes the light of the wall's front side, where
+   its square meets the room). A point in the open behind a panel that does not cross its
+   square stays where it is: moved, it would take light from the panel's other side, which
+   the texel cannot see. Repeated up to ``TANGENT_ROUNDS`` times, so a point behind two walls
+   (a corner) gets out too.
+3. Hemisphere probes again from the final point, if it moved. The fraction decides:
    - at least ``ENCLOSED_FRACTION``: the point is shut inside a solid (a floor under a box or a
      thick wall). No light reaches it: its lightmap value is 0 (dark), its own rays are unused.
    - at least ``BACKFACE_TOLERANCE``: inside or behind geometry, and it could not be moved out:
@@ -164,15 +174,18 @@ def _back_faces(triangle: np.ndarray, directions: np.ndarray, normals: np.ndarra
 
 
 def _tangent_step(tracer: Tracer, faces: Faces, position: np.ndarray, normal: np.ndarray,
-                  size: np.ndarray, home: np.ndarray
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                  size: np.ndarray, home: np.ndarray, origin: np.ndarray, axes: np.ndarray,
+                  free: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One round of tangent probes for k points: (new position (k, 3), moved (k,) bool,
     touching (k,) bool: some probe met a surface within ``TOUCH`` ray lifts).
 
-    Of the back faces within ``TIE`` texel sides of the nearest, the point crosses the one
-    whose direction points most towards ``home`` (k, 3), the centroid of the texel's own
-    triangle: where the surface really is (a wall's corner texel poking past the ceiling and a
-    side wall moves back into the room, not over the ceiling)."""
+    Of the back faces within ``TIE`` texel sides of the nearest that the point may cross — any
+    where ``free`` (k,) (it is inside geometry), else only one met within the texel's own
+    square (centred on ``origin`` (k, 3), the sample point before any move, spanned by its
+    texel ``axes`` (k, 2, 3)) — the point crosses the one whose direction points most towards
+    ``home`` (k, 3), the centroid of the texel's own triangle: where the surface really is (a
+    wall's corner texel poking past the ceiling and a side wall moves back into the room, not
+    over the ceiling)."""
     t1, t2 = _frames(normal)
     angle = 2 * np.pi * np.arange(TANGENT_RAYS) / TANGENT_RAYS
     in_plane = np.stack([np.cos(angle), np.sin(angle), np.zeros(TANGENT_RAYS)], axis=1)
@@ -181,13 +194,34 @@ def _tangent_step(tracer: Tracer, faces: Faces, position: np.ndarray, normal: np
                                  np.repeat(PROBE_RADIUS * size, TANGENT_RAYS))
     new, moved, touching = (np.empty_like(position), np.empty(len(position), np.bool_),
                             np.empty(len(position), np.bool_))
-    _cross_nearest(position, size, home, directions, hits.triangle, hits.distance, lift,
-                   faces.normals, faces.single, new, moved, touching)
+    _cross_nearest(position, size, home, origin, np.ascontiguousarray(axes, np.float64),
+                   free, directions, hits.triangle, hits.distance, lift, faces.normals,
+                   faces.single, new, moved, touching)
     return new, moved, touching
 
 
 @jit
+def _in_square(px: float, py: float, pz: float, origin: np.ndarray, axes: np.ndarray,
+               i: int) -> bool:
+    """Whether the point (px, py, pz), on texel i's plane, lies within its square: the texel
+    ``axes[i]`` (2, 3) (world steps of one texel in x and y) about ``origin[i]``, with a
+    margin of 10⁻⁶ texel (its Gram system solved by hand; no square without UV area)."""
+    ox, oy, oz = px - origin[i, 0], py - origin[i, 1], pz - origin[i, 2]
+    a = axes[i, 0, 0] * axes[i, 0, 0] + axes[i, 0, 1] * axes[i, 0, 1] + axes[i, 0, 2] * axes[i, 0, 2]
+    b = axes[i, 0, 0] * axes[i, 1, 0] + axes[i, 0, 1] * axes[i, 1, 1] + axes[i, 0, 2] * axes[i, 1, 2]
+    c = axes[i, 1, 0] * axes[i, 1, 0] + axes[i, 1, 1] * axes[i, 1, 1] + axes[i, 1, 2] * axes[i, 1, 2]
+    u = axes[i, 0, 0] * ox + axes[i, 0, 1] * oy + axes[i, 0, 2] * oz
+    v = axes[i, 1, 0] * ox + axes[i, 1, 1] * oy + axes[i, 1, 2] * oz
+    det = a * c - b * b
+    if not det > 1e-12 * a * c:
+        return False
+    s, t = (c * u - b * v) / det, (a * v - b * u) / det
+    return abs(s) <= 0.5 + 1e-6 and abs(t) <= 0.5 + 1e-6
+
+
+@jit
 def _cross_nearest(position: np.ndarray, size: np.ndarray, home: np.ndarray,
+                   origin: np.ndarray, axes: np.ndarray, free: np.ndarray,
                    directions: np.ndarray, triangle: np.ndarray, distance: np.ndarray,
                    lift: np.ndarray, normals: np.ndarray, single: np.ndarray, new: np.ndarray,
                    moved: np.ndarray, touching: np.ndarray) -> None:
@@ -197,7 +231,9 @@ def _cross_nearest(position: np.ndarray, size: np.ndarray, home: np.ndarray,
     ``distance`` (k·m,) (``LocalHits``'). Writes ``new`` (k, 3), the point moved past the
     chosen back face and ``PUSH`` texel sides ``size`` (k,) further (or where it was),
     ``moved`` (k,) and ``touching`` (k,): a probe met anything within ``TOUCH`` × ``lift``
-    (k,). A back face: ``_back_faces`` with the faces' ``normals`` and ``single``."""
+    (k,). A back face: ``_back_faces`` with the faces' ``normals`` and ``single``; one the
+    point may cross: any where ``free`` (k,), else one met within the texel's square
+    (``_in_square`` about ``origin`` (k, 3) with ``axes`` (k, 2, 3))."""
     k = len(position)
     m = len(triangle) // max(k, 1)
     back = np.empty(m)
@@ -214,6 +250,11 @@ def _cross_nearest(position: np.ndarray, size: np.ndarray, home: np.ndarray,
             facing = t >= 0 and single[t] and (normals[t, 0] * directions[r, 0]
                                                + normals[t, 1] * directions[r, 1]
                                                + normals[t, 2] * directions[r, 2]) > 0
+            if facing and not free[i]:
+                d = distance[r]
+                facing = _in_square(position[i, 0] + d * directions[r, 0],
+                                    position[i, 1] + d * directions[r, 1],
+                                    position[i, 2] + d * directions[r, 2], origin, axes, i)
             back[j] = distance[r] if facing else np.inf
             nearest = min(nearest, back[j])
         within = nearest + TIE * size[i]
@@ -363,25 +404,33 @@ def check_texels(scene: Scene, world: World, tracer: Tracer, texels: Texels,
 
     def work(rows: slice) -> None:
         normal, size = texels.geometric_normal(rows), texels.size(rows)
-        usable = np.flatnonzero((size > 0) & (np.linalg.norm(normal, axis=1) > 0.5))
+        ok = np.flatnonzero(np.linalg.norm(normal, axis=1) > 0.5)
+        usable = ok[size[ok] > 0]
         p = position[rows]  # a view: the chunk's own rows
         p[:] = _raise(tracer, p, normal, texels.size(rows), texels.terminator(rows))
         start[rows] = p
+        origin = p.copy()
         home = _centroids(world.positions, world.triangles, texels.triangle[rows])
-        step_moved, touched = moved[rows], touching[rows]  # views: the chunk's own rows
+        axes = texels.axes(rows)
+        step_moved, touched, back = moved[rows], touching[rows], fraction[rows]  # views
+        back[ok], touched[ok] = _back_fraction(tracer, faces, p[ok], normal[ok], size[ok],
+                                               d_max)
+        free = back >= BACKFACE_TOLERANCE  # inside geometry: it may move through any back face
         for _ in range(TANGENT_ROUNDS):
             new, stepped, touch = _tangent_step(tracer, faces, p[usable], normal[usable],
-                                                size[usable], home[usable])
+                                                size[usable], home[usable], origin[usable],
+                                                axes[usable], free[usable])
             p[usable] = new
             step_moved[usable] |= stepped
             touched[usable] |= touch
             usable = usable[stepped]
             if not len(usable):
                 break
-        ok = np.flatnonzero(np.linalg.norm(normal, axis=1) > 0.5)
-        fraction[rows][ok], touch = _back_fraction(tracer, faces, p[ok], normal[ok], size[ok],
-                                                   d_max)
-        touched[ok] |= touch
+        again = np.flatnonzero(step_moved)  # the fraction where each moved point ended
+        if len(again):
+            back[again], touch = _back_fraction(tracer, faces, p[again], normal[again],
+                                                size[again], d_max)
+            touched[again] |= touch
 
     run_chunks(work, [slice(start, min(start + _CHUNK, count))
                       for start in range(0, count, _CHUNK)], threads)

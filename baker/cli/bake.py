@@ -306,6 +306,9 @@ def print_summary(result: baker.BakeResult) -> None:
               + ", ".join(f"{name} {w['texels']:,} texels" for name, w in on["workers"].items())
               + "; workers' " + ", ".join(f"{k} {v:.1f}" for k, v in
                                           on["worker_stage_seconds"].items()) + " s")
+        for lost in on.get("parts_run_again", []):  # a worker lost: its part made elsewhere
+            print(f"  part {lost['part'] + 1} was run again: its worker was lost "
+                  f"({lost['error']})")
 
 
 def run(args: argparse.Namespace) -> int:

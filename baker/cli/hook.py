@@ -8,11 +8,19 @@ that are themselves bake outputs (``*_baked.*``) are skipped. Exit code 0 when e
 The bake states beside the outputs (``<stem>_baked.glb.bake`` and its ``.json``: tens of MB, and
 rebuilt by any full bake) do not belong in the asset repository: the hook adds the line
 ``IGNORE`` to the ``.gitignore`` of each folder it baked into, once, and says so.
+
+A repository is as untrusted as the scenes in it: the hook opens every file as the files a
+scene names are opened (``gltf.files.SceneFolder``: inside the folder, no link out, one name),
+the staged scenes themselves included (``baker.bake(contained=True)``), and the ``.gitignore``
+once, to read and append to: one that is a link, not a regular file, has other names or more
+than ``MAX_GITIGNORE_BYTES`` is left as it is, with a line saying so. The settings it takes
+from a bake state never include a guard (``settings.CALLER_ONLY``).
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -21,6 +29,8 @@ from baker.cli.state import print_rebake, settings_for
 
 SUFFIX = "_baked"
 IGNORE = "*_baked.gl*.bake*"  # every bake state the hook writes, and its timing record
+MAX_GITIGNORE_BYTES = 1 << 20
+"""Largest ``.gitignore`` the hook reads to add its line to (a sparse 3 GB one was read whole)."""
 
 
 def add_parser(commands) -> None:
@@ -53,7 +63,8 @@ def run(args: argparse.Namespace) -> int:
             continue
         try:
             settings = settings_for(output_for(scene), rays=args.rays, page_size=args.page_size)
-            result = baker.bake(scene, output_for(scene), settings, incremental=True)
+            result = baker.bake(scene, output_for(scene), settings, incremental=True,
+                                contained=True)
             print_rebake(result)
             print(f"baked {result.output}")
             folders.add(result.output.parent)
@@ -61,22 +72,40 @@ def run(args: argparse.Namespace) -> int:
             print(f"baker: error: {error}", file=sys.stderr)
             failed += 1
     for folder in sorted(folders):
-        if ignore_states(folder):
+        try:
+            added = ignore_states(folder)
+        except baker.BakerError as error:
+            print(f"baker hook: {error.file} not changed: {error.message}", file=sys.stderr)
+            continue
+        if added is None:
+            print(f"baker hook: {folder / '.gitignore'} not changed: more than "
+                  f"{MAX_GITIGNORE_BYTES:,} bytes; add the line {IGNORE} yourself",
+                  file=sys.stderr)
+        elif added:
             print(f"baker hook: added {IGNORE} to {folder / '.gitignore'} (the bake states "
                   "beside the outputs: large, and rebuilt by any full bake)")
     return 1 if failed else 0
 
 
-def ignore_states(folder: Path) -> bool:
+def ignore_states(folder: Path) -> bool | None:
     """Add ``IGNORE`` to ``folder``'s .gitignore (made if missing) unless a line says it
-    already; whether it was added."""
-    from baker.run.atomic import write_atomically
+    already: whether it was added (None: the file is too large to read). The file is opened
+    once (``SceneFolder.append_to``); a link, or a file that is no regular file of one name, is
+    an InputError and left as it is."""
+    from baker.gltf.files import SceneFolder
 
-    path = folder / ".gitignore"
-    text = path.read_text(encoding="utf-8") if path.is_file() else ""
-    if IGNORE in (line.strip() for line in text.splitlines()):
-        return False
-    head = text + ("\n" if text and not text.endswith("\n") else "")
-    write_atomically(path, (head + f"# baker's bake states: large, rebuilt by any bake\n"
-                            f"{IGNORE}\n").encode("utf-8"))
-    return True
+    with SceneFolder(folder, str(folder / ".gitignore")) as opened:
+        found = opened.append_to(".gitignore", MAX_GITIGNORE_BYTES)
+    if found is None:
+        return None
+    descriptor, data = found
+    try:
+        text = data.decode("utf-8", errors="replace")
+        if IGNORE in (line.strip() for line in text.splitlines()):
+            return False
+        head = "\n" if text and not text.endswith("\n") else ""
+        os.write(descriptor, (head + "# baker's bake states: large, rebuilt by any bake\n"
+                              f"{IGNORE}\n").encode("utf-8"))
+        return True
+    finally:
+        os.close(descriptor)

@@ -19,8 +19,9 @@ from typing import Iterator
 
 import baker
 from baker.cli import INTERRUPTED, started
+from baker.run.interruptible import raise_interrupt
 
-SUBCOMMANDS = ("bake", "rebake", "relight", "watch", "hook", "preview", "view", "study")
+SUBCOMMANDS = ("bake", "rebake", "relight", "watch", "hook", "preview", "view", "plugin", "study")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -47,27 +48,51 @@ class Terminated(BaseException):
 
 
 def _raise_terminated(signum, frame) -> None:
-    raise Terminated
+    raise_interrupt(Terminated, frame)
+
+
+def _raise_interrupted(signum, frame) -> None:
+    raise_interrupt(KeyboardInterrupt, frame)
 
 
 @contextmanager
-def _sigterm_raises() -> Iterator[None]:
-    """While the command runs, SIGTERM raises ``Terminated`` (the previous handler after)."""
+def _signals_raise() -> Iterator[None]:
+    """While the command runs, SIGTERM raises ``Terminated`` and SIGINT KeyboardInterrupt (if
+    it is not ignored) through ``run.interruptible.raise_interrupt``, which raises them again
+    where the bake passes often should some code swallow them — a ``__del__`` or a ctypes
+    callback, which would print the swallowed one as "Exception ignored in …": not printed
+    (the previous handlers after)."""
     if threading.current_thread() is not threading.main_thread():  # only it takes signals
         yield
         return
+    from baker.run.interruptible import forget_interrupts
+
     previous = signal.signal(signal.SIGTERM, _raise_terminated)
+    previous_int = signal.getsignal(signal.SIGINT)
+    if previous_int is signal.default_int_handler:
+        signal.signal(signal.SIGINT, _raise_interrupted)
+    unraisable = sys.unraisablehook
+
+    def quiet(what) -> None:  # swallowed (a __del__, a ctypes callback), raised again later
+        if not isinstance(what.exc_value, (KeyboardInterrupt, Terminated)):
+            unraisable(what)
+
+    sys.unraisablehook = quiet
     try:
         yield
     finally:
         signal.signal(signal.SIGTERM, previous)
+        if previous_int is signal.default_int_handler:
+            signal.signal(signal.SIGINT, previous_int)
+        sys.unraisablehook = unraisable
+        forget_interrupts()
 
 
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; return the exit code."""
     args = build_parser().parse_args(argv)
     try:
-        with _sigterm_raises():
+        with _signals_raise():
             return args.run(args)
     except baker.BakerError as error:
         if args.debug:

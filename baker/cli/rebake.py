@@ -46,15 +46,15 @@ def add_parser(commands) -> None:
 def run(args: argparse.Namespace) -> int:
     """Rebake; exit code 0 (1 with a message when there is no usable state or scene, 4 when
     no surface got a lightmap)."""
-    from baker.rebake.incremental import asked_settings
+    from baker.api import last_settings, scene_node_names
 
-    state = args.state or baker.rebake.state.default_path(args.output)
-    settings = asked_settings(state, threads=args.threads, cluster=args.cluster)
+    settings = last_settings(args.output, args.state, threads=args.threads,
+                             cluster=args.cluster)
     result = baker.bake(args.scene, args.output, settings, report_path=report_file(args),
-                        quiet=args.quiet, incremental=True, state=state)
+                        quiet=args.quiet, incremental=True, state=args.state)
     code = finish(args, result, print_rebake, print_summary)
     if args.moved and result.rebake.get("incremental"):
-        names = baker.rebake.incremental.node_names(args.scene)
+        names = scene_node_names(args.scene)
         found = set(result.rebake["moved_nodes"])
         named = {names.get(int(n), n) if n.isdigit() else n for n in args.moved}
         unknown = sorted(named - set(names.values()))

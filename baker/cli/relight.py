@@ -30,11 +30,10 @@ def add_parser(commands) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Relight; exit code 0 (1 with a message when more than the lights' colours changed)."""
-    from baker.rebake.incremental import asked_settings
+    from baker.api import last_settings
 
-    state = args.state or baker.rebake.state.default_path(args.output)
-    result = baker.bake(args.scene, args.output, asked_settings(state),
+    result = baker.bake(args.scene, args.output, last_settings(args.output, args.state),
                         report_path=report_file(args), quiet=args.quiet, relight=True,
-                        state=state)
+                        state=args.state)
     finish(args, result, print_rebake, print_summary)
     return 0

@@ -53,10 +53,10 @@ def print_rebake(result: baker.BakeResult) -> None:
 def settings_for(output: Path, **given) -> baker.Settings:
     """The settings of the bake that wrote ``output``'s state (so a rebake can follow), or
     ``Settings(**given)`` when there is no usable state."""
-    from baker.rebake.incremental import asked_settings
+    from baker.api import last_settings
 
     try:
-        return asked_settings(baker.rebake.state.default_path(output), threads=given.get("threads", 0))
+        return last_settings(output, threads=given.get("threads", 0))
     except baker.SettingsError:
         return baker.Settings(**given)
 

@@ -54,15 +54,13 @@ def add_parser(commands) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the study; print the table; exit code 0."""
-    from baker.gltf.load import load
-    from baker.pipeline.full import compute
     from baker.run.atomic import write_atomically
     from baker.study import compare_with_gi, plot, run_study, sky_rows
 
     settings = baker.Settings(page_size=args.page_size, d_max=args.d_max, rays=1, sky_rays=1,
                               sky_image=args.sky_image, sky_rotation=args.sky_rotation,
                               sky_intensity=args.sky_intensity, directional=args.directional)
-    done = compute(load(args.scene), settings)
+    done = baker.compute(baker.load(args.scene), settings)
     result = run_study(done, tuple(args.rays), tuple(args.techniques), args.reference_rays,
                        progress=lambda text: print(f"  {text}", flush=True))
     if args.sky_image:

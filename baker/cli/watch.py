@@ -35,31 +35,25 @@ def add_parser(commands) -> None:
                         help="show the traceback of an error")
 
 
-def _stamp(path: Path) -> tuple[int, int] | None:
-    try:
-        info = path.stat()
-    except OSError:
-        return None
-    return info.st_mtime_ns, info.st_size
-
-
 class _Watched:
-    """The files a bake of ``scene`` reads (``gltf.load.used_files``: the scene, its .bin, its
-    images), listed again whenever the scene file itself changes; ``stamp()`` changes when any
-    of them does (its modification time or size), or is None while the scene file is missing."""
+    """The files a bake of ``scene`` reads (the scene, its .bin, its images:
+    ``gltf.load.used_uris``), listed again whenever the scene file itself changes; ``stamp()``
+    changes when any of them does (its modification time or size), or is None while the scene
+    file is missing."""
 
     def __init__(self, scene: Path):
-        self._scene, self._seen, self._files = scene, None, [scene]
+        self._scene, self._seen, self._uris = scene, None, []
 
     def stamp(self) -> tuple | None:
-        from baker.gltf.load import used_files
+        from baker.gltf.load import file_stamps, used_uris
 
-        own = _stamp(self._scene)
-        if own is None:
+        stamps = file_stamps(self._scene, self._uris)
+        if stamps[0] is None:
             return None
-        if own != self._seen:
-            self._seen, self._files = own, used_files(self._scene)
-        return tuple(_stamp(path) for path in self._files)
+        if stamps[0] != self._seen:
+            self._seen, self._uris = stamps[0], used_uris(self._scene)
+            stamps = file_stamps(self._scene, self._uris)
+        return stamps
 
 
 def run(args: argparse.Namespace) -> int:

@@ -75,11 +75,18 @@ def texture_uv(world: World, ref: TextureRef, tris: np.ndarray, bary: np.ndarray
     """The UVs (k, 2) at which ``ref`` is sampled at barycentric points (k, 3) of world
     triangles (k,): its UV set interpolated, then its KHR_texture_transform applied (an affine
     map, so transforming the interpolated UVs equals interpolating transformed corners)."""
-    uv = interpolate(world.texcoords[ref.texcoord], world, tris, bary)
-    if ref.transform is None:
+    return transformed_uv(interpolate(world.texcoords[ref.texcoord], world, tris, bary),
+                          ref.transform)
+
+
+def transformed_uv(uv: np.ndarray, transform: tuple[float, ...] | None) -> np.ndarray:
+    """UVs (..., 2) through a ``TextureRef.transform`` (a, b, c, d, e, f): u' = a·u + b·v + c,
+    v' = d·u + e·v + f; as they are without one."""
+    if transform is None:
         return uv
-    a, b, c, d, e, f = ref.transform
-    return np.stack([a * uv[:, 0] + b * uv[:, 1] + c, d * uv[:, 0] + e * uv[:, 1] + f], axis=1)
+    a, b, c, d, e, f = transform
+    return np.stack([a * uv[..., 0] + b * uv[..., 1] + c, d * uv[..., 0] + e * uv[..., 1] + f],
+                    axis=-1)
 
 
 def _textured(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray,
@@ -87,7 +94,7 @@ def _textured(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray,
     """factor[material] (k, 3) times each material's texture (its levels read by ``decode``),
     looked up where it has one."""
     materials = world.tri_material[tris]
-    result = factor[materials].copy()
+    result = factor[materials]  # a new array (fancy indexing)
     for m, material in enumerate(scene.materials):
         ref = texture_of(material)
         if ref is None:
@@ -149,13 +156,22 @@ def base_colour(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray) 
     factor × texture × COLOR_0, every branch's weight left out (tints of mirrors and glass)."""
     factor = np.array([m.base_color[:3] for m in scene.materials], np.float64).reshape(-1, 3)
     colour = _textured(scene, world, tris, bary, factor, lambda m: m.base_color_texture)
-    return colour * interpolate(world.colors[:, :3], world, tris, bary)
+    return _vertex_coloured(colour, world, tris, bary)
 
 
 def albedo(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray) -> np.ndarray:
     """Diffuse albedo (k, 3), linear RGB, at barycentric points (k, 3) of world triangles (k,)."""
     colour = _textured(scene, world, tris, bary, diffuse_factors(scene),
                        lambda m: m.base_color_texture)
+    return _vertex_coloured(colour, world, tris, bary)
+
+
+def _vertex_coloured(colour: np.ndarray, world: World, tris: np.ndarray,
+                     bary: np.ndarray) -> np.ndarray:
+    """``colour`` (k, 3) × COLOR_0's RGB interpolated at the points; as it is when no vertex
+    has a COLOR_0 (the interpolation of ones would cost as much as the rest)."""
+    if not world.coloured:
+        return colour
     return colour * interpolate(world.colors[:, :3], world, tris, bary)
 
 

@@ -34,7 +34,8 @@ class World:
     (inverse-transpose transformed); rows of primitives without normals are the flat normal of one
     of their triangles, and ``smooth`` is False there. texcoords: tuple of (V, 2) float64, one per
     UV set used by any material texture (zeros where a primitive lacks the set). colors: (V, 4)
-    float64 linear RGBA (ones where absent). triangles: (T, 3) int64 into positions.
+    float64 linear RGBA (ones where absent; ``coloured`` says whether any vertex has one).
+    triangles: (T, 3) int64 into positions.
     tri_instance / tri_local / tri_material: (T,) int64, the triangle's instance, its index inside
     the primitive, its material. vertex_start / tri_start: (I + 1,) int64 offsets of each instance.
     alpha: ``materials.AlphaTest`` when some triangle may let rays through (alphaMode MASK or
@@ -54,6 +55,7 @@ class World:
     tri_start: np.ndarray
     center: np.ndarray
     alpha: object = field(default=None, compare=False, repr=False)
+    coloured: bool = True  # some vertex has a COLOR_0 (else ``colors`` is all ones)
 
 
     def __post_init__(self) -> None:
@@ -224,5 +226,7 @@ def build_world(scene: Scene) -> World:
         vertex_start=np.asarray(vertex_start, np.int64),
         tri_start=np.asarray(tri_start, np.int64),
         center=center,
+        coloured=any(scene.primitives[inst.primitive].colors is not None
+                     for inst in scene.instances),
     )
     return replace(world, alpha=alpha_test(scene, world))

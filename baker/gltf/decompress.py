@@ -83,6 +83,30 @@ def decompressed(document: pygltflib.GLTF2, buffers: list[bytes],
     return document, [bytes(b) for b in buffers]
 
 
+def draco_declared_bytes(document: pygltflib.GLTF2) -> list[tuple[str, int]]:
+    """(where, bytes) that each Draco primitive's accessors declare (count × element size of
+    the attributes its extension maps, and of its indices): what decoding it may make, for the
+    input's budget (``gltf.budget.check_buffers``) before anything is decoded. Accessors that
+    are not valid are left for the decoding to report."""
+    accessors = document.accessors or []
+    out = []
+    for where, primitive, extension in _draco_primitives(document):
+        names = set(extension.get("attributes") or {})
+        indices = [primitive.indices] if primitive.indices is not None else []
+        used = [getattr(primitive.attributes, n, None) for n in names] + indices
+        total = 0
+        for index in used:
+            if isinstance(index, int) and 0 <= index < len(accessors):
+                accessor = accessors[index]
+                dtype = COMPONENT_DTYPES.get(accessor.componentType)
+                width = _WIDTHS.get(accessor.type)
+                if dtype is not None and width and isinstance(accessor.count, int) \
+                        and accessor.count > 0:
+                    total += accessor.count * width * np.dtype(dtype).itemsize
+        out.append((where, total))
+    return out
+
+
 def _meshopt_views(document: pygltflib.GLTF2) -> list[tuple[int, pygltflib.BufferView, dict, str]]:
     out = []
     for index, view in enumerate(document.bufferViews or []):
@@ -192,7 +216,7 @@ def _decode_draco_primitive(document: pygltflib.GLTF2, buffers: list[bytearray],
         raise InputError("the Draco data is a point cloud, not triangles", file=file, where=where,
                          fix=_REEXPORT)
     if primitive.indices is None:  # Draco's vertices are indexed whatever the primitive says
-        document.accessors.append(pygltflib.Accessor(componentType=5125, type="SCALAR", count=0))
+        document.accessors.append(pygltflib.Accessor(componentType=5125, type="SCALAR"))
         primitive.indices = len(document.accessors) - 1
     _set_accessor(document, appended, len(buffers), primitive.indices,
                   np.asarray(faces).reshape(-1, 1), file, f"{where} (indices)")
@@ -212,6 +236,11 @@ def _set_accessor(document: pygltflib.GLTF2, appended: bytearray, buffer: int, i
     dtype = COMPONENT_DTYPES.get(accessor.componentType)
     width = _WIDTHS.get(accessor.type)
     values = values.reshape(len(values), -1)
+    declared = accessor.count
+    if declared is not None and not (isinstance(declared, int) and len(values) <= declared):
+        raise InputError(f"the Draco data decodes to {len(values):,} elements where "
+                         f"accessors[{index}] declares {declared!r} (what the input's budget "
+                         "counted)", file=file, where=where, fix=_REEXPORT)
     if dtype is None or width != values.shape[1]:
         raise InputError(f"accessors[{index}] ({accessor.type}) does not match the decoded data's "
                          f"{values.shape[1]} components", file=file, where=where, fix=_REEXPORT)

@@ -39,8 +39,10 @@ from __future__ import annotations
 
 import base64
 import binascii
+import dataclasses
 import json
 import math
+import os
 import struct
 import urllib.parse
 from contextlib import contextmanager
@@ -52,24 +54,25 @@ import numpy as np
 import pygltflib
 
 from baker.errors import InputError
+from baker.gltf import budget
 from baker.gltf import document as gltf_document
 from baker.gltf import images
 from baker.gltf.decompress import (
     COMPRESSION_EXTENSIONS,
     compressed,
     decompressed,
+    draco_declared_bytes,
     is_meshopt_fallback,
 )
 from baker.gltf.document import COMPONENT_DTYPES
-from baker.gltf.files import inside, read_inside
-from baker.gltf.images import MAX_SCENE_PIXELS
+from baker.gltf.files import SceneFolder, read_descriptor
 from baker.gltf.materials import (
     MIRROR_ROUGHNESS,
     UNLIT_REASON,
     classify,
     no_lightmap_reason,
 )
-from baker.gltf.references import check_references
+from baker.gltf.references import check_references, texture_slots
 from baker.gltf.scene import (
     REPEAT,
     Image,
@@ -159,10 +162,6 @@ _CHUNK_JSON = 0x4E4F534A
 _CHUNK_BIN = 0x004E4942
 
 _REEXPORT = "re-export the asset from your DCC tool; the Khronos glTF Validator shows what is wrong"
-MAX_IMAGE_FILE_BYTES = 1 << 30
-"""Most bytes read of an image file (a PNG of ``images.MAX_IMAGE_PIXELS`` is at most about 512 MiB)."""
-MAX_FALLBACK_BYTES = 1 << 30
-"""Largest meshopt fallback buffer without data that baker decodes views into (zeros first)."""
 MAX_JSON_DEPTH = 64
 """Deepest nesting of arrays and objects in the glTF JSON (glTF's own is 5; extras may add)."""
 MAX_INTEGER_DIGITS = 400
@@ -173,10 +172,8 @@ MAX_WORLD_UNITS = 1e12
 """Farthest a mesh may lie from the origin, in scene units (Embree's float32 has a resolution of
 1e5 units there already; a scale of 1e300 would overflow every later computation)."""
 MAX_SCENE_COMPONENTS = 1 << 28
-"""Most numbers the accessors of the baked meshes may declare in all (2 GiB as float64: some
-40 million vertices with normals and UVs)."""
-MAX_ACCESSOR_COMPONENTS = 1 << 28
-"""Largest accessor without a bufferView (all zeros: nothing in the file bounds its count)."""
+"""Most numbers the accessors baker reads may declare in all (2 GiB as float64: some 40 million
+vertices with normals and UVs); those without a bufferView, ``budget.MAX_UNBACKED_NUMBERS``."""
 _GPU_REASON = "GPU-instanced (EXT_mesh_gpu_instancing): occluder only"
 _SKIN_REASON = "skinned: occluder only (rest pose)"
 _UNLIT_REASON = UNLIT_REASON
@@ -198,10 +195,11 @@ class _Context:
     document: pygltflib.GLTF2
     buffers: list[bytes]
     file: str
-    folder: Path
-    hard_links: bool = False  # files with several names may be read (``files.read_inside``)
+    folder: SceneFolder | None  # None once the load is done (``image_pixels``)
     skipped: list[Skipped] = field(default_factory=list)
     decoded: dict[int, np.ndarray] = field(default_factory=dict)  # image index → (h, w, 4) uint8
+    image_files: dict[int, bytes] = field(default_factory=dict)  # image index → its file's bytes
+    headers: dict[int, images.Header] = field(default_factory=dict)  # image index → its header
 
     def skip(self, where: str, reason: str) -> None:
         """Record something left out, once."""
@@ -215,7 +213,7 @@ class _Context:
 
 
 def load(path: str | Path, mirror_roughness: float = MIRROR_ROUGHNESS,
-         animated: str = "bake", hard_links: bool = False) -> Scene:
+         animated: str = "bake", hard_links: bool = False, contained: bool = False) -> Scene:
     """Read a ``.gltf`` or ``.glb`` file into a ``Scene`` (see ``baker.gltf.scene``).
 
     Geometry stays in each mesh's local space (glTF units, metres); ``Instance.world`` is the
@@ -226,26 +224,35 @@ def load(path: str | Path, mirror_roughness: float = MIRROR_ROUGHNESS,
     of their node or of an ancestor): "bake" them in their rest pose with a warning, keep them
     as "occlude"rs only (rest pose, no texels), or "skip" them (no instance at all: neither
     baked nor casting shadows); each is listed with its reason in ``Scene.skipped``.
-    ``hard_links``: read files the URIs name that have other names too (``files.read_inside``).
+    ``hard_links``: read files the URIs name that have other names too (``files.SceneFolder``).
+    ``contained``: the scene file itself is opened as the files it names are (inside its
+    folder, no link out, one name): for files as untrusted as their contents (``baker hook``).
+
+    Every file is opened once, relative to the scene's folder, and the whole input is checked
+    against ``gltf.budget`` before anything is allocated for it: the nodes, the buffers'
+    declared bytes, the accessors the meshes use, then every image's header.
     """
     path = Path(path)
-    document = read_document(path)
-    buffers = resolve_buffers(document, path, hard_links)
-    kept = None
-    if compressed(document):
-        document, buffers = decompressed(document, buffers, str(path))
-        kept = tuple(buffers)
-    ctx = _Context(document, buffers, str(path), path.parent, hard_links)
-    materials = _read_materials(ctx)
-    placements = _walk_nodes(ctx)
-    images = _images(ctx)
-    _check_image_files(ctx)
-    unbaked = [no_lightmap_reason(classify(m, images, mirror_roughness)) for m in materials]
-    primitives, instances = _instantiate(ctx, placements, materials, unbaked, animated)
-    lights = _read_lights(ctx, placements)
+    with SceneFolder(path.parent, str(path), hard_links) as folder:
+        spent = budget.Budget(str(path))
+        document = read_document(path, folder if contained else None, spent)
+        ctx = _Context(document, [], str(path), folder)
+        placements = _walk_nodes(ctx)
+        _check_declared_sizes(ctx, placements)
+        check_buffer_budget(document, str(path), spent)
+        ctx.buffers = resolve_buffers(document, folder)
+        if compressed(document):
+            ctx.document, ctx.buffers = decompressed(document, ctx.buffers, str(path))
+        _read_images(ctx, spent)
+        materials = _read_materials(ctx)
+        _check_images(ctx)
+        images = _images(ctx)
+        unbaked = [no_lightmap_reason(classify(m, images, mirror_roughness)) for m in materials]
+        primitives, instances = _instantiate(ctx, placements, materials, unbaked, animated)
+        lights = _read_lights(ctx, placements)
     return Scene(
         path=path,
-        document=document,
+        document=ctx.document,
         primitives=tuple(primitives),
         instances=tuple(instances),
         materials=tuple(materials),
@@ -253,8 +260,8 @@ def load(path: str | Path, mirror_roughness: float = MIRROR_ROUGHNESS,
         skipped=tuple(ctx.skipped),
         lights=lights,
         mirror_roughness=float(mirror_roughness),
-        buffers=kept,
-        hard_links=hard_links,
+        buffers=tuple(ctx.buffers),
+        inputs=dict(folder.opened),
     )
 
 
@@ -262,22 +269,24 @@ def load(path: str | Path, mirror_roughness: float = MIRROR_ROUGHNESS,
 # File, JSON, GLB container
 
 
-def read_document(path: str | Path) -> pygltflib.GLTF2:
+def read_document(path: str | Path, folder: SceneFolder | None = None, contained: bool = False,
+                  spent: budget.Budget | None = None) -> pygltflib.GLTF2:
     """Parse a ``.gltf`` or ``.glb`` file into a pygltflib document, checking what baker relies on.
 
     A GLB's binary chunk is kept as ``document.binary_blob()``; ``document._path`` and
-    ``document._name`` are set as ``pygltflib.GLTF2.load`` sets them.
+    ``document._name`` are set as ``pygltflib.GLTF2.load`` sets them. The file is read through
+    ``folder`` (its folder, opened: ``files.SceneFolder.read_scene``; ``contained`` as there) and
+    counted in ``spent`` (the input's budget), each made here when not given.
     """
     path = Path(path)
     file = str(path)
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise InputError("file not found", file=file, fix="check the path and the file name") from None
-    except OSError as exc:
-        raise InputError(
-            f"cannot read the file ({exc.strerror or exc})", file=file, fix="check that it is a readable file"
-        ) from None
+    spent = spent or budget.Budget(file)
+    if folder is None:
+        with SceneFolder(path.parent, file) as own:
+            data = own.read_scene(path, contained, budget.MAX_INPUT_BYTES)
+    else:
+        data = folder.read_scene(path, contained, budget.MAX_INPUT_BYTES)
+    spent.spend(len(data), "the scene file", "")
     if data[:4] == _GLB_MAGIC:
         text, blob = _split_glb(data, file)
     else:
@@ -285,6 +294,7 @@ def read_document(path: str | Path) -> pygltflib.GLTF2:
     raw = _parse_json(text, file)
     _check_asset(raw, file)
     _check_arrays(raw, file)
+    budget.check_nodes(raw, file)
     check_references(raw, file)
     _check_required_extensions(raw, file)
     try:
@@ -302,29 +312,51 @@ def read_document(path: str | Path) -> pygltflib.GLTF2:
     return document
 
 
-def used_files(path: str | Path) -> list[Path]:
-    """The files a bake of ``path`` reads: ``path`` itself, and every file inside its folder
-    that its buffers and images name by URI (``files.inside``; the others, and a file that cannot
-    be parsed, are left for the bake to report). For ``baker watch``, which rebakes when any of
-    them changes."""
+def used_uris(path: str | Path) -> list[tuple[str, str]]:
+    """(JSON path, URI) of every file the scene at ``path`` names (its buffers' and images'),
+    none when it cannot be read or parsed. For ``baker watch`` (``file_stamps``)."""
     path = Path(path)
     try:
-        data = path.read_bytes()
+        with SceneFolder(path.parent, str(path)) as folder:
+            data = folder.read_scene(path, False, budget.MAX_INPUT_BYTES)
         text = _split_glb(data, str(path))[0] if data[:4] == _GLB_MAGIC else _decode_text(data, "")
         raw = _parse_json(text, str(path))
-    except (OSError, InputError):
-        return [path]
-    out = [path]
+    except InputError:
+        return []
+    out = []
     for kind in ("buffers", "images"):
         items = raw.get(kind)
         for i, item in enumerate(items if isinstance(items, list) else []):
             uri = item.get("uri") if isinstance(item, dict) else None
             if isinstance(uri, str) and not uri.startswith("data:"):
-                try:
-                    out.append(inside(uri, path.parent, str(path), f"{kind}[{i}]"))
-                except InputError:
-                    pass
+                out.append((f"{kind}[{i}].uri", uri))
     return out
+
+
+def file_stamps(path: str | Path, uris: list[tuple[str, str]]) -> tuple:
+    """(size, modification time) of the scene file at ``path`` and of each file of ``uris``
+    (``used_uris``) as opened (``files.SceneFolder``), None for one that cannot be: what
+    changes when any of them does, for ``baker watch``."""
+    path = Path(path)
+    try:
+        folder = SceneFolder(path.parent, str(path))
+    except InputError:
+        return (None,)
+    stamps = []
+    with folder:
+        for at, uri in [("", None)] + uris:
+            try:
+                descriptor = (folder.open(uri, at)[0] if uri is not None
+                              else os.open(path, os.O_RDONLY | os.O_NONBLOCK))
+            except (InputError, OSError):
+                stamps.append(None)
+                continue
+            try:
+                info = os.fstat(descriptor)
+                stamps.append((info.st_size, info.st_mtime_ns))
+            finally:
+                os.close(descriptor)
+    return tuple(stamps)
 
 
 def _document_from_json(text: str, raw: dict) -> pygltflib.GLTF2:
@@ -542,43 +574,54 @@ def _unsupported_kind(name: str) -> str:
 # Buffers and URIs
 
 
-def resolve_buffers(document: pygltflib.GLTF2, path: str | Path,
-                    hard_links: bool = False) -> list[bytes]:
+def check_buffer_budget(document: pygltflib.GLTF2, file: str, spent: budget.Budget) -> None:
+    """Check every buffer's declared byteLength, before any is read, against the input's
+    budget (``budget.check_buffers``): files, bytes embedded in the scene file, and the
+    meshopt fallback buffers and Draco primitives that compressed geometry decodes into."""
+    blob = document.binary_blob()
+    lengths = []
+    for i, buffer in enumerate(document.buffers or []):
+        embedded = (buffer.uri is None and i == 0 and blob is not None) or (
+            isinstance(buffer.uri, str) and buffer.uri.startswith("data:"))
+        kind = ("embedded" if embedded else "file" if buffer.uri is not None
+                else "decoded" if is_meshopt_fallback(buffer) else "embedded")
+        lengths.append((f"buffers[{i}]", buffer.byteLength, kind))
+    budget.check_buffers(lengths, draco_declared_bytes(document), spent)
+
+
+def resolve_buffers(document: pygltflib.GLTF2, folder: SceneFolder) -> list[bytes]:
     """The bytes of every ``document.buffers[i]``, exactly ``byteLength`` of them.
 
     A buffer without ``uri`` is the GLB binary chunk; a ``data:`` URI is decoded; any other URI is
-    a file path relative to the folder of ``path``, percent-decoded (``hard_links``: as ``load``).
+    a file inside the scene's ``folder``, percent-decoded (``files.SceneFolder``).
     """
-    path = Path(path)
-    file = str(path)
     blob = document.binary_blob()
     out = []
     for i, buffer in enumerate(document.buffers):
         where = f"buffers[{i}]"
-        with _schema(file, where):
-            out.append(_buffer_bytes(buffer, blob if i == 0 else None, path, where, hard_links))
+        with _schema(folder.file, where):
+            out.append(_buffer_bytes(buffer, blob if i == 0 else None, folder, where))
     return out
 
 
-def _buffer_bytes(buffer: pygltflib.Buffer, blob: bytes | None, path: Path, where: str,
-                  hard_links: bool) -> bytes:
+def _buffer_bytes(buffer: pygltflib.Buffer, blob: bytes | None, folder: SceneFolder,
+                  where: str) -> bytes:
     """The ``byteLength`` bytes of one buffer: ``blob`` (GLB binary chunk) when it has no uri; of
-    a file, at most ``byteLength`` bytes are read (``scene_files.read_inside``)."""
-    file = str(path)
+    a file, at most ``byteLength`` bytes are read."""
+    file = folder.file
     length = buffer.byteLength
     if not isinstance(length, int) or isinstance(length, bool) or length < 0:
         raise _invalid(f"byteLength {length!r} is not a byte count", file, where)
     if buffer.uri is None:
         if blob is None and is_meshopt_fallback(buffer):
-            if length > MAX_FALLBACK_BYTES:
-                raise _invalid(f"meshopt fallback buffer of {length:,} bytes, more than baker "
-                               f"decodes ({MAX_FALLBACK_BYTES:,})", file, where)
             return bytes(length)  # where decompress.decompressed puts the decoded views
         if blob is None:
             raise _invalid("buffer has no uri and the file has no GLB binary chunk for it", file, where)
         data = blob
+    elif isinstance(buffer.uri, str) and buffer.uri.startswith("data:"):
+        data = _decode_data_uri(buffer.uri, file, where)
     else:
-        data = _read_uri(buffer.uri, path.parent, file, where, length, hard_links)
+        data = folder.read(buffer.uri, f"{where}.uri", length)
     if len(data) < length:
         raise InputError(
             f"buffer holds {len(data)} bytes but its byteLength is {length}",
@@ -586,16 +629,7 @@ def _buffer_bytes(buffer: pygltflib.Buffer, blob: bytes | None, path: Path, wher
             where=where,
             fix="the binary data is incomplete or from another export: export the asset again",
         )
-    return bytes(data[:length])
-
-
-def _read_uri(uri: str, folder: Path, file: str, where: str, limit: int,
-              hard_links: bool) -> bytes:
-    """The bytes a glTF ``uri`` points to, at most ``limit`` of a file: a data URI, or a regular
-    file inside ``folder`` (``scene_files.read_inside``)."""
-    if isinstance(uri, str) and uri.startswith("data:"):
-        return _decode_data_uri(uri, file, where)
-    return read_inside(uri, folder, limit, file, where, hard_links)
+    return data if len(data) == length else bytes(data[:length])
 
 
 def _decode_data_uri(uri: str, file: str, where: str) -> bytes:
@@ -647,7 +681,7 @@ def read_accessor(
         if not isinstance(count, int) or count < 0:
             raise _invalid(f"count {count!r} is not an element count", file, where)
         if accessor.bufferView is None:
-            if count * shape[0] * shape[1] > MAX_ACCESSOR_COMPONENTS:
+            if count * shape[0] * shape[1] > budget.MAX_UNBACKED_NUMBERS:
                 raise _invalid(f"count {count:,} is too large for an accessor without a bufferView",
                                file, where)
             raw = np.zeros((count, shape[0] * shape[1]), dtype)
@@ -816,6 +850,8 @@ def _read_material(ctx: _Context, i: int, material: pygltflib.Material) -> Mater
         **base,
         emissive=_emission(ctx, emissive, strength, where),
         emissive_texture=_texture_ref(ctx, material.emissiveTexture, f"{where}.emissiveTexture"),
+        occlusion_texture=_texture_ref(ctx, material.occlusionTexture,
+                                       f"{where}.occlusionTexture"),
         alpha_mode=alpha_mode,
         alpha_cutoff=value({"alphaCutoff": material.alphaCutoff}, "alphaCutoff", 0.5, 0.0,
                            math.inf, where),
@@ -930,12 +966,19 @@ def _factor(ctx: _Context, value: Any, default: list[float], where: str) -> np.n
     return vector
 
 
+MAX_TEXCOORD_SETS = 32
+"""A texture may name TEXCOORD_0 to TEXCOORD_31; past that (or below 0) it is left out: the
+world holds one UV array per set up to the highest a material reads."""
+
+
 def _texture_ref(ctx: _Context, info: Any, where: str) -> TextureRef | None:
     """Resolve a textureInfo to (image, UV set, wrap modes), decoding the image; None if absent.
 
-    A texture whose image is only in an extension (``EXT_texture_webp``, ``KHR_texture_basisu``)
-    is used when that image decodes (``images.decode``), else left out and recorded in
-    ``ctx.skipped``, as is one past the scene's pixel budget; the factor is used instead.
+    The texture's core ``source`` is used, else the image of the first extension whose format
+    baker decodes (``EXT_texture_webp``, ``KHR_texture_basisu``, ``EXT_texture_avif``). One
+    that this installation cannot decode (KTX 2 without opengl-basisu), or past the pixels the
+    bake keeps (``budget.MAX_SAMPLED_PIXELS``), is left out and recorded in ``ctx.skipped``,
+    its material's factor used (and only checked); one that does not decode is an InputError.
     ``KHR_texture_transform``: its texCoord override and its UV transform are honoured.
     """
     if info is None:
@@ -945,19 +988,17 @@ def _texture_ref(ctx: _Context, info: Any, where: str) -> TextureRef | None:
     source, extension = texture.source, None
     if source is None:
         for name, value in (texture.extensions or {}).items():
-            if isinstance(value, dict) and value.get("source") is not None:
+            if name in images.FORMATS and isinstance(value, dict) and value.get("source") is not None:
                 source, extension = value["source"], name
                 break
     if source is None:
-        ctx.skip(texture_where, "texture has no image source: left out")
+        ctx.skip(texture_where, "texture has no image source baker reads: left out")
         return None
     _item(ctx.document.images, source, "images", ctx.file, f"{texture_where}.source")
     try:
         with _referred(where):
-            _decode_image(ctx, source, extension)
-    except InputError as exc:
-        if extension is None and not isinstance(exc, images.OverBudget):
-            raise
+            _decode_image(ctx, source)
+    except (images.Undecodable, budget.OverBudget) as exc:
         named = f" ({extension})" if extension else ""
         ctx.skip(texture_where, f"image {source}{named} not decoded ({exc.message}; {exc.fix}): "
                                 "texture left out, its material's factor used")
@@ -968,6 +1009,11 @@ def _texture_ref(ctx: _Context, info: Any, where: str) -> TextureRef | None:
     if isinstance(transform, dict):
         texcoord = int(transform.get("texCoord", texcoord))  # the extension's override (spec)
         affine = _uv_transform(ctx, transform, f"{where}.extensions.KHR_texture_transform")
+    if not 0 <= texcoord < MAX_TEXCOORD_SETS:
+        ctx.skip(texture_where, f"{where} reads TEXCOORD_{texcoord}, which no primitive may have "
+                                f"(0 to {MAX_TEXCOORD_SETS - 1}): texture left out, its "
+                                "material's factor used")
+        return None
     wrap_s = wrap_t = REPEAT
     if texture.sampler is not None:
         samplers = ctx.document.samplers
@@ -995,50 +1041,149 @@ def _uv_transform(ctx: _Context, transform: dict, where: str) -> tuple[float, ..
     return None if affine == (1.0, 0.0, 0.0, 0.0, 1.0, 0.0) else tuple(float(x) for x in affine)
 
 
-def _decode_image(ctx: _Context, index: int, extension: str | None = None) -> np.ndarray:
-    """Decode ``images[index]`` once into (h, w, 4) uint8 RGBA, row 0 at the top (sRGB as stored),
-    in a format glTF allows for a source named by ``extension`` (None: the core texture.source;
-    ``images.FORMATS``), within what is left of the scene's pixel budget."""
-    if index in ctx.decoded:
-        return ctx.decoded[index]
+def _read_images(ctx: _Context, spent: budget.Budget) -> None:
+    """Read every image's bytes (a file once: kept in ``ctx.image_files`` for the writer,
+    counted in the input's budget ``spent``) and its header (``images.header``: a format its
+    textures allow, pixels its bytes can hold), then check the pixels of all of them together
+    (``budget.check_pixels``), before any is decoded."""
+    allowed, users = _image_formats(ctx.document), _image_users(ctx.document)
+    for i in range(len(ctx.document.images)):
+        with _referred(users.get(i, f"images[{i}]")):
+            _read_image(ctx, i, allowed[i], spent)
+    budget.check_pixels([(f"images[{i}]", head.pixels) for i, head in ctx.headers.items()],
+                        ctx.file)
+
+
+def _read_image(ctx: _Context, i: int, allowed: tuple[str, ...], spent: budget.Budget) -> None:
+    """Read ``images[i]``'s file (when it is one) and header (``_read_images``)."""
+    image, where = ctx.document.images[i], f"images[{i}]"
+    if _is_file(image.uri):
+        descriptor, size = ctx.folder.open(image.uri, f"{where}.uri")
+        try:
+            spent.spend(size, f'the image file "{image.uri}"', f"{where}.uri")
+            ctx.image_files[i] = read_descriptor(descriptor, size, image.uri, ctx.file,
+                                                 f"{where}.uri")
+        finally:
+            os.close(descriptor)
+    data, label = _image_data(ctx, i)
+    ctx.headers[i] = images.header(data, allowed, label, ctx.file, where)
+
+
+def _image_users(document: pygltflib.GLTF2) -> dict[int, str]:
+    """The first material texture slot that uses each image (its JSON path, e.g.
+    ``materials[0].pbrMetallicRoughness.baseColorTexture``), to name in messages."""
+    users: dict[int, str] = {}
+    textures = document.textures or []
+    for m, material in enumerate(document.materials or []):
+        for at, index in texture_slots(dataclasses.asdict(material), f"materials[{m}]"):
+            if not isinstance(index, int) or not 0 <= index < len(textures):
+                continue
+            texture = textures[index]
+            sources = [texture.source] + [value.get("source") for value in
+                                          (texture.extensions or {}).values()
+                                          if isinstance(value, dict)]
+            for source in sources:
+                if isinstance(source, int):
+                    users.setdefault(source, at)
+    return users
+
+
+def _is_file(uri: Any) -> bool:
+    """Whether an image's ``uri`` names a file (not a data URI, not absent)."""
+    return uri is not None and not (isinstance(uri, str) and uri.startswith("data:"))
+
+
+def _image_formats(document: pygltflib.GLTF2) -> list[tuple[str, ...]]:
+    """The formats each image may have: those every texture naming it allows
+    (``images.FORMATS``: PNG or JPEG as a core source, WebP through ``EXT_texture_webp``, …;
+    none through an extension baker does not know), any format baker reads when none does."""
+    allowed: list[set[str] | None] = [None] * len(document.images or [])
+
+    def name(index: Any, formats: tuple[str, ...]) -> None:
+        if isinstance(index, int) and not isinstance(index, bool) and 0 <= index < len(allowed):
+            allowed[index] = set(formats) if allowed[index] is None else allowed[index] & set(formats)
+
+    for texture in document.textures or []:
+        name(texture.source, images.FORMATS[None])
+        for extension, value in (texture.extensions or {}).items():
+            if isinstance(value, dict):
+                name(value.get("source"), images.FORMATS.get(extension, ()))
+    return [images.ANY_FORMAT if formats is None
+            else tuple(f for f in images.ANY_FORMAT if f in formats) for formats in allowed]
+
+
+def _image_data(ctx: _Context, index: int) -> tuple[bytes, str]:
+    """The encoded bytes of ``images[index]`` and a label naming it in messages: its file's
+    (read by ``_read_images``), its bufferView's or its data URI's."""
     image = ctx.document.images[index]
     where = f"images[{index}]"
+    if index in ctx.image_files:
+        return ctx.image_files[index], f'"{image.uri}"'
     if image.bufferView is not None:
-        view, _ = _buffer_view(ctx.document, ctx.buffers, image.bufferView, ctx.file, f"{where}.bufferView")
-        data, label = bytes(view), f"the image in bufferViews[{image.bufferView}]"
-    elif image.uri is not None:
-        data = _read_uri(image.uri, ctx.folder, ctx.file, where, MAX_IMAGE_FILE_BYTES,
-                         ctx.hard_links)
-        label = "the embedded image" if image.uri.startswith("data:") else f'"{image.uri}"'
-    else:
+        view, _ = _buffer_view(ctx.document, ctx.buffers, image.bufferView, ctx.file,
+                               f"{where}.bufferView")
+        return bytes(view), f"the image in bufferViews[{image.bufferView}]"
+    if image.uri is None:
         raise _invalid("image has neither uri nor bufferView", ctx.file, where)
-    budget = MAX_SCENE_PIXELS - sum(p.shape[0] * p.shape[1] for p in ctx.decoded.values())
-    pixels = images.decode(data, extension, label, budget, ctx.file, where)
-    ctx.decoded[index] = pixels
+    return _decode_data_uri(image.uri, ctx.file, where), "the embedded image"
+
+
+def _decode_image(ctx: _Context, index: int, keep: bool = True) -> np.ndarray | None:
+    """Decode ``images[index]`` (its header read by ``_read_images``) once: into (h, w, 4) uint8
+    RGBA, row 0 at the top (sRGB as stored), kept in ``ctx.decoded`` when ``keep``; else
+    decoded only to check it."""
+    if index in ctx.decoded:
+        return ctx.decoded[index]
+    data, label = _image_data(ctx, index)
+    head, where = ctx.headers[index], f"images[{index}]"
+    if keep:
+        budget.check_sampled(sum(p.shape[0] * p.shape[1] for p in ctx.decoded.values()),
+                             head.pixels, f"{head.width}×{head.height}", label, ctx.file, where)
+    pixels = images.decode(data, head, label, ctx.file, where, keep)
+    if keep:
+        ctx.decoded[index] = pixels
     return pixels
 
 
-def _check_image_files(ctx: _Context) -> None:
-    """Check that every image file the output will carry (normal, occlusion, metallic-roughness
-    maps, unused images) is a readable regular file inside the scene's folder, so that a missing
-    one fails here, before any work, and not at writing; the colour textures were read already.
-    ``read_inside`` with a limit of 0 bytes makes every check of a read and reads nothing."""
-    for i, image in enumerate(ctx.document.images):
-        uri = image.uri
-        if i in ctx.decoded or not isinstance(uri, str) or uri.startswith("data:"):
+def image_pixels(scene: Scene, index: int) -> np.ndarray:
+    """``scene.images[index]`` as (h, w, 4) uint8 RGBA, decoded again from the bytes the load
+    read (its file's, its bufferView's or its data URI's): for an image the bake does not
+    sample (``baker preview`` reads the lightmap pages of a baked file)."""
+    ctx = _Context(scene.document, list(scene.buffers), str(scene.path), None)
+    ctx.image_files = {i: image.data for i, image in enumerate(scene.images)
+                       if image.data is not None}
+    data, label = _image_data(ctx, index)
+    where = f"images[{index}]"
+    head = images.header(data, images.ANY_FORMAT, label, ctx.file, where)
+    return images.decode(data, head, label, ctx.file, where)
+
+
+def _check_images(ctx: _Context) -> None:
+    """Decode every image the bake does not sample (normal, occlusion, metallic-roughness
+    maps, unused images), only to check it: every image an output carries was decoded once.
+    One this installation cannot decode (KTX 2 without opengl-basisu) is checked from its
+    header alone, and recorded in ``ctx.skipped``."""
+    users = _image_users(ctx.document)
+    for i in range(len(ctx.document.images)):
+        if i in ctx.decoded:
             continue
-        read_inside(uri, ctx.folder, 0, ctx.file, f"images[{i}]", ctx.hard_links)
+        try:
+            with _referred(users.get(i, f"images[{i}]")):
+                _decode_image(ctx, i, keep=False)
+        except images.Undecodable as exc:
+            ctx.skip(f"images[{i}]", f"checked from its header only: {exc.message} ({exc.fix})")
 
 
 def _images(ctx: _Context) -> tuple[Image, ...]:
-    """One Image per glTF image: decoded when a colour texture uses it, else a 1×1 white placeholder."""
+    """One Image per glTF image: decoded when a texture the bake samples uses it, else a 1×1
+    white placeholder; with its file's bytes when it is a file."""
     out = []
     for i, image in enumerate(ctx.document.images):
         pixels = ctx.decoded.get(i)
         if pixels is None:
             pixels = np.full((1, 1, 4), 255, np.uint8)
         uri = image.uri if image.uri and not image.uri.startswith("data:") else ""
-        out.append(Image(pixels=pixels, name=image.name or uri))
+        out.append(Image(pixels=pixels, name=image.name or uri, data=ctx.image_files.get(i)))
     return tuple(out)
 
 
@@ -1203,7 +1348,9 @@ def _walk_nodes(ctx: _Context) -> list[tuple[int, np.ndarray]]:
     """Every node of the scene with its (4, 4) float64 world matrix, depth first, children in order.
 
     The scene is ``document.scene`` (0 when unset); a file without scenes uses every root node.
-    A node reached twice (a cycle, or two parents) is an error: glTF node hierarchies are trees.
+    A node reached twice (a cycle, or two parents) is an error: glTF node hierarchies are trees;
+    so is one nested deeper than ``budget.MAX_NODE_DEPTH``. The nodes' local matrices are made
+    all at once (``_local_matrices``), so that a walk costs a matrix product a node.
     """
     document = ctx.document
     if document.scenes:
@@ -1214,10 +1361,11 @@ def _walk_nodes(ctx: _Context) -> list[tuple[int, np.ndarray]]:
         with _schema(ctx.file, "nodes"):
             children = {c for node in document.nodes for c in node.children or []}
         roots = [i for i in range(len(document.nodes)) if i not in children]
+    local = _local_matrices(ctx)
     out, visited = [], set()
-    stack = [(root, np.eye(4)) for root in reversed(roots)]
+    stack = [(root, np.eye(4), 1) for root in reversed(roots)]
     while stack:
-        index, parent = stack.pop()
+        index, parent, depth = stack.pop()
         where = f"nodes[{index}]"
         if index in visited:
             raise InputError(
@@ -1226,14 +1374,16 @@ def _walk_nodes(ctx: _Context) -> list[tuple[int, np.ndarray]]:
                 where=where,
                 fix="give every node at most one parent (glTF node hierarchies are trees) and export again",
             )
+        budget.check_depth(depth, where, ctx.file)
         visited.add(index)
         node = document.nodes[index]
         with _schema(ctx.file, where):
+            matrix = local.get(index)
             with np.errstate(over="ignore", invalid="ignore"):  # checked in _check_reach
-                world = parent @ _local_matrix(ctx, node, where)
+                world = parent if matrix is None else parent @ matrix
             children = [_checked_node(ctx, c, f"{where}.children") for c in node.children or []]
         out.append((index, world))
-        stack.extend((child, world) for child in reversed(children))
+        stack.extend((child, world, depth + 1) for child in reversed(children))
     return out
 
 
@@ -1243,15 +1393,32 @@ def _checked_node(ctx: _Context, index: Any, referrer: str) -> int:
     return index
 
 
-def _local_matrix(ctx: _Context, node: pygltflib.Node, where: str) -> np.ndarray:
-    """A node's (4, 4) float64 local matrix: ``matrix`` (column-major in the file) or T @ R @ S."""
-    if node.matrix is not None:
-        matrix = _finite(ctx, node.matrix, 16, f"{where}.matrix")
-        return matrix.reshape(4, 4).T
-    translation = _finite(ctx, _default(node.translation, [0.0, 0.0, 0.0]), 3, f"{where}.translation")
-    rotation = _finite(ctx, _default(node.rotation, [0.0, 0.0, 0.0, 1.0]), 4, f"{where}.rotation")
-    scale = _finite(ctx, _default(node.scale, [1.0, 1.0, 1.0]), 3, f"{where}.scale")
-    return trs_matrices(translation[None], rotation[None], scale[None], file=ctx.file, where=where)[0]
+def _local_matrices(ctx: _Context) -> dict[int, np.ndarray]:
+    """Each node's (4, 4) float64 local matrix that is not the identity: its ``matrix``
+    (column-major in the file), or T @ R @ S, made for all such nodes at once."""
+    matrices: dict[int, np.ndarray] = {}
+    trs: list[tuple[int, np.ndarray, np.ndarray, np.ndarray]] = []
+    for index, node in enumerate(ctx.document.nodes):
+        where = f"nodes[{index}]"
+        with _schema(ctx.file, where):
+            if node.matrix is not None:
+                matrices[index] = _finite(ctx, node.matrix, 16, f"{where}.matrix").reshape(4, 4).T
+            elif not (node.translation is None and node.rotation is None and node.scale is None):
+                trs.append((index,
+                            _finite(ctx, _default(node.translation, [0.0, 0.0, 0.0]), 3,
+                                    f"{where}.translation"),
+                            _finite(ctx, _default(node.rotation, [0.0, 0.0, 0.0, 1.0]), 4,
+                                    f"{where}.rotation"),
+                            _finite(ctx, _default(node.scale, [1.0, 1.0, 1.0]), 3,
+                                    f"{where}.scale")))
+    if trs:
+        zero = next((i for i, _, rotation, _ in trs if not np.any(rotation)), None)
+        if zero is not None:
+            raise _invalid("rotation quaternion has zero length", ctx.file, f"nodes[{zero}]")
+        indices, translation, rotation, scale = zip(*trs)
+        made = trs_matrices(np.array(translation), np.array(rotation), np.array(scale))
+        matrices.update(zip(indices, made))
+    return matrices
 
 
 def trs_matrices(
@@ -1339,13 +1506,7 @@ def _instantiate(
     ``unbaked``: per material, why its primitives get no lightmap ("" when they do);
     ``animated``: what becomes of node-animated instances (``load``)."""
     document = ctx.document
-    used = set()
-    for index, _ in placements:
-        mesh = document.nodes[index].mesh
-        if mesh is not None:
-            _item(document.meshes, mesh, "meshes", ctx.file, f"nodes[{index}].mesh")
-            used.add(mesh)
-    _check_declared_sizes(ctx, sorted(used))
+    used = _used_meshes(ctx, placements)
     primitives: list[Primitive] = []
     slots: dict[int, list[int | None]] = {}
     for mesh in sorted(used):
@@ -1394,53 +1555,82 @@ def _instantiate(
     return primitives, instances
 
 
-def _check_declared_sizes(ctx: _Context, meshes: list[int]) -> None:
-    """Refuse, before any accessor is read, meshes whose accessors (attributes, targets and
-    indices of every primitive, each accessor once) declare more than ``MAX_SCENE_COMPONENTS``
-    numbers in all: a 3 KB file of accessors without a bufferView and large counts took 9 GB
-    and 86 s before it failed. The error names the largest accessor and where it is used.
-    Entries that are not valid are left for the reading to report."""
+def _used_meshes(ctx: _Context, placements: list[tuple[int, np.ndarray]]) -> list[int]:
+    """The meshes the placed nodes use, in mesh order (each checked to be one of the file's)."""
+    used = set()
+    for index, _ in placements:
+        mesh = ctx.document.nodes[index].mesh
+        if mesh is not None:
+            _item(ctx.document.meshes, mesh, "meshes", ctx.file, f"nodes[{index}].mesh")
+            used.add(mesh)
+    return sorted(used)
+
+
+def _check_declared_sizes(ctx: _Context, placements: list[tuple[int, np.ndarray]]) -> None:
+    """Refuse, before any buffer is read, accessors baker would read (the attributes and
+    indices of every primitive of the meshes the nodes use, the GPU instances' transforms; each
+    accessor once) that declare more than ``MAX_SCENE_COMPONENTS`` numbers in all, or more
+    than ``budget.MAX_UNBACKED_NUMBERS`` in accessors without a bufferView (zeros, whose count
+    nothing in the file bounds: a 1 kB file of an index accessor of 30 M took a minute). A
+    3 KB file of accessors without a bufferView and large counts took 9 GB and 86 s before it
+    failed. The error names the largest accessor and where it is used. Entries that are not
+    valid are left for the reading to report; morph targets are not read."""
     accessors = ctx.document.accessors or []
     seen: set[int] = set()
-    total, largest, largest_count, used_at = 0, -1, 0, ""
-    for mesh in meshes:
-        for j, primitive in enumerate(ctx.document.meshes[mesh].primitives or []):
+    totals = {"all": [0, -1, 0, ""], "unbacked": [0, -1, 0, ""]}  # total, largest, its count, at
+    for at, index in _read_accessors(ctx, placements):
+        if not isinstance(index, int) or not 0 <= index < len(accessors) or index in seen:
+            continue
+        seen.add(index)
+        accessor = accessors[index]
+        shape = _TYPE_SHAPES.get(accessor.type)
+        if shape is None or not isinstance(accessor.count, int) or accessor.count < 0:
+            continue
+        numbers = accessor.count * shape[0] * shape[1]
+        for key in ("all",) + (("unbacked",) if accessor.bufferView is None else ()):
+            tally = totals[key]
+            tally[0] += numbers
+            if numbers > tally[2]:
+                tally[1:] = [index, numbers, at]
+    for key, limit, what in (("unbacked", budget.MAX_UNBACKED_NUMBERS,
+                              "accessors without a bufferView (zeros: no data behind them)"),
+                             ("all", MAX_SCENE_COMPONENTS, "accessors")):
+        total, largest, largest_count, used_at = totals[key]
+        if total > limit:
+            raise InputError(
+                f"the {what} baker reads declare {total:,} numbers in all, more than baker "
+                f"holds ({limit:,}, {8 * limit >> 20:,} MiB as float64); the largest, "
+                f"accessors[{largest}], declares {largest_count:,}",
+                file=ctx.file,
+                where=f"{used_at} → accessors[{largest}]",
+                fix="check the accessors' counts; split the scene, or bake its parts apart",
+            )
+
+
+def _read_accessors(ctx: _Context, placements: list[tuple[int, np.ndarray]]
+                    ) -> Iterator[tuple[str, Any]]:
+    """(JSON path, accessor index) of every accessor baker reads for the placed nodes: the
+    attributes and indices of the primitives of their meshes, and their GPU instances'
+    transforms (``EXT_mesh_gpu_instancing``)."""
+    document = ctx.document
+    for mesh in _used_meshes(ctx, placements):
+        for j, primitive in enumerate(document.meshes[mesh].primitives or []):
             for name, index in _accessors_of(primitive):
-                if not isinstance(index, int) or not 0 <= index < len(accessors) or index in seen:
-                    continue
-                seen.add(index)
-                accessor = accessors[index]
-                shape = _TYPE_SHAPES.get(accessor.type)
-                if shape is None or not isinstance(accessor.count, int) or accessor.count < 0:
-                    continue
-                numbers = accessor.count * shape[0] * shape[1]
-                total += numbers
-                if numbers > largest_count:
-                    largest, largest_count = index, numbers
-                    used_at = f"meshes[{mesh}].primitives[{j}].{name}"
-    if total > MAX_SCENE_COMPONENTS:
-        raise InputError(
-            f"the meshes' {len(seen)} accessors declare {total:,} numbers in all, more than baker "
-            f"holds ({MAX_SCENE_COMPONENTS:,}, {8 * MAX_SCENE_COMPONENTS >> 30} GiB as float64); "
-            f"the largest, accessors[{largest}], declares {largest_count:,}",
-            file=ctx.file,
-            where=f"{used_at} → accessors[{largest}]",
-            fix="check the accessors' counts; split the scene, or bake its parts apart",
-        )
+                yield f"meshes[{mesh}].primitives[{j}].{name}", index
+    for node, _ in placements:
+        extension = (document.nodes[node].extensions or {}).get("EXT_mesh_gpu_instancing")
+        attributes = extension.get("attributes") if isinstance(extension, dict) else None
+        for name, index in (attributes.items() if isinstance(attributes, dict) else ()):
+            yield f"nodes[{node}].extensions.EXT_mesh_gpu_instancing.attributes.{name}", index
 
 
 def _accessors_of(primitive: Any) -> list[tuple[str, Any]]:
-    """(JSON path within the primitive, accessor index) of every accessor a primitive names:
-    its attributes, its morph targets', its indices."""
-    def named(attributes: Any, at: str) -> list[tuple[str, Any]]:
-        if attributes is None:
-            return []
-        items = attributes if isinstance(attributes, dict) else vars(attributes)
-        return [(f"{at}.{k}", v) for k, v in items.items() if v is not None]
-
-    targets = primitive.targets if isinstance(primitive.targets, list) else []
-    return (named(primitive.attributes, "attributes")
-            + [pair for t, target in enumerate(targets) for pair in named(target, f"targets[{t}]")]
+    """(JSON path within the primitive, accessor index) of every accessor of a primitive baker
+    reads: its attributes and its indices."""
+    attributes = primitive.attributes
+    items = {} if attributes is None else (
+        attributes if isinstance(attributes, dict) else vars(attributes))
+    return ([(f"attributes.{k}", v) for k, v in items.items() if v is not None]
             + [("indices", primitive.indices)])
 
 

@@ -102,19 +102,23 @@ def _checked(where: str, index: Any, target: str, sizes: dict[str, int]
 
 
 def _material_textures(raw: dict, sizes: dict[str, int]) -> Iterator[tuple[str, str, Any, int]]:
-    """Texture references of materials: every ``…Texture`` object's ``index``, in the core
-    material and in its extensions (KHR_materials_*: clearcoatTexture, transmissionTexture…)."""
-    def walk(node: Any, where: str) -> Iterator[tuple[str, str, Any, int]]:
-        if not isinstance(node, dict):
-            return
-        for key, value in node.items():
-            if key.endswith("Texture") and isinstance(value, dict) and "index" in value:
-                yield from _checked(f"{where}.{key}.index", value["index"], "textures", sizes)
-            elif key in ("pbrMetallicRoughness", "extensions") or key.startswith("KHR_"):
-                yield from walk(value, f"{where}.{key}")
-
+    """Texture references of materials (``texture_slots``)."""
     for i, material in enumerate(raw.get("materials", [])):
-        yield from walk(material, f"materials[{i}]")
+        for where, index in texture_slots(material, f"materials[{i}]"):
+            yield from _checked(f"{where}.index", index, "textures", sizes)
+
+
+def texture_slots(material: Any, where: str) -> Iterator[tuple[str, Any]]:
+    """(JSON path, texture index) of every ``…Texture`` object of a material (its JSON, as
+    parsed, at ``where``), in the core material and in its extensions (KHR_materials_*:
+    clearcoatTexture, transmissionTexture…)."""
+    if not isinstance(material, dict):
+        return
+    for key, value in material.items():
+        if key.endswith("Texture") and isinstance(value, dict) and "index" in value:
+            yield f"{where}.{key}", value["index"]
+        elif key in ("pbrMetallicRoughness", "extensions") or key.startswith("KHR_"):
+            yield from texture_slots(value, f"{where}.{key}")
 
 
 def _light_references(raw: dict) -> Iterator[tuple[str, str, Any, int]]:

@@ -31,6 +31,8 @@ class Image:
 
     pixels: np.ndarray
     name: str = ""
+    data: bytes | None = None  # the image file's bytes as read, for the writer to copy; None
+    # when the image is in a buffer or a data URI (the writer has those)
 
 
 @dataclass(frozen=True)
@@ -78,6 +80,9 @@ class Material:
     attenuation_color: np.ndarray = field(default_factory=lambda: np.ones(3))  # (3,) linear
     diffuse_transmission: float = 0.0  # KHR_materials_diffuse_transmission factor
     diffuse_transmission_color: np.ndarray = field(default_factory=lambda: np.ones(3))  # (3,)
+    # occlusionTexture (linear, R): read only where it carries a bake (the occlusion carrier,
+    # baker preview), its UV set and transform as the other textures'; None when absent.
+    occlusion_texture: TextureRef | None = None
 
 
 @dataclass(frozen=True)
@@ -175,12 +180,12 @@ class Scene:
     lights: tuple[Light, ...] = field(default=())  # KHR_lights_punctual lights, in node order
     # Metals smoother than this are mirrors (materials.py); a setting, carried with the scene.
     mirror_roughness: float = 0.1
-    # The buffers of a compressed file as decoded (decompress.py), for the writer, which reads
-    # the file's buffers again otherwise (a decoded document's cannot be read from the file).
-    buffers: tuple[bytes, ...] | None = None
-    # Files with several names (hard links) were allowed (a setting: files.read_inside), for the
-    # writer, which reads the buffers and image files again.
-    hard_links: bool = False
+    # The bytes of every document.buffers[i], as read (a compressed file's as decoded:
+    # decompress.py), for the writer: no file is read twice.
+    buffers: tuple[bytes, ...] = ()
+    # (device, inode) → how the scene reads it, of every file the load opened (the scene file,
+    # its buffers and images): no file a bake writes may replace one (run/atomic.py).
+    inputs: dict[tuple[int, int], str] = field(default_factory=dict)
 
     def lights_needed(self) -> bool:
         """Whether the punctual lights light a surface that no lightmap will hold: an instance

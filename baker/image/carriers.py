@@ -25,7 +25,8 @@ import numpy as np
 
 from baker.atlas.layout import Atlas
 from baker.atlas.rasterise import Texels, flat_pages, texel_barycentrics
-from baker.geometry.surface import base_colour, emission, metallic_at, viewer_diffuse_weight_at
+from baker.geometry.surface import (base_colour, emission, metallic_at,
+                                    viewer_diffuse_weight_at)
 from baker.geometry.world import World
 from baker.gltf.scene import Scene
 from baker.image.compose import Lightmaps
@@ -53,8 +54,9 @@ def emissive_lightmaps(scene: Scene, world: World, atlas: Atlas, texels: Texels,
     bary = texel_barycentrics(atlas, world, texels)[front]
     index = texels.pixel_index(front)
     irradiance = flat_pages(lightmaps.light)[index]
-    diffuse = viewer_diffuse_weight_at(scene, world, tris, bary)[:, None] * irradiance
     metal = metallic_at(scene, world, tris, bary)[:, None]
+    transmission = np.array([m.transmission for m in scene.materials])[world.tri_material[tris]]
+    diffuse = (1.0 - metal) * (1.0 - np.clip(transmission, 0.0, 1.0))[:, None] * irradiance
     if metal.any():
         punctual = _punctual_irradiance(kept, front, len(texels.key))
         diffuse += metal * np.maximum(irradiance - punctual, 0.0)

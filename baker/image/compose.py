@@ -143,8 +143,8 @@ def directional_pages(lightmaps: Lightmaps) -> Lightmaps:
 
 
 @jit
-def _compose_kernel(index, w_hit, escaped, through_hit, through_ave, r_ave, intensity,
-                    indirect, direct, pages, visibility, covered):
+def _compose_kernel(index, w_hit, escaped, escaped_tint, through_hit, through_ave, r_ave,
+                    intensity, indirect, direct, pages, visibility, covered):
     """Scatter the texels' L = I_A·W + D (W: ``obscurance_at``), or the path-traced
     ``indirect`` + D when it has rows (``direct`` D (k, 3), or (0, 3): none), into the flat
     pages at ``index`` (k,) (``Texels.pixel_index``); their visibility (``escaped``, at most 1)
@@ -154,7 +154,7 @@ def _compose_kernel(index, w_hit, escaped, through_hit, through_ave, r_ave, inte
     for i in range(len(index)):
         p = index[i]
         covered[p] = True
-        w = obscurance_at(w_hit, escaped, through_hit, through_ave, r_ave, i)
+        w = obscurance_at(w_hit, escaped, escaped_tint, through_hit, through_ave, r_ave, i)
         for c in range(3):
             if keep:
                 visibility[p, c] = min(escaped[i], 1.0)

@@ -19,12 +19,13 @@ the sRGB curve (``srgb``: what the proposed MOZ_lightmap text says; more precisi
 
 from __future__ import annotations
 
+import io
 import struct
 import zlib
 from dataclasses import dataclass
 
 import numpy as np
-from isal import isal_zlib
+from PIL import Image as PILImage
 
 from baker.geometry.surface import LUMINANCE
 from baker.image.compose import Lightmaps
@@ -74,10 +75,24 @@ def srgb_to_linear(e: np.ndarray) -> np.ndarray:
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 _ZLIB_HEADER = b"\x78\x5e"  # deflate, 32 KiB window, "fast" level (the level is a hint only)
-# ISA-L's deflate level (0-3; isal_zlib). On an 825² bench page, one core: 5.0 ms and 551 KB,
-# where zlib took 36 ms at level 4 (520 KB), 22 ms at level 1 (561 KB), 111 ms at 6 (497 KB).
-_LEVEL = 2
+# zlib's deflate level. On the demo's 766 × 870 page (2.0 MB of filtered rows, one core, load
+# about 10): ISA-L's level 2, used before, 4.0 ms and 606 KB, but its bytes are not always the
+# same for the same input (rebake/zipwriter.py); zlib's level 1 16 ms and 630 KB, level 3
+# 30 ms and 594 KB, level 6 109 ms and 556 KB.
+_LEVEL = 3
 _BAND_ROWS = 64  # image rows compressed as one piece (pieces go to every core)
+
+
+def smooth_png_bytes(rgb: np.ndarray) -> bytes:
+    """A (H, W, 3) uint8 image that varies smoothly in both directions (a directional page's
+    light directions) as PNG bytes, through PIL's per-row choice of filter: its Paeth and
+    Average filters predict a gradient from both neighbours, where ``png_bytes``' one "Up"
+    filter sees it only from above (a bumped floor's 49² directional page: 1,351 bytes
+    against 1,829). Deterministic: no timestamps, fixed settings."""
+    out = io.BytesIO()
+    PILImage.fromarray(np.ascontiguousarray(rgb, np.uint8)).save(out, format="PNG",
+                                                                compress_level=9)
+    return out.getvalue()
 
 
 def png_bytes(rgb: np.ndarray) -> bytes:
@@ -87,8 +102,8 @@ def png_bytes(rgb: np.ndarray) -> bytes:
     compresses within 0.5 % of the per-row adaptive choice (PIL's), at a fraction of the cost.
     The filtered rows are deflated in bands of ``_BAND_ROWS`` rows side by side, each band a
     raw deflate stream ending on a byte boundary (a sync flush; the last one finishes), so that
-    their concatenation is one valid zlib stream (as pigz makes it). The deflate is ISA-L's
-    (Intel's, through python-isal): 7× zlib's speed at level 4, for a file 6 % larger.
+    their concatenation is one valid zlib stream (as pigz makes it). The deflate is zlib's, at
+    ``_LEVEL``: the same bytes in every process (ISA-L's, 7 times as fast, is not).
     """
     height, width = rgb.shape[:2]
     rows = np.ascontiguousarray(rgb, np.uint8).reshape(height, 3 * width)
@@ -99,11 +114,11 @@ def png_bytes(rgb: np.ndarray) -> bytes:
     starts = range(0, height, _BAND_ROWS)
     pieces: list[bytes] = [b""] * len(starts)
 
-    def deflate(band: int) -> None:  # isal releases the GIL: bands compress side by side
-        stream = isal_zlib.compressobj(_LEVEL, isal_zlib.DEFLATED, -15)
+    def deflate(band: int) -> None:  # zlib releases the GIL: bands compress side by side
+        stream = zlib.compressobj(_LEVEL, zlib.DEFLATED, -15)
         last = band == len(pieces) - 1
         pieces[band] = (stream.compress(filtered[starts[band]:starts[band] + _BAND_ROWS])
-                        + stream.flush(isal_zlib.Z_FINISH if last else isal_zlib.Z_SYNC_FLUSH))
+                        + stream.flush(zlib.Z_FINISH if last else zlib.Z_SYNC_FLUSH))
 
     run_chunks(deflate, range(len(pieces)))
     data = b"".join([_ZLIB_HEADER, *pieces, struct.pack(">I", zlib.adler32(filtered))])
@@ -224,7 +239,7 @@ def encode(lightmaps: Lightmaps, encoding: str, occlusion: bool,
             _quantise_linear(np.ascontiguousarray(light, np.float64), intensity, texels)
         else:
             texels = _page_texels(light, lambda rows: quantise(rows / intensity, encoding))
-        direction_png = (png_bytes(page_texels(lightmaps.direction[p]))
+        direction_png = (smooth_png_bytes(page_texels(lightmaps.direction[p]))
                          if len(lightmaps.direction) else None)
         pages.append(EncodedPage(png=png_bytes(texels),
                                  intensity=intensity, occlusion_png=occlusion_png,

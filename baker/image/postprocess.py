@@ -17,6 +17,7 @@ import numpy as np
 from baker.image.compose import Lightmaps
 from baker.image.seams import Seams, stitch
 from baker.jit import jit
+from baker.run.progress import Steps
 
 _NEIGHBOURS = np.array([(dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1) if (dy, dx) != (0, 0)],
                        np.int64)
@@ -139,7 +140,8 @@ def _fill_invalid_in_place(pages: tuple[np.ndarray, ...], covered: np.ndarray,
 
 
 def postprocess(lightmaps: Lightmaps, padding: int, invalid: np.ndarray | None = None,
-                enclosed: np.ndarray | None = None, seams: Seams | None = None) -> Lightmaps:
+                enclosed: np.ndarray | None = None, seams: Seams | None = None,
+                steps: Steps | None = None) -> Lightmaps:
     """Clean the composed pages: enclosed texels dark, invalid ones from valid neighbours,
     dilation past the padding (at least 4 texels, for bilinear + 1 mip), then both sides of
     every smooth UV seam made to agree (``seams.stitch``); the directional pages alike (an
@@ -147,12 +149,15 @@ def postprocess(lightmaps: Lightmaps, padding: int, invalid: np.ndarray | None =
 
     invalid, enclosed: (P, H, W) bool masks from ``validity.Validity.page_masks`` (None: none).
     seams: from ``seams.find_seams`` (None: no stitching).
+    steps: its three passes over the pages' texels (fill, dilation, seams), counted as done.
 
     The pages of ``lightmaps`` are cleaned in place (float64 C-contiguous ones, as compose and
     denoise make them; others are converted first) and returned: the composed pages are not
     needed after, and a copy of a 4096² page pair would add 800 MB to the bake's peak memory.
     """
     covered = lightmaps.covered
+    steps = steps or Steps()
+    steps.expect(3 * covered.size)
     pages = [np.ascontiguousarray(values, np.float64)
              for values in (lightmaps.light, lightmaps.visibility, lightmaps.direction)]
     kept = tuple(values for values in pages if len(values))  # W's pages may not be kept
@@ -164,7 +169,10 @@ def postprocess(lightmaps: Lightmaps, padding: int, invalid: np.ndarray | None =
             values[enclosed] = 0.0  # shut inside a solid: no light reaches it
     if invalid is not None and invalid.any():
         _fill_invalid_in_place(kept, covered, invalid)
+    steps.advance(covered.size)
     _dilate_in_place(kept, covered, max(2 * padding, 4))
+    steps.advance(covered.size)
     if seams is not None and len(seams):
         pages = [stitch(values, covered, seams) if len(values) else values for values in pages]
+    steps.advance(covered.size)
     return Lightmaps(light=pages[0], visibility=pages[1], covered=covered, direction=pages[2])

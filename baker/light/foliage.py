@@ -394,9 +394,11 @@ def shade_by_crowns(foliage: Foliage, texels: Texels, rows: np.ndarray, terms: T
     def split(s: np.ndarray) -> np.ndarray:
         return np.column_stack([s[:, 0] + occluded * lum * s[:, 1], visibility * s[:, 1]])
 
+    tint = terms.escaped_tint  # a tinted escape meets the crowns as a grey one does
     return replace(terms, w_hit=w_hit, escaped=escaped * visibility,
                    hit_sq=terms.hit_sq + escaped * occluded * lum * lum,
-                   half_split=split(terms.half_split))
+                   half_split=split(terms.half_split),
+                   escaped_tint=None if tint is None else tint * visibility[:, None])
 
 
 def shaded(foliage: Foliage, texels: Texels, terms: Terms, d_max: float) -> Terms:
@@ -407,6 +409,7 @@ def shaded(foliage: Foliage, texels: Texels, terms: Terms, d_max: float) -> Term
     moved or were fitted anew, in closed form."""
     rows = np.flatnonzero(foliage.texel_groups(texels) < 0)
     shading = ("w_hit", "escaped", "hit_sq", "half_split")  # what shade_by_crowns changes
+    shading += ("escaped_tint",) if terms.escaped_tint is not None else ()
     mine = replace(terms, **{name: getattr(terms, name)[rows] for name in shading})
     done = shade_by_crowns(foliage, texels, rows, mine, d_max)
     columns = {}

@@ -75,7 +75,10 @@ class Terms:
     leaves and closed translucent objects their back-face and inner rays (§4); capped:
     (N,) int64 of its rays whose chain the depth cap stopped (both empty when not counted).
     With mirrors, glass or translucency, a ray's escaped weight may be a fraction (the mean
-    of its chain's RGB throughput), and ``escaped`` the mean of those weights.
+    of its chain's RGB throughput), and ``escaped`` the mean of those weights; escaped_tint:
+    (N, 3) the mean of what such a chain's RGB throughput adds to its escaped weight in each
+    channel (a red mirror's escapes are red: W takes (escaped + escaped_tint) · R_ave, the
+    visibility ``escaped`` alone), None when no mirror or glass is in the scene.
     through_hit, through_ave: (N, 3) light through translucent surfaces (§4, ``inner.py``): the
     part of W independent of R_ave (a leaf's translucency × its back face's hits) and the RGB
     weight of R_ave (× the back face's escaped fraction, + the inner obscurance); None when the
@@ -99,6 +102,7 @@ class Terms:
     aim_hit: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     aim_escaped: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     aim_split: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))
+    escaped_tint: np.ndarray | None = None
 
     @property
     def rays(self) -> int:
@@ -117,11 +121,13 @@ class Terms:
         _obscurance_kernel(*self.w_parts(), np.asarray(r_ave, np.float64), out)
         return out
 
-    def w_parts(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(w_hit, escaped, through_hit, through_ave) as ``obscurance_at`` takes them: the
-        light through translucent surfaces as (0, 3) arrays when there is none."""
+    def w_parts(self) -> tuple[np.ndarray, ...]:
+        """(w_hit, escaped, escaped_tint, through_hit, through_ave) as ``obscurance_at`` takes
+        them: the tint and the light through translucent surfaces as (0, 3) arrays when there
+        is none."""
         none = np.zeros((0, 3))
         return (self.w_hit, self.escaped,
+                none if self.escaped_tint is None else self.escaped_tint,
                 none if self.through_hit is None else self.through_hit,
                 none if self.through_ave is None else self.through_ave)
 
@@ -139,7 +145,8 @@ class Terms:
 
     def _front(self, r_ave: np.ndarray) -> np.ndarray:
         """(N, 3) the part of W that the texel's own rays estimate."""
-        return self.w_hit + self.escaped[:, None] * r_ave
+        front = self.w_hit + self.escaped[:, None] * r_ave
+        return front if self.escaped_tint is None else front + self.escaped_tint * r_ave
 
     def standard_error(self, r_ave: np.ndarray) -> np.ndarray:
         """(N,) standard error of the luminance of W, from the rays' sample variance; where
@@ -218,12 +225,16 @@ def rmse_of(square: float, count: int) -> float:
 
 
 @inline
-def obscurance_at(w_hit, escaped, through_hit, through_ave, r_ave, i):
-    """W (3 floats) of texel i: w_hit + escaped · R_ave, plus the light through translucent
-    surfaces, through_hit + through_ave · R_ave, when those have rows (``Terms.w_parts``).
-    Inlined where it is called: arrays passed to a call cost reference counts per texel."""
+def obscurance_at(w_hit, escaped, escaped_tint, through_hit, through_ave, r_ave, i):
+    """W (3 floats) of texel i: w_hit + escaped · R_ave, plus escaped_tint · R_ave (escapes
+    tinted by mirrors and glass) and the light through translucent surfaces, through_hit +
+    through_ave · R_ave, when those have rows (``Terms.w_parts``). Inlined where it is
+    called: arrays passed to a call cost reference counts per texel."""
     out = (w_hit[i, 0] + escaped[i] * r_ave[0], w_hit[i, 1] + escaped[i] * r_ave[1],
            w_hit[i, 2] + escaped[i] * r_ave[2])
+    if len(escaped_tint):
+        out = (out[0] + escaped_tint[i, 0] * r_ave[0], out[1] + escaped_tint[i, 1] * r_ave[1],
+               out[2] + escaped_tint[i, 2] * r_ave[2])
     if not len(through_hit):
         return out
     return (out[0] + through_hit[i, 0] + through_ave[i, 0] * r_ave[0],
@@ -232,10 +243,10 @@ def obscurance_at(w_hit, escaped, through_hit, through_ave, r_ave, i):
 
 
 @jit
-def _obscurance_kernel(w_hit, escaped, through_hit, through_ave, r_ave, out):
+def _obscurance_kernel(w_hit, escaped, escaped_tint, through_hit, through_ave, r_ave, out):
     for i in range(len(out)):
-        out[i, 0], out[i, 1], out[i, 2] = obscurance_at(w_hit, escaped, through_hit,
-                                                        through_ave, r_ave, i)
+        out[i, 0], out[i, 1], out[i, 2] = obscurance_at(w_hit, escaped, escaped_tint,
+                                                        through_hit, through_ave, r_ave, i)
 
 
 @jit
@@ -387,6 +398,11 @@ _CONSTANT, _VARYING, _SPECIAL = 0, 1, 2  # per-triangle kinds of ``_accumulate_k
 # 2^-40 ≈ 10^-12 is far below float32's output precision.
 _SHIFT = 1.5 * 2.0 ** 12  # x + _SHIFT for x in [−2^11, 2^11) has float64 spacing 2^-40
 EXACT_RAYS = 1 << 11
+
+
+def _grid_values(x: np.ndarray) -> np.ndarray:
+    """``_on_grid`` of an array of values (a new array)."""
+    return (x + _SHIFT) - _SHIFT
 
 
 @inline
@@ -573,11 +589,14 @@ def _refract(d: np.ndarray, n: np.ndarray, ior: np.ndarray, thin: np.ndarray,
 
 @dataclass
 class _Chains:
-    """Counts from ``_special_hits`` per texel of a chunk: rays cast along chains (k,) and
-    chains stopped by the depth cap (k,)."""
+    """What ``_special_hits`` adds up per texel of a chunk: rays cast along chains (k,), chains
+    stopped by the depth cap (k,), and the summed tint of the escaped weights (k, 3): each
+    ray's RGB throughput × ρ less its escaped weight (their mean), on the grid of
+    ``_on_grid``, so exact in any order."""
 
     rays: np.ndarray
     capped: np.ndarray
+    tint: np.ndarray
 
 
 def _special_hits(surfaces: Surfaces, tracer: Tracer, origins: np.ndarray,
@@ -595,7 +614,8 @@ def _special_hits(surfaces: Surfaces, tracer: Tracer, origins: np.ndarray,
     ρ = 1). Chains end at a diffuse choice, a miss (escaped: weight R_ave·ρ), Russian roulette
     from bounce ``_ROULETTE_FROM`` on (survival min(0.95, max throughput), throughput divided by
     it: unbiased) or the hard cap ``settings.max_depth`` (nothing counted; ``chains.capped``).
-    Escaped weights are scalar: the mean of the RGB throughput.
+    Escaped weights are scalar, the mean of the RGB throughput (× ρ); what each channel's
+    throughput adds to it is summed per texel into ``chains.tint``.
 
     origins, directions: (k·rays, 3) float32 as cast; hits: their ``LocalHits``; keys: (k,)
     texel keys. Writes ``out`` (k·rays, 4): R·ρ (RGB) and escaped weight of each such ray.
@@ -612,7 +632,8 @@ def _special_hits(surfaces: Surfaces, tracer: Tracer, origins: np.ndarray,
     texel = ray // rays
     key, sample = keys[texel], first + ray % rays
     n = len(ray)
-    value, escape = np.zeros((n, 3)), np.zeros(n)
+    value = np.zeros((n, 3))
+    escaped = np.zeros((n, 3))  # each escaped ray's RGB throughput × ρ
     throughput = np.ones((n, 3))
     start = origins[ray].astype(np.float64)
     d = directions[ray].astype(np.float64)
@@ -638,10 +659,10 @@ def _special_hits(surfaces: Surfaces, tracer: Tracer, origins: np.ndarray,
         diffuse = branch == DIFFUSE
         value[live[diffuse]] = throughput[live[diffuse]] * colour[diffuse] * fade[diffuse, None]
         translucent = branch == TRANSLUCENT
-        escape[live[translucent]] = throughput[live[translucent]].mean(axis=1) * settings.translucent
+        escaped[live[translucent]] = throughput[live[translucent]] * settings.translucent
         onward = (branch == SPECULAR) | (branch == TRANSPARENT)
         if settings.specular == "c":  # R_ave, ρ = 1, no ray
-            escape[live[onward]] = throughput[live[onward]].mean(axis=1)
+            escaped[live[onward]] = throughput[live[onward]]
             break
         live, mat, colour, branch = live[onward], mat[onward], colour[onward], branch[onward]
         if not len(live) or depth == settings.max_depth:
@@ -675,7 +696,7 @@ def _special_hits(surfaces: Surfaces, tracer: Tracer, origins: np.ndarray,
         d[live] = new
         length = d_max - total[live] if settings.specular == "b" else np.full(len(live), d_max)
         going = length > 0
-        escape[live[~going]] = throughput[live[~going]].mean(axis=1)  # past d_max: ρ = 1
+        escaped[live[~going]] = throughput[live[~going]]  # past d_max: ρ = 1
         live = live[going]
         if not len(live):
             break
@@ -686,13 +707,17 @@ def _special_hits(surfaces: Surfaces, tracer: Tracer, origins: np.ndarray,
         missed = live[~hit]
         fade = (_rho(rho_kind, first_dist[missed] / d_max) if settings.specular == "a"
                 else np.ones(len(missed)))
-        escape[missed] = throughput[missed].mean(axis=1) * fade
+        escaped[missed] = throughput[missed] * fade[:, None]
         live = live[hit]
         tri[live] = sub.triangle[hit]
         dist[live] = sub.distance[hit]
         bu[live], bv[live] = sub.u[hit], sub.v[hit]
+    escape = escaped.mean(axis=1)
     out[ray, :3] = value
     out[ray, 3] = escape
+    grid = _grid_values(escaped - escape[:, None])
+    for c in range(3):
+        chains.tint[:, c] += np.bincount(texel, grid[:, c], minlength=len(chains.tint))
 
 
 def _rho(kind: int, x: np.ndarray) -> np.ndarray:
@@ -734,7 +759,8 @@ def _chunk_sums(surfaces: Surfaces, tracer: Tracer, texels: Texels, rows: np.nda
     origins, directions = hemisphere_rays(texels, rows, rays, settings.seed, tracer.center,
                                           settings.sampling, first, sub, settings.rays)
     lengths = np.full(len(origins), settings.d_max, np.float32)
-    chains = _Chains(np.zeros(len(rows), np.int64), np.zeros(len(rows), np.int64))
+    chains = _Chains(np.zeros(len(rows), np.int64), np.zeros(len(rows), np.int64),
+                     np.zeros((len(rows), 3)))
     sums = np.zeros((len(rows), columns(settings.directional_pages)))
     aims = directions if settings.directional_pages else _NO_DIRECTIONS
     if blocking_only(surfaces, settings):
@@ -819,6 +845,7 @@ def hemisphere_terms(scene: Scene, world: World, tracer: Tracer, texels: Texels,
     sums = np.zeros((len(rows), columns(settings.directional_pages)))
     chaining = surfaces.special  # else no chain is counted: the counts stay empty
     chain_counts = np.zeros((len(rows) if chaining else 0, 2), np.int64)  # rays, capped chains
+    tints = np.zeros((len(rows) if chaining else 0, 3))  # the escaped weights' tints, summed
     counts = np.zeros(len(rows), np.int64)
     errors = np.zeros(len(rows))  # each row's predicted error after its last round
     active = np.arange(len(rows))
@@ -832,6 +859,7 @@ def hemisphere_terms(scene: Scene, world: World, tracer: Tracer, texels: Texels,
             if chaining:
                 chain_counts[chunk, 0] += chains.rays
                 chain_counts[chunk, 1] += chains.capped
+                tints[chunk] += chains.tint
             sums[chunk] += round_sums
             if progress is not None:
                 progress(len(chunk) if first == 0 else 0, len(chunk) * batch)
@@ -852,7 +880,8 @@ def hemisphere_terms(scene: Scene, world: World, tracer: Tracer, texels: Texels,
             progress(0, 0, len(active) * batch)
     terms = _means(sums, counts)
     if chaining:
-        terms = replace(terms, chain_rays=chain_counts[:, 0], capped=chain_counts[:, 1])
+        terms = replace(terms, chain_rays=chain_counts[:, 0], capped=chain_counts[:, 1],
+                        escaped_tint=tints / np.maximum(counts, 1)[:, None])
     return terms
 
 

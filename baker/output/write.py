@@ -45,12 +45,12 @@ from baker.errors import InputError, OutputError, SettingsError
 from baker.gltf import document as gltf_document
 from baker.gltf import images
 from baker.gltf.document import COMPONENT_DTYPES
-from baker.gltf.files import inside, read_inside
-from baker.gltf.load import MAX_IMAGE_FILE_BYTES, read_accessor, resolve_buffers
+from baker.gltf.load import read_accessor
 from baker.gltf.scene import Material, Scene
 from baker.image.encode import PNG_SIGNATURE, EncodedPage
 from baker.output.specular import dielectric_f0, mixed_pair, without_diffuse
 from baker.run.atomic import Outputs
+from baker.run.progress import Steps
 from baker.settings import BAKED_LIGHTS, CARRIERS, ENCODINGS, OCCLUSION_MODES
 
 LIGHTMAP_EXTENSION = "MOZ_lightmap"
@@ -60,6 +60,7 @@ DIRECTIONAL_EXTENSION = "BAKER_lightmap_directional"
 the lightmap's UV set (``light.directional``)."""
 LIGHTS_EXTENSION = "KHR_lights_punctual"
 VARIANTS_EXTENSION = "KHR_materials_variants"
+TEXTURE_TRANSFORM = "KHR_texture_transform"
 EMISSIVE_STRENGTH = "KHR_materials_emissive_strength"
 ENCODING_TARGETS = {
     "linear": "texel/255 x intensity: the three.js MOZ_lightmap plugin, Hubs, baker view",
@@ -139,14 +140,16 @@ class WriteInfo:
 
 
 def write(scene: Scene, atlas: Atlas, pages: Sequence[EncodedPage], output: Path,
-          options: WriteOptions = WriteOptions(), outputs: Outputs | None = None) -> WriteInfo:
+          options: WriteOptions = WriteOptions(), outputs: Outputs | None = None,
+          steps: Steps | None = None) -> WriteInfo:
     """Write ``scene`` with the lightmaps of ``atlas``/``pages`` to ``output`` (.glb or .gltf).
 
     ``pages[p]`` is atlas page p. Nothing is written unless everything succeeds: an existing
     output is replaced atomically. ``outputs``: stage the files there, for the caller to put in
     place with its other files (``staging.Outputs.commit``); None: put them in place now.
     Raises ``OutputError`` when the output cannot be written, ``InputError`` when the input's
-    buffers or images cannot be read.
+    buffers or images cannot be read. ``steps``: the baked triangles, counted as their nodes
+    are written.
     """
     output = Path(output)
     kind = _output_kind(output)
@@ -154,8 +157,11 @@ def write(scene: Scene, atlas: Atlas, pages: Sequence[EncodedPage], output: Path
         raise ValueError(f"{len(pages)} encoded pages for an atlas of {atlas.page_count}")
     builder = _Builder(scene, output, options)
     builder.add_pages(pages)
+    steps = steps or Steps()
+    steps.expect(sum(len(unwrap.triangles) for unwrap in atlas.instances))
     for node, baked in _baked_by_node(scene, atlas).items():
         builder.bake_node(node, baked)
+        steps.advance(sum(len(unwrap.triangles) for unwrap in baked.values()))
     builder.record_asset()
     if options.baked_lights == "remove" and builder.material_copies:
         builder.remove_lights()
@@ -269,9 +275,7 @@ class _Builder:
         self.options = options
         self.base = Path(scene.path).parent
         self.data = _document_data(scene.document)
-        self.source_buffers = (list(scene.buffers) if scene.buffers is not None
-                               else resolve_buffers(scene.document, scene.path,
-                                                    scene.hard_links))
+        self.source_buffers = list(scene.buffers)
         self.blob = bytearray()
         self._merge_buffers()
         self.source_cache: dict[int, np.ndarray] = {}
@@ -285,6 +289,7 @@ class _Builder:
         self.intensities: list[float] = []
         self.material_copies: dict[tuple[int | None, int, int], int] = {}
         self.mixed: dict[int | None, tuple[int, int | None] | None] = {}  # specular.mixed_pair
+        self.shared_geometry: dict[tuple, tuple[dict, np.ndarray, int]] = {}  # _page_geometry
         self.texcoord: dict[int, int] = {}
         self.notes: list[str] = []
 
@@ -416,11 +421,14 @@ class _Builder:
         return len(textures) - 1
 
     def _lightmap_material(self, material: int | None, page: int, texcoord: int,
-                           shifted: bool = False) -> int:
+                           shifted: bool = False, transform: dict | None = None) -> int:
         """The copy of ``material`` (None: the default material) bound to lightmap ``page`` on
         UV set ``texcoord``; ``shifted``: the primitive's sets from TEXCOORD_1 on moved up one,
-        so every texCoord of 1 or more in the copy moves with them."""
-        key = (material, page, texcoord, shifted)
+        so every texCoord of 1 or more in the copy moves with them; ``transform``: the
+        KHR_texture_transform (offset, scale) that maps the UVs an instance shares with others
+        to its own place on the page (``_shared_uv``), on every texture read on them."""
+        key = (material, page, texcoord, shifted, None if transform is None
+               else (tuple(transform["offset"]), tuple(transform["scale"])))
         if key in self.material_copies:
             return self.material_copies[key]
         materials = self.data.setdefault("materials", [])
@@ -453,6 +461,10 @@ class _Builder:
                     self.notes.append(note)
             copied["occlusionTexture"] = {"index": self.occlusion_textures[page],
                                           "texCoord": texcoord}
+        if transform is not None:
+            for info in (copied.get("emissiveTexture"), copied.get("occlusionTexture")):
+                if info is not None and info.get("texCoord") == texcoord:
+                    info.setdefault("extensions", {})[TEXTURE_TRANSFORM] = dict(transform)
         materials.append(copied)
         self.material_copies[key] = len(materials) - 1
         return len(materials) - 1
@@ -548,33 +560,59 @@ class _Builder:
         result = []
         for page in on_pages:
             used, inverse = np.unique(triangles[page_of == page], return_inverse=True)
-            indices = inverse.reshape(-1, 3)
-            rows = vertices[used]
+            geometry, uv_accessor, transform = self._page_geometry(
+                primitive, where, vertices[used], inverse.reshape(-1, 3), uv[used], texcoord,
+                shifted)
             new = {key: copy.deepcopy(value) for key, value in primitive.items()
                    if key not in ("attributes", "indices", "mode", "targets", "material")}
-            new_attributes = {_moved(name, shifted): self._gather(accessor, rows,
-                                                                  bounds=name == "POSITION")
-                              for name, accessor in attributes.items()
-                              if _moved(name, shifted) != f"TEXCOORD_{texcoord}"}
-            lightmap_uv = self._add_accessor(uv[used].astype(np.float32), _FLOAT, "VEC2")
+            new.update(copy.deepcopy(geometry))
+            new["attributes"][f"TEXCOORD_{texcoord}"] = uv_accessor
             if 0 not in used_sets:
-                new_attributes["TEXCOORD_0"] = lightmap_uv
-            new_attributes[f"TEXCOORD_{texcoord}"] = lightmap_uv
-            new["attributes"] = new_attributes
-            if primitive.get("targets"):
-                new["targets"] = [{_moved(name, shifted):
-                                   self._gather(accessor, rows, bounds=name == "POSITION")
-                                   for name, accessor in target.items()}
-                                  for target in primitive["targets"]]
-            wide = len(used) > 65535  # 65535 itself is reserved (primitive restart)
-            index_type = _UNSIGNED_INT if wide else _UNSIGNED_SHORT
-            new["indices"] = self._add_accessor(indices.reshape(-1, 1), index_type, "SCALAR",
-                                                target=_ELEMENT_ARRAY_BUFFER)
+                new["attributes"]["TEXCOORD_0"] = uv_accessor
             new["mode"] = _TRIANGLES
             new["material"] = self._lightmap_material(primitive.get("material"), int(page),
-                                                       texcoord, shifted)
+                                                       texcoord, shifted, transform)
             result.append(new)
         return result
+
+    def _page_geometry(self, primitive: dict, where: str, rows: np.ndarray, indices: np.ndarray,
+                       uv: np.ndarray, texcoord: int, shifted: bool) -> tuple[dict, int, dict | None]:
+        """A page's part of an instance of the primitive at ``where`` in the input: its
+        attributes but the lightmap UVs, its targets and indices (``rows`` (k,) of the
+        primitive's vertices, ``indices`` (m, 3) into them), and the accessor of its lightmap
+        UVs ``uv`` (k, 2) with the texture transform to read them through (None: as they are).
+
+        Instances of one mesh charted alike give the same rows and indices: the accessors are
+        written once and shared (``shared_geometry``), so a mesh placed 20,000 times is stored
+        once. Where an instance's UVs are the first such instance's moved and scaled on the
+        page (its charts packed as one block), they are shared too, and the instance's material
+        copy reads them through a KHR_texture_transform: with the emissive carrier, whose core
+        textureInfo every viewer transforms (MOZ_lightmap readers know no transform)."""
+        key = (where, shifted, texcoord, rows.tobytes(), indices.tobytes())
+        if key not in self.shared_geometry:
+            attributes = primitive["attributes"]
+            geometry = {"attributes": {
+                _moved(name, shifted): self._gather(accessor, rows, bounds=name == "POSITION")
+                for name, accessor in attributes.items()
+                if _moved(name, shifted) != f"TEXCOORD_{texcoord}"}}
+            if primitive.get("targets"):
+                geometry["targets"] = [{_moved(name, shifted):
+                                        self._gather(accessor, rows, bounds=name == "POSITION")
+                                        for name, accessor in target.items()}
+                                       for target in primitive["targets"]]
+            wide = len(rows) > 65535  # 65535 itself is reserved (primitive restart)
+            geometry["indices"] = self._add_accessor(
+                indices.reshape(-1, 1), _UNSIGNED_INT if wide else _UNSIGNED_SHORT, "SCALAR",
+                target=_ELEMENT_ARRAY_BUFFER)
+            reference = uv.astype(np.float32)
+            self.shared_geometry[key] = (geometry, reference,
+                                         self._add_accessor(reference, _FLOAT, "VEC2"))
+            return geometry, self.shared_geometry[key][2], None
+        geometry, reference, shared = self.shared_geometry[key]
+        transform = _uv_transform(reference, uv)
+        if transform is None or (transform and self.options.carrier != "emissive"):
+            return geometry, self._add_accessor(uv.astype(np.float32), _FLOAT, "VEC2"), None
+        return geometry, shared, transform or None
 
     def _note(self, note: str) -> None:
         if note not in self.notes:
@@ -587,7 +625,10 @@ class _Builder:
         asset.extras."""
         used = self.data.setdefault("extensionsUsed", [])
         for index in sorted(set(self.material_copies.values())):
-            for name in self.data["materials"][index].get("extensions", {}):
+            copied = self.data["materials"][index]
+            transformed = any(TEXTURE_TRANSFORM in ((copied.get(slot) or {}).get("extensions") or {})
+                              for slot in ("emissiveTexture", "occlusionTexture"))
+            for name in [*copied.get("extensions", {}), *([TEXTURE_TRANSFORM] * transformed)]:
                 if name not in used:
                     used.append(name)
         if not used:
@@ -664,27 +705,20 @@ class _Builder:
         return files
 
     def _image_files(self):
-        """(index, image JSON, URI) of the images the input names by a URI (a file inside the
-        input's folder, ``gltf.files``: ``_read_image`` refuses anything else)."""
-        for i, image in enumerate(self.data.get("images", [])):
-            uri = image.get("uri")
-            if uri is None or (isinstance(uri, str) and uri.startswith("data:")):
-                continue
-            yield i, image, uri
-
-    def _read_image(self, i: int, uri: str) -> bytes:
-        return read_inside(uri, self.base, MAX_IMAGE_FILE_BYTES, str(self.scene.path),
-                           f"images[{i}]", self.scene.hard_links)
+        """(index, image JSON, its bytes) of the images the input names by a URI: files
+        inside the input's folder, read once at load (``Image.data``)."""
+        for i, (image, loaded) in enumerate(zip(self.data.get("images", []), self.scene.images)):
+            if loaded.data is not None:
+                yield i, image, loaded.data
 
     def _embed_images(self) -> list[tuple[Path, bytes]]:
         """Put every image the input names by URI into the .glb's binary chunk (a bufferView
         and its mimeType, by the file's own bytes): a .glb is one self-contained file."""
-        for i, image, uri in self._image_files():
-            data = self._read_image(i, uri)
+        for i, image, data in self._image_files():
             mime = _MIME_TYPES.get(images.kind(data))
             if mime is None:
-                raise InputError(f"images[{i}] ({uri}) is in no format a glTF image may be",
-                                 file=str(self.scene.path), where=f"images[{i}].uri",
+                raise InputError(f"images[{i}] ({image['uri']}) is in no format a glTF image "
+                                 "may be", file=str(self.scene.path), where=f"images[{i}].uri",
                                  fix="export the image as PNG or JPEG")
             del image["uri"]
             image["bufferView"], image["mimeType"] = self._add_view(data), mime
@@ -695,15 +729,13 @@ class _Builder:
         the output goes to the input's folder, else copied beside the output under a name baker
         makes (``image_file_name``), never at a path taken from the input."""
         target = self.output.parent
-        same_folder = target.resolve() == self.base.resolve()
+        if target.resolve() == self.base.resolve():
+            return []
         files: list[tuple[Path, bytes]] = []
-        for i, image, uri in self._image_files():
-            if same_folder:
-                inside(uri, self.base, str(self.scene.path), f"images[{i}]")
-                continue
-            name = image_file_name(self.output, i, uri)
+        for i, image, data in self._image_files():
+            name = image_file_name(self.output, i, image["uri"])
             image["uri"] = quote(name)
-            files.append((target / name, self._read_image(i, uri)))
+            files.append((target / name, data))
         return files
 
 
@@ -715,6 +747,24 @@ def image_file_name(output: Path, index: int, uri: str) -> str:
     if not re.fullmatch(r"\.[a-z0-9]{1,5}", suffix):
         suffix = ""
     return f"{output.stem}_image{index}{suffix}"
+
+
+def _uv_transform(reference: np.ndarray, uv: np.ndarray) -> dict | None:
+    """The KHR_texture_transform {offset, scale} that maps ``reference`` (k, 2) float32 UVs onto
+    ``uv`` (k, 2) to within a millionth of the page, per axis: {} when they are the same
+    already, None when no such map does it (the charts not moved as one block)."""
+    target = uv.astype(np.float32).astype(np.float64)
+    source = reference.astype(np.float64)
+    if np.array_equal(source, target):
+        return {}
+    low, high = source.min(axis=0), source.max(axis=0)
+    if np.any(high - low <= 0):
+        return None
+    scale = (target.max(axis=0) - target.min(axis=0)) / (high - low)
+    offset = target.min(axis=0) - scale * low
+    if np.abs(source * scale + offset - target).max() > 1e-6:
+        return None
+    return {"offset": [float(v) for v in offset], "scale": [float(v) for v in scale]}
 
 
 def _moved(attribute: str, shifted: bool) -> str:

@@ -1,16 +1,17 @@
 """A bake's parts, or a rebake's traced texels, run as Ray tasks on a running cluster
 (``baker bake --cluster ADDRESS``, ``baker rebake --cluster ADDRESS``).
 
-A bake is cut into parts of at most ``parts.PART_TEXELS`` texels whose results depend only on
-their texels' keys (``parts.py``): that is the unit sent to the cluster. ``run_parts`` is the
+A bake is cut into parts whose results depend only on their texels' keys (``parts.py``), about
+four for each worker of the cluster (``part_texels``): that is the unit sent to the cluster. ``run_parts`` is the
 one dispatcher: it puts a ``Work`` (what every part needs) into Ray's object store once, asks
 for the parts as tasks, each carrying only its own input, and gives their results back in
 order, whatever order they finish in, counting which worker made what (``Session``). A worker
 process fetches the shipped work once (``_ready``), makes it ready (Embree's scene, built from
 the shipped scene and world) and runs the part function on each part it is given.
 
-A full bake (``parts``): the driver (the process that runs ``baker``) loads, unwraps and
-rasterises the scene as a local bake does, ships what every part needs (``_shipped``: scene,
+A full bake (``parts``): the driver (the process that runs ``baker``) loads the scene, has the
+workers chart its distinct meshes (``chart_on_workers``), packs their charts and rasterises as a
+local bake does, ships what every part needs (``_shipped``: scene,
 world, resolved settings, light sources, I_A, atlas and the texels' owners) and sends each
 part only its texels' coverage rows; the worker runs the same part function as a local bake
 (``full._bake_part``) and sends back the part's results less what the driver can make itself
@@ -18,8 +19,9 @@ part only its texels' coverage rows; the worker runs the same part function as a
 does: the same bytes whatever the workers and their threads. A rebake's parts are its dirty
 texels (``rebake.retrace``), through the same dispatcher.
 
-Faults: a part whose worker process dies (SIGKILL, a machine lost) is run again by Ray on another
-worker (``_RETRIES``); Ctrl-C on the driver cancels the parts not done and leaves the cluster
+Faults: a part whose worker process dies (SIGKILL, a machine lost) is asked for again, and runs
+on whichever worker is free (``_RETRIES``; the report lists such parts and what Ray said was
+lost); Ctrl-C on the driver cancels the parts not done and leaves the cluster
 running, with nothing of the bake on it. Before any part, every node that has CPUs runs an
 identity function (``baker.api.cluster_identity``) and must report the driver's: the same code
 of baker, Python and libraries.
@@ -34,6 +36,7 @@ import logging
 import os
 import platform
 import socket
+import sys
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
@@ -42,23 +45,33 @@ from typing import Callable, Iterator
 
 import numpy as np
 
+from baker.atlas.charts import balanced, chart_list
 from baker.atlas.rasterise import Coverage, texels_of
 from baker.atlas.validity import Faces
 from baker.errors import SettingsError
 from baker.light.hemisphere import surfaces_of
+from baker.pipeline import parts as parts_module
 from baker.pipeline.parts import TexelPoints
 from baker.rays.trace import Tracer
 
 INSTALL = 'pip install "baker[cluster]"'
-_RETRIES = 4  # times Ray runs a part again whose worker process died
+_RETRIES = 4  # times a part is asked for again whose worker process or node was lost
+_PARTS_A_WORKER = 4  # parts of a bake for each worker of the cluster (``part_texels``)
+_LEAST_PART = 4096  # texels: the least a part of a bake holds on a cluster
+_AHEAD = 4  # parts ended and not taken, at most, for each part running (``run_parts``)
 _REACH_SECONDS = 5.0  # how long to wait for the head's port to answer
 _IDENTITY_SECONDS = 120.0  # how long each node may take to start a worker and answer
 _WAIT_SECONDS = 0.1  # how often the driver looks at the parts (progress, Ctrl-C)
+_ASKS = 8  # times Ray asks a head for its cluster's identity, a second apart (``_ray``)
+_CONNECT_SECONDS = 15.0  # how long Ray may take to connect to a head that answers
 _LIBRARIES = ("ray", "numpy", "numba", "embreex", "xatlas", "pygltflib")
 
 
 def _ray():
-    """The ``ray`` module, or a SettingsError saying how to install it."""
+    """The ``ray`` module, or a SettingsError saying how to install it. Ray asks an address for
+    its cluster's identity ``_ASKS`` times, a second apart (its default: 20), before it gives
+    up: set before Ray is first imported (it reads it then), unless the user set it."""
+    os.environ.setdefault("RAY_NUM_REDIS_GET_RETRIES", str(_ASKS))
     try:
         import ray
     except ImportError:
@@ -95,7 +108,9 @@ class Session:
     and parts it baked; worker_seconds: the stages' seconds summed over the workers (the part
     functions' stages, "receive": fetching the shipped work and building Embree's scene);
     sent/received: array bytes to and from the workers per part (the shipped work once:
-    ``shipped_bytes``); parts_run: parts the driver took, retries not counted (Ray's own)."""
+    ``shipped_bytes``); parts_run: parts the driver took; lost: each part lost with its worker
+    (process or node) and asked for again: the part and Ray's word on what was lost;
+    charted: distinct meshes the workers charted (``chart_on_workers``)."""
 
     address: str
     cpus: int
@@ -108,6 +123,8 @@ class Session:
     sent: int = 0
     received: int = 0
     parts_run: int = 0
+    lost: list[dict] = field(default_factory=list)
+    charted: int = 0
 
     def report(self) -> dict:
         """The JSON-able ``cluster`` entry of the bake's report."""
@@ -115,7 +132,8 @@ class Session:
                 "parts": self.parts_run, "workers": self.workers,
                 "worker_stage_seconds": self.worker_seconds,
                 "shipped_bytes": self.shipped_bytes, "bytes_to_workers": self.sent,
-                "bytes_from_workers": self.received}
+                "bytes_from_workers": self.received, "parts_run_again": self.lost,
+                "meshes_charted": self.charted}
 
     def took(self, returned: "_Returned", texels: int) -> None:
         """Count a part of ``texels`` texels the driver took: its worker's texels and parts,
@@ -165,15 +183,32 @@ def connect(address: str, threads: int, identity: Callable[[], dict[str, str]]) 
                             fix="give the address `ray start --head` printed, e.g. "
                                 "10.0.0.1:6379")
     try:
-        socket.create_connection((host, int(port)), timeout=_REACH_SECONDS).close()
+        answer = _first_frame(host, int(port))
     except OSError as error:
         raise SettingsError(f"no Ray cluster answers at {address} ({error.strerror or error})",
                             fix=f"start one with `ray start --head --port {port}` on {host}, "
                                 "or give the address of a running head") from None
+    if len(answer) < 9 or answer[3] != _SETTINGS_FRAME:
+        raise SettingsError(f"no Ray cluster answers at {address}: something listens there, "
+                            f"but not a Ray head (it does not speak gRPC)",
+                            fix=f"give the address `ray start --head` printed on the head (its "
+                                f"GCS port, 6379 by default), or start one with `ray start "
+                                f"--head --port {port}` on {host}")
     connected_here = not ray.is_initialized()
     if connected_here:
-        ray.init(address=address, logging_level=logging.WARNING, log_to_driver=False,
-                 configure_logging=True)
+        try:
+            with _stderr_kept(dropped := []):
+                _within(_CONNECT_SECONDS, lambda: ray.init(
+                    address=address, logging_level=logging.WARNING, log_to_driver=False,
+                    configure_logging=True))
+        except (ConnectionError, RuntimeError, TimeoutError) as error:
+            said = f" ({dropped[0]})" if dropped else ""
+            raise SettingsError(
+                f"no Ray cluster answers at {address}: something listens there, but no Ray "
+                f"head ({error or type(error).__name__}){said}",
+                fix=f"give the address `ray start --head` printed on the head (its GCS port, "
+                    f"6379 by default), or start one with `ray start --head --port {port}` on "
+                    f"{host}") from None
     try:
         nodes = [n for n in ray.nodes() if n["Alive"] and n["Resources"].get("CPU", 0) > 0]
         if not nodes:
@@ -193,6 +228,77 @@ def connect(address: str, threads: int, identity: Callable[[], dict[str, str]]) 
         raise
     return Session(address, sum(int(n["Resources"]["CPU"]) for n in nodes), len(nodes),
                    connected_here, threads)
+
+
+def _within(seconds: float, call: Callable[[], object]) -> object:
+    """``call()``'s value, or its error, if it ends within ``seconds``; else TimeoutError
+    (the call goes on in a daemon thread: Ray's connection to a server that speaks gRPC but
+    is no Ray head retries for minutes, past any timeout it takes)."""
+    import threading
+
+    outcome: list = []
+
+    def run() -> None:
+        try:
+            outcome.append((True, call()))
+        except BaseException as error:  # handed to the caller's thread
+            outcome.append((False, error))
+
+    thread = threading.Thread(target=run, daemon=True)
+    thread.start()
+    thread.join(seconds)
+    if not outcome:
+        raise TimeoutError(f"no answer in {seconds:.0f} s")
+    ok, value = outcome[0]
+    if not ok:
+        raise value
+    return value
+
+
+_PREFACE = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n" + bytes([0, 0, 0, 4, 0, 0, 0, 0, 0])
+_SETTINGS_FRAME = 4  # an HTTP/2 frame's type, its header's fourth byte
+
+
+def _first_frame(host: str, port: int) -> bytes:
+    """The first bytes (up to an HTTP/2 frame header's 9) that ``host:port`` answers to an
+    HTTP/2 client's preface and empty SETTINGS frame within ``_REACH_SECONDS``: a Ray head's
+    GCS (gRPC) answers with its own SETTINGS frame at once; anything else (another server, or
+    none that answers) would keep Ray's connection retrying for minutes. OSError when nothing
+    accepts the connection."""
+    with socket.create_connection((host, port), timeout=_REACH_SECONDS) as connection:
+        connection.sendall(_PREFACE)
+        answer = b""
+        try:
+            while len(answer) < 9:
+                part = connection.recv(9 - len(answer))
+                if not part:
+                    break
+                answer += part
+        except (socket.timeout, ConnectionError):
+            pass
+        return answer
+
+
+@contextmanager
+def _stderr_kept(dropped: list[str]) -> Iterator[None]:
+    """Send what is written to this process's standard error (file descriptor 2: Ray's C++
+    core logs there, a line a second while it waits for a head that does not answer) to a
+    file for the block, and put its last line in ``dropped`` instead of on the terminal."""
+    import tempfile
+
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as kept:
+        os.dup2(kept.fileno(), 2)
+        try:
+            yield
+        finally:
+            sys.stderr.flush()
+            os.dup2(saved, 2)
+            os.close(saved)
+            kept.seek(0)
+            lines = kept.read().decode(errors="replace").strip().splitlines()
+            dropped.extend(lines[-1:])
 
 
 def _check_nodes(ray, address: str, nodes: list[dict], identity: Callable) -> None:
@@ -254,35 +360,99 @@ class _Returned:
     seconds: dict[str, float]
 
 
+def part_texels(count: int) -> int:
+    """Texels a part of a bake of ``count`` texels holds on the current session: about
+    ``_PARTS_A_WORKER`` parts for each worker (its CPUs over the CPUs a part takes), so that a
+    slow part or a lost worker holds up little of the bake, and the workers that end first
+    take the rest; at least ``_LEAST_PART`` texels (a part's own costs) and at most
+    ``parts.PART_TEXELS``."""
+    account = current()
+    workers = max(1, account.cpus // account.threads)
+    return int(min(parts_module.PART_TEXELS,
+                   max(_LEAST_PART, -(-count // (_PARTS_A_WORKER * workers)))))
+
+
+def chart_on_workers(meshes: list, steps) -> list:
+    """Each mesh's charts (``atlas.charts.chart``: ``Charts``), made by tasks on the current
+    session's workers, in order: the meshes dealt by triangles into about
+    ``_PARTS_A_WORKER`` groups a worker, each group a task of one CPU, run again where its
+    worker is lost (Ray's retries). Charting is a pure function of a mesh, so the atlas the
+    driver packs from them has the same bits as one charted here. ``steps`` (``Steps``): the
+    triangles charted, as the groups end."""
+    ray, account = _ray(), current()
+    task = ray.remote(num_cpus=1, max_retries=_RETRIES)(chart_list)
+    counts = [len(triangles) for _positions, triangles in meshes]
+    order = sorted(range(len(meshes)), key=lambda m: (-counts[m], m))
+    groups = balanced(order, [counts[m] for m in order], _PARTS_A_WORKER * account.cpus)
+    steps.expect(sum(counts))
+    refs = {task.remote([meshes[m] for m in group]): group for group in groups}
+    out: list = [None] * len(meshes)
+    pending = list(refs)
+    while pending:
+        done, pending = ray.wait(pending, num_returns=1)
+        for ref in done:
+            for m, charts in zip(refs[ref], ray.get(ref)):
+                out[m] = charts
+            steps.advance(sum(counts[m] for m in refs[ref]))
+    account.charted += len(meshes)
+    return out
+
+
 def run_parts(work: Work, sizes: list[int], item: Callable[[int], object],
               times: dict[str, float], advance: Callable[[int], None]) -> Iterator:
     """``work.run``'s results for the parts ``item(k)`` of ``sizes[k]`` texels, in order, each
     made on a worker of the current session with ``Settings.threads`` CPUs (the ``threads``
     the session was opened with). ``advance(texels)`` as each part ends, in any order (the
-    progress bar). At most two parts per CPU of the cluster are asked for and not yet taken,
-    so the driver holds what a local run holds and a part's result at a time. ``times`` gets
+    progress bar). As many parts run as the cluster has workers, twice over, each asked for
+    as one ends, whichever it is: a slow part does not hold the others up; results wait on
+    the workers' nodes until the driver takes them, in order, one at a time. ``times`` gets
     the driver's "trace", the time it waited for parts (so rays/s are the cluster's), and
-    "ship", putting ``work.shipped`` in the object store. A part whose worker dies runs again
-    (``_RETRIES``); an error or Ctrl-C cancels the parts not taken."""
+    "ship", putting ``work.shipped`` in the object store. A part whose worker is lost (its
+    process killed, its machine gone) is asked for again, up to ``_RETRIES`` times, and the
+    session notes it (``Session.lost``); an error or Ctrl-C cancels the parts not taken."""
     ray, account = _ray(), current()
-    task = ray.remote(num_cpus=account.threads, max_retries=_RETRIES)(_run_part)
+    task = ray.remote(num_cpus=account.threads, max_retries=0)(_run_part)
     start = time.perf_counter()
     box = [ray.put(work)]  # in a list: Ray hands the reference over, not the value
     account.shipped_bytes += _array_bytes(work.shipped)
     _add_seconds(times, "ship", start)
-    window = max(2, 2 * account.cpus // account.threads)
-    asked, pending = {}, {}
+    running = max(2, 2 * account.cpus // account.threads)
+    asked: dict[int, object] = {}  # part → its task's reference, until the driver takes it
+    pending: dict[object, int] = {}  # a reference not yet ended → its part
+    tries = [0] * len(sizes)
+
+    def ask(k: int) -> None:
+        given = item(k)
+        account.sent += _array_bytes(given)
+        asked[k] = task.remote(box, given)
+        pending[asked[k]] = k
+
+    following = [0]  # the next part to ask for
+
+    def fill(taken: int) -> None:
+        """Keep ``running`` parts going, the next ones in order, at most ``_AHEAD`` times as
+        many beyond part ``taken`` (the next the driver takes) waiting to be taken."""
+        while (len(pending) < running and following[0] < len(sizes)
+               and following[0] - taken < _AHEAD * running):
+            ask(following[0])
+            following[0] += 1
+
     try:
         for index in range(len(sizes)):
-            while len(asked) < window and len(asked) + index < len(sizes):
-                k = index + len(asked)
-                given = item(k)
-                account.sent += _array_bytes(given)
-                asked[k] = task.remote(box, given)
-                pending[asked[k]] = sizes[k]
+            fill(index)
             waited = time.perf_counter()
-            _wait_for(ray, asked[index], pending, advance)
-            returned = ray.get(asked.pop(index))
+            while True:
+                _wait_for(ray, asked[index], pending, sizes, advance, lambda: fill(index))
+                try:
+                    returned = ray.get(asked[index])
+                    break
+                except _lost_errors(ray) as error:
+                    tries[index] += 1
+                    account.lost.append({"part": index, "error": _first_line(error)})
+                    if tries[index] > _RETRIES:
+                        raise
+                    ask(index)
+            del asked[index]
             _add_seconds(times, "trace", waited)
             account.took(returned, sizes[index])
             yield returned.value
@@ -292,15 +462,34 @@ def run_parts(work: Work, sizes: list[int], item: Callable[[int], object],
         raise
 
 
-def _wait_for(ray, wanted, pending: dict, advance: Callable[[int], None]) -> None:
-    """Wait for the part ``wanted``, advancing the progress by the texels of every part that
-    ends meanwhile (``pending``: part reference → its texels, not yet counted). The results
-    stay on the nodes that made them until the driver takes them (``ray.get``)."""
+def _lost_errors(ray) -> tuple[type, ...]:
+    """The errors of a part whose worker process or node was lost (not of the part itself)."""
+    from ray import exceptions
+
+    return tuple(getattr(exceptions, name) for name in (
+        "WorkerCrashedError", "NodeDiedError", "OwnerDiedError", "ObjectLostError",
+        "TaskUnschedulableError") if hasattr(exceptions, name))
+
+
+def _first_line(error: BaseException) -> str:
+    """The first line of ``error``'s message, with its type (what the report says of it)."""
+    text = str(error).strip().splitlines()
+    return f"{type(error).__name__}: {text[0] if text else ''}"
+
+
+def _wait_for(ray, wanted, pending: dict, sizes: list[int], advance: Callable[[int], None],
+              ended: Callable[[], None]) -> None:
+    """Wait for the part ``wanted`` to end, advancing the progress by the texels of every part
+    that ends meanwhile (``pending``: reference → its part, not yet ended; ``sizes``: each
+    part's texels) and calling ``ended()`` (to ask for more). The results stay on the nodes
+    that made them until the driver takes them (``ray.get``)."""
     while wanted in pending:
         done, _ = ray.wait(list(pending), num_returns=1, timeout=_WAIT_SECONDS,
                            fetch_local=False)
         for ref in done:
-            advance(pending.pop(ref))
+            advance(sizes[pending.pop(ref)])
+        if done:
+            ended()
 
 
 _READY: dict = {}  # in a worker process: the shipped work's reference → (work, its ready value)

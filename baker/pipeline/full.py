@@ -75,7 +75,8 @@ from baker.pipeline import cluster
 from baker.pipeline.parts import PerTexel, Tally, TexelPoints, part_slices
 from baker.pipeline.plan import Plan, make_plan
 from baker.rays.trace import Tracer
-from baker.run.progress import Meter, StageLines, bar, wanted
+from baker.run.interruptible import check_interrupted
+from baker.run.progress import Meter, StageLines, Steps, bar, wanted
 from baker.run.spill import Spill
 from baker.errors import SettingsError
 from baker.settings import Resolved, Settings, resolve
@@ -83,10 +84,13 @@ from baker.settings import Resolved, Settings, resolve
 
 @contextmanager
 def timed(times: dict[str, float], name: str) -> Iterator[None]:
-    """Add the wall time of the block to ``times[name]``, in seconds."""
+    """Add the wall time of the block to ``times[name]``, in seconds. An interrupt some code
+    swallowed is raised again as the block starts and ends (``run.interruptible``)."""
+    check_interrupted()
     start = time.perf_counter()
     yield
     times[name] = times.get(name, 0.0) + time.perf_counter() - start
+    check_interrupted()
 
 
 def bounds_of_baked(world, scene) -> tuple[float, float]:
@@ -251,33 +255,38 @@ class StateSink(Protocol):
 
 def compute(scene: Scene, settings: Settings, quiet: bool = True,
             spill_folder: str | os.PathLike | None = None,
-            staging: StateSink | None = None) -> Computed:
+            staging: StateSink | None = None,
+            prepared: tuple[World, Lighting] | None = None) -> Computed:
     """Run every stage from the loaded scene up to the post-processed float lightmaps.
 
     The texels are made, traced and composed a part at a time (``parts.py``); when there are
     several parts, each part's results go to a temporary folder in ``spill_folder`` (None: the
     system's) until the bake state is written (``Computed.per_texel``). ``staging``: where the
-    bake state starts to be written once the texels are done.
+    bake state starts to be written once the texels are done. ``prepared``: the scene's world
+    and ``Lighting`` with these settings, already made (by a rebake that fell back to this
+    bake, ``rebake.incremental.FullBake``): the same objects this bake would make.
     """
     times: dict[str, float] = {}
     log = StageLines(not quiet)
     with log.stage("lights and plan"):
         with timed(times, "load"):
-            world = build_world(scene)
+            world = build_world(scene) if prepared is None else prepared[0]
         area, diagonal = bounds_of_baked(world, scene)
         resolved = resolve(settings, area, diagonal, normal_maps=has_normal_maps(scene),
                            lights_needed=scene.lights_needed())
-        lit = lighting(scene, world, resolved, times)
-    with timed(times, "unwrap"), log.stage("unwrap"):
+        lit = lighting(scene, world, resolved, times) if prepared is None else prepared[1]
+    with timed(times, "unwrap"), log.stage("unwrap", "triangles") as steps:
         if settings.uv is not None:  # the artist's lightmap UVs: no unwrap
             atlas = authored_atlas(scene, world, resolved)
         else:
-            atlas, resolved = _unwrapped(scene, world, settings, resolved, area)
+            atlas, resolved = _unwrapped(scene, world, settings, resolved, steps)
     with timed(times, "rasterise"), log.stage("rasterise"):
         coverage = cover(atlas, world)
         owned = owners(atlas, world, coverage)
     count = len(coverage.key)
-    spill = Spill(spill_folder) if len(part_slices(count)) > 1 else None
+    slices = part_slices(count, cluster.part_texels(count) if resolved.cluster is not None
+                         else None)
+    spill = Spill(spill_folder) if len(slices) > 1 else None
     baking = Baking(scene, world, resolved, lit, atlas, coverage, owned, Faces(scene, world),
                     surfaces_of(scene, world))
     check_ray_budget(baking, count)
@@ -289,11 +298,11 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True,
                     effective_r_ave(lit.ambient, resolved.rho))))
     try:
         with log.stage(f"texels and rays ({count:,} texels)"):
-            pages, last = _bake_parts(baking, spill, times, quiet)
+            pages, last = _bake_parts(baking, slices, spill, times, quiet)
         per_texel = (PerTexel.spilled(spill, atlas, world) if spill is not None
                      else last.held())
-        with log.stage("post-process"):
-            return _finish_pages(baking, per_texel, pages, times, staging)
+        with log.stage("post-process", "texels") as steps:
+            return _finish_pages(baking, per_texel, pages, times, staging, steps=steps)
     except BaseException:  # an error or Ctrl-C: no spilled rows left behind
         if spill is not None:
             spill.close()
@@ -301,17 +310,21 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True,
 
 
 def _unwrapped(scene: Scene, world: World, settings: Settings, resolved: Resolved,
-               area: float) -> tuple[Atlas, Resolved]:
-    """xatlas's atlas and the settings with the density it used: a derived density is
-    lowered to fit a page (``unwrap.py``); the user's is kept or refused with what fits."""
+               steps: Steps) -> tuple[Atlas, Resolved]:
+    """The atlas and the settings with the density it used: a derived density is
+    lowered to fit a page (``unwrap.py``); the user's is kept or refused with what fits.
+    ``steps``: the triangles charted, as they are."""
     derived = settings.texel_density is None
+    elsewhere = cluster.chart_on_workers if resolved.cluster is not None else None
     try:
-        atlas = unwrap(scene, world, resolved, fit_one_page=derived, area=area)
+        atlas = unwrap(scene, world, resolved, fit_one_page=derived, steps=steps,
+                       chart_elsewhere=elsewhere)
     except PageTooSmall as error:
         if not derived:  # the user's density: say what fits
             raise
         resolved = replace(resolved, texel_density=error.texel_density)  # derived: shrink it
-        atlas = unwrap(scene, world, resolved, fit_one_page=True, area=area)
+        atlas = unwrap(scene, world, resolved, fit_one_page=True, steps=steps,
+                       chart_elsewhere=elsewhere)
     return atlas, replace(resolved, texel_density=atlas.texel_density)
 
 
@@ -387,19 +400,18 @@ class _Stages:
         return advance
 
 
-def _bake_parts(baking: Baking, spill: Spill | None, times: dict[str, float], quiet: bool
-                ) -> tuple["_Pages", BakedPart]:
-    """Bake the texels a part at a time, each composed into the pages as it is done and, with
-    a ``spill``, its rows appended to it. Returns the composed ``_Pages``, and the last
-    ``BakedPart`` — all the texels' when there is one part."""
+def _bake_parts(baking: Baking, slices: list[slice], spill: Spill | None,
+                times: dict[str, float], quiet: bool) -> tuple["_Pages", BakedPart]:
+    """Bake the texels a part (``slices``) at a time, each composed into the pages as it is
+    done and, with a ``spill``, its rows appended to it. Returns the composed ``_Pages``, and
+    the last ``BakedPart`` — all the texels' when there is one part."""
     count = len(baking.coverage.key)
     pages = _Pages.blank(baking)
     with bar("baking", wanted(quiet)) as meter:
         stages = _Stages.of(meter, baking, count)
-        made = (cluster.parts(_bake_part, baking, part_slices(count), times,
-                              stages.whole_parts())
+        made = (cluster.parts(_bake_part, baking, slices, times, stages.whole_parts())
                 if baking.settings.cluster is not None else
-                (_bake_part(baking, rows, times, stages) for rows in part_slices(count)))
+                (_bake_part(baking, rows, times, stages) for rows in slices))
         for part in made:
             with timed(times, "compose"):
                 pages.add(baking, part.texels, part.validity, part.terms, part.direct,
@@ -527,24 +539,30 @@ def writes_occlusion(settings: Resolved) -> bool:
 
 
 def _finish_pages(baking: Baking, per_texel: PerTexel, pages: _Pages, times: dict[str, float],
-                  staging: StateSink | None = None, fingerprint: dict | None = None
-                  ) -> Computed:
+                  staging: StateSink | None = None, fingerprint: dict | None = None,
+                  steps: Steps | None = None) -> Computed:
     """Start writing the bake state (``staging``, if any: the texels are final), then denoise
-    (if asked) and post-process the composed pages."""
+    (if asked) and post-process the composed pages; ``steps``: a pass over the pages' texels
+    for the denoiser, one for the seams, and the post-process's own, counted as done."""
     if staging is not None:
         staging.start(baking, per_texel, fingerprint)
     resolved, lightmaps, masks = baking.settings, pages.lightmaps, pages.masks
     with timed(times, "compose"):
         lightmaps = directional_pages(lightmaps)
+    steps = steps or Steps()
+    texels = lightmaps.covered.size
+    steps.expect(texels * (2 if resolved.denoise else 1))
     denoised = None
     if resolved.denoise:  # per chart, before the fill of invalid texels and dilation (denoise.py)
         with timed(times, "denoise"):
             lightmaps, denoised = denoise(lightmaps, per_texel.texels, *masks,
                                           threads=resolved.threads,
                                           visibility=writes_occlusion(resolved))
+        steps.advance(texels)
     with timed(times, "compose"):
-        lightmaps = postprocess(lightmaps, resolved.padding, *masks,
-                                seams=find_seams(baking.atlas, baking.world))
+        seams = find_seams(baking.atlas, baking.world)
+        steps.advance(texels)
+        lightmaps = postprocess(lightmaps, resolved.padding, *masks, seams=seams, steps=steps)
     return Computed(scene=baking.scene, world=baking.world, settings=resolved,
                     ambient=baking.ambient, plan=baking.lit.plan, atlas=baking.atlas,
                     per_texel=per_texel, tally=pages.tally, lightmaps=lightmaps,

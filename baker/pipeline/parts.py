@@ -34,11 +34,12 @@ from baker.run.spill import Spill
 PART_TEXELS = 1 << 18
 
 
-def part_slices(count: int) -> list[slice]:
-    """The rows of each part of ``count`` texels, in order: as few parts of at most
-    ``PART_TEXELS`` as will do, of equal size (no small last part, whose threads would idle;
-    one empty part for none)."""
-    return even_slices(count, PART_TEXELS) or [slice(0, 0)]
+def part_slices(count: int, most: int | None = None) -> list[slice]:
+    """The rows of each part of ``count`` texels, in order: as few parts of at most ``most``
+    (None: ``PART_TEXELS``; a cluster asks for smaller ones, ``cluster.part_texels``) as will
+    do, of equal size (no small last part, whose threads would idle; one empty part for
+    none)."""
+    return even_slices(count, most or PART_TEXELS) or [slice(0, 0)]
 
 
 def texel_rows(texels, rows: np.ndarray | slice) -> dict[str, np.ndarray]:

@@ -19,7 +19,9 @@ The numbers come from three streams, whose hashes never take the same words:
   (``trace._coin``), keyed by no texel at all.
 
 Keys are texel keys, a texel's other side (``inner.OTHER_SIDE``), the power-estimate points
-(``direct._POWER_KEY_BASE``) or the GI paths' vertices (``gi._bounce_keys``); a range says which.
+(``direct._POWER_KEY_BASE``), the sources whose power is traced from them
+(``direct._TRACED_KEY_BASE``) or the GI paths' vertices (``gi._bounce_keys``); a range says
+which.
 """
 
 from __future__ import annotations
@@ -32,6 +34,8 @@ SUPERSAMPLE = 9  # sub-positions of a supersampled texel
 POWER = (10, 11)  # where the power-estimate points fall on the surfaces (power keys)
 SKY = 12  # cosine directions towards the sky
 EMISSIVE = 13  # the emitter point of each emissive next-event sample
+POWER_TRACED = (14, 15)  # rays from the sources for their power: where (an emitter's point),
+# which way (traced-power keys, one per source)
 _LIGHTS_LOW = 16  # light l < _LIGHTS_LOW_COUNT: 16 + 2l (the layout of bakes before the table)
 _LIGHTS_LOW_COUNT = 12
 GI_FIRST = 40  # the first bounce's direction of each path (texel keys)
@@ -89,6 +93,7 @@ def ranges(lights: int, max_depth: int, continuations: int) -> list[Range]:
              Range("power", "sobol", POWER[0], POWER[1] + 1),
              Range("sky", "sobol", SKY, SKY + 1),
              Range("emissive", "sobol", EMISSIVE, EMISSIVE + 1),
+             Range("traced power", "sobol", POWER_TRACED[0], POWER_TRACED[1] + 1),
              Range("gi", "sobol", GI_FIRST, GI_EMITTER + 1)]
     table += [Range(f"light {l}", "sobol", light_dimension(l), light_dimension(l) + 1)
               for l in range(lights)]

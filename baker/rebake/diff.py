@@ -33,10 +33,8 @@ from baker.atlas.unwrap import baked_instances, frame_positions
 from baker.geometry.world import World
 from baker.gltf.scene import Scene
 from baker.rebake.state import digest
-from baker.settings import Resolved
+from baker.settings import CALLER_ONLY, Resolved
 
-# Settings that never change the result (how the work is split, how much of it is allowed).
-_NO_EFFECT = ("threads", "chunk_texels", "cluster", "max_total_rays", "allow_hard_links")
 # Settings that only the composition, post-processing or encoding read: a recomposition.
 RECOMPOSE_SETTINGS = ("ambient", "encoding", "occlusion", "carrier", "baked_lights")
 # Settings that change the atlas.
@@ -136,7 +134,7 @@ def fingerprints(scene: Scene, world: World, settings: Resolved, asked=None) -> 
     bakes again with them)."""
     values = settings.as_dict()
     rays = {k: v for k, v in values.items()
-            if k not in _NO_EFFECT + RECOMPOSE_SETTINGS + ATLAS_SETTINGS}
+            if k not in CALLER_ONLY + RECOMPOSE_SETTINGS + ATLAS_SETTINGS}
     if rays.get("sky_image") is not None:  # the image's bytes, wherever it is named from
         rays["sky_image"] = digest(np.frombuffer(Path(rays["sky_image"]).read_bytes(), np.uint8))
     baked = baked_instances(scene)
@@ -148,7 +146,7 @@ def fingerprints(scene: Scene, world: World, settings: Resolved, asked=None) -> 
                               *_authored_uv(scene, i, settings.uv)))
                             for i in baked])
     asked_values = None if asked is None else {
-        k: _as_json(v) for k, v in asdict(asked).items() if k not in _NO_EFFECT}
+        k: _as_json(v) for k, v in asdict(asked).items() if k not in CALLER_ONLY}
     return {
         "code": code_fingerprint(),
         "asked": asked_values,
@@ -156,7 +154,7 @@ def fingerprints(scene: Scene, world: World, settings: Resolved, asked=None) -> 
                      "atlas": digest(*[values[k] for k in ATLAS_SETTINGS]),
                      "recompose": digest(*[values[k] for k in RECOMPOSE_SETTINGS]),
                      "values": {k: _as_json(values[k]) for k in sorted(values)
-                                if k not in _NO_EFFECT}},
+                                if k not in CALLER_ONLY}},
         "unwrap": unwrap_input,
         "center": world.center.tolist() + [world.scale],
         "triangles": int(len(world.triangles)),

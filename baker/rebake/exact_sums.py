@@ -18,12 +18,12 @@ from baker.light.hemisphere import (
     _ESCAPED,
     _HALF,
     _RGB,
-    _SHIFT,
     _NO_DIRECTIONS,
     _SQUARE,
     Surfaces,
     Terms,
     _accumulate_kernel,
+    _grid_values,
     _luminance_and_escaped,
     _means,
     _shading,
@@ -50,20 +50,15 @@ def ray_changes(surfaces: Surfaces, settings: Resolved, target: np.ndarray,
     return changes
 
 
-def _grid(x: np.ndarray) -> np.ndarray:
-    """x rounded to multiples of 2^-40, as ``_on_grid``."""
-    return (x + _SHIFT) - _SHIFT
-
-
 def _sums_of(terms: Terms) -> np.ndarray:
     """(k, 7) the sums ``_means`` made ``terms`` from (of one round of rays), worked back from
     the means: each is a multiple of 2^-40 far smaller than float64's precision can tell apart,
     so rounding recovers it. ``changed_terms`` checks the result."""
     n = terms.counts.astype(np.float64)
     sums = np.zeros((len(n), _COLUMNS))
-    sums[:, _RGB] = _grid(terms.w_hit * n[:, None])
-    sums[:, _ESCAPED] = _grid(terms.escaped * n)
-    sums[:, _SQUARE] = _grid(terms.hit_sq * n)
+    sums[:, _RGB] = _grid_values(terms.w_hit * n[:, None])
+    sums[:, _ESCAPED] = _grid_values(terms.escaped * n)
+    sums[:, _SQUARE] = _grid_values(terms.hit_sq * n)
     sums[:, _HALF] = _part_sums(terms.half_split, terms.counts // 2,
                                 _luminance_and_escaped(sums), terms.counts)
     return sums
@@ -78,7 +73,7 @@ def _part_sums(split: np.ndarray, part: np.ndarray, whole: np.ndarray,
     rest = (whole_count - part).astype(np.float64)[:, None]
     with np.errstate(divide="ignore", invalid="ignore"):
         found = (split + whole / rest) * (p * rest) / (p + rest)
-    return np.where((p >= 1) & (rest >= 1), _grid(found), 0.0)
+    return np.where((p >= 1) & (rest >= 1), _grid_values(found), 0.0)
 
 
 def changed_terms(terms: Terms, changes: np.ndarray) -> tuple[Terms, np.ndarray]:

@@ -99,7 +99,7 @@ from baker.rebake.retrace import Retracing, retraced
 from baker.rebake.sobol_cells import cap_boxes, net_solve, sobol_cell_sample
 from baker.run.parallel import cores, even_slices, run_chunks
 from baker.run.progress import StageLines
-from baker.settings import TECHNIQUES, Resolved, Settings, resolve
+from baker.settings import CALLER_ONLY, TECHNIQUES, Resolved, Settings, resolve
 
 # Extra reach (in texel sides of each texel) beyond d_max: the validity probes move a sample
 # point by up to rounds × (probe radius + push) sides, then probe a radius further; plus one.
@@ -113,7 +113,16 @@ REASONS = ("own", "validity", "obscurance", "shadow", "colour", "chain")
 
 
 class FullBake(Exception):
-    """An incremental rebake cannot follow; ``str(error)`` says why in one line."""
+    """An incremental rebake cannot follow; ``str(error)`` says why in one line. ``settings``:
+    the settings the full bake should take instead of the ones asked (a derived value kept
+    from the last bake, ``kept_d_max``), None to take them as asked; ``prepared``: what the
+    rebake made that the full bake would make again (``pipeline.full.compute``)."""
+
+    def __init__(self, reason: str, settings: Settings | None = None,
+                 prepared: tuple[World, Lighting] | None = None):
+        super().__init__(reason)
+        self.settings = settings
+        self.prepared = prepared  # the scene's world and Lighting, if made: the full bake's
 
 
 def state_classes() -> dict[str, type]:
@@ -151,6 +160,7 @@ class Rebaked:
     dirty: Dirty
     fingerprints: dict
     rays: int
+    modelled: float | None = None  # seconds the cost model gave its search and rays (_afford)
 
 
 def _absent(value) -> bool:
@@ -973,26 +983,35 @@ def _by_ray(stored: Terms, judge: _HitsCompared, surfaces, settings
 
 
 def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
-           relight: bool = False, staging=None) -> Rebaked:
+           relight: bool = False, staging=None, priced: bool = True) -> Rebaked:
     """Recompute the scene's lightmaps from the bake state at ``path``; only what changed
-    (``staging``: where the new bake state starts to be written, as in ``pipeline.full.compute``).
+    (``staging``: where the new bake state starts to be written, as in ``pipeline.full.compute``;
+    ``priced``: fall back to a full bake where the last bakes' measured times say a rebake
+    would cost more, ``_worth_reading`` and ``_afford``).
 
     Raises FullBake (with the reason) when the state is unusable or the change needs a new
     atlas, new rays for every texel, or a new float32 frame.
     """
     times: dict[str, float] = {}
     log = StageLines(not quiet)
-    with log.stage("state and changes"):
+    if priced:
+        _worth_reading(path)
+    with log.stage("state, lights and changes"):
         start = _compared(scene, settings, path, relight, times)
-    with log.stage("lights and plan"):
-        lit = lighting(scene, start.world, start.resolved, times)
-    with log.stage("changed texels"):
-        stored = _stored_texels(scene, start, lit, times)
-        foliage = None
-        if start.resolved.foliage == "approx":
-            with timed(times, "foliage fit"):
-                foliage = _foliage_again(scene, start, lit, stored)
-        search = _dirty_search(scene, start, lit, stored, times, foliage)
+    if not priced:  # no record of the last bakes' times: the rebake goes on (``_afford``)
+        start = replace(start, full_bake=None)
+    lit = start.lit
+    try:
+        with log.stage("changed texels"):
+            stored = _stored_texels(scene, start, lit, times)
+            foliage = None
+            if start.resolved.foliage == "approx":
+                with timed(times, "foliage fit"):
+                    foliage = _foliage_again(scene, start, lit, stored)
+            search = _dirty_search(scene, start, lit, stored, times, foliage)
+    except FullBake as why:  # the full bake keeps what this one kept and made, and says so
+        raise FullBake(str(why) + (f"; {start.kept}" if start.kept else ""), start.asked,
+                       (start.world, start.lit)) from None
     with log.stage("rays"):
         terms, direct, rays = _traced_again(scene, start, lit, stored, search, times, foliage)
     per_texel = PerTexel.held(search.texels, stored.texels, search.validity, terms, direct)
@@ -1003,7 +1022,7 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
     dirty = Dirty(rows=rows, reason=search.reason, tested_rays=search.tested,
                   relit=tuple(start.change.lights_placed))
     return Rebaked(computed=done, diff=start.change, dirty=dirty, fingerprints=start.fingerprint,
-                   rays=rays)
+                   rays=rays, modelled=search.modelled)
 
 
 @dataclass(frozen=True)
@@ -1017,7 +1036,10 @@ class _Compared:
     resolved: Resolved
     fingerprint: dict
     change: Diff
+    lit: Lighting
     full_bake: dict | None = None  # the last full bake's times (``state.last_full_bake``)
+    asked: Settings | None = None  # the settings with a kept d_max (``kept_d_max``), if any
+    kept: str = ""  # the line that says so
 
     @property
     def moved(self) -> np.ndarray:
@@ -1040,6 +1062,11 @@ def _compared(scene: Scene, settings: Settings, path, relight: bool, times: dict
     area, diagonal = bounds_of_baked(world, scene)
     resolved = resolve(settings, area, diagonal, normal_maps=has_normal_maps(scene),
                        lights_needed=scene.lights_needed())
+    kept, note = kept_d_max(stored.fingerprints, settings, resolved.d_max)
+    asked = None
+    if kept is not None:  # the user's from now on: the state records it as asked
+        asked = settings = replace(settings, d_max=kept)
+        resolved = replace(resolved, d_max=kept)
     if settings.texel_density is None and density is not None and (
             density < resolved.texel_density):
         # The full bake lowered its derived density until the charts fit a page
@@ -1047,27 +1074,51 @@ def _compared(scene: Scene, settings: Settings, path, relight: bool, times: dict
         # value it ended with. Were the geometry different, the unwrap fingerprint below
         # would still call for a full bake.
         resolved = replace(resolved, texel_density=density)
+    lit = lighting(scene, world, resolved, times)  # also a full bake's, if it comes to one
     fingerprint = fingerprints(scene, world, resolved, settings)
+
+    def full_bake(reason: str) -> FullBake:
+        return FullBake(reason + (f"; {note}" if note else ""), asked, (world, lit))
+
     try:
         check_fingerprints(stored.fingerprints, fingerprint)
         change = diff(stored.fingerprints, fingerprint)
         if change.full is None:
             check_for_scene(stored, scene, world)
     except state_file.StateUnusable as error:
-        raise FullBake(str(error)) from None
+        raise full_bake(str(error)) from None
     if change.full is not None:
-        raise FullBake(change.full)
+        raise full_bake(change.full)
     if relight and (change.moved or change.recoloured or change.lights_placed):
-        raise FullBake("more than light colours and intensities changed: "
-                       + "; ".join(change.changes))
+        raise full_bake("more than light colours and intensities changed: "
+                        + "; ".join(change.changes))
     if resolved.method != "obscurance":
-        raise FullBake(f"method {resolved.method!r} traces paths through the whole scene from "
-                       "every texel")
+        raise full_bake(f"method {resolved.method!r} traces paths through the whole scene "
+                        "from every texel")
     if getattr(resolved, "supersample", 1) > 1:
-        raise FullBake("supersampled shadow and obscurance rays start from sub-texel points "
-                       "the rebake does not track yet")
-    return _Compared(stored, world, resolved, fingerprint, change,
-                     state_file.last_full_bake(path))
+        raise full_bake("supersampled shadow and obscurance rays start from sub-texel points "
+                        "the rebake does not track yet")
+    if note:
+        change.changes.append(note)
+    return _Compared(stored, world, resolved, fingerprint, change, lit,
+                     state_file.last_full_bake(path), asked, note)
+
+
+def kept_d_max(stored: dict, settings: Settings, derived: float) -> tuple[float | None, str]:
+    """(the d_max a bake keeps from the last bake's, or None; the line that says so) when the
+    user gives none and the scene now derives another (``derived``: an edit moved its bounds,
+    an object out of the room) than the last bake baked with (its fingerprints ``stored``),
+    at the same ``d_max_fraction``: the obscurance distance stays, and with it every texel's
+    rays. The kept value is the user's from then on (``Settings.d_max``, recorded as asked in
+    the state); --d-max sets another."""
+    values = (stored.get("settings") or {}).get("values") or {}
+    asked = stored.get("asked") or {}
+    last = values.get("d_max")
+    if (settings.d_max is not None or not isinstance(last, float) or last == derived
+            or asked.get("d_max_fraction") != settings.d_max_fraction):
+        return None, ""
+    return last, (f"d_max {last:.4g} kept from the last bake (the scene's bounds now derive "
+                  f"{derived:.4g}: --d-max {derived:.4g} to take it)")
 
 
 @dataclass(frozen=True)
@@ -1136,6 +1187,7 @@ class _Search:
     by_ray: bool
     judge: "_HitsCompared | None" = None
     tested: int = 0
+    modelled: float | None = None  # the seconds ``_afford`` gave the search and the rays
 
 
 def _dirty_search(scene: Scene, start: _Compared, lit: Lighting, stored: _Stored,
@@ -1197,22 +1249,25 @@ def _moved_reach(scene: Scene, start: _Compared, lit: Lighting, stored: _Stored,
     new_corners = [_placed_corners(scene, world, i, scene.instances[i].world) for i in moved]
     boxes = [(c.reshape(-1, 3).min(0), c.reshape(-1, 3).max(0))
              for c in old_corners + new_corners if len(c)]
-    small = _Changed(old_corners + new_corners, world.center)
-    before = _world_before(scene, world, moved, instance_world)
-    tracer_before, faces = Tracer(before), Faces(scene, world)
     near = _near(raw, boxes, resolved.d_max)
     # Validity: tangent probes reach a few texel sides; hemisphere probes d_max.
     close = own | _near(raw, boxes, 0.0)
     far = np.flatnonzero(near & ~close)
-    _afford(start.full_bake, int(close.sum()), len(far), len(raw))
+    search.modelled = _afford(start.full_bake, int(close.sum()), len(far), len(raw))
+    small = _Changed(old_corners + new_corners, world.center)
+    before = _world_before(scene, world, moved, instance_world)
+    tracer_before, faces = Tracer(before), Faces(scene, world)
     meets, n = _probes_meet(small, texels, far, resolved.d_max, resolved.threads,
                             _ProbesCompared((tracer, faces),
                                             (tracer_before, Faces(scene, before))))
     search.tested += n
     # Texels touching other geometry: which coincident triangle a probe or ray meets there
-    # depends on Embree's BVH, which the move changed (``Validity.touching``).
+    # depends on Embree's BVH, which the move changed (``Validity.touching``). Far texels whose
+    # points moved: whether they might was judged by probes from where they were, which the
+    # probes compared above (from where they are) do not cover.
     redo = np.union1d(np.union1d(np.flatnonzero(close), far[meets]),
-                      np.flatnonzero(old_validity.touching))
+                      np.union1d(np.flatnonzero(old_validity.touching),
+                                 far[old_validity.moved_by[far] > 0]))
     checked, fresh = check_texels(scene, world, tracer, take(raw, redo), resolved.d_max,
                                   faces=faces)
     search.tested += len(redo) * (validity_module.HEMISPHERE_RAYS + validity_module.TANGENT_RAYS
@@ -1246,39 +1301,85 @@ reach (its probes, and its rays that may meet the node, cast in the scene now an
 Calibrated on 2 shared cores (bench_rebake.py, bench_foliage_rebake.py): the 60 crates (0.2 %
 of the texels their own, 33 % more within reach) rebaked in 0.15–0.22 of a full bake, modelled
 0.12; the box near the tree (1 %, 41 %) in 0.36, modelled about 0.28; the tree (44 %, 39 %) in
-1.1–1.9, modelled 1.28 against 0.98 for a full bake."""
+1.1–1.9, modelled 1.28 against 0.98 for a full bake. A rebake of a state measures what its own
+search and rays took against this model and records it (``rebake_measured``): the next rebake
+of that state scales the model by it (``_afford``)."""
+
+CORRECTION_RANGE = (0.25, 8.0)
+"""The least and most a measured correction scales the model by (``_afford``): one rebake's
+time, on a shared machine, is a noisy measure."""
 
 
-def rebake_cost(stages: dict[str, float], redone: float, reached: float) -> tuple[float, float]:
-    """(a rebake's cost, a full bake's) from here on, as fractions of the last full bake, whose
-    ``stages`` (name → seconds) price the work: ``redone`` (fraction of the texels: the moved
-    nodes' own and those touching them) at ``REDO_COST`` × a full bake's validity, trace and
-    direct light per texel, ``reached`` (fraction: the others within reach) at ``SEARCH_COST``
-    × its validity per texel, and both compose and write. The full bake redoes all but loading
-    the scene."""
+def rebake_cost(stages: dict[str, float], redone: float, reached: float
+                ) -> tuple[float, float, float]:
+    """(a rebake's search and rays, its composing and writing, and a full bake's work from the
+    same point), as fractions of the last full bake, whose ``stages`` (name → seconds) price
+    the work: ``redone`` (fraction of the texels: the moved nodes' own and those touching
+    them) at ``REDO_COST`` × a full bake's validity, trace and direct light per texel,
+    ``reached`` (fraction: the others within reach) at ``SEARCH_COST`` × its validity per
+    texel; compose and write as a full bake's. A full bake from there does all but loading the
+    scene (its lights and plan too: the rebake hands over what it made of them,
+    ``FullBake.prepared``, but a process's first bake pays numba's start there, which a
+    later one does not)."""
     total = sum(stages.values())
     share = {name: stages.get(name, 0.0) / total for name in
              ("load", "validity", "trace", "direct", "compose", "spill", "write")}
     per_texel = share["validity"] + share["trace"] + share["direct"]
     tail = share["compose"] + share["spill"] + share["write"]
-    return (redone * REDO_COST * per_texel + reached * SEARCH_COST * share["validity"] + tail,
+    return (redone * REDO_COST * per_texel + reached * SEARCH_COST * share["validity"], tail,
             1.0 - share["load"])
 
 
-def _afford(full_bake: dict | None, redone: int, reached: int, texels: int) -> None:
+def _afford(full_bake: dict | None, redone: int, reached: int, texels: int) -> float | None:
     """FullBake when a rebake of a move (``redone``, ``reached``: texel counts, as
-    ``rebake_cost`` takes their fractions of ``texels``) would cost more than a full bake, by
-    the last full bake's stage times (no record of them: the rebake goes on). A full bake's
-    bytes are the rebake's."""
+    ``rebake_cost`` takes their fractions of ``texels``) would cost more than a full bake
+    from here, by the last full bake's stage times (no record of them: the rebake goes on),
+    its search and rays scaled by what the last rebake of this state measured of them against
+    this model (``rebake_measured``). Returns the seconds the model gives the search and the
+    rays, unscaled (None without a record), for that measure. A full bake's bytes are the
+    rebake's."""
     if not full_bake or not texels or sum(full_bake["stage_seconds"].values()) <= 0:
-        return
-    redone, reached = redone / texels, reached / texels
-    cost, full = rebake_cost(full_bake["stage_seconds"], redone, reached)
+        return None
+    seconds = full_bake["full_bake_seconds"]
+    scaling, tail, full = rebake_cost(full_bake["stage_seconds"], redone / texels,
+                                      reached / texels)
+    correction = float(np.clip(full_bake.get("rebake_correction", 1.0), *CORRECTION_RANGE))
+    cost = correction * scaling + tail
     if cost > full:
+        measured = (f", × {correction:.2f} as the last rebake of this state measured"
+                    if "rebake_correction" in full_bake else "")
         raise FullBake(
-            f"a rebake would cost more than a full bake: the move reaches {redone + reached:.0%} "
-            f"of the texels ({redone:.0%} redone whole), about {cost:.2f} of the last full "
-            f"bake ({full_bake['full_bake_seconds']:.2f} s) against {full:.2f} for a full one")
+            f"a rebake would cost more than a full bake: the move reaches "
+            f"{(redone + reached) / texels:.0%} of the texels ({redone / texels:.0%} redone "
+            f"whole), about {cost * seconds:.2f} s by the last full bake's stages"
+            f"{measured}, against {full * seconds:.2f} s for a full one (the last took "
+            f"{seconds:.2f} s)")
+    return scaling * seconds
+
+
+def _worth_reading(path) -> None:
+    """FullBake, before the state at ``path`` is read, when the last rebake of it took longer
+    besides its search and rays (reading the state, the scene's world and lights, composing,
+    writing: ``rebake_overhead``, measured) than the whole last full bake: no edit can make a
+    rebake of it pay (a small scene, whose every bake is mostly such fixed work)."""
+    record = state_file.last_full_bake(path)
+    if record is None or "rebake_overhead" not in record:
+        return
+    overhead, full = record["rebake_overhead"], record["full_bake_seconds"]
+    if overhead >= full:
+        raise FullBake(f"a rebake would cost more than a full bake: the last rebake of this "
+                       f"state took {overhead:.2f} s besides its search and rays, the last "
+                       f"full bake {full:.2f} s in all")
+
+
+def rebake_measured(rebaked: "Rebaked", stages: dict[str, float]) -> float | None:
+    """What a rebake's search and rays (its "dirty", "trace" and "direct" ``stages``, seconds)
+    took over what the model gave them (``Rebaked.modelled``), for the record beside the
+    state (``state.save_rebake_correction``); None when unmodelled."""
+    if not rebaked.modelled:
+        return None
+    spent = sum(stages.get(name, 0.0) for name in ("dirty", "trace", "direct"))
+    return spent / rebaked.modelled
 
 
 def _traced_again(scene: Scene, start: _Compared, lit: Lighting, stored: _Stored,
@@ -1360,10 +1461,22 @@ def record_full_bake(path, rebaked, seconds: float, write,
                      stages: dict[str, float] | None = None) -> None:
     """After a full bake, record beside its state at ``path`` the ``seconds`` it took without
     numba's compile and its ``stages``' seconds (``state.timing_path``), which the rebakes that
-    follow compare with and price their work by (``_afford``); ``write(path, bytes)`` writes it
+    follow compare with and price their work by (``_afford``); after a rebake, keep that
+    record with what its search and rays took against the model (``rebake_measured``) and
+    what it took besides them (``_worth_reading``); ``write(path, bytes)`` writes it
     (``run.atomic.Outputs.stage``)."""
     if not isinstance(rebaked, Rebaked):
         state_file.save_full_bake_seconds(path, seconds, write, stages)
+        return
+    last = state_file.last_full_bake(path)
+    if last is None:
+        return
+    stages = stages or {}
+    scaling = sum(stages.get(name, 0.0) for name in ("dirty", "trace", "direct"))
+    state_file.save_full_bake_seconds(
+        path, last["full_bake_seconds"], write, last["stage_seconds"],
+        rebake_measured(rebaked, stages) or last.get("rebake_correction"),
+        max(seconds - scaling, 0.0))
 
 
 def summary(rebaked, state_path, incremental: bool, seconds: float | None = None,
@@ -1389,6 +1502,7 @@ def summary(rebaked, state_path, incremental: bool, seconds: float | None = None
             "moved_nodes": sorted({rebaked.fingerprints["instances"][i]["name"]
                                    for i in rebaked.diff.moved}),
             "rays": int(rebaked.rays), "test_rays": int(rebaked.dirty.tested_rays),
+            "modelled_seconds": rebaked.modelled,  # its search and rays, by the cost model
             "seconds": seconds, "compile_seconds": compile_seconds,
             "last_full_bake_seconds": state_file.last_full_bake_seconds(state_path)})
     return out
@@ -1407,7 +1521,9 @@ def details(report: dict, rebaked) -> dict:
 
 def asked_settings(path, **overrides) -> Settings:
     """The ``Settings`` the bake that wrote the state at ``path`` was given (for ``baker
-    rebake``), with ``overrides``; SettingsError when there is no usable state."""
+    rebake``), with ``overrides``; SettingsError when there is no usable state. The settings
+    in ``CALLER_ONLY`` are never taken from the state (it travels with the scene, as untrusted):
+    they are the defaults unless ``overrides`` give them."""
 
     try:
         stored = state_file.load(path, {})
@@ -1418,7 +1534,7 @@ def asked_settings(path, **overrides) -> Settings:
     names = {f.name for f in fields(Settings)}
     try:
         values = {k: tuple(v) if isinstance(v, list) else v
-                  for k, v in (asked or {}).items() if k in names}
+                  for k, v in (asked or {}).items() if k in names and k not in CALLER_ONLY}
         Settings(**values).check()
     except (SettingsError, TypeError, ValueError, AttributeError) as error:
         raise SettingsError(f"cannot rebake: the settings stored in the bake state {path} are "

@@ -9,6 +9,7 @@ from baker.pipeline.full import Baking
 from baker.pipeline.parts import PerTexel
 from baker.rebake.incremental import bake_state_writer
 from baker.run.atomic import Outputs, remove_temporary, stage_atomically
+from baker.run.interruptible import deferred
 from baker.settings import Settings
 
 
@@ -21,7 +22,9 @@ class StateStaging:
     removed if anything fails (``discard``)."""
 
     def __init__(self, executor: ThreadPoolExecutor, path: Path, settings: Settings):
-        self._executor, self._path, self._settings = executor, path, settings
+        self._executor, self._path = executor, path
+        self.asked = settings  # what the state records as asked (``api.bake_or_rebake`` may
+        # give it a d_max a rebake kept when it falls back to a full bake)
         self._future: Future | None = None
 
     def start(self, baking: "Baking", per_texel: PerTexel, fingerprint: dict | None = None
@@ -29,8 +32,9 @@ class StateStaging:
         """Begin writing the state of ``baking``'s texels ``per_texel`` (``fingerprint``: the
         scene's, if made already)."""
         writer = bake_state_writer(baking.scene, baking.world, baking.settings, baking.atlas,
-                                   per_texel, self._settings, fingerprint)
-        self._future = self._executor.submit(stage_atomically, self._path, writer)
+                                   per_texel, self.asked, fingerprint)
+        with deferred():  # submitted and recorded, for discard to wait for: not parted
+            self._future = self._executor.submit(stage_atomically, self._path, writer)
 
     def stage_into(self, outputs: Outputs) -> None:
         """Wait for the state to be written and add it to the files ``outputs`` puts in place."""

@@ -23,9 +23,11 @@ version, fields that do not match) raises ``StateUnusable`` with a one-line reas
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import io
 import json
+import math
 import os
 import stat
 import struct
@@ -44,7 +46,7 @@ from baker.run.spill import Column, Group
 from baker.settings import MAX_TEXELS
 
 FORMAT = "baker-bake-state"
-VERSION = 16
+VERSION = 17
 SUFFIX = ".bake"
 _NPY_HEAD = 1 << 16  # bytes enough for any .npy header baker writes (version 1.0: < 64 KiB)
 
@@ -68,29 +70,44 @@ def timing_path(state_path: str | Path) -> Path:
 
 def save_full_bake_seconds(state_path: str | Path, seconds: float,
                            write: Callable[[Path, bytes], None] = write_atomically,
-                           stages: dict[str, float] | None = None) -> None:
+                           stages: dict[str, float] | None = None,
+                           rebake_correction: float | None = None,
+                           rebake_overhead: float | None = None) -> None:
     """Record that a full bake for this state took ``seconds``, and ``stages`` (stage name →
-    seconds, as the bake's report has them) if given, with ``write(path, bytes)`` (an atomic
-    writer, or ``run.atomic.Outputs.stage``)."""
+    seconds, as the bake's report has them) if given; and, as the last rebake measured them,
+    its search and rays' time over the cost model's figure (``incremental.rebake_measured``)
+    and its seconds besides them, if given; with ``write(path, bytes)`` (an atomic writer, or
+    ``run.atomic.Outputs.stage``)."""
     record: dict = {"full_bake_seconds": round(float(seconds), 3)}
     if stages:
         record["stage_seconds"] = {k: round(float(v), 4) for k, v in sorted(stages.items())}
+    if rebake_correction is not None:
+        record["rebake_correction"] = round(float(rebake_correction), 4)
+    if rebake_overhead is not None:
+        record["rebake_overhead"] = round(float(rebake_overhead), 3)
     write(timing_path(state_path), json.dumps(record).encode())
 
 
 def last_full_bake(state_path: str | Path) -> dict | None:
-    """The record of the last full bake beside the state: ``full_bake_seconds`` (> 0) and, if
-    it was recorded, ``stage_seconds`` (name → seconds ≥ 0); None if none or unreadable."""
+    """The record of the last full bake beside the state: ``full_bake_seconds`` (> 0), if
+    recorded ``stage_seconds`` (name → seconds ≥ 0), and ``rebake_correction`` (> 0) and
+    ``rebake_overhead`` (≥ 0) where a rebake has measured itself since; None if none or
+    unreadable."""
     try:
         with _open_regular(timing_path(state_path)) as file:
             record = json.loads(file.read(1 << 16))
         seconds = float(record["full_bake_seconds"])
         stages = {str(k): float(v) for k, v in record.get("stage_seconds", {}).items()}
+        measured = {name: float(record[name]) for name in ("rebake_correction",
+                                                          "rebake_overhead") if name in record}
     except (OSError, ValueError, KeyError, TypeError, AttributeError, StateUnusable):
         return None
     if not seconds > 0 or not all(v >= 0 for v in stages.values()):
         return None
-    return {"full_bake_seconds": seconds, "stage_seconds": stages}
+    return {"full_bake_seconds": seconds, "stage_seconds": stages,
+            **{name: value for name, value in measured.items()
+               if value >= 0 and math.isfinite(value)
+               and (value > 0 or name == "rebake_overhead")}}
 
 
 def last_full_bake_seconds(state_path: str | Path) -> float | None:
@@ -106,7 +123,7 @@ def digest(*parts: Any) -> str:
         if isinstance(part, np.ndarray):
             a = np.ascontiguousarray(part)
             h.update(f"{a.dtype.str}{a.shape}".encode())
-            h.update(a.tobytes())
+            h.update(a.reshape(-1).view(np.uint8))  # its bytes, not a copy (a texture's 256 MiB)
         else:
             h.update(repr(part).encode())
         h.update(b"\x00")
@@ -431,10 +448,17 @@ def load(path: str | Path, classes: dict[str, type]) -> BakeState:
 
 
 def _open_regular(path: Path) -> BinaryIO:
-    """``path`` opened for reading if it is a regular file (followed through links): a FIFO
-    (which would wait for a writer for ever), a device (``/dev/zero``: endless bytes) or a
-    folder is ``StateUnusable`` before a byte is read."""
-    descriptor = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_BINARY", 0))
+    """``path`` opened for reading if it is a regular file: a FIFO (which would wait for a
+    writer for ever), a device (``/dev/zero``: endless bytes), a folder or a symbolic link (to
+    anything: the state beside a scene is as untrusted as the scene, and a bake never replaces
+    a link: ``run.atomic.destination``) is ``StateUnusable`` before a byte is read."""
+    try:
+        descriptor = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_NOFOLLOW
+                             | getattr(os, "O_BINARY", 0))
+    except OSError as error:
+        if error.errno in (errno.ELOOP, errno.EMLINK):
+            raise StateUnusable(f"{path} is a symbolic link: not a bake state") from None
+        raise
     mode = os.fstat(descriptor).st_mode
     if not stat.S_ISREG(mode):
         os.close(descriptor)

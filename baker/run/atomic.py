@@ -10,17 +10,33 @@ that removes the temporaries (``Outputs.discard``), and one during the renames p
 they replaced (each replaced file is first given a second name, a hard link, ``spill.set_aside``),
 so that every previous file is as it was.
 
+Two rules hold for every file put in place (``destination``, checked when the file is staged
+and again, for all of them, before the first rename):
+
+- a path that exists is replaced only when it is a regular file: a folder, a device, a socket
+  or a symbolic link (``--report /dev/stdout`` as root replaced the device's link with a
+  regular file) is refused, never renamed over; a FIFO (or a link to one: ``/dev/stdout`` on
+  a pipe) is streamed into instead, once every other file is in place;
+- no file replaces one the scene was read from (``Outputs(inputs=…)``: their device and inode,
+  ``files.SceneFolder.opened``), whatever the name it is reached by (a buffer named
+  ``baked.glb.bake`` was overwritten by the bake state), unless the caller says it may
+  (``--overwrite``: the output and its own files only).
+
 ``write_atomically`` is the one-file case. Errors writing are ``OutputError`` naming the file.
 """
 
 from __future__ import annotations
 
 import os
+import shutil
+import stat
 import tempfile
 from pathlib import Path
-from typing import BinaryIO, Callable
+from typing import BinaryIO, Callable, Iterable
 
 from baker.errors import OutputError
+from baker.run.file_kind import kind_of
+from baker.run.interruptible import check_interrupted, deferred
 from baker.run.spill import remove_later, set_aside
 
 Data = bytes | Callable[[BinaryIO], None]
@@ -28,11 +44,18 @@ Data = bytes | Callable[[BinaryIO], None]
 
 
 class Outputs:
-    """Files staged for one commit: ``stage`` each, then ``commit`` (or ``discard``)."""
+    """Files staged for one commit: ``stage`` each, then ``commit`` (or ``discard``).
+    ``inputs``: (device, inode) → what the scene reads it as, of every file the scene was read
+    from, which no staged file may replace; but with ``overwrite``, the files at the ``own``
+    paths (the output's own: ``api.output_files``) may."""
 
-    def __init__(self) -> None:
+    def __init__(self, inputs: dict[tuple[int, int], str] | None = None,
+                 own: Iterable[Path] = (), overwrite: bool = False) -> None:
         self._staged: list[tuple[str, Path]] = []  # (temporary, destination), in commit order
         self._made: list[Path] = []  # folders made for the files, removed again on discard
+        self._inputs = inputs or {}
+        self._own = {os.path.abspath(p) for p in own}
+        self._overwrite = overwrite
 
     def folder(self, path: Path) -> Path:
         """Make the folder ``path`` (and its missing parents) for files staged into it; the
@@ -43,29 +66,60 @@ class Outputs:
             raise OutputError("is a file, not a folder", file=str(path),
                               fix="give a folder (it is made if missing), or remove the file")
         for folder in reversed(missing):
-            try:
-                folder.mkdir()
-            except OSError as error:
-                raise _error(error, folder) from None
-            self._made.append(folder)
+            with deferred():  # made and recorded, for discard to remove: not parted by Ctrl-C
+                try:
+                    folder.mkdir()
+                except OSError as error:
+                    raise _error(error, folder) from None
+                self._made.append(folder)
         return path
 
     def stage(self, path: Path, data: Data, durable: bool = False) -> None:
         """Write ``data`` to a temporary beside ``path`` (``durable``: flushed to the disk),
         for ``commit`` to put in place."""
-        self.adopt(stage_atomically(Path(path), data, durable), path)
+        self.check(path)
+        stage_atomically(Path(path), data, durable, lambda temporary: self.adopt(temporary, path))
 
     def adopt(self, temporary: str, path: Path) -> None:
         """Add a temporary staged elsewhere (``stage_atomically``) to put in place at ``path``."""
         self._staged.append((temporary, Path(path)))
 
-    def commit(self) -> None:
-        """Rename every staged file into place, in the order staged. If one rename fails (or
-        Ctrl-C comes), the files already renamed get back what they replaced."""
-        done: list[tuple[Path, str | None]] = []
+    def check(self, path: Path) -> str:
+        """``destination(path)``, and an ``OutputError`` when a file there is one the scene was
+        read from (unless ``path`` is one of the output's own and ``overwrite``)."""
+        how = destination(path)
         try:
+            info = os.stat(path)
+        except OSError:
+            return how
+        read_as = self._inputs.get((info.st_dev, info.st_ino))
+        own = os.path.abspath(path) in self._own
+        if read_as is not None and not (own and self._overwrite):
+            raise OutputError(
+                f"the bake would replace this file, which the scene reads ({read_as})",
+                file=str(path),
+                fix="choose another output name or folder, or add --overwrite to replace the "
+                    "input with its bake" if own else
+                    "write the bake's other files elsewhere (--state, --report), or rename the "
+                    "scene's file (a bake never replaces its input but by --overwrite)")
+        return how
+
+    def commit(self) -> None:
+        """Put every staged file in place: each destination checked first (``check``: nothing
+        is changed if one is refused), then renamed in the order staged, then the FIFOs among
+        them streamed into. If one rename fails (or Ctrl-C comes), the files already renamed
+        get back what they replaced."""
+        done: list[tuple[Path, str | None]] = []
+        pipes: list[tuple[str, Path, int]] = []
+        try:
+            check_interrupted()  # one some code swallowed: the previous files stay
+            streamed = [(temporary, path) for temporary, path in self._staged
+                        if self.check(path) == "stream"]
+            for temporary, path in streamed:
+                pipes.append((temporary, path, _open_pipe(path)))
             for temporary, path in self._staged:
-                _check_destination(path)
+                if (temporary, path) in streamed:
+                    continue
                 old = set_aside(path)
                 done.append((path, old))
                 try:
@@ -73,6 +127,8 @@ class Outputs:
                 except OSError as error:
                     raise _error(error, path) from None
         except BaseException:
+            for _, _, pipe in pipes:
+                os.close(pipe)
             _put_back(done)
             self.discard()
             raise
@@ -80,6 +136,14 @@ class Outputs:
         for _, old in done:
             if old is not None:
                 remove_later(old)
+        for k, (temporary, path, pipe) in enumerate(pipes):
+            try:
+                _stream(temporary, path, pipe)
+            except BaseException:
+                for rest, _, other in pipes[k + 1:]:
+                    os.close(other)
+                    remove_temporary(rest)
+                raise
 
     def discard(self) -> None:
         """Remove every staged temporary, and the folders ``folder`` made if they are empty."""
@@ -94,6 +158,54 @@ class Outputs:
         self._made = []
 
 
+def destination(path: Path) -> str:
+    """How a file is put at ``path``: "replace" (nothing there, or a regular file: renamed
+    over) or "stream" (a FIFO, or a symbolic link to one: written into); an ``OutputError``
+    for anything else there (a folder, a device, a socket, a link to another thing)."""
+    try:
+        info = os.lstat(path)
+    except (FileNotFoundError, NotADirectoryError):  # nothing there (a file above: refused
+        return "replace"                               # where its folder is made)
+    except OSError as error:
+        raise _error(error, Path(path)) from None
+    if stat.S_ISREG(info.st_mode):
+        return "replace"
+    try:
+        target = os.stat(path).st_mode
+    except OSError:
+        target = None
+    if target is not None and stat.S_ISFIFO(target):
+        return "stream"
+    linked = (f" (to {kind_of(target)}: {os.readlink(path)})" if stat.S_ISLNK(info.st_mode)
+              else "")
+    raise OutputError(f"is {kind_of(info.st_mode)}{linked}, not a regular file: baker replaces "
+                      "only regular files (a FIFO is written into)", file=str(path),
+                      fix="give the path of a file, or move away what is there")
+
+
+def _open_pipe(path: Path) -> int:
+    """A descriptor writing into the FIFO at ``path``; an ``OutputError`` when nothing reads
+    it (opened without blocking: no wait for a reader that never comes)."""
+    try:
+        pipe = os.open(path, os.O_WRONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
+    except OSError as error:
+        raise OutputError(f"is a FIFO that nothing reads ({error.strerror or error})",
+                          file=str(path), fix="start its reader first, or give a file") from None
+    os.set_blocking(pipe, True)
+    return pipe
+
+
+def _stream(temporary: str, path: Path, pipe: int) -> None:
+    """Copy the staged ``temporary`` into ``pipe`` (the FIFO at ``path``), then remove it."""
+    try:
+        with open(temporary, "rb") as source, os.fdopen(pipe, "wb") as sink:
+            shutil.copyfileobj(source, sink)
+    except OSError as error:
+        raise _error(error, path) from None
+    finally:
+        remove_temporary(temporary)
+
+
 def _put_back(done: list[tuple[Path, str | None]]) -> None:
     """Undo the renames ``done`` (path, its previous file's second name or None), last first."""
     for path, old in reversed(done):
@@ -106,13 +218,6 @@ def _put_back(done: list[tuple[Path, str | None]]) -> None:
                 os.replace(old, path)
         except OSError:
             pass
-
-
-def _check_destination(path: Path) -> None:
-    """Refuse a destination that is a folder (a rename would fail there, or replace it)."""
-    if path.is_dir() and not path.is_symlink():
-        raise OutputError("is a folder, not a file", file=str(path),
-                          fix="give a file name, or move the folder away")
 
 
 def _error(error: OSError, path: Path) -> OutputError:
@@ -132,20 +237,27 @@ def _umask() -> int:
     return mask
 
 
-def stage_atomically(path: Path, data: Data, durable: bool = False) -> str:
+def stage_atomically(path: Path, data: Data, durable: bool = False,
+                     made: Callable[[str], None] | None = None) -> str:
     """Write ``data`` to a temporary file beside ``path`` with the permissions a new file gets
     (0666 less the umask, not the temporary's 0600) and return the temporary's path, for a
     rename to put in place; nothing is left behind if writing fails. ``durable``: flushed to
-    the disk (``fsync``) before returning."""
+    the disk (``fsync``) before returning. ``made(temporary)`` is called as soon as it exists,
+    before any Ctrl-C can come between (``run.interruptible.deferred``): whoever removes it
+    knows it from then on."""
     path = Path(path)
     if not path.parent.is_dir():
         raise OutputError(f"the folder {path.parent} does not exist", file=str(path),
                           fix=f"create {path.parent} first, or choose another path")
-    _check_destination(path)
-    try:
-        handle, temp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    except OSError as error:
-        raise _error(error, path) from None
+    beside = destination(path) == "replace"  # a FIFO's folder (/dev) is no place for one
+    with deferred():
+        try:
+            handle, temp = tempfile.mkstemp(dir=path.parent if beside else None,
+                                            prefix=f".{path.name}.", suffix=".tmp")
+        except OSError as error:
+            raise _error(error, path) from None
+        if made is not None:
+            made(temp)
     try:
         with os.fdopen(handle, "wb") as f:
             if callable(data):

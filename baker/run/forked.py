@@ -56,11 +56,12 @@ def call_forked(function: Callable[[], Any], what: str, seconds: float) -> Any:
     return call_forked_together([function], what, seconds)[0]
 
 
-def call_forked_together(functions: list[Callable[[], Any]], what: str, seconds: float
-                         ) -> list[Any]:
+def call_forked_together(functions: list[Callable[[], Any]], what: str, seconds: float,
+                         tick: Callable[[], None] | None = None) -> list[Any]:
     """Every function of ``functions`` run as ``call_forked`` runs one, each in its own child
     and all at once (one per core would be busy), ``seconds`` of CPU time for each: their
-    values in order.
+    values in order. ``tick()`` is called every ``_POLL_SECONDS`` while they run (to show
+    their progress).
     A crashed or hung child is run again on its own; the first error raised ends them all."""
     if not hasattr(os, "fork") or not sys.platform.startswith("linux"):
         return [function() for function in functions]
@@ -68,7 +69,7 @@ def call_forked_together(functions: list[Callable[[], Any]], what: str, seconds:
     failures: dict[int, list[str]] = {i: [] for i in range(len(functions))}
     pending = list(range(len(functions)))
     while pending:
-        outcomes = _attempts([functions[i] for i in pending], seconds)
+        outcomes = _attempts([functions[i] for i in pending], seconds, tick)
         for i, outcome in zip(pending, outcomes):
             if isinstance(outcome, str):
                 failures[i].append(outcome)
@@ -87,7 +88,8 @@ def call_forked_together(functions: list[Callable[[], Any]], what: str, seconds:
     return [values[i] for i in range(len(functions))]
 
 
-def _attempts(functions: list[Callable[[], Any]], seconds: float) -> list[tuple[bool, Any] | str]:
+def _attempts(functions: list[Callable[[], Any]], seconds: float,
+              tick: Callable[[], None] | None = None) -> list[tuple[bool, Any] | str]:
     """One forked run of each function, all at once: per function (True, value) or (False,
     exception), or why its child was lost: the name of the signal that killed it, or why it was
     taken for hung (it is killed)."""
@@ -103,7 +105,7 @@ def _attempts(functions: list[Callable[[], Any]], seconds: float) -> list[tuple[
                 _child(function, read, write)
             os.close(write)
             children.append((pid, read))
-        data = _read_until(children, seconds, min(seconds, STALL_SECONDS))
+        data = _read_until(children, seconds, min(seconds, STALL_SECONDS), tick)
     except BaseException:  # Ctrl-C while the children run: they go too
         for pid, _ in children:
             os.kill(pid, signal.SIGKILL)
@@ -131,11 +133,11 @@ def _outcome(pid: int, data: bytes | str) -> tuple[bool, Any] | str:
         return False, RuntimeError(f"the forked call gave no usable result ({error!r})")
 
 
-def _read_until(children: list[tuple[int, int]], cpu_seconds: float, stall_seconds: float
-                ) -> list[bytes | str]:
+def _read_until(children: list[tuple[int, int]], cpu_seconds: float, stall_seconds: float,
+                tick: Callable[[], None] | None = None) -> list[bytes | str]:
     """All of each child's pipe (``children``: (pid, read end)) up to its end, or, for a child
     taken for hung first, why: more than ``cpu_seconds`` of CPU time used, or none gained in
-    ``stall_seconds`` of clock time."""
+    ``stall_seconds`` of clock time. ``tick()`` after each wait."""
     parts: dict[int, list[bytes]] = {fd: [] for _, fd in children}
     done: dict[int, bytes | str] = {}
     progress = {fd: (-1.0, time.monotonic()) for _, fd in children}  # (CPU s, when it grew)
@@ -148,6 +150,8 @@ def _read_until(children: list[tuple[int, int]], cpu_seconds: float, stall_secon
                 parts[fd].append(part)
             else:
                 done[fd] = b"".join(parts[fd])
+        if tick is not None:
+            tick()
         now = time.monotonic()
         for pid, fd in children:
             if fd in done:

@@ -12,6 +12,8 @@ import threading
 from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
 from typing import Callable, Iterable, TypeVar
 
+from baker.run.interruptible import check_interrupted
+
 Chunk = TypeVar("Chunk")
 
 CHUNK_RAYS = 1 << 18  # rays per work unit at most: 4096 texels × 64 rays
@@ -49,15 +51,22 @@ def run_chunks(work: Callable[[Chunk], None], chunks: Iterable[Chunk], threads: 
     threads = threads or cores()
     if threads == 1 or len(chunks) < 2:
         for chunk in chunks:
+            check_interrupted()
             work(chunk)
         return
     failed = threading.Event()
 
     def guarded(chunk: Chunk) -> None:
-        """``work(chunk)``, skipped once any chunk has failed: a worker thread takes the next
-        chunk from the queue the instant its own ends, before this thread wakes to cancel it."""
+        """``work(chunk)``, skipped once any chunk has failed, or an interrupt has come
+        (``run.interruptible``): a worker thread takes the next chunk from the queue the
+        instant its own ends, before this thread wakes to cancel it."""
         if failed.is_set():
             return
+        try:
+            check_interrupted()
+        except BaseException:
+            failed.set()
+            raise
         try:
             work(chunk)
         except BaseException:
@@ -68,6 +77,7 @@ def run_chunks(work: Callable[[Chunk], None], chunks: Iterable[Chunk], threads: 
     try:
         futures = [pool.submit(guarded, chunk) for chunk in chunks]
         done, _ = wait(futures, return_when=FIRST_EXCEPTION)
+        check_interrupted()
         for future in futures:  # re-raise the first error, in chunk order
             if future in done:
                 future.result()

@@ -3,7 +3,10 @@ nothing with ``quiet``.
 
 ``StageLines`` prints ``baker: <stage> <seconds> s`` to stderr as each stage ends, wherever
 stderr goes (a pipeline's or CI's log gets one line per stage); on a terminal the line is shown
-while the stage runs (``baker: unwrap …``) and completed with the time when it ends.
+while the stage runs (``baker: unwrap …``) and completed with the time when it ends. A stage
+that counts its own steps (``Steps``: the unwrap its triangles charted, the post-process its
+passes over the pages' texels, the write its texels encoded and triangles written) has them
+drawn in the line's place, with the time left at its pace so far, once it has run 2 s.
 
 The bar counts rays, the work there is: a texel of a 256-path GI bake costs a hundred times one
 of a 4-ray obscurance bake. Each stage (obscurance, direct light, GI) is registered with its
@@ -193,6 +196,58 @@ def _has_size() -> bool:
     return size.columns > 0 and size.lines > 0
 
 
+class Steps:
+    """A stage's work in steps of its own (triangles charted, texels cleaned, bytes written):
+    the stage announces them (``expect``) and counts them done (``advance``, ``done_so_far``),
+    from any thread. Drawn (``draw``) as a bar with the time left on a terminal once the
+    stage has run ``DELAY`` seconds: a shorter stage shows only its line. The time left is the
+    steps to come at the stage's mean seconds per step so far (tqdm's rate, unsmoothed)."""
+
+    DELAY = 2.0  # seconds a stage runs before its bar is drawn
+    FORMAT = "{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} {unit} [{elapsed}<{remaining}]"
+
+    def __init__(self, name: str = "", unit: str = "", draw: bool = False):
+        self._name, self._unit, self._draw = name, unit, draw
+        self._bar: tqdm | None = None  # made at the first ``expect``: a stage that never
+        self.total = 0  # counts (the rays' own bar draws it) has none beside its other bars
+        self.done = 0
+        self._lock = threading.Lock()
+
+    def expect(self, steps: int) -> None:
+        """``steps`` more steps to do."""
+        with self._lock:
+            self.total += int(steps)
+            if self._draw and self._bar is None:
+                sized = _has_size()
+                self._bar = tqdm(total=self.total, initial=self.done,
+                                 desc=f"baker: {self._name}",
+                                 unit=self._unit, unit_scale=True, leave=False, smoothing=0,
+                                 delay=self.DELAY, bar_format=self.FORMAT, dynamic_ncols=sized,
+                                 ncols=None if sized else _DEFAULT_SIZE[0],
+                                 nrows=None if sized else _DEFAULT_SIZE[1])
+            if self._bar is not None:
+                self._bar.total = self.total
+
+    def advance(self, steps: int = 1) -> None:
+        """``steps`` more steps done."""
+        with self._lock:
+            self.done += int(steps)
+            if self._bar is not None:
+                self._bar.update(int(steps))
+
+    def done_so_far(self, steps: int) -> None:
+        """``steps`` done in all (a count polled from elsewhere, e.g. forked children)."""
+        with self._lock:
+            change = int(steps) - self.done
+        if change > 0:
+            self.advance(change)
+
+    def close(self) -> None:
+        """Take the bar off the terminal (a stage's line follows)."""
+        if self._bar is not None:
+            self._bar.close()
+
+
 class StageLines:
     """One line per stage of a bake, with its wall time, to stderr (none when not ``show``)."""
 
@@ -201,22 +256,26 @@ class StageLines:
         self._live = show and wanted(False)  # a terminal: the line shows while the stage runs
 
     @contextmanager
-    def stage(self, name: str) -> Iterator[None]:
+    def stage(self, name: str, unit: str = "") -> Iterator[Steps]:
         """Print ``baker: NAME S s`` when the block ends (S: its wall seconds); on a terminal
-        ``baker: NAME …`` from its start. A block ended by an error prints no time (on a
-        terminal its line is ended, so that the error starts a line of its own)."""
+        ``baker: NAME …`` from its start, and the bar of the ``Steps`` yielded (counted in
+        ``unit``) once it has run ``Steps.DELAY``. A block ended by an error prints no time
+        (on a terminal its line is ended, so that the error starts a line of its own)."""
         if not self.show:
-            yield
+            yield Steps()
             return
         if self._live:
             self._write(f"baker: {name} …")
         started = time.perf_counter()
+        steps = Steps(name, unit, draw=self._live)
         try:
-            yield
+            yield steps
         except BaseException:
+            steps.close()
             if self._live:
                 self._write("\n")
             raise
+        steps.close()
         seconds = time.perf_counter() - started
         self._write(("\r\x1b[K" if self._live else "") + f"baker: {name} {seconds:.2f} s\n")
 

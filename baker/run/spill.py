@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import os
 import shutil
+import subprocess
+import sys
 import tempfile
 import threading
 import uuid
@@ -196,15 +198,17 @@ class Spill:
 
     ``folder``: where to make it (None: the system's temporary folder). A bake puts it beside
     its output, on the disk that will hold the bake state anyway. Its name holds this process's
-    id: the folders a killed bake left there (SIGKILL, power loss) are removed when the next
-    one starts (``remove_stale``).
+    id: the folders a killed bake left there (power loss) are removed when the next one starts
+    (``remove_stale``). A process ended at once (SIGKILL, or Ray's hard exit when a cluster's
+    head is lost) runs nothing more: a small watcher process started with the folder
+    (``_watched``) removes it then, and says why on standard error.
     """
 
     def __init__(self, folder: str | os.PathLike | None = None):
         remove_stale(folder)
         self.folder = tempfile.mkdtemp(prefix=f"{_PREFIX}{os.getpid()}-", dir=folder)
         self.groups: dict[str, Group] = {}
-        self._cleanup = weakref.finalize(self, shutil.rmtree, self.folder, ignore_errors=True)
+        self._cleanup = weakref.finalize(self, _removed, self.folder, _watched(self.folder))
 
     def append(self, name: str, part) -> None:
         """Append the rows of ``part`` (a dataclass of per-texel arrays) to the group ``name``."""
@@ -233,6 +237,35 @@ class Spill:
     def close(self) -> None:
         """Remove the folder and everything in it."""
         self._cleanup()
+
+
+_WATCHER = """import os, shutil, sys
+sys.stdin.buffer.read()  # until the bake's process closes its end, or ends: then
+if os.path.isdir(sys.argv[1]):  # not removed by the bake: it ended at once
+    shutil.rmtree(sys.argv[1], ignore_errors=True)
+    sys.stderr.write("baker: the bake ended abruptly (killed, or its Ray cluster's head was "
+                     "lost); nothing was written, and its temporary rows are removed\\n")
+"""
+
+
+def _watched(folder: str) -> subprocess.Popen | None:
+    """A process (Python, no baker imported) that waits for this one to end and then
+    removes ``folder`` if it is still there, saying so on standard error; in a session of its
+    own, so that Ctrl-C at the terminal leaves it to see the bake's own clean-up. None where
+    it cannot start (the folder is then left to ``remove_stale``)."""
+    try:
+        return subprocess.Popen([sys.executable, "-c", _WATCHER, folder], stdin=subprocess.PIPE,
+                                stdout=subprocess.DEVNULL, start_new_session=True)
+    except OSError:
+        return None
+
+
+def _removed(folder: str, watcher: subprocess.Popen | None) -> None:
+    """Remove ``folder``, then let its watcher go (it finds nothing left to do)."""
+    shutil.rmtree(folder, ignore_errors=True)
+    if watcher is not None:
+        watcher.stdin.close()
+        watcher.wait()
 
 
 def remove_stale(folder: str | os.PathLike | None = None) -> list[str]:

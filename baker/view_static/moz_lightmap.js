@@ -13,8 +13,13 @@
 // max(0, 1 + (n - n0) . g), with n the normal-mapped world normal and n0 the interpolated
 // vertex one (baker/light/directional.py; baker preview computes the same). World space is the
 // glTF scene's: add the loaded scene without a transform of its own.
+//
+// In an app of your own (`baker plugin DIR` writes this file; three.js r151 or later):
+//   import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
+//   import { MozLightmapPlugin } from './moz_lightmap.js';
+//   const loader = new GLTFLoader().register((parser) => new MozLightmapPlugin(parser));
 
-import { NoColorSpace, SRGBColorSpace } from './three.min.js';
+import { NoColorSpace, SRGBColorSpace } from 'three';
 
 const DIRECTIONAL = 'BAKER_lightmap_directional';
 
