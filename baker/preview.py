@@ -34,16 +34,17 @@ frames the bounds of every triangle from a three-quarter angle above (+x, +y, +z
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from baker.errors import InputError, OutputError, SettingsError
-from baker.geometry.surface import (LUMINANCE, SRGB_TO_LINEAR, albedo, base_colour, emission,
-                                    transformed_uv, viewer_diffuse_weight_at)
+from baker.geometry.surface import (LUMINANCE, SRGB_TO_LINEAR, albedo, alpha, base_colour,
+                                    emission, transformed_uv, viewer_diffuse_weight_at)
 from baker.geometry.world import World, build_world
 from baker.gltf.load import load
+from baker.gltf.materials import BLEND
 from baker.gltf.read_images import image_pixels
 from baker.gltf.read_nodes import trs_matrices
 from baker.gltf.scene import Scene
@@ -445,17 +446,14 @@ def render(scene: Scene, mode: str = "lit", size: tuple[int, int] | None = None,
         size = (640, max(1, int(round(640 / aspect))))
     width, height = size
     origins, directions = primary_rays(view, width, height)
-    tracer = Tracer(world)
-    n = len(origins)
-    triangle = np.full(n, -1, np.int64)
-    bary = np.zeros((n, 3))
-    for start in range(0, n, _RAYS_PER_CHUNK):
-        rows = slice(start, min(start + _RAYS_PER_CHUNK, n))
-        triangle[rows], bary[rows] = _first_front_hits(scene, world, tracer, origins[rows],
-                                                       directions[rows])
+    tracer = Tracer(_blended_opaque(world))
+    triangle, bary = _front_hits(scene, world, tracer, origins, directions)
     cell = _checker_cell(lightmaps, triangle, bary, width, height) if mode == "checker" else 1
     radiance, lightmapped, from_lightmap = _shade(scene, world, lightmaps, mode, triangle, bary,
                                                   directions, cell)
+    if mode in ("lit", "unlit"):
+        radiance = _composited(scene, world, tracer, lightmaps, mode, triangle, bary, directions,
+                               radiance)
     if exposure is None:
         exposure = 1.0
         shown = radiance[lightmapped] @ LUMINANCE
@@ -469,6 +467,82 @@ def render(scene: Scene, mode: str = "lit", size: tuple[int, int] | None = None,
                    lightmapped=lightmapped.reshape(height, width), exposure=float(exposure),
                    position=_points(world, triangle, bary).reshape(height, width, 3),
                    from_lightmap=from_lightmap.reshape(height, width, 3), checker_texels=cell)
+
+
+def _front_hits(scene: Scene, world: World, tracer: Tracer, origins: np.ndarray,
+                directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``_first_front_hits`` of every ray (n,), ``_RAYS_PER_CHUNK`` rays at a time."""
+    n = len(origins)
+    triangle, bary = np.full(n, -1, np.int64), np.zeros((n, 3))
+    for start in range(0, n, _RAYS_PER_CHUNK):
+        rows = slice(start, min(start + _RAYS_PER_CHUNK, n))
+        triangle[rows], bary[rows] = _first_front_hits(scene, world, tracer, origins[rows],
+                                                       directions[rows])
+    return triangle, bary
+
+
+def _blended_opaque(world: World) -> World:
+    """``world`` whose blended (BLEND) triangles stop a ray, for primary rays: the preview
+    draws what is behind them by compositing (``_composited``), as viewers blend, where the
+    bake's tracer lets a ray through at random (1 − alpha of them). Alpha-cut (MASK) stays."""
+    if world.alpha is None or not np.any(world.alpha.mode == BLEND):
+        return world
+    return replace(world, alpha=replace(world.alpha, mode=np.where(
+        world.alpha.mode == BLEND, 0, world.alpha.mode).astype(np.uint8)))
+
+
+def _see_through(scene: Scene, world: World, tris: np.ndarray,
+                 bary: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For hits (k,) on world triangles: the share (k,) of the surface's own shading a viewer
+    shows (alpha for a blended material, else 1), and what of the scene behind it shows through
+    (k, 3): 1 − alpha for a blended material, transmission × base colour for a transmissive one
+    (three.js tints what it lets through by the base colour), else 0."""
+    material = world.tri_material[tris]
+    blended = np.array([m.alpha_mode == "BLEND" for m in scene.materials])[material]
+    transmission = np.array([m.transmission for m in scene.materials])[material]
+    own = np.ones(len(tris))
+    behind = np.zeros((len(tris), 3))
+    if blended.any():
+        own[blended] = np.clip(alpha(scene, world, tris[blended], bary[blended]), 0.0, 1.0)
+        behind[blended] = (1.0 - own[blended])[:, None]
+    clear = ~blended & (transmission > 0)
+    if clear.any():
+        behind[clear] = (np.clip(transmission[clear], 0.0, 1.0)[:, None]
+                         * base_colour(scene, world, tris[clear], bary[clear]))
+    return own, behind
+
+
+def _composited(scene: Scene, world: World, tracer: Tracer, lightmaps: SceneLightmaps, mode: str,
+                triangle: np.ndarray, bary: np.ndarray, directions: np.ndarray,
+                radiance: np.ndarray) -> np.ndarray:
+    """``radiance`` (n, 3) of the first hits with what shows through blended and transmissive
+    surfaces composited front to back, as a viewer draws them: each layer's own shading × its
+    alpha, plus what its ``_see_through`` lets pass of the layers behind, up to
+    ``_MAX_CULLED_LAYERS`` of them (the background where nothing is behind)."""
+    out = radiance.copy()
+    through = np.zeros((len(triangle), 3))
+    hit = np.flatnonzero(triangle >= 0)
+    own, through[hit] = _see_through(scene, world, triangle[hit], bary[hit])
+    out[hit] *= own[:, None]
+    step = 1e-6 * float(np.abs(world.positions - world.center).max(initial=1.0))
+    tri, bar = triangle, bary
+    for _ in range(_MAX_CULLED_LAYERS):
+        rows = np.flatnonzero(through.max(axis=1) > 1e-3)
+        if not len(rows):
+            break
+        starts = _points(world, tri[rows], bar[rows]) + directions[rows] * step
+        tri, bar = np.full(len(triangle), -1, np.int64), np.zeros_like(bary)
+        tri[rows], bar[rows] = _front_hits(scene, world, tracer, starts, directions[rows])
+        layer, _, _ = _shade(scene, world, lightmaps, mode, tri[rows], bar[rows],
+                             directions[rows])
+        missed = tri[rows] < 0
+        layer[missed] = _BACKGROUND
+        own, behind = np.ones(len(rows)), np.zeros((len(rows), 3))
+        seen = ~missed
+        own[seen], behind[seen] = _see_through(scene, world, tri[rows][seen], bar[rows][seen])
+        out[rows] += through[rows] * layer * own[:, None]
+        through[rows] *= behind
+    return out
 
 
 def _points(world: World, triangle: np.ndarray, bary: np.ndarray) -> np.ndarray:

@@ -23,7 +23,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from assets.make_scenes import cornell_box  # noqa: E402
 from baker.pipeline.full import compute  # noqa: E402
-from baker.light.hemisphere import hemisphere_rays
+from baker.light.hemisphere import blocking_only, hemisphere_rays, surfaces_of  # noqa: E402
 from baker.light.integrate import integrate  # noqa: E402
 from baker.gltf.load import load  # noqa: E402
 from baker.run.parallel import cores  # noqa: E402
@@ -33,8 +33,12 @@ from baker.rays.trace import Tracer  # noqa: E402
 RAW_RAYS = 8_000_000  # how many of the bake's rays the raw measurement casts
 
 
-def raw_embree_rate(done, threads: int) -> tuple[float, int]:
-    """Rays/s of embreex alone on the bake's own first ``RAW_RAYS`` rays, and how many."""
+def raw_embree_rate(done, threads: int, query: str = "INTERSECT") -> tuple[float, int]:
+    """Rays/s of embreex alone on the bake's own first ``RAW_RAYS`` rays, and how many.
+
+    query: "INTERSECT" (the nearest hit with its distance and barycentrics, as ``cast_local``
+    asks) or "OCCLUDED" (whether anything is hit, as ``blocked_local`` asks: ``--rho step``'s
+    obscurance rays, shadow rays)."""
     s = done.settings
     tracer = Tracer(done.world)
     count = min(len(done.texels), RAW_RAYS // s.rays)
@@ -44,10 +48,11 @@ def raw_embree_rate(done, threads: int) -> tuple[float, int]:
         origins, directions = hemisphere_rays(done.texels, rows, s.rays, s.seed, tracer.center)
         batches.append((origins, directions, np.full(len(origins), s.d_max, np.float32)))
     scene = tracer._scene  # the benchmark measures Embree itself, so it reaches past the wrapper
+    output = 1 if query == "INTERSECT" else None
 
     def cast(batch):
         origins, directions, dists = batch
-        scene.run(origins, directions, dists=dists.copy(), output=1)
+        scene.run(origins, directions, dists=dists.copy(), query=query, output=output)
 
     started = time.perf_counter()
     with ThreadPoolExecutor(threads) as pool:
@@ -55,6 +60,12 @@ def raw_embree_rate(done, threads: int) -> tuple[float, int]:
     seconds = time.perf_counter() - started
     rays = sum(len(b[0]) for b in batches)
     return rays / seconds, rays
+
+
+def stage_query(done) -> str:
+    """The query the bake's obscurance rays were cast with (``hemisphere.blocking_only``)."""
+    surfaces = surfaces_of(done.scene, done.world)
+    return "OCCLUDED" if blocking_only(surfaces, done.settings) else "INTERSECT"
 
 
 def main() -> None:

@@ -6,10 +6,11 @@ demo Cornell room (36 triangles: the cost per texel shows) and a room of 200 box
 shows). For each, after one bake to load numba's kernels and fill a fresh unwrap cache
 (``baker/atlas/unwrap_cache.py``), ``--repeat`` bakes in this process (medians), printing every stage's seconds, µs per texel and per triangle, the share of the
 stages other than trace and direct light against the tracing, and the raw embreex rate on the
-bake's own rays measured in the same run (``bench_cornell.raw_embree_rate``), the unwrap
-without the cache (every mesh charted: the cold cost, what a first bake pays), and the unwrap
-after an edit of one mesh (the charts of the instance of median triangle count, a box, gone
-from the cache: it is charted again and every instance's charts packed again).
+bake's own rays measured in the same run (``bench_cornell.raw_embree_rate``: nearest hits, and
+the occlusion query that ``--rho step`` casts its rays with), the unwrap without the cache
+(every mesh charted: the cold cost, what a first bake pays), and the unwrap after an edit of
+one mesh (the charts of the instance of median triangle count, a box, gone from the cache: it
+is charted again and every instance's charts packed again).
 Then the cost of a new process: Python with baker's imports, against Python alone (medians of ``--repeat``).
 
     python benchmarks/bench_fixed_cost.py [--rays 64] [--repeat 3] [--scenes cornell boxes]
@@ -37,7 +38,7 @@ from baker.gltf.load import load  # noqa: E402
 from baker.pipeline.full import compute  # noqa: E402
 from baker.run.parallel import cores  # noqa: E402
 from baker.settings import Settings  # noqa: E402
-from benchmarks.bench_cornell import raw_embree_rate  # noqa: E402
+from benchmarks.bench_cornell import raw_embree_rate, stage_query  # noqa: E402
 
 SCENES = {"cornell": ("Cornell room", cornell_box), "boxes": ("200 boxes + sphere", boxes_and_sphere)}
 TRACING = ("trace", "direct", "gi")  # the stages that cast the bake's rays
@@ -59,7 +60,9 @@ def bake_scene(name: str, rays: int, repeat: int) -> None:
         runs.append(done.stage_seconds)
     texels, triangles = len(done.texels), len(done.world.triangles)
     threads = done.settings.threads or cores()
-    raw, raw_rays = raw_embree_rate(done, threads)
+    nearest, raw_rays = raw_embree_rate(done, threads)
+    query = stage_query(done)
+    raw = raw_embree_rate(done, threads, query)[0] if query != "INTERSECT" else nearest
     print(f"\n{title}: {triangles:,} triangles in {len(done.atlas.instances)} baked instances, "
           f"{texels:,} texels on {done.atlas.page_count} page(s) of {done.atlas.width}², "
           f"{rays} rays/texel, {threads} thread(s); medians of {repeat}")
@@ -73,8 +76,10 @@ def bake_scene(name: str, rays: int, repeat: int) -> None:
     fixed = sum(s for stage, s in stages.items() if stage not in TRACING)
     print(f"  wall {statistics.median(walls):.3f} s; fixed stages {fixed:.3f} s against "
           f"tracing {tracing:.3f} s ({fixed / tracing:.2f}×)")
-    print(f"  obscurance rays {done.terms.rays / stages['trace'] / 1e6:.2f} M/s end to end; "
-          f"raw embreex {raw / 1e6:.2f} M/s on {raw_rays:,} of the same rays")
+    rate = done.terms.rays / stages['trace']
+    print(f"  obscurance rays {rate / 1e6:.2f} M/s end to end; raw embreex on {raw_rays:,} of "
+          f"the same rays: {nearest / 1e6:.2f} M/s nearest hits ({rate / nearest:.0%}), "
+          f"{raw / 1e6:.2f} M/s with the stage's query, {query} ({rate / raw:.0%})")
     print(f"  unwrap cold (no cache, every mesh charted): {cold_unwrap(done, repeat):.3f} s; "
           f"one mesh edited: {edited_unwrap(done, repeat):.3f} s; "
           f"from the cache (above): {stages['unwrap']:.3f} s")

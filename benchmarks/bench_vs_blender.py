@@ -1,9 +1,14 @@
 """Benchmark: baker against Blender Cycles' AO bake, per unit of error (issue 27).
 
-    python benchmarks/bench_vs_blender.py [--repeat 3] [--scenes cornell boxes] [--images DIR]
+    python benchmarks/bench_vs_blender.py [--blender bpy|system] [--repeat 3]
+        [--scenes cornell boxes] [--images DIR]
 
-needs ``blender`` on PATH (Debian: ``apt-get install blender python3-numpy``; measured with
-3.4.1) and the OpenEXR package (``--format exr``). Not run in CI.
+``--blender bpy`` (the default): Blender 4.5 LTS from PyPI (the ``bpy`` wheel, Blender as a
+Python module, for Python 3.11 only), installed by this benchmark into a venv of its own
+(``--bpy-venv``, made with ``python -m venv`` and ``pip install "bpy==4.5.*"`` when missing:
+about 1 GB; not a dependency of baker). ``--blender system``: ``blender`` on PATH (Debian:
+``apt-get install blender python3-numpy``; measured with 3.4.1). Both need the OpenEXR
+package (``--format exr``). Not run in CI.
 
 Two scenes, built as ``bench_fixed_cost.py`` builds them (``assets.make_scenes.cornell_box``,
 ``assets.many_objects.boxes_and_sphere``, saved to a temporary .glb), except that the Cornell
@@ -22,7 +27,8 @@ r for repeat r, medians of ``--repeat``), as a new process whose wall time is me
   --quiet --no-state --lightmaps DIR --format exr --seed r``, the checkout's code (the ``baker``
   command on PATH may be an older install), after a warm-up bake that fills a temporary
   ``BAKER_CACHE_DIR`` (the unwrap cache) and numba's cache;
-- Blender: ``blender -b --factory-startup -P <script> -- ...``: import the glTF, join the mesh
+- Blender: ``blender -b --factory-startup -P <script> -- ...`` (with ``bpy``: ``python
+  <script> -- ...`` in its venv, the same script importing ``bpy``): import the glTF, join the mesh
   objects into one, one new UV map by Smart UV Project (island margin 2 texels), one plain
   material whose active image node is a 512² float image, Cycles on the CPU, 2 threads,
   N samples, seed r, denoising off, no bounces (``max_bounces`` 0: the default 12 traces paths
@@ -51,7 +57,9 @@ points, what the reference adds (√(RMSE² − noise²)).
 
 Per unit of error: each tool's (RMSE, median wall seconds) points joined in log-log; at every
 RMSE both reach within their measured ranges (each measured point's RMSE), the time each tool
-takes to reach it. What this does not say: the texel counts differ (Smart UV Project packs the
+takes to reach it. Then the issue's row: at the error of N = 4, 16, 64, 256 rays (the RMSE of
+Blender's N-sample bake), Blender's time ÷ baker's, baker's time read off its line (beyond
+its measured points, the line through its last two, marked ~). What this does not say: the texel counts differ (Smart UV Project packs the
 page fuller than baker's xatlas layout at its derived density: both counts are printed), so at
 equal RMSE Blender may be baking more texels, or fewer; the two layouts differ in where the
 texels are, and so in the error's spatial pattern; Blender's margin fill and baker's
@@ -211,7 +219,7 @@ def blender_bake(script: Path, scene: Path, samples: int, seed: int, folder: Pat
     """(wall seconds, bake-call seconds, R channel (H, W), row 0 at the top) of one Blender
     process; ``coverage``: no margin, the pixels no triangle covers left at −1."""
     out = folder / "blender.npy"
-    command = ["blender", "-b", "--factory-startup", "-P", str(script), "--", str(scene),
+    command = [*BLENDER, str(script), "--", str(scene),
                str(samples), str(seed), str(SIZE), f"{DISTANCE:g}", str(MARGIN), "1" if coverage else "0",
                str(out)]
     started = time.perf_counter()
@@ -221,6 +229,24 @@ def blender_bake(script: Path, scene: Path, samples: int, seed: int, folder: Pat
     if run.returncode != 0 or said is None:
         sys.exit(f"blender failed ({run.returncode}):\n{run.stdout[-2000:]}\n{run.stderr[-2000:]}")
     return seconds, float(said.group(1)), np.load(out).astype(np.float64)[::-1]
+
+
+BLENDER = ["blender", "-b", "--factory-startup", "-P"]  # how a Blender process starts on a
+# script (``use_bpy`` sets it to the bpy venv's Python)
+BPY = "bpy==4.5.*"  # Blender 4.5 LTS
+
+
+def use_bpy(venv: Path) -> str:
+    """Make ``blender_bake`` run the bpy wheel's Blender in ``venv`` (made and filled with
+    ``BPY`` when it has no bpy); returns Blender's version line."""
+    python = venv / "bin" / "python"
+    check = [str(python), "-c", "import bpy; print('Blender', bpy.app.version_string)"]
+    if not python.exists() or subprocess.run(check, capture_output=True).returncode != 0:
+        print(f"installing {BPY} into {venv} (once)", flush=True)
+        subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True)
+        subprocess.run([str(python), "-m", "pip", "install", "--quiet", BPY], check=True)
+    BLENDER[:] = [str(python)]
+    return subprocess.run(check, capture_output=True, text=True, check=True).stdout.strip()
 
 
 def blender_environment() -> dict[str, str]:
@@ -237,17 +263,23 @@ def rmse(a: np.ndarray, b: np.ndarray, covered: np.ndarray) -> float:
     return float(np.sqrt(np.mean((a[covered] - b[covered]) ** 2)))
 
 
-def seconds_at(error: float, points: list[tuple[float, float]]) -> float | None:
-    """Seconds to reach RMSE ``error`` along (RMSE, seconds) points joined in log-log; None
-    outside their range."""
+def seconds_at(error: float, points: list[tuple[float, float]],
+               beyond: bool = False) -> float | None:
+    """Seconds to reach RMSE ``error`` along (RMSE, seconds) points joined in log-log; outside
+    their range None, or with ``beyond`` the line through the two nearest points."""
     points = sorted(points)
-    for (e0, t0), (e1, t1) in zip(points, points[1:]):
+    pairs = list(zip(points, points[1:]))
+    for (e0, t0), (e1, t1) in pairs:
         if e0 <= error <= e1:
-            if e1 == e0:
-                return t0
-            f = math.log(error / e0) / math.log(e1 / e0)
-            return math.exp(math.log(t0) + f * (math.log(t1) - math.log(t0)))
-    return None
+            break
+    else:
+        if not beyond or not pairs:
+            return None
+        (e0, t0), (e1, t1) = pairs[0] if error < points[0][0] else pairs[-1]
+    if e1 == e0:
+        return t0
+    f = math.log(error / e0) / math.log(e1 / e0)
+    return math.exp(math.log(t0) + f * (math.log(t1) - math.log(t0)))
 
 
 def save_png(page: np.ndarray, path: Path) -> None:
@@ -320,6 +352,14 @@ def bench_scene(name: str, script: Path, args, folder: Path) -> None:
         if b is None or bl is None:
             continue
         print(f"  {error:8.5f} | {b:8.2f} | {bl:9.2f} {call:9.2f} | {bl / b:.2f}×")
+    ratios = []
+    for n in RAYS:
+        seconds, error = table["blender", n][:2]
+        b = seconds_at(error, points["baker"], beyond=True)
+        inside = seconds_at(error, points["baker"]) is not None
+        ratios.append(f"{'' if inside else '~'}{seconds / b:.2f}")
+    print(f"  | {title} | {' / '.join(ratios)}× | (Blender ÷ baker time at the error of "
+          f"{' / '.join(map(str, RAYS))} rays)")
 
 
 def main() -> None:
@@ -329,14 +369,24 @@ def main() -> None:
     parser.add_argument("--reference-rays", type=int, default=2048)
     parser.add_argument("--reference-spp", type=int, default=1024)
     parser.add_argument("--images", metavar="DIR", help="write PNGs of the pages here")
+    parser.add_argument("--blender", choices=("bpy", "system"), default="bpy",
+                        help="Blender 4.5 LTS from PyPI in a venv of its own, or blender on PATH")
+    parser.add_argument("--bpy-venv", type=Path,
+                        default=Path.home() / ".cache" / "baker-bench" / "bpy-4.5")
     args = parser.parse_args()
-    if shutil.which("blender", path=blender_environment()["PATH"]) is None:
+    if args.blender == "bpy":
+        if sys.version_info[:2] != (3, 11):
+            sys.exit("bench_vs_blender: the bpy 4.5 wheels are for Python 3.11 only")
+        version = use_bpy(args.bpy_venv)
+    elif shutil.which("blender", path=blender_environment()["PATH"]) is None:
         sys.exit("bench_vs_blender: blender is not on PATH (Debian: apt-get install blender "
                  "python3-numpy); nothing measured")
-    version = subprocess.run(["blender", "--version"], capture_output=True, text=True).stdout
+    else:
+        version = subprocess.run(["blender", "--version"], capture_output=True,
+                                 text=True).stdout.splitlines()[0]
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT,
                             capture_output=True, text=True).stdout.strip()
-    print(f"{version.splitlines()[0] if version else 'blender'}; baker at {commit}; "
+    print(f"{version or 'blender'} ({args.blender}); baker at {commit}; "
           f"{THREADS} threads each, {os.cpu_count()} cores; "
           f"load average {os.getloadavg()[0]:.2f}")
     with tempfile.TemporaryDirectory(prefix="bench-vs-blender-") as temp:

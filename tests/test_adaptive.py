@@ -290,3 +290,29 @@ def test_a_target_the_rays_cannot_reach_is_said(tmp_path):
     loose = bake(10.0)
     assert loose["rmse_estimate"] <= 10.0
     assert not any(note.startswith("--target-error") for note in loose["notes"])
+
+
+def test_rays_made_texel_by_texel_are_the_bits_of_the_directions_drawn_at_once(tmp_path):
+    """``hemisphere_rays`` makes each texel's points, directions and rays in one pass
+    (``_rays_kernel``); they are the bits of ``cosine_directions`` then ``world_rays`` over all
+    texels at once, for every technique, an adaptive round's grown nets and sub-positions."""
+    from assets.make_scenes import cornell_box
+    from baker.atlas.supersample import sub_positions
+    from baker.light.hemisphere import hemisphere_rays, world_rays
+    from baker.rays.trace import Tracer
+    from tests.bakehelp import computed
+
+    done = computed(cornell_box(), tmp_path, page_size=64, rays=4)
+    texels, tracer = done.texels, Tracer(done.world)
+    rows = np.arange(0, len(texels), 7)
+    sub = sub_positions(tracer, texels, rows, 4, 3)
+    for technique, rays, first, start, moved in (("sobol", 16, 0, 16, None),
+                                                 ("sobol", 8, 8, 8, None),
+                                                 ("sobol", 6, 0, 6, sub),
+                                                 ("stratified", 12, 0, 12, None),
+                                                 ("random", 5, 3, 0, sub)):
+        fused = hemisphere_rays(texels, rows, rays, 3, tracer.center, technique, first, moved,
+                                start)
+        x, y, z = cosine_directions(texels.key[rows], rays, 3, technique, first, start)
+        apart = world_rays(texels, rows, rays, x, y, z, tracer.center, first=first, sub=moved)
+        assert np.array_equal(fused[0], apart[0]) and np.array_equal(fused[1], apart[1])

@@ -77,6 +77,23 @@ def test_standard_error_of_a_known_variance():
     assert np.isclose(stderr[0], np.sqrt(0.25 * 100 / 99 / 100))
 
 
+def test_classic_ao_by_occlusion_queries_is_the_bits_of_nearest_hits(tmp_path, monkeypatch):
+    """``--rho step`` casts its obscurance rays as occlusion queries (``blocking_only``); the
+    terms are the very bits that nearest hits give (a hit's value is 0 whatever its distance
+    and albedo), with a target error's rounds too."""
+    import baker.light.hemisphere as hemisphere
+
+    settings = dict(texel_density=6.0, rays=8, rho="step", d_max=1.0)
+    for extra in ({}, {"target_error": 0.02, "max_rays": 32}):
+        occluded = computed(red_wall_floor(), tmp_path, **settings, **extra).terms
+        with monkeypatch.context() as patch:
+            patch.setattr(hemisphere, "blocking_only", lambda surfaces, settings: False)
+            nearest = computed(red_wall_floor(), tmp_path, **settings, **extra).terms
+        assert 0 < occluded.escaped.mean() < 1
+        for name in ("w_hit", "escaped", "hit_sq", "half_split", "counts"):
+            assert np.array_equal(getattr(occluded, name), getattr(nearest, name)), name
+
+
 def _random_rays(seed: int, texels: int, rays: int, triangles: int = 50):
     """Embree-like hits of texels × rays rays, texel-major: primID (−1 for misses), tfar."""
     rng = np.random.default_rng(seed)
@@ -90,7 +107,8 @@ def test_texel_sums_are_exact_in_any_order_and_recovered_from_the_means():
     """Every ray's values are rounded to a grid fine enough to be exact when summed, so a
     texel's sums are the same bits whatever the order of its rays (what a rebake that swaps one
     ray's old value for its new one relies on), and the stored means give them back exactly."""
-    from baker.light.hemisphere import COLUMNS, _TEXEL_MAJOR, accumulate_kernel, terms_of_sums
+    from baker.light.hemisphere import (COLUMNS, NO_DIRECTIONS, _TEXEL_MAJOR,
+                                        accumulate_kernel, terms_of_sums)
     from baker.rebake.exact_sums import _sums_of
     from baker.geometry.surface import LUMINANCE
 
@@ -100,11 +118,11 @@ def test_texel_sums_are_exact_in_any_order_and_recovered_from_the_means():
     shade = (np.float32(2.0), 0, table, kind, np.zeros((0, 4)), LUMINANCE)
     in_order = np.zeros((texels, COLUMNS))
     accumulate_kernel(rays, primitive, distance, *shade, in_order, *_TEXEL_MAJOR, 1.0,
-                      _NO_DIRECTIONS)
+                      NO_DIRECTIONS)
     shuffled = np.random.default_rng(5).permutation(texels * rays)
     any_order = np.zeros((texels, COLUMNS))
     accumulate_kernel(rays, primitive[shuffled], distance[shuffled], *shade, any_order,
-                      shuffled // rays, shuffled % rays, 1.0, _NO_DIRECTIONS)
+                      shuffled // rays, shuffled % rays, 1.0, NO_DIRECTIONS)
     assert np.array_equal(in_order, any_order)
     assert (in_order[:, 5] > 0).any() and (in_order[:, 6] > 0).any()  # the first halves
     counts = np.full(texels, rays, np.int64)
@@ -115,7 +133,8 @@ def test_a_rays_change_replaces_its_value_in_the_sums_exactly():
     """The kernel's signed sums of changed rays (what ``ray_changes`` adds up) and
     ``changed_terms``: the terms of texels after some of their rays' hits changed are the bits
     of the terms of the new hits, summed afresh."""
-    from baker.light.hemisphere import COLUMNS, _TEXEL_MAJOR, accumulate_kernel, terms_of_sums
+    from baker.light.hemisphere import (COLUMNS, NO_DIRECTIONS, _TEXEL_MAJOR,
+                                        accumulate_kernel, terms_of_sums)
     from baker.rebake.exact_sums import changed_terms
     from baker.geometry.surface import LUMINANCE
 
@@ -130,13 +149,13 @@ def test_a_rays_change_replaces_its_value_in_the_sums_exactly():
     shade = (np.float32(2.0), 0, table, kind, np.zeros((0, 4)), LUMINANCE)
     before, after = np.zeros((texels, COLUMNS)), np.zeros((texels, COLUMNS))
     accumulate_kernel(rays, primitive, distance, *shade, before, *_TEXEL_MAJOR, 1.0,
-                      _NO_DIRECTIONS)
+                      NO_DIRECTIONS)
     accumulate_kernel(rays, new_primitive, new_distance, *shade, after, *_TEXEL_MAJOR, 1.0,
-                      _NO_DIRECTIONS)
+                      NO_DIRECTIONS)
     changes = np.zeros((texels, COLUMNS))
     for sign, hits, dist in ((-1.0, primitive, distance), (1.0, new_primitive, new_distance)):
         accumulate_kernel(rays, hits[changed], dist[changed], *shade, changes,
-                          changed // rays, changed % rays, sign, _NO_DIRECTIONS)
+                          changed // rays, changed % rays, sign, NO_DIRECTIONS)
     counts = np.full(texels, rays, np.int64)
     terms, exact = changed_terms(terms_of_sums(before, counts), changes)
     assert exact.all()

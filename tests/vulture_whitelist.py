@@ -1,7 +1,8 @@
 """What ``vulture`` cannot see used in ``baker`` (``tests/test_dead_code.py`` reads this file
 with the package; it is never imported): hooks that Python, numpy, numba, xatlas and the
-standard library call or read by name, values a user reads of the API's results, and two
-methods left for a change that holds their files. Anything else vulture finds is dead code."""
+standard library call or read by name, values a user reads of the API's results, a prototype's
+constant, and three functions left for a change that holds their files. Anything else vulture
+finds is dead code."""
 
 # Python, numpy, numba, xatlas and http.server read or call these by name.
 __getattr__  # baker/__init__.py: the package's lazy public names (PEP 562)
@@ -27,3 +28,8 @@ back_fraction  # atlas/validity.py: Validity's field, written to the bake state
 # it, or to earn a place (issue 41).
 _.standard_error  # light/hemisphere.py: Terms.standard_error
 _.page_masks  # atlas/validity.py: Validity.page_masks
+cosine_directions  # light/hemisphere.py: the bake draws its directions in its kernels now
+
+# The world-space filter, a prototype not yet in the bake (docs/design.md): its widths, read by
+# its docstring and bench_world_filter.py.
+WIDTHS  # image/world_filter.py

@@ -52,7 +52,7 @@ from baker.atlas.rasterise import Texels, flat_pages
 from baker.geometry.world import World
 from baker.gltf.scene import Scene
 from baker.jit import jit
-from baker.rays.trace import Tracer, ray_lift
+from baker.rays.trace import LocalHits, Tracer, ray_lift
 from baker.run.parallel import run_chunks
 
 TANGENT_RAYS = 8
@@ -190,8 +190,8 @@ def _tangent_step(tracer: Tracer, faces: Faces, position: np.ndarray, normal: np
     angle = 2 * np.pi * np.arange(TANGENT_RAYS) / TANGENT_RAYS
     in_plane = np.stack([np.cos(angle), np.sin(angle), np.zeros(TANGENT_RAYS)], axis=1)
     lift = ray_lift(position, size, tracer.center)
-    origins, directions = _fan(position, normal, t1, t2, lift, in_plane)
-    hits = tracer.cast(origins, directions, np.repeat(PROBE_RADIUS * size, TANGENT_RAYS))
+    directions, hits = _cast_fan(tracer, position, normal, t1, t2, lift, in_plane,
+                                 np.repeat(PROBE_RADIUS * size, TANGENT_RAYS))
     new, moved, touching = (np.empty_like(position), np.empty(len(position), np.bool_),
                             np.empty(len(position), np.bool_))
     _cross_nearest(position, size, home, origin, np.ascontiguousarray(axes, np.float64),
@@ -228,7 +228,7 @@ def _cross_nearest(position: np.ndarray, size: np.ndarray, home: np.ndarray,
     """What ``_tangent_step``'s probes found, in one compiled pass over k points (numpy's
     passes over (k, m) temporaries took most of the stage's time outside Embree): their m rays
     point-major, ``directions`` (k·m, 3) and hits ``triangle`` (k·m,) (−1: none) at
-    ``distance`` (k·m,) (inf for misses). Writes ``new`` (k, 3), the point moved past the
+    ``distance`` (k·m,) (``LocalHits``'). Writes ``new`` (k, 3), the point moved past the
     chosen back face and ``PUSH`` texel sides ``size`` (k,) further (or where it was),
     ``moved`` (k,) and ``touching`` (k,): a probe met anything within ``TOUCH`` × ``lift``
     (k,). A back face: ``_back_faces`` with the faces' ``normals`` and ``single``; one the
@@ -246,7 +246,7 @@ def _cross_nearest(position: np.ndarray, size: np.ndarray, home: np.ndarray,
         for j in range(m):
             r = i * m + j
             t = triangle[r]
-            touch |= distance[r] <= TOUCH * lift[i]
+            touch |= t >= 0 and distance[r] <= TOUCH * lift[i]
             facing = t >= 0 and single[t] and (normals[t, 0] * directions[r, 0]
                                                + normals[t, 1] * directions[r, 1]
                                                + normals[t, 2] * directions[r, 2]) > 0
@@ -277,35 +277,52 @@ def hemisphere_probes(position: np.ndarray, normal: np.ndarray, size: np.ndarray
     """The fixed hemisphere probes of k points: origins and directions, each (k·HEMISPHERE_RAYS,
     3) float64 world, point-major; origins lifted off the surface by ``trace.ray_lift``."""
     t1, t2 = probe_frames(normal)
-    return _fan(position, normal, t1, t2, ray_lift(position, size, center),
-                hemisphere_directions(HEMISPHERE_RAYS))
+    m = HEMISPHERE_RAYS
+    origins, directions = np.empty((len(position) * m, 3)), np.empty((len(position) * m, 3))
+    _fan(position, normal, t1, t2, ray_lift(position, size, center),
+         hemisphere_directions(m), np.zeros(3), origins, directions)
+    return origins, directions
+
+
+def _cast_fan(tracer: Tracer, position: np.ndarray, normal: np.ndarray, t1: np.ndarray,
+              t2: np.ndarray, lift: np.ndarray, local: np.ndarray, lengths: np.ndarray
+              ) -> tuple[np.ndarray, LocalHits]:
+    """Cast ``_fan``'s rays within ``lengths`` (k·m,): their directions (k·m, 3) float64 and
+    hits. The rays go to Embree as ``Tracer.cast`` would send them (origins − centre, then
+    float32), made so in the fan's one pass."""
+    origins = np.empty((len(lengths), 3), np.float32)
+    directions = np.empty((len(lengths), 3))
+    _fan(position, normal, t1, t2, lift, local, tracer.center, origins, directions)
+    return directions, tracer.cast_local(origins, directions.astype(np.float32),
+                                         lengths.astype(np.float32))
 
 
 @jit
 def _fan(position: np.ndarray, normal: np.ndarray, t1: np.ndarray, t2: np.ndarray,
-         lift: np.ndarray, local: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Origins and directions (k·m, 3), point-major, of the m ``local`` directions (m, 3) in
-    each point's frame (t1, t2, normal) (k, 3), from the point lifted by ``lift`` (k,)."""
+         lift: np.ndarray, local: np.ndarray, shift: np.ndarray, origins: np.ndarray,
+         directions: np.ndarray) -> None:
+    """Write the origins − ``shift`` (3,) and the directions, (k·m, 3) each, point-major, of
+    the m ``local`` directions (m, 3) in each point's frame (t1, t2, normal) (k, 3), from the
+    point lifted by ``lift`` (k,); float32 ``origins`` take the float64 values rounded."""
     k, m = len(position), len(local)
-    origins = np.empty((k * m, 3))
-    directions = np.empty((k * m, 3))
     for i in range(k):
         for j in range(m):
             r = i * m + j
             for c in range(3):
-                origins[r, c] = position[i, c] + lift[i] * normal[i, c]
+                origins[r, c] = position[i, c] + lift[i] * normal[i, c] - shift[c]
                 directions[r, c] = (local[j, 0] * t1[i, c] + local[j, 1] * t2[i, c]
                                     + local[j, 2] * normal[i, c])
-    return origins, directions
 
 
 def _back_fraction(tracer: Tracer, faces: Faces, position: np.ndarray, normal: np.ndarray,
                    size: np.ndarray, d_max: float) -> tuple[np.ndarray, np.ndarray]:
     """(k,) fraction of the fixed hemisphere probes from each point that meet a back face, and
     (k,) bool whether one touches (meets a surface within ``TOUCH`` ray lifts)."""
-    origins, directions = hemisphere_probes(position, normal, size, tracer.center)
-    hits = tracer.cast(origins, directions, d_max)
+    t1, t2 = probe_frames(normal)
     lift = ray_lift(position, size, tracer.center)
+    directions, hits = _cast_fan(tracer, position, normal, t1, t2, lift,
+                                 hemisphere_directions(HEMISPHERE_RAYS),
+                                 np.full(len(position) * HEMISPHERE_RAYS, d_max))
     fraction, touching = np.empty(len(position)), np.empty(len(position), np.bool_)
     _count_backs(directions, hits.triangle, hits.distance, lift, faces.normals, faces.single,
                  fraction, touching)
@@ -325,7 +342,7 @@ def _count_backs(directions: np.ndarray, triangle: np.ndarray, distance: np.ndar
         backs, touch = 0, False
         for r in range(i * m, (i + 1) * m):
             t = triangle[r]
-            touch |= distance[r] <= TOUCH * lift[i]
+            touch |= t >= 0 and distance[r] <= TOUCH * lift[i]
             if t >= 0 and single[t] and (normals[t, 0] * directions[r, 0]
                                          + normals[t, 1] * directions[r, 1]
                                          + normals[t, 2] * directions[r, 2]) > 0:

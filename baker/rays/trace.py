@@ -245,16 +245,25 @@ class Tracer:
         n = len(origins)
         if n == 0 or self.triangle_count == 0:
             return np.zeros(n, bool)
-        local = (origins - self.center).astype(np.float32)
         dists = np.empty(n, np.float32)
         dists[:] = length
-        directions = directions.astype(np.float32)
-        limit = dists.astype(np.float64)
-        result = self._scene.run(local, directions, dists=dists, query="OCCLUDED")
-        blocked = result >= 0
-        if self.alpha is not None and blocked.any():  # blocked maybe only by see-through hits
-            rows = np.flatnonzero(blocked)
-            again = self._run(local[rows], directions[rows], limit[rows].astype(np.float32))
-            pass_alpha(self._run, self.alpha, local[rows], directions[rows], limit[rows], again)
-            blocked[rows] = again["primID"] >= 0
-        return blocked
+        return self.blocked_local((origins - self.center).astype(np.float32),
+                                  directions.astype(np.float32), dists) >= 0
+
+    def blocked_local(self, origins: np.ndarray, directions: np.ndarray,
+                      lengths: np.ndarray) -> np.ndarray:
+        """(n,) int32: 0 where something lies along the ray within its length, −1 where
+        nothing does (Embree's occlusion query, which stops at the first hit it finds and
+        reports no distance: 14–50 % faster than the nearest hit). Rays as ``cast_local`` takes
+        them (float32, the recentred frame); ``lengths`` is left as it was."""
+        if self.triangle_count == 0:
+            return np.full(len(lengths), -1, np.int32)
+        result = self._scene.run(origins, directions, dists=lengths, query="OCCLUDED")
+        if self.alpha is not None:  # blocked maybe only by see-through hits
+            rows = np.flatnonzero(result >= 0)
+            if len(rows):
+                limit = lengths[rows].astype(np.float64)
+                again = self._run(origins[rows], directions[rows], lengths[rows])
+                pass_alpha(self._run, self.alpha, origins[rows], directions[rows], limit, again)
+                result[rows] = np.where(again["primID"] >= 0, 0, -1)
+        return result
