@@ -28,9 +28,9 @@ The pipeline, stage by stage (docs/design.md §3); each stage hands a frozen dat
     image.carriers               optional (--carrier emissive): pages of outgoing radiance
     output.write.write           Scene + Atlas + pages → glTF file carrying the bake
 
-``pipeline.full.compute`` runs them from the scene to the lightmaps, from ``texels_of`` to
-``compose`` a part of the texels at a time (``pipeline.parts``, ``run.spill``), so a large page
-needs little more memory than its pages. ``rebake.incremental.rebake`` recomputes only what an
+``pipeline.full.compute`` runs them from the scene to the lightmaps, as its named ``STAGES``
+(the lines a bake prints), from ``texels_of`` to ``compose`` a part of the texels at a time
+(``pipeline.parts``, ``run.spill``), so a large page needs little more memory than its pages. ``rebake.incremental.rebake`` recomputes only what an
 edit changed, from the bake state (``rebake.state``). ``api.bake`` chooses between the two,
 writes the files and the report; ``baker.cli`` is the command line over it.
 """

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Callable
 
 from baker.errors import BakerError, InputError, OutputError
+from baker.gltf.container import read_document
 from baker.gltf.load import load
 from baker.gltf.scene import Scene
 from baker.image.carriers import emissive_lightmaps, viewer_notes
@@ -24,25 +25,21 @@ from baker.light.gi import MAX_BOUNCES
 from baker.output.write import (DIRECTIONAL_EXTENSION, WriteInfo, WriteOptions, image_file_name,
                                 write)
 from baker.pipeline import cluster
-from baker.pipeline.full import Computed, compute, timed, writes_occlusion
+from baker.pipeline.full import Computed, compute, writes_occlusion
 from baker.pipeline.input_warnings import input_warnings
 from baker.pipeline.plan import Plan
-from baker.rebake.incremental import (
-    FullBake,
-    asked_settings,
-    details,
-    node_names,
-    rebake,
-    record_full_bake,
-    summary,
-)
+from baker.rebake.asked import asked_settings
 from baker.rebake.diff import code_fingerprint
+from baker.rebake.fallback import FullBake
+from baker.rebake.incremental import rebake
+from baker.rebake.report import details, record_full_bake, summary
 from baker.rebake.staging import StateStaging
 from baker.rebake.state import default_path as default_state_path
 from baker.rebake.state import timing_path
 from baker.run.atomic import Outputs, destination, write_atomically
 from baker.run.compile_clock import CompileClock
 from baker.run.progress import StageLines
+from baker.run.stages import timed
 from baker.settings import Resolved, Settings
 
 
@@ -59,7 +56,7 @@ class BakeResult:
     seconds: float
     rmse_estimate: float
     report: dict = field(repr=False)
-    rebake: dict | None = field(default=None, repr=False)  # incremental.summary: what changed
+    rebake: dict | None = field(default=None, repr=False)  # rebake.report.summary: what changed
 
 
 def check_output(input_path: Path, output: Path, overwrite: bool = False,
@@ -254,7 +251,8 @@ def last_settings(output: str | os.PathLike, state: str | os.PathLike | None = N
 
 def scene_node_names(scene: str | os.PathLike) -> dict[int, str]:
     """Node index → name (or ``nodes[i]``) of the glTF file ``scene``, for messages."""
-    return node_names(scene)
+    document = read_document(scene)
+    return {i: node.name or f"nodes[{i}]" for i, node in enumerate(document.nodes or [])}
 
 
 def encode_pages(done: Computed) -> list[EncodedPage]:

@@ -5,8 +5,8 @@ The geometry a bake hands from stage to stage (the world, the atlas, which trian
 texel) is read by every later stage and written by none; ``read_only`` makes numpy enforce
 that, so that a stage that wrote into another's result fails where it writes. The per-texel
 results (texels, terms, direct light, validity) stay writable: the rebake merges fresh rows
-into the stored ones (``rebake.incremental.merge``), and its ``_Search`` owns the texels whose
-sample points the probes move.
+into the stored ones (``rebake.rows.merge``), and its dirty search (``rebake.dirty.Search``)
+owns the texels whose sample points the probes move.
 """
 
 from __future__ import annotations

@@ -64,5 +64,5 @@ if not any(cls.__name__.startswith("Baker") for cls in caching.CacheImpl._locato
 jit = numba.njit(nogil=True, cache=True)
 # For helpers that take arrays and run once per texel or ray inside a kernel: inlined into the
 # kernels that call them (numba IR), where a call passing arrays costs several times their
-# arithmetic (``rebake.incremental._near_flags``: 907 -> 105 ns a texel of 64 rays).
+# arithmetic (``rebake.near_rays._near_flags``: 907 -> 105 ns a texel of 64 rays).
 inline = numba.njit(nogil=True, cache=True, inline="always")

@@ -43,8 +43,10 @@ from baker.errors import InputError, OutputError, SettingsError
 from baker.geometry.surface import (LUMINANCE, SRGB_TO_LINEAR, albedo, alpha, base_colour,
                                     emission, transformed_uv, viewer_diffuse_weight_at)
 from baker.geometry.world import World, build_world
+from baker.gltf.load import load
 from baker.gltf.materials import BLEND
-from baker.gltf.load import image_pixels, load, trs_matrices
+from baker.gltf.read_images import image_pixels
+from baker.gltf.read_nodes import trs_matrices
 from baker.gltf.scene import Scene
 from baker.light.viewer_lights import punctual_shading
 from baker.image.encode import linear_to_srgb, png_bytes
@@ -265,7 +267,7 @@ def read_lightmaps(scene: Scene, world: World) -> SceneLightmaps:
         found = _carried_texture(document, scene.materials[prim.material], carrier, encoding)
         if found is None or found[1] >= len(prim.texcoords):
             continue
-        directional.add(scene, world, i, found[1])
+        directional.add(scene, world, i)
         texture, texcoord, scale, curve, red = found
         source = document.textures[texture].source
         key = (source, scale, curve, red)
@@ -302,7 +304,7 @@ class _DirectionalReader:
         self.images: list[np.ndarray] = []
         self.maps: list[np.ndarray] = []
 
-    def add(self, scene: Scene, world: World, instance: int, lightmap_uv: int) -> None:
+    def add(self, scene: Scene, world: World, instance: int) -> None:
         """The directional page and the normal map of ``instance``'s material, when it has
         both (``BAKER_lightmap_directional`` on the lightmap's UV set, a normalTexture)."""
         prim = scene.primitives[scene.instances[instance].primitive]

@@ -40,7 +40,7 @@ CALLER_ONLY = ("threads", "chunk_texels", "cluster", "max_total_rays", "allow_ha
 or read: its threads, the size of its work units (memory), the cluster it runs on (where the
 scene is sent), its ray budget and whether it reads files with several names. They come only
 from whoever runs the bake (the command line, the API), never from a file that travels with the
-scene: ``rebake.incremental.asked_settings`` drops them from a bake state, which is as
+scene: ``rebake.asked.asked_settings`` drops them from a bake state, which is as
 untrusted as the scene it sits beside."""
 
 MAX_TOTAL_RAYS = 10 ** 10

@@ -5,6 +5,9 @@ of rays per texel, the obscurance terms are estimated again and timed. Each run'
 (I_A·W, luminance) is compared with a converged reference — the same estimator with many more
 rays — to give the measured RMSE, next to the RMSE the bake itself estimates from its samples'
 variance (what every bake reports). Units are lightmap units, as in the report.
+
+``calibration`` asks the other question, whether those estimates hold: a bake's estimated
+error against its measured one, texel by texel (docs/model.md, ``benchmarks/bench_calibration.py``).
 """
 
 from __future__ import annotations
@@ -19,7 +22,8 @@ from baker.geometry.surface import LUMINANCE
 from baker.gltf.scene import Scene
 from baker.image.compose import effective_r_ave
 from baker.image.errormap import texel_errors
-from baker.light import direct
+from baker.light.direct import texel_receivers
+from baker.light.direct_estimators import sky_irradiance
 from baker.light.gi import indirect_light
 from baker.light.hemisphere import Terms
 from baker.light.integrate import integrate
@@ -168,22 +172,20 @@ def sky_rows(done: Computed, rays: tuple[int, ...] = DEFAULT_RAYS,
     ``rays`` rays per texel, drawn as a bake draws them ("sky image": the image's peak by the
     image, light/sky.py) and by cosine rays alone ("sky cosine", as a colour sky's), each timed
     and measured (luminance RMSE) against ``reference_rays`` of the bake's rays, another
-    seed; the estimated RMSE from the rays' halves (``direct.mean_and_variance``). Empty
+    seed; the estimated RMSE from the rays' halves (``direct_estimators.mean_and_variance``). Empty
     without an image sky."""
     sky = done.sources.sky if done.sources is not None else None
     if sky is None or not sky.is_image:
         return ()
     tracer = Tracer(done.world)
-    receivers = direct.texel_receivers(done.texels, slice(None), tracer.center)
-    reference, _ = direct.sky_irradiance(sky, reference_rays, receivers, tracer,
-                                         done.settings.seed + 1)
+    receivers = texel_receivers(done.texels, slice(None), tracer.center)
+    reference, _ = sky_irradiance(sky, reference_rays, receivers, tracer, done.settings.seed + 1)
     rows = []
     for name, drawn in (("sky image", sky), ("sky cosine", replace(sky, ceiling=np.inf,
                                                                      image_share=0.0))):
         for count in rays:
             started = time.perf_counter()
-            got, variance = direct.sky_irradiance(drawn, count, receivers, tracer,
-                                                  done.settings.seed)
+            got, variance = sky_irradiance(drawn, count, receivers, tracer, done.settings.seed)
             seconds = time.perf_counter() - started
             rmse = float(np.sqrt(np.mean(((got - reference) @ LUMINANCE) ** 2)))
             rows.append(Row(name, count, seconds, rmse, float(np.sqrt(np.mean(variance)))))
@@ -271,7 +273,7 @@ _RAY_KINDS = ("shadow_rays", "emissive_rays", "sky_rays")  # with ``rays``: ever
 def _calibration_bake(scene: Scene, settings: dict, rays: int, seed: int
                       ) -> tuple[np.ndarray, np.ndarray, float]:
     """A bake of ``scene`` at ``rays`` rays of every kind (I_A's power estimate follows them,
-    ``direct.power_samples``): the baked texels' lightmap luminance, their ``texel_errors`` and
+    ``power.power_samples``): the baked texels' lightmap luminance, their ``texel_errors`` and
     the ``rmse_estimate``."""
     done = compute(scene, Settings(rays=rays, seed=seed,
                                    **{**settings, **dict.fromkeys(_RAY_KINDS, rays)}))

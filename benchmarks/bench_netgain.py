@@ -44,7 +44,7 @@ from baker.gltf.load import load  # noqa: E402
 from baker.image.compose import effective_r_ave  # noqa: E402
 from baker.image.errormap import pooled  # noqa: E402
 from baker.light.hemisphere import (  # noqa: E402
-    _TEXEL_MAJOR, _accumulate_kernel, _shading, surfaces_of, world_rays)
+    _TEXEL_MAJOR, accumulate_kernel, hit_shading, surfaces_of, world_rays)
 from baker.light.integrate import integrate  # noqa: E402
 from baker.light.obscurance import RHO_KINDS  # noqa: E402
 from baker.pipeline.full import compute  # noqa: E402
@@ -59,7 +59,7 @@ _CHUNK = 4096  # texels whose rays are held at once
 def net_values(done, tracer, surfaces, rows: np.ndarray, rays: int, seed: int, lum: float
                ) -> np.ndarray:
     """(k, rays) luminance of W per ray for the texels ``rows`` (k,), the rays one scrambled
-    net of ``rays`` per texel (seed ``seed``), shaded as ``_accumulate_kernel`` shades them
+    net of ``rays`` per texel (seed ``seed``), shaded as ``accumulate_kernel`` shades them
     (one ray per row of its sums)."""
     settings = done.settings
     out = np.empty((len(rows), rays))
@@ -72,11 +72,11 @@ def net_values(done, tracer, surfaces, rows: np.ndarray, rays: int, seed: int, l
                                          local[:, 1].copy(), local[:, 2].copy(), tracer.center)
         hits = tracer.cast_local(origins, directions,
                                  np.full(len(origins), settings.d_max, np.float32))
-        kind, albedo = _shading(surfaces, settings, hits)
+        kind, albedo = hit_shading(surfaces, settings, hits)
         sums = np.zeros((len(origins), 7))
-        _accumulate_kernel(1, hits.triangle, hits.distance, np.float32(settings.d_max),
-                           RHO_KINDS[settings.rho], surfaces.table, kind, albedo, LUMINANCE,
-                           sums, *_TEXEL_MAJOR, 1.0)
+        accumulate_kernel(1, hits.triangle, hits.distance, np.float32(settings.d_max),
+                          RHO_KINDS[settings.rho], surfaces.table, kind, albedo, LUMINANCE,
+                          sums, *_TEXEL_MAJOR, 1.0)
         out[start:start + len(part)] = (sums[:, :3] @ LUMINANCE + lum * sums[:, 3]).reshape(
             len(part), rays)
     return out

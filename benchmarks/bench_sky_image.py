@@ -3,8 +3,8 @@
 A 3 m floor with a 0.6 m box on it under a sun-like panorama (``assets.sky_images.sun``: a
 disc of 1° radius at 50° elevation, 2·10⁴ times brighter than the sky around it, over a
 uniform sky and a darker ground). For every texel, the direct sky irradiance
-(``direct.sky_irradiance``) with ``n`` rays: drawn by the image and the cosine half and half
-(``Sky.draw``, what a bake does) or by the cosine alone (``image_share`` 0, as a constant sky's
+(``direct_estimators.sky_irradiance``) with ``n`` rays: drawn by the image and the cosine half and
+half (``Sky.draw``, what a bake does) or by the cosine alone (``image_share`` 0, as a constant sky's
 rays are drawn). RMSE (luminance, over the texels) against a reference of ``--reference``
 rays of the mixture with another seed. Then, for each count of the mixture, the cosine rays
 that reach the same RMSE (the cosine's RMSE falls as n^-½ here: log-log interpolation of its
@@ -31,7 +31,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from assets import sky_images  # noqa: E402
 from assets.light_scenes import floor_under_box  # noqa: E402
 from baker.geometry.surface import LUMINANCE  # noqa: E402
-from baker.light.direct import sky_irradiance, texel_receivers  # noqa: E402
+from baker.light.direct import texel_receivers  # noqa: E402
+from baker.light.direct_estimators import sky_irradiance  # noqa: E402
 from baker.light.sky import Sky  # noqa: E402
 from baker.rays.trace import Tracer  # noqa: E402
 from tests.bakehelp import computed  # noqa: E402

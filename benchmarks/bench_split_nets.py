@@ -29,7 +29,7 @@ from assets.many_objects import boxes_and_sphere  # noqa: E402
 from baker.geometry.surface import LUMINANCE  # noqa: E402
 from baker.gltf.load import load  # noqa: E402
 from baker.image.compose import effective_r_ave  # noqa: E402
-from baker.light.hemisphere import _chunk_sums, _means, surfaces_of  # noqa: E402
+from baker.light.hemisphere import _chunk_sums, terms_of_sums, surfaces_of  # noqa: E402
 from baker.pipeline.full import compute  # noqa: E402
 from baker.rays.trace import Tracer  # noqa: E402
 from baker.settings import Settings  # noqa: E402
@@ -46,7 +46,7 @@ def luminance_w(done, tracer, surfaces, rows, rays: int, first: int, seed: int) 
     says; 0 here)."""
     settings = replace(done.settings, seed=seed, rays=0)
     sums, _ = _chunk_sums(surfaces, tracer, done.texels, rows, first, rays, settings)
-    terms = _means(sums, np.full(len(rows), rays, np.int64))
+    terms = terms_of_sums(sums, np.full(len(rows), rays, np.int64))
     return terms.obscurance(effective_r_ave(done.ambient, settings.rho)) @ LUMINANCE
 
 

@@ -29,7 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import baker  # noqa: E402
 from assets.rebake_scenes import box_room, grid_boxes  # noqa: E402
 from baker.rebake import state as state_file  # noqa: E402
-from baker.rebake.incremental import state_classes  # noqa: E402
+from baker.rebake.state import state_classes  # noqa: E402
 from baker.rebake.zipwriter import ZipWriter  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 
+from baker.atlas.rasterise import Texels, cover, texels_of
+from baker.image.compose import Lightmaps, blank, compose_into
 from baker.pipeline.full import Computed, compute
 from baker.gltf.load import load
 from baker.gltf.scene import Scene
@@ -41,6 +43,21 @@ def computed(builder, folder: Path, only_nodes=None, **settings) -> Computed:
             replace(inst, baked=inst.baked and inst.node in only_nodes, reason="not under test")
             for inst in scene.instances))
     return compute(scene, Settings(**settings))
+
+
+def rasterised(atlas, world) -> Texels:
+    """Every texel a baked triangle touches, with its world sample point and normals, in one
+    part: the bake's own ``rasterise.cover`` and ``texels_of``."""
+    return texels_of(atlas, world, cover(atlas, world))
+
+
+def composed(done: Computed, direct=None, visibility: bool = True) -> Lightmaps:
+    """The pages of ``done``'s texels composed as a bake composes them (``compose.blank``,
+    ``compose_into``), before any post-processing: L = D + I_A·W with ``direct`` (None: no
+    direct light), and the visibility's pages with ``visibility``."""
+    lightmaps = blank(done.atlas, visibility)
+    compose_into(lightmaps, done.texels, done.terms, done.ambient, done.settings.rho, direct)
+    return lightmaps
 
 
 def carried(material) -> dict | None:

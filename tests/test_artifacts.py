@@ -9,12 +9,11 @@ import pytest
 from assets.artifact_scenes import lit_leak_room, low_poly_sphere, shadow_edge
 from baker.errors import SettingsError
 from baker.geometry.world import build_world
-from baker.atlas.rasterise import rasterise
 from baker.settings import Settings
 from baker.atlas.supersample import sub_offsets
 from baker.rays.trace import Tracer
 from baker.atlas.validity import _raise
-from tests.bakehelp import computed, loaded
+from tests.bakehelp import computed, loaded, rasterised
 from tests.test_validity import DENSITY, _floor_lookup_texels, _grid, _interior_points, _node_of
 
 LIGHTS = {  # a bright light outside the room: steep sun, grazing suns at the thin and thick
@@ -39,7 +38,7 @@ def _light_leaks(done, builder):
     info = builder.info
     h = info["half"]
     floor = _node_of(done) == info["nodes"]["floor"]
-    centre = rasterise(done.atlas, done.world).position[floor]  # before any was moved
+    centre = rasterised(done.atlas, done.world).position[floor]  # before any was moved
     r = done.texels.size(floor)[:, None] / 2
     overlap = (np.clip(h - (np.abs(centre[:, [0, 2]]) - r), 0.0, 2 * r) / (2 * r)).prod(axis=1)
     t = done.texels

@@ -10,7 +10,8 @@ import io
 
 import baker
 from assets.make_scenes import cornell_box, three_instances, vase_room
-from baker.gltf.load import load, read_accessor
+from baker.gltf.accessors import read_accessor
+from baker.gltf.load import load
 from tests.bakehelp import REAL_SCENES, carried, page_uv, saved
 from tests.gltf_validator import describe, issue_codes, validate
 

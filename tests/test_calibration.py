@@ -14,7 +14,8 @@ from baker.geometry.surface import LUMINANCE
 from baker.geometry.world import build_world
 from baker.gltf.load import load
 from baker.light.ambient import ambient_terms
-from baker.light.direct import POWER_POINTS, delivered_power, light_sources, power_samples
+from baker.light.power import POWER_POINTS, delivered_power, power_samples
+from baker.light.sources import light_sources
 from baker.rays.trace import Tracer
 from baker.settings import Settings, resolve
 from baker.study import calibration

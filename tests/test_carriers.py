@@ -22,10 +22,9 @@ from baker.errors import SettingsError
 from baker.geometry.surface import LUMINANCE, albedo, emission
 from baker.gltf.load import load
 from baker.image.carriers import emissive_lightmaps
-from baker.image.compose import compose
 from baker.light.inner import OTHER_SIDE
 from baker.preview import render
-from tests.bakehelp import REAL_SCENES, computed, saved
+from tests.bakehelp import REAL_SCENES, composed, computed, saved
 
 import gltf_validator
 
@@ -109,10 +108,8 @@ def test_indirect_leaves_out_exactly_the_punctual_direct_light(tmp_path):
     indirect = computed(scene, tmp_path / "b", texel_density=6, rays=16, carrier="moz",
                         baked_lights="indirect")
     covered = removed.lightmaps.covered
-    direct_only = compose(removed.atlas, removed.texels, removed.terms, removed.ambient,
-                          removed.settings.rho, removed.direct, visibility=False)
-    no_direct = compose(removed.atlas, removed.texels, removed.terms, removed.ambient,
-                        removed.settings.rho, None, visibility=False)
+    direct_only = composed(removed, removed.direct, visibility=False)
+    no_direct = composed(removed, None, visibility=False)
     assert np.array_equal(indirect.ambient.intensity, removed.ambient.intensity)  # I_A kept
     # the composed pages (before post-processing) relate exactly; post-processing is the same
     difference = (direct_only.light - no_direct.light)[covered]

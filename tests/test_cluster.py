@@ -140,7 +140,7 @@ def _rebakes(folder: Path, settings: dict) -> tuple[Path, Path, Path]:
     and the edited scene (``_short_block_moved``): (its path, the local and the cluster
     outputs, each with the state of the first bake beside it, without its timing record: the
     move reaches most texels, and by the record's stage times a rebake may cost about what a
-    full bake does (``incremental.rebake_cost``), which these tests do not weigh)."""
+    full bake does (``cost.rebake_cost``), which these tests do not weigh)."""
     local, remote = _outputs(folder)
     baker.bake(cornell_box().save(folder / "cornell.glb"), local, baker.Settings(**settings))
     Path(f"{default_path(local)}.json").unlink()

@@ -9,14 +9,49 @@ bounces, and that no module keeps a dimension of its own outside it.
 from __future__ import annotations
 
 import re
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
 
 from baker.rays import dimensions
+from baker.rays.dimensions import (ALPHA, EMISSIVE, FOLIAGE_FIT, GI_EMITTER, GI_FIRST, MATERIAL,
+                                   MATERIAL_STRIDE, OBSCURANCE, POWER, POWER_TRACED, SKY,
+                                   SUPERSAMPLE, alpha_dimension, light_dimension,
+                                   material_dimension)
 from baker.rays.trace import MAX_CONTINUATIONS
 
 PACKAGE = Path(__file__).resolve().parents[1] / "baker"
+
+
+@dataclass(frozen=True)
+class Range:
+    """Dimensions ``start`` … ``stop − 1`` of ``stream``, owned by ``owner``."""
+
+    owner: str
+    stream: str
+    start: int
+    stop: int
+
+
+def ranges(lights: int, max_depth: int, continuations: int) -> list[Range]:
+    """Every range of ``baker.rays.dimensions`` in use by a bake with ``lights`` punctual
+    lights, material chains of at most ``max_depth`` bounces and ``continuations`` alpha-test
+    steps a ray (a range added there is added here)."""
+    table = [Range("obscurance", "sobol", OBSCURANCE, OBSCURANCE + 1),
+             Range("supersample", "sobol", SUPERSAMPLE, SUPERSAMPLE + 1),
+             Range("power", "sobol", POWER[0], POWER[1] + 1),
+             Range("sky", "sobol", SKY, SKY + 1),
+             Range("emissive", "sobol", EMISSIVE, EMISSIVE + 1),
+             Range("traced power", "sobol", POWER_TRACED[0], POWER_TRACED[1] + 1),
+             Range("gi", "sobol", GI_FIRST, GI_EMITTER + 1)]
+    table += [Range(f"light {l}", "sobol", light_dimension(l), light_dimension(l) + 1)
+              for l in range(lights)]
+    table += [Range("foliage fit", "uniform", FOLIAGE_FIT, FOLIAGE_FIT + 1),
+              Range("material", "uniform", MATERIAL,
+                    material_dimension(max_depth) + MATERIAL_STRIDE),
+              Range("alpha", "ray", ALPHA, alpha_dimension(continuations))]
+    return table
 
 
 def _overlaps(table):
@@ -32,15 +67,15 @@ def _overlaps(table):
 @pytest.mark.parametrize("lights", [0, 1, 11, 12, 13, 40, 300, 5000])
 @pytest.mark.parametrize("max_depth", [1, 16, 200])
 def test_no_two_ranges_of_a_stream_overlap(lights, max_depth):
-    table = dimensions.ranges(lights, max_depth, MAX_CONTINUATIONS)
+    table = ranges(lights, max_depth, MAX_CONTINUATIONS)
     assert all(r.start < r.stop for r in table)
     assert _overlaps(table) == []
 
 
 def test_the_checker_finds_an_overlap():
     """The layout before the table (16 + 2l for every light) is caught at light 12."""
-    table = [dimensions.Range("gi", "sobol", dimensions.GI_FIRST, dimensions.GI_EMITTER + 1)]
-    table += [dimensions.Range(f"light {l}", "sobol", 16 + 2 * l, 17 + 2 * l) for l in range(13)]
+    table = [Range("gi", "sobol", dimensions.GI_FIRST, dimensions.GI_EMITTER + 1)]
+    table += [Range(f"light {l}", "sobol", 16 + 2 * l, 17 + 2 * l) for l in range(13)]
     assert [(a.owner, b.owner) for a, b in _overlaps(table)] == [("gi", "light 12")]
 
 

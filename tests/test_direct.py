@@ -8,7 +8,7 @@ import pytest
 import baker
 from assets.gltf_builder import GltfBuilder, quad
 from assets.light_scenes import blocked_floor, emissive_square, lit_floor, open_floor, penumbra
-from baker.light.direct import spot_attenuation
+from baker.light.direct_estimators import spot_attenuation
 from baker.geometry.surface import LUMINANCE
 from tests.bakehelp import REAL_SCENES, computed, loaded
 

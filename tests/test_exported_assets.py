@@ -11,7 +11,8 @@ import pytest
 
 from assets.gltf_builder import GltfBuilder, box, quad
 from baker.errors import InputError, SettingsError
-from baker.gltf.load import VIEW_ONLY_EXTENSIONS, load
+from baker.gltf.extensions import VIEW_ONLY_EXTENSIONS
+from baker.gltf.load import load
 from baker.gltf.materials import DIFFUSE, classify
 from baker.settings import Settings
 from baker.pipeline.full import compute

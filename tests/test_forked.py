@@ -1,4 +1,4 @@
-"""A call run in a forked child (``baker/forked.py``, how xatlas runs): its value or its error
+"""A call run in a forked child (``baker/run/forked.py``, how xatlas runs): its value or its error
 comes back, and a child killed by a signal is run again."""
 
 from __future__ import annotations
@@ -19,11 +19,16 @@ pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"),
                                 reason="forked calls are made on Linux only; elsewhere in-process")
 
 
+def call_forked(function, what: str, seconds: float):
+    """One function run as the charting runs its calls (``forked.call_forked_together``)."""
+    return forked.call_forked_together([function], what, seconds)[0]
+
+
 def test_the_childs_value_comes_back_and_the_child_is_another_process():
     def work():
         return os.getpid(), np.arange(5.0) * 2
 
-    pid, values = forked.call_forked(work, "a test", 60)
+    pid, values = call_forked(work, "a test", 60)
     assert pid != os.getpid()
     assert np.array_equal(values, np.arange(5.0) * 2)
 
@@ -43,7 +48,7 @@ def test_a_child_killed_by_a_signal_is_run_again(tmp_path):
             _crash()
         return "second run"
 
-    assert forked.call_forked(crashes_once, "a test", 60) == "second run"
+    assert call_forked(crashes_once, "a test", 60) == "second run"
     assert marker.read_text() == "crashed"
 
 
@@ -56,7 +61,7 @@ def test_a_child_that_always_crashes_ends_in_a_clear_error(tmp_path):
         _crash()
 
     with pytest.raises(BakerError) as caught:
-        forked.call_forked(always, "the unwrapper (xatlas)", 60)
+        call_forked(always, "the unwrapper (xatlas)", 60)
     assert "the unwrapper (xatlas) crashed 3 times in a row (SIGSEGV" in str(caught.value)
     assert "fix:" in str(caught.value)
     assert len(list(runs.iterdir())) == forked.ATTEMPTS
@@ -67,7 +72,7 @@ def test_the_childs_error_is_raised_here():
         raise ValueError("no mesh")
 
     with pytest.raises(ValueError, match="no mesh"):
-        forked.call_forked(fails, "a test", 60)
+        call_forked(fails, "a test", 60)
 
 
 def test_a_child_that_hangs_is_killed_and_run_again(tmp_path):
@@ -80,7 +85,7 @@ def test_a_child_that_hangs_is_killed_and_run_again(tmp_path):
         return "second run"
 
     start = time.monotonic()
-    assert forked.call_forked(hangs_once, "a test", 1.0) == "second run"
+    assert call_forked(hangs_once, "a test", 1.0) == "second run"
     assert time.monotonic() - start < 10
 
 
@@ -96,7 +101,7 @@ def test_a_child_that_spins_is_killed_by_its_cpu_time_and_run_again(tmp_path):
         return "second run"
 
     start = time.monotonic()
-    assert forked.call_forked(spins_once, "a test", 1.0) == "second run"
+    assert call_forked(spins_once, "a test", 1.0) == "second run"
     assert time.monotonic() - start < 30  # 1 s of CPU, at any share of a core a CI gives
 
 
@@ -116,7 +121,7 @@ def test_a_child_slowed_by_a_busy_machine_is_not_killed(tmp_path):
             time.sleep(0.09)
         return "finished"
 
-    assert forked.call_forked(slowed, "a test", 1.0) == "finished"
+    assert call_forked(slowed, "a test", 1.0) == "finished"
     assert len(list(runs.iterdir())) == 1
 
 
@@ -142,8 +147,8 @@ def test_cpu_time_is_that_of_the_process_and_none_once_it_has_exited():
 
 
 def test_a_bake_whose_chart_builder_crashes_once_gives_the_same_bytes(tmp_path, monkeypatch):
-    """The charting goes through ``call_forked``: a child dying of SIGSEGV in its first run (as
-    xatlas's task scheduler's race makes it) costs a re-run, not the bake."""
+    """The charting goes through ``call_forked_together``: a child dying of SIGSEGV in its first
+    run (as xatlas's task scheduler's race makes it) costs a re-run, not the bake."""
     from baker.atlas import charts
 
     monkeypatch.setenv("BAKER_CACHE_DIR", "off")  # both bakes chart every mesh

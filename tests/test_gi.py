@@ -3,7 +3,7 @@
 import numpy as np
 
 from assets.gltf_builder import GltfBuilder, box
-from baker.light.direct import light_sources
+from baker.light.sources import light_sources
 from baker.light.gi import indirect_light
 from baker.study import compare_with_gi
 from baker.rays.trace import Tracer

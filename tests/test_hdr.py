@@ -13,7 +13,7 @@ from PIL import Image
 import baker
 from assets.light_scenes import lit_floor
 from baker.image.compose import Lightmaps
-from baker.image.encode import decode, encode, error_bound
+from baker.image.encode import decode, encode, linear_to_srgb, srgb_to_linear
 from baker.image.hdr import exr_bytes, hdr_bytes
 from baker.cli.main import main
 from tests.bakehelp import computed, saved
@@ -26,6 +26,25 @@ def _hdr_page(shape=(256, 256), low=1e-2, high=1e5, seed=1) -> np.ndarray:
     grey = 10 ** rng.uniform(np.log10(low), np.log10(high), shape)
     tint = rng.uniform(0.5, 1.0, shape + (3,))
     return grey[..., None] * tint / tint.max(axis=-1, keepdims=True)
+
+
+def error_bound(values: np.ndarray, intensity: float, encoding: str) -> np.ndarray:
+    """The largest |decoded − value| that encoding ``values`` (linear, ≥ 0, any shape) can give
+    (docs/output.md's error bound).
+
+    Below ``intensity``: half a code step of the curve at the value, measured exactly on the
+    curve (``linear``: intensity/510 everywhere; ``srgb``: smaller in the darks, larger near the
+    top). Above it the texel clips: the error is ``value − intensity``.
+    """
+    x = np.asarray(values, np.float64) / intensity
+    inside = np.clip(x, 0.0, 1.0)
+    if encoding == "srgb":
+        e = linear_to_srgb(inside)
+        half = 0.5 / 255.0
+        step = np.maximum(srgb_to_linear(e + half) - inside, inside - srgb_to_linear(e - half))
+    else:
+        step = np.full_like(inside, 0.5 / 255.0)
+    return np.where(x > 1.0, x - 1.0, step) * intensity
 
 
 def _read_png(png: bytes) -> np.ndarray:

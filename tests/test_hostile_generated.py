@@ -183,7 +183,7 @@ def test_a_bake_state_gives_no_setting_a_caller_alone_gives(tmp_path):
     work-unit size, threads): a state edited to say them gives the defaults (or the caller's
     overrides), while the rest of what it says is kept."""
     from baker.cli.main import main
-    from baker.rebake.incremental import asked_settings
+    from baker.rebake.asked import asked_settings
     from baker.settings import CALLER_ONLY, Settings
     from tests.hostile_cases import edit_state
 

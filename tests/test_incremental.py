@@ -17,13 +17,14 @@ from assets.gltf_builder import quat_axis_angle, rotation_matrix
 from assets.rebake_scenes import box_room, grid_boxes, moved
 from baker.pipeline.full import compute
 from baker.geometry.world import build_world
-from baker.rebake.incremental import FullBake, rebake
+from baker.rebake.fallback import FullBake
+from baker.rebake.incremental import rebake
 from baker.gltf.load import load
-from baker.atlas.rasterise import rasterise
 from baker.settings import resolve
 from baker.rebake.state import default_path
 from baker.atlas.unwrap import frame_area, stretch, unwrap
 from baker.cli.main import main
+from tests.bakehelp import rasterised
 
 ROOM = (4.0, 3.0, 4.0)
 BOXES = grid_boxes(4, room=ROOM, size=0.4)
@@ -131,7 +132,7 @@ def test_atlas_and_texels_do_not_change_under_a_rigid_move(tmp_path):
         world = build_world(scene)
         settings = resolve(SETTINGS, frame_area(scene, world), 1.0)
         atlas = unwrap(scene, world, settings)
-        out.append((settings, atlas, rasterise(atlas, world)))
+        out.append((settings, atlas, rasterised(atlas, world)))
     (s0, a0, t0), (s1, a1, t1) = out
     assert s0.texel_density == s1.texel_density
     assert (a0.width, a0.height, a0.page_count) == (a1.width, a1.height, a1.page_count)
@@ -444,7 +445,7 @@ def test_state_leaves_out_arrays_of_zeros_and_reads_them_back(base):
     sky or mirrors does not have are not held at all (0 rows)."""
     import json
 
-    from baker.rebake.incremental import state_classes
+    from baker.rebake.state import state_classes
 
     path = default_path(base)
     with zipfile.ZipFile(path) as archive:
@@ -467,7 +468,7 @@ def test_state_stores_repeated_and_sparse_arrays_compactly_and_reads_them_back(b
     with the bits, shape and dtype it was written with."""
     import json
 
-    from baker.rebake.incremental import state_classes
+    from baker.rebake.state import state_classes
 
     path = default_path(base)
     with zipfile.ZipFile(path) as archive:
@@ -541,7 +542,7 @@ def test_a_small_move_at_the_edge_of_the_scene_still_rebakes(tmp_path):
 def test_a_box_moved_out_of_the_room_keeps_the_derived_d_max(tmp_path, capsys):
     """A box pushed out through a wall grows the baked bounds, whose diagonal the automatic
     d_max follows (a quarter octave of it): the bake keeps the last one's instead
-    (``incremental.kept_d_max``), says so and records it as asked. The tracer's frame moved
+    (``asked.kept_d_max``), says so and records it as asked. The tracer's frame moved
     with the bounds, so it bakes fully — with the kept d_max: the bytes of a full bake given
     it."""
     before = _room().save(tmp_path / "before.glb")
@@ -588,10 +589,10 @@ def test_texels_touching_a_corner_follow_the_full_bake_after_any_move(tmp_path):
 
 def test_the_shadow_ray_prefilter_keeps_every_texel_whose_rays_meet_the_move(tmp_path,
                                                                               monkeypatch):
-    """``_may_shadow`` skips the texels whose shadow rays cannot pass the moved box (by the rays'
-    geometry); with a soft point light, a spot and a soft sun, the rebake finds the same
-    shadow-dirty texels as when every texel's shadow rays are cast, and the same bytes."""
-    from baker.rebake import incremental as incremental
+    """``shadows.may_shadow`` skips the texels whose shadow rays cannot pass the moved box (by
+    the rays' geometry); with a soft point light, a spot and a soft sun, the rebake finds the
+    same shadow-dirty texels as when every texel's shadow rays are cast, and the same bytes."""
+    from baker.rebake import shadows
 
     def lit(boxes):
         builder = _room(boxes, lamp=dict(LAMP, radius=0.3))
@@ -610,7 +611,7 @@ def test_the_shadow_ray_prefilter_keeps_every_texel_whose_rays_meet_the_move(tmp
     found = {}
     for name, prefilter in (("all", False), ("filtered", True)):
         if not prefilter:
-            monkeypatch.setattr(incremental, "_may_shadow",
+            monkeypatch.setattr(shadows, "may_shadow",
                                 lambda texels, rows, *_: np.ones(len(rows), bool))
         baker.bake(before, tmp_path / f"{name}.glb", settings)
         result = baker.bake(after, tmp_path / f"{name}.glb", settings, incremental="always")
@@ -675,9 +676,9 @@ def test_state_atlas_joins_the_instances_and_splits_them_back(tmp_path):
 
 def test_rays_stopped_before_the_moved_box_leave_their_texels_clean(tmp_path, monkeypatch):
     """A ray that meets the moved box only behind a surface that did not move has that surface
-    as its first hit before and after the move (``_HitsCompared``): the texels behind a
+    as its first hit before and after the move (``judges.HitsCompared``): the texels behind a
     screen are not recomputed, and the rebake still gives the full bake's bytes."""
-    from baker.rebake import incremental as incremental
+    from baker.rebake.judges import HitsCompared
 
     screen = {"name": "screen", "size": (0.1, 1.2, 2.5), "at": (0.1, 0.5), "colour": "crate"}
     settings = baker.Settings(rays=16, page_size=128, shadow_rays=4, threads=1, d_max=1.5)
@@ -687,8 +688,8 @@ def test_rays_stopped_before_the_moved_box_leave_their_texels_clean(tmp_path, mo
     found = {}
     for name in ("every ray that meets it", "first hits only"):
         if name == "every ray that meets it":
-            judged = incremental._HitsCompared.__call__  # every ray that meets it: changed
-            monkeypatch.setattr(incremental._HitsCompared, "__call__",
+            judged = HitsCompared.__call__  # every ray that meets it: changed
+            monkeypatch.setattr(HitsCompared, "__call__",
                                 lambda self, *rays: judged(self, *rays) | True)
         out = tmp_path / f"{name}.glb"
         baker.bake(before, out, settings)
@@ -704,13 +705,13 @@ def test_rays_stopped_before_the_moved_box_leave_their_texels_clean(tmp_path, mo
 
 
 def test_the_cell_search_finds_the_rays_drawing_them_all_finds():
-    """``_drawn_near_rays`` finds the rays of texels far from the spheres cell by cell
+    """``near_rays.drawn_near_rays`` finds the rays of texels far from the spheres cell by cell
     (``_cell_candidates``) and draws all the rays of the others: the same rays, bit for bit,
     as drawing every texel's rays, for texels near and far, facing the spheres or not, and ray
     counts that are powers of two or not. Half the texels' hemispheres tilt from their front
     faces (shading normals), so some of their rays are folded above the face
     (``sampling.fold``): every ray whose folded direction passes near a sphere is found."""
-    from baker.rebake.incremental import _drawn_near_rays
+    from baker.rebake.near_rays import drawn_near_rays
     from baker.light.hemisphere import cosine_directions
     from baker.rays.sampling import folded, tangent_frames
 
@@ -729,7 +730,7 @@ def test_the_cell_search_finds_the_rays_drawing_them_all_finds():
         t1, t2 = tangent_frames(normals)
         args = (0, np.uint64(11), keys, rays, starts, t1, t2, normals, geometric,
                 centres, radii, 2.5)
-        found = [sorted(zip(*(a.tolist() for a in _drawn_near_rays(*args, cells))))
+        found = [sorted(zip(*(a.tolist() for a in drawn_near_rays(*args, cells))))
                  for cells in (True, False)]
         assert found[0] == found[1] and len(found[0]) > 100, rays
         x, y, z = cosine_directions(keys, rays, 11, "sobol")
@@ -801,23 +802,24 @@ def test_texels_whose_rays_the_move_changed_recast_only_those_rays(tmp_path, mon
 
 def test_far_texels_whose_probes_see_the_same_faces_keep_their_validity(tmp_path, monkeypatch):
     """A far texel's validity changes only if one of its hemisphere probes meets a back face
-    first before the move and not after, or the other way round (``_ProbesCompared``): the
-    texels whose probes merely see the moved box are not probed again, and the rebake still
+    first before the move and not after, or the other way round (``judges.ProbesCompared``):
+    the texels whose probes merely see the moved box are not probed again, and the rebake still
     gives the full bake's bytes."""
-    from baker.rebake import incremental as incremental
+    from baker.rebake import dirty
+    from baker.rebake.judges import ProbesCompared
 
     settings = baker.Settings(rays=16, page_size=128, shadow_rays=4, threads=1, d_max=1.5)
     before = _room(lamp=None).save(tmp_path / "before.glb")
     after = _room(moved(BOXES, "box1", at=(1.2, -1.1)), lamp=None).save(tmp_path / "after.glb")
     baker.bake(after, tmp_path / "full.glb", settings)
     probed = {}
-    check = incremental.check_texels
+    check = dirty.check_texels
     for name in ("every probe that meets it", "back faces compared"):
         if name == "every probe that meets it":
-            judged = incremental._ProbesCompared.__call__
-            monkeypatch.setattr(incremental._ProbesCompared, "__call__",
+            judged = ProbesCompared.__call__
+            monkeypatch.setattr(ProbesCompared, "__call__",
                                 lambda self, *probes: judged(self, *probes) | True)
-        monkeypatch.setattr(incremental, "check_texels", lambda *args, **kwargs: (
+        monkeypatch.setattr(dirty, "check_texels", lambda *args, **kwargs: (
             probed.__setitem__(name, len(args[3])) or check(*args, **kwargs)))
         out = tmp_path / f"{name}.glb"
         baker.bake(before, out, settings)
@@ -859,13 +861,15 @@ def test_rebake_cost_prices_the_texels_by_the_stages_of_a_full_bake():
     light (0.8 of the full bake), the rest searched at ``SEARCH_COST`` times their probes
     (validity 0.4); compose and write 0.1; a full bake from there redoes all but its 0.1 of
     loading."""
+    from baker.rebake import cost
+
     stages = {"load": 1.0, "validity": 4.0, "trace": 3.0, "direct": 1.0, "compose": 0.5,
               "write": 0.5}
-    scaling, tail, full = baker.rebake.incremental.rebake_cost(stages, 0.5, 0.5)
-    redo, search = baker.rebake.incremental.REDO_COST, baker.rebake.incremental.SEARCH_COST
+    scaling, tail, full = cost.rebake_cost(stages, 0.5, 0.5)
+    redo, search = cost.REDO_COST, cost.SEARCH_COST
     assert scaling == pytest.approx(0.5 * redo * 0.8 + 0.5 * search * 0.4)
     assert tail == pytest.approx(0.1) and full == pytest.approx(0.9)
-    assert baker.rebake.incremental.rebake_cost(stages, 0.0, 0.0)[0] == 0.0
+    assert cost.rebake_cost(stages, 0.0, 0.0)[0] == 0.0
 
 
 def test_a_rebake_measures_itself_and_the_next_one_of_the_state_goes_by_it(tmp_path):

@@ -188,6 +188,24 @@ def test_the_design_table_names_every_module():
     assert missing == []
 
 
+def test_the_design_lists_the_full_bake_s_stages():
+    """docs/design.md §3's stage table names the stages of ``pipeline.full.STAGES``, in their
+    order (read from the source, the names being the lines a bake prints): a stage added,
+    renamed or moved without its row there fails here."""
+    tree = ast.parse((PACKAGE / "pipeline" / "full.py").read_text())
+    listed = next(node.value for node in tree.body if isinstance(node, ast.AnnAssign)
+                  and ast.unparse(node.target) == "STAGES")
+    stages = [call.args[0].value for call in listed.elts]
+    lines = (PACKAGE.parent / "docs" / "design.md").read_text().splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith("| stage "))
+    rows = []
+    for line in lines[start + 2:]:  # past the header and its rule, to the table's end
+        if not line.startswith("|"):
+            break
+        rows.append(line.split("|")[1].strip().split(" (")[0])
+    assert rows == stages
+
+
 def test_the_command_line_goes_through_the_api():
     """The command line reaches the bake only through the API (``baker``'s public names,
     ``baker.api``, ``preview``, ``study``, ``view``), never into the pipeline's stages, so the

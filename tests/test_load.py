@@ -19,9 +19,11 @@ import pygltflib
 import pytest
 from PIL import Image as PILImage
 
-from baker.gltf import load as load_module
+from baker.gltf import container
 from baker.errors import InputError
-from baker.gltf.load import expand_triangles, load, read_accessor
+from baker.gltf.accessors import read_accessor
+from baker.gltf.load import load
+from baker.gltf.read_meshes import expand_triangles
 from baker.gltf.scene import CLAMP_TO_EDGE, MIRRORED_REPEAT
 
 from tests.bakehelp import SHARED_SCENES
@@ -658,8 +660,8 @@ def _same_objects(a, b, path="document"):
 
 def _document_text(path: Path) -> str:
     data = path.read_bytes()
-    return (load_module._split_glb(data, str(path))[0] if data[:4] == b"glTF"
-            else load_module._decode_text(data, str(path)))
+    return (container._split_glb(data, str(path))[0] if data[:4] == b"glTF"
+            else container._decode_text(data, str(path)))
 
 
 def _document_paths(name: str, tmp_path: Path) -> list[Path]:
@@ -711,7 +713,7 @@ def test_document_data_is_pygltflib_data_cleaned(name, tmp_path):
     """``gltf_document.data`` (the writer's JSON data) equals pygltflib's ``gltf_asdict``
     cleaned, types included, and shares nothing with the document (a deep copy)."""
     from baker.gltf import document as gltf_document
-    from baker.gltf.load import read_document
+    from baker.gltf.container import read_document
 
     for path in _document_paths(name, tmp_path):
         document = read_document(path)
@@ -729,7 +731,7 @@ def test_documents_with_odd_values_parse_as_pygltflib_parses_them():
     another JSON type than its field's (a float for an index, a string for a number) is left
     to pygltflib, which decides what it means."""
     from baker.gltf import document as gltf_document
-    from baker.gltf.load import _document_from_json
+    from baker.gltf.container import _document_from_json
 
     nodes = [{"name": "a", "mesh": 0, "translation": [1, 2, 3], "rotation": [0, 0, 0, 1]},
              {"children": [0], "scale": [2, 2.5, 1], "extras": {"k": 1}, "weights": [0.5]},

@@ -10,11 +10,10 @@ from assets.make_scenes import cornell_box
 from baker.image import compose as compose_module
 from baker.image import encode as encode_module
 from baker.light import hemisphere as integrate_module
-from baker.image.compose import compose
 from baker.image.encode import encode
 from baker.image.postprocess import postprocess
 from baker.image.seams import find_seams
-from tests.bakehelp import computed
+from tests.bakehelp import composed, computed
 
 
 @pytest.fixture(scope="module")
@@ -24,8 +23,7 @@ def done(tmp_path_factory):
 
 
 def _composed(done):
-    return compose(done.atlas, done.texels, done.terms, done.ambient, done.settings.rho,
-                   done.direct)
+    return composed(done, done.direct)
 
 
 def _extra_bytes(run) -> int:
@@ -62,8 +60,8 @@ def test_blocks_give_the_same_values_as_one_block(done, monkeypatch):
     nothing (the bytes of a bake do not depend on the block sizes)."""
     whole = _composed(done)
     pages = encode(done.lightmaps, "srgb", True)
-    means = integrate_module._means(np.arange(7 * 1000.0).reshape(1000, 7) % 17,
-                                    np.arange(1000) % 40)
+    means = integrate_module.terms_of_sums(np.arange(7 * 1000.0).reshape(1000, 7) % 17,
+                                           np.arange(1000) % 40)
     monkeypatch.setattr(compose_module, "_TEXELS_AT_ONCE", 7)
     monkeypatch.setattr(encode_module, "_ROWS", 5)
     monkeypatch.setattr(integrate_module, "_MEAN_ROWS", 3)
@@ -72,8 +70,8 @@ def test_blocks_give_the_same_values_as_one_block(done, monkeypatch):
     assert np.array_equal(blocked.visibility, whole.visibility)
     assert [(p.png, p.occlusion_png, p.intensity) for p in encode(done.lightmaps, "srgb", True)] \
         == [(p.png, p.occlusion_png, p.intensity) for p in pages]
-    again = integrate_module._means(np.arange(7 * 1000.0).reshape(1000, 7) % 17,
-                                    np.arange(1000) % 40)
+    again = integrate_module.terms_of_sums(np.arange(7 * 1000.0).reshape(1000, 7) % 17,
+                                           np.arange(1000) % 40)
     for name in ("w_hit", "escaped", "hit_sq", "half_split"):
         assert np.array_equal(getattr(again, name), getattr(means, name)), name
 

@@ -107,8 +107,8 @@ def test_texel_sums_are_exact_in_any_order_and_recovered_from_the_means():
     """Every ray's values are rounded to a grid fine enough to be exact when summed, so a
     texel's sums are the same bits whatever the order of its rays (what a rebake that swaps one
     ray's old value for its new one relies on), and the stored means give them back exactly."""
-    from baker.light.hemisphere import (_COLUMNS, _NO_DIRECTIONS, _TEXEL_MAJOR,
-                                        _accumulate_kernel, _means)
+    from baker.light.hemisphere import (COLUMNS, NO_DIRECTIONS, _TEXEL_MAJOR,
+                                        accumulate_kernel, terms_of_sums)
     from baker.rebake.exact_sums import _sums_of
     from baker.geometry.surface import LUMINANCE
 
@@ -116,25 +116,25 @@ def test_texel_sums_are_exact_in_any_order_and_recovered_from_the_means():
     primitive, distance, table = _random_rays(4, texels, rays)
     kind = np.zeros(len(table), np.uint8)
     shade = (np.float32(2.0), 0, table, kind, np.zeros((0, 4)), LUMINANCE)
-    in_order = np.zeros((texels, _COLUMNS))
-    _accumulate_kernel(rays, primitive, distance, *shade, in_order, *_TEXEL_MAJOR, 1.0,
-                       _NO_DIRECTIONS)
+    in_order = np.zeros((texels, COLUMNS))
+    accumulate_kernel(rays, primitive, distance, *shade, in_order, *_TEXEL_MAJOR, 1.0,
+                      NO_DIRECTIONS)
     shuffled = np.random.default_rng(5).permutation(texels * rays)
-    any_order = np.zeros((texels, _COLUMNS))
-    _accumulate_kernel(rays, primitive[shuffled], distance[shuffled], *shade, any_order,
-                       shuffled // rays, shuffled % rays, 1.0, _NO_DIRECTIONS)
+    any_order = np.zeros((texels, COLUMNS))
+    accumulate_kernel(rays, primitive[shuffled], distance[shuffled], *shade, any_order,
+                      shuffled // rays, shuffled % rays, 1.0, NO_DIRECTIONS)
     assert np.array_equal(in_order, any_order)
     assert (in_order[:, 5] > 0).any() and (in_order[:, 6] > 0).any()  # the first halves
     counts = np.full(texels, rays, np.int64)
-    assert np.array_equal(_sums_of(_means(in_order, counts)), in_order)
+    assert np.array_equal(_sums_of(terms_of_sums(in_order, counts)), in_order)
 
 
 def test_a_rays_change_replaces_its_value_in_the_sums_exactly():
     """The kernel's signed sums of changed rays (what ``ray_changes`` adds up) and
     ``changed_terms``: the terms of texels after some of their rays' hits changed are the bits
     of the terms of the new hits, summed afresh."""
-    from baker.light.hemisphere import (_COLUMNS, _NO_DIRECTIONS, _TEXEL_MAJOR,
-                                        _accumulate_kernel, _means)
+    from baker.light.hemisphere import (COLUMNS, NO_DIRECTIONS, _TEXEL_MAJOR,
+                                        accumulate_kernel, terms_of_sums)
     from baker.rebake.exact_sums import changed_terms
     from baker.geometry.surface import LUMINANCE
 
@@ -147,22 +147,22 @@ def test_a_rays_change_replaces_its_value_in_the_sums_exactly():
     new_distance[changed] = rng.random(len(changed)).astype(np.float32)
     kind = np.zeros(len(table), np.uint8)
     shade = (np.float32(2.0), 0, table, kind, np.zeros((0, 4)), LUMINANCE)
-    before, after = np.zeros((texels, _COLUMNS)), np.zeros((texels, _COLUMNS))
-    _accumulate_kernel(rays, primitive, distance, *shade, before, *_TEXEL_MAJOR, 1.0,
-                       _NO_DIRECTIONS)
-    _accumulate_kernel(rays, new_primitive, new_distance, *shade, after, *_TEXEL_MAJOR, 1.0,
-                       _NO_DIRECTIONS)
-    changes = np.zeros((texels, _COLUMNS))
+    before, after = np.zeros((texels, COLUMNS)), np.zeros((texels, COLUMNS))
+    accumulate_kernel(rays, primitive, distance, *shade, before, *_TEXEL_MAJOR, 1.0,
+                      NO_DIRECTIONS)
+    accumulate_kernel(rays, new_primitive, new_distance, *shade, after, *_TEXEL_MAJOR, 1.0,
+                      NO_DIRECTIONS)
+    changes = np.zeros((texels, COLUMNS))
     for sign, hits, dist in ((-1.0, primitive, distance), (1.0, new_primitive, new_distance)):
-        _accumulate_kernel(rays, hits[changed], dist[changed], *shade, changes,
-                           changed // rays, changed % rays, sign, _NO_DIRECTIONS)
+        accumulate_kernel(rays, hits[changed], dist[changed], *shade, changes,
+                          changed // rays, changed % rays, sign, NO_DIRECTIONS)
     counts = np.full(texels, rays, np.int64)
-    terms, exact = changed_terms(_means(before, counts), changes)
+    terms, exact = changed_terms(terms_of_sums(before, counts), changes)
     assert exact.all()
-    fresh = _means(after, counts)
+    fresh = terms_of_sums(after, counts)
     for name in ("w_hit", "escaped", "hit_sq", "half_split"):
         assert np.array_equal(getattr(terms, name), getattr(fresh, name)), name
-    assert not np.array_equal(fresh.w_hit, _means(before, counts).w_hit)
+    assert not np.array_equal(fresh.w_hit, terms_of_sums(before, counts).w_hit)
 
 
 def test_step_ao_under_a_low_ceiling_never_claims_an_exact_texel(tmp_path):

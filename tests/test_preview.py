@@ -17,7 +17,7 @@ from assets.make_scenes import cornell_box
 from baker.geometry.world import build_world
 from baker.gltf.load import load
 from baker.preview import View, primary_rays, render
-from baker.geometry.surface import LUMINANCE, viewer_diffuse_weight, viewer_diffuse_weight_at
+from baker.geometry.surface import LUMINANCE, viewer_diffuse_weight_at
 from baker.cli.main import main
 from tests.bakehelp import REAL_SCENES, saved
 
@@ -208,7 +208,8 @@ def test_command_previews_every_scene(name, cornell, small_bake, tmp_path):
     # shows what they show: the map changes nothing.
     world = build_world(scene)
     material = world.tri_material[np.maximum(lit.triangle, 0)]
-    weight = viewer_diffuse_weight(scene)[material]
+    weight = np.array([(1 - np.clip(m.metallic, 0, 1)) * (1 - np.clip(m.transmission, 0, 1))
+                       for m in scene.materials])[material]  # factors only
     textured = np.array([m.metallic_roughness_texture is not None for m in scene.materials])
     diffuse = shown & (weight > 0)
     metal = shown & (weight == 0) & ~textured[material]

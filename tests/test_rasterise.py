@@ -4,10 +4,10 @@ import numpy as np
 
 from assets.make_scenes import open_plane, slivers_and_tiny, three_instances
 from baker.geometry.world import build_world, triangle_cross
-from baker.atlas.rasterise import INSET, _baked_triangles, rasterise
+from baker.atlas.rasterise import INSET, _baked_triangles
 from baker.settings import Settings, resolve
 from baker.atlas.unwrap import unwrap
-from tests.bakehelp import loaded
+from tests.bakehelp import loaded, rasterised
 
 
 def _raster(builder, tmp_path, density):
@@ -15,7 +15,7 @@ def _raster(builder, tmp_path, density):
     world = build_world(scene)
     settings = resolve(Settings(texel_density=density), world.areas().sum(), 1.0)
     atlas = unwrap(scene, world, settings)
-    return scene, world, atlas, rasterise(atlas, world)
+    return scene, world, atlas, rasterised(atlas, world)
 
 
 def test_every_triangle_with_area_gets_texels_slivers_and_tiny_included(tmp_path):

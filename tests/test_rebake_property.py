@@ -25,7 +25,7 @@ to ``REGRESSIONS`` (room seed, edit seed) once fixed, and runs in both modes; th
 rebakes of rooms with sky or with glass and mirrors that fell back to full bakes on every
 edit ("the bake state is unusable": a sky colour read back as a list; escaped weights above 1
 from Russian roulette). An edit that moves the room's bounds so that it would derive another
-d_max keeps the last one (``incremental.kept_d_max``): its full bake is given that d_max. The same check runs with ``--foliage approx`` on the first
+d_max keeps the last one (``asked.kept_d_max``): its full bake is given that d_max. The same check runs with ``--foliage approx`` on the first
 ``FOLIAGE_CASES`` rooms that have an alpha-cut panel (a crown of one leaf: fitted, shading the
 room in closed form), or ``LONG_FOLIAGE_CASES`` with ``BAKER_LONG=1``.
 """

@@ -5,7 +5,8 @@ import numpy as np
 from assets.make_scenes import cornell_box
 from baker.geometry.world import build_world
 from baker.rays.trace import LocalHits, Occluder, RayCaster, Tracer
-from baker.rebake.incremental import _Changed, _Recorder
+from baker.rebake.changed import Changed
+from baker.rebake.shadows import Recorder
 from tests.bakehelp import loaded
 
 
@@ -15,10 +16,10 @@ def test_every_tracer_implements_the_declared_interface(tmp_path):
     triangles finds the same hits as the whole tracer where those are the triangles hit."""
     world = build_world(loaded(cornell_box(), tmp_path))
     tracer = Tracer(world)
-    changed = _Changed([world.positions[world.triangles]], world.center)  # every triangle
+    changed = Changed([world.positions[world.triangles]], world.center)  # every triangle
     assert isinstance(tracer, RayCaster) and isinstance(changed, RayCaster)
-    assert isinstance(_Recorder(changed), Occluder)
-    assert not isinstance(_Recorder(changed), RayCaster)
+    assert isinstance(Recorder(changed), Occluder)
+    assert not isinstance(Recorder(changed), RayCaster)
     rng = np.random.default_rng(0)
     directions = rng.normal(size=(64, 3))
     directions /= np.linalg.norm(directions, axis=1, keepdims=True)

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from assets.artifact_scenes import leak_room
-from baker.image.postprocess import fill_invalid
-from baker.atlas.rasterise import rasterise
+from baker.image.compose import Lightmaps
+from baker.image.postprocess import postprocess
 from baker.rays.trace import Tracer
 from baker.atlas.validity import ENCLOSED, INVALID, MOVED, PROBE_RADIUS, PUSH, TANGENT_ROUNDS, VALID, Validity, check_texels
-from tests.bakehelp import computed
+from tests.bakehelp import computed, rasterised
 from tests.plane_reference import blocked, segment_meets
 
 DENSITY = 10.0  # texels per metre: texel 0.1 m
@@ -82,7 +82,7 @@ def _leaking_texels(done, builder):
     floor = _node_of(done) == info["nodes"]["floor"]
     # Texel centres before any was moved, to the mm: those near the floor's diagonal are drawn
     # 0.01–0.017 texels off it (rasterise.INSET)
-    centre = rasterise(done.atlas, done.world).position[floor].round(2)
+    centre = rasterised(done.atlas, done.world).position[floor].round(2)
     size = done.texels.size(floor)
     step = np.diff(np.unique(centre[:, 0]))
     assert np.allclose(step, size[0], atol=1e-6) and np.allclose(size, size[0])  # on a world-aligned grid
@@ -175,7 +175,7 @@ def test_probe_states_on_known_points(room, tmp_path):
     outside a thin wall are moved into the room, by about a texel at most."""
     done = computed(room, tmp_path, texel_density=DENSITY, rays=4, d_max=6.0)
     texels, validity, info = done.texels, done.validity, room.info
-    original = rasterise(done.atlas, done.world).position  # before the probes moved any
+    original = rasterised(done.atlas, done.world).position  # before the probes moved any
     node = np.array([inst.node for inst in done.scene.instances])[texels.instance()]
     floor = node == info["nodes"]["floor"]
     bx, _, bz = info["box_centre"]
@@ -208,8 +208,9 @@ def test_probe_states_on_known_points(room, tmp_path):
 
 def test_invalid_texels_take_their_valid_neighbours_mean_within_their_chart():
     """An invalid texel gets the mean of its valid 8-neighbours, never its own value, and the
-    fill never crosses the empty padding to another chart."""
-    values = np.zeros((1, 6, 9, 1))
+    fill never crosses the empty padding to another chart (``postprocess``, before it dilates
+    the charts into the padding)."""
+    values = np.zeros((1, 6, 9, 3))
     covered = np.zeros((1, 6, 9), bool)
     covered[0, 1:5, 1:4] = True  # chart A: 4 × 3 texels of 1.0 …
     values[0, 1:5, 1:4] = 1.0
@@ -220,16 +221,18 @@ def test_invalid_texels_take_their_valid_neighbours_mean_within_their_chart():
     values[0, 2, 3] = 100.0  # its own (wrong) value
     invalid[0, 1:5, 7] = True  # B's right column: neighbours only in B
     values[0, 1:5, 7] = -7.0
-    filled = fill_invalid(values, covered, invalid)
-    assert filled[0, 2, 3, 0] == pytest.approx(1.0)
-    np.testing.assert_allclose(filled[0, 1:5, 7, 0], 5.0)
-    unchanged = ~invalid
+    none = np.zeros((0, 6, 9, 3))
+    filled = postprocess(Lightmaps(light=values.copy(), visibility=none, covered=covered,
+                                   direction=none), 0, invalid).light
+    assert filled[0, 2, 3] == pytest.approx([1.0] * 3)
+    np.testing.assert_allclose(filled[0, 1:5, 7], 5.0)
+    unchanged = covered & ~invalid
     np.testing.assert_array_equal(filled[unchanged], values[unchanged])
 
 
 def test_probes_do_not_depend_on_threads(room, tmp_path):
     done = computed(room, tmp_path, texel_density=DENSITY, rays=4, d_max=6.0)
-    texels = rasterise(done.atlas, done.world)
+    texels = rasterised(done.atlas, done.world)
     tracer = Tracer(done.world)
     one = check_texels(done.scene, done.world, tracer, texels, 6.0, threads=1)
     two = check_texels(done.scene, done.world, tracer, texels, 6.0, threads=2)
@@ -242,7 +245,7 @@ def test_probe_frames_are_numpys_cross_products_to_the_bit():
     """The probes' tangent frames (compiled) are the cross products numpy gives, bit for bit
     (the probes' directions, so the bakes, do not depend on which computes them), and
     orthonormal; at the x axis the helper switches to y."""
-    from baker.atlas.validity import _frames
+    from baker.atlas.validity import probe_frames
 
     rng = np.random.default_rng(3)
     normal = rng.normal(size=(20_000, 3))
@@ -252,7 +255,7 @@ def test_probe_frames_are_numpys_cross_products_to_the_bit():
     helper = np.where((np.abs(normal[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
     t1 = np.cross(normal, helper)
     t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
-    got = _frames(normal)
+    got = probe_frames(normal)
     assert np.array_equal(got[0], t1) and np.array_equal(got[1], np.cross(normal, t1))
     frame = np.stack([got[0], got[1], normal], axis=1)
     assert np.allclose(frame @ frame.transpose(0, 2, 1), np.eye(3), atol=1e-4)
@@ -320,7 +323,7 @@ def panels_bake(tmp_path_factory):
     done = computed(scene, tmp_path_factory.mktemp("panels"), texel_density=PANEL_DENSITY,
                     rays=PANEL_RAYS, rho="step", d_max=PANEL_D_MAX)
     floor = _node_of(done) == scene.info["nodes"]["floor"]
-    original = rasterise(done.atlas, done.world).position[floor]
+    original = rasterised(done.atlas, done.world).position[floor]
     return scene.info, done, np.flatnonzero(floor), original
 
 

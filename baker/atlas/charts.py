@@ -34,7 +34,8 @@ _NO_PAGE = np.uint32(0xFFFFFFFF)  # xatlas's page index for vertices of faces it
 # them; the scale is undone after.
 _XATLAS_AREA = 1e5
 # The CPU time (all its threads) a charting child may use before it is taken for hung
-# (``forked.call_forked``: CPU time, so a loaded machine never makes a genuine run look hung):
+# (``forked.call_forked_together``: CPU time, so a loaded machine never makes a genuine run
+# look hung):
 # 5 s, and 2 ms a triangle (xatlas charts about 15,000 triangles a second on one busy core).
 _SECONDS, _SECONDS_PER_TRIANGLE = 5.0, 2e-3
 

@@ -350,11 +350,6 @@ class Coverage:
         read_only(self)  # a hand-off: later stages read it (frozen.py)
 
 
-def rasterise(atlas: Atlas, world: World) -> Texels:
-    """All texels touched by baked triangles, with their world sample points and normals."""
-    return texels_of(atlas, world, cover(atlas, world))
-
-
 def cover(atlas: Atlas, world: World) -> Coverage:
     """The owner of every texel that a baked triangle touches (conservative coverage, the
     deepest triangle at the texel centre, ties to the lower index; see the module notes)."""

@@ -4,8 +4,8 @@ obscurance details are anti-aliased.
 With one sample point per texel, a hard shadow edge crossing a texel makes it either fully lit
 or fully dark: a stair-step along the edge at low resolution. With ``supersample`` = S > 1 each
 texel gets S sub-positions spread over its square, and its rays spread over them — shadow,
-emissive and sky ray s starts from sub-position s mod S (``direct.Receivers``), obscurance ray
-j (the texel's sample j, in every adaptive round) from sub-position j mod S
+emissive and sky ray s starts from sub-position s mod S (``direct_estimators.Receivers``),
+obscurance ray j (the texel's sample j, in every adaptive round) from sub-position j mod S
 (``integrate.hemisphere_rays``) — so a texel half in shadow comes out half lit, and a texel
 half under a low shelf half dark (a box filter of the texel's footprint). A hard light casts S
 rays per texel then, one from each sub-position. Sub-positions lie on the owning triangle's

@@ -114,7 +114,7 @@ class Validity:
             enclosed[where] = self.state[rows] == ENCLOSED
 
 
-def _frames(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def probe_frames(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Two unit tangents (k, 3) each, orthogonal to the unit normals (k, 3) and to each other:
     t1 = normal × helper, normalised, with helper the x axis (the y axis where the normal is
     within 26° of x), and t2 = normal × t1."""
@@ -126,7 +126,7 @@ def _frames(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 @jit
 def _frames_kernel(normal: np.ndarray, t1: np.ndarray, t2: np.ndarray) -> None:
-    """``_frames`` into t1, t2, in one pass: the arithmetic of np.cross and np.linalg.norm
+    """``probe_frames`` into t1, t2, in one pass: the arithmetic of np.cross and np.linalg.norm
     (the same bits), 18× faster than they are on (k, 3) rows."""
     for i in range(len(normal)):
         nx, ny, nz = normal[i, 0], normal[i, 1], normal[i, 2]
@@ -138,7 +138,7 @@ def _frames_kernel(normal: np.ndarray, t1: np.ndarray, t2: np.ndarray) -> None:
         t2[i, 0], t2[i, 1], t2[i, 2] = ny * az - nz * ay, nz * ax - nx * az, nx * ay - ny * ax
 
 
-def _hemisphere_directions(count: int) -> np.ndarray:
+def hemisphere_directions(count: int) -> np.ndarray:
     """(count, 3) fixed cosine-spread directions about +z (a Fibonacci spiral on the disc)."""
     i = np.arange(count) + 0.5
     r = np.sqrt(i / count)
@@ -186,7 +186,7 @@ def _tangent_step(tracer: Tracer, faces: Faces, position: np.ndarray, normal: np
     ``home`` (k, 3), the centroid of the texel's own triangle: where the surface really is (a
     wall's corner texel poking past the ceiling and a side wall moves back into the room, not
     over the ceiling)."""
-    t1, t2 = _frames(normal)
+    t1, t2 = probe_frames(normal)
     angle = 2 * np.pi * np.arange(TANGENT_RAYS) / TANGENT_RAYS
     in_plane = np.stack([np.cos(angle), np.sin(angle), np.zeros(TANGENT_RAYS)], axis=1)
     lift = ray_lift(position, size, tracer.center)
@@ -276,11 +276,11 @@ def hemisphere_probes(position: np.ndarray, normal: np.ndarray, size: np.ndarray
                       center: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The fixed hemisphere probes of k points: origins and directions, each (k·HEMISPHERE_RAYS,
     3) float64 world, point-major; origins lifted off the surface by ``trace.ray_lift``."""
-    t1, t2 = _frames(normal)
+    t1, t2 = probe_frames(normal)
     m = HEMISPHERE_RAYS
     origins, directions = np.empty((len(position) * m, 3)), np.empty((len(position) * m, 3))
     _fan(position, normal, t1, t2, ray_lift(position, size, center),
-         _hemisphere_directions(m), np.zeros(3), origins, directions)
+         hemisphere_directions(m), np.zeros(3), origins, directions)
     return origins, directions
 
 
@@ -318,10 +318,10 @@ def _back_fraction(tracer: Tracer, faces: Faces, position: np.ndarray, normal: n
                    size: np.ndarray, d_max: float) -> tuple[np.ndarray, np.ndarray]:
     """(k,) fraction of the fixed hemisphere probes from each point that meet a back face, and
     (k,) bool whether one touches (meets a surface within ``TOUCH`` ray lifts)."""
-    t1, t2 = _frames(normal)
+    t1, t2 = probe_frames(normal)
     lift = ray_lift(position, size, tracer.center)
     directions, hits = _cast_fan(tracer, position, normal, t1, t2, lift,
-                                 _hemisphere_directions(HEMISPHERE_RAYS),
+                                 hemisphere_directions(HEMISPHERE_RAYS),
                                  np.full(len(position) * HEMISPHERE_RAYS, d_max))
     fraction, touching = np.empty(len(position)), np.empty(len(position), np.bool_)
     _count_backs(directions, hits.triangle, hits.distance, lift, faces.normals, faces.single,

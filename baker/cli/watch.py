@@ -37,7 +37,7 @@ def add_parser(commands) -> None:
 
 class _Watched:
     """The files a bake of ``scene`` reads (the scene, its .bin, its images:
-    ``gltf.load.used_uris``), listed again whenever the scene file itself changes; ``stamp()``
+    ``gltf.container.used_uris``), listed again whenever the scene file itself changes; ``stamp()``
     changes when any of them does (its modification time or size), or is None while the scene
     file is missing."""
 
@@ -45,7 +45,7 @@ class _Watched:
         self._scene, self._seen, self._uris = scene, None, []
 
     def stamp(self) -> tuple | None:
-        from baker.gltf.load import file_stamps, used_uris
+        from baker.gltf.container import file_stamps, used_uris
 
         stamps = file_stamps(self._scene, self._uris)
         if stamps[0] is None:

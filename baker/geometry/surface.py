@@ -113,17 +113,6 @@ def diffuse_factors(scene: Scene) -> np.ndarray:
     return np.array([c.diffuse for c in table.classes], np.float64).reshape(-1, 3)
 
 
-def viewer_diffuse_weight(scene: Scene) -> np.ndarray:
-    """(M,) the share of every material's base colour that a glTF viewer shades as diffuse,
-    (1 − metallic) × (1 − transmission), factors only (``viewer_diffuse_weight_at`` reads the
-    metallic texture at points) (three.js's MeshPhysicalMaterial, and
-    every viewer that follows glTF's BRDF): the part that a lightmap lights. A metal or glass
-    therefore shows little or nothing of a MOZ_lightmap, whatever the bake gave it."""
-    return np.array([(1.0 - float(np.clip(m.metallic, 0.0, 1.0)))
-                     * (1.0 - float(np.clip(m.transmission, 0.0, 1.0)))
-                     for m in scene.materials], np.float64)
-
-
 def metallic_roughness_at(scene: Scene, world: World, tris: np.ndarray,
                           bary: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(k,) metallic and (k,) roughness in [0, 1] at barycentric points (k, 3) of world
@@ -143,9 +132,12 @@ def metallic_at(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray) 
 
 def viewer_diffuse_weight_at(scene: Scene, world: World, tris: np.ndarray,
                              bary: np.ndarray) -> np.ndarray:
-    """(k,) ``viewer_diffuse_weight`` at barycentric points (k, 3) of world triangles (k,), with
-    metallic read per point (``metallic_at``): a textured metal's dielectric parts show a
-    lightmap (LightsPunctualLamp's stand)."""
+    """(k,) the share of the base colour that a glTF viewer shades as diffuse at barycentric
+    points (k, 3) of world triangles (k,), (1 − metallic) × (1 − transmission) (three.js's
+    MeshPhysicalMaterial, and every viewer that follows glTF's BRDF): the part that a lightmap
+    lights. A metal or glass therefore shows little or nothing of a MOZ_lightmap, whatever the
+    bake gave it. Metallic is read per point (``metallic_at``): a textured metal's dielectric
+    parts show a lightmap (LightsPunctualLamp's stand)."""
     transmission = np.array([m.transmission for m in scene.materials], np.float64)
     return ((1.0 - metallic_at(scene, world, tris, bary))
             * (1.0 - np.clip(transmission, 0.0, 1.0)[world.tri_material[tris]]))

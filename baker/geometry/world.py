@@ -36,8 +36,8 @@ class World:
     UV set used by any material texture (zeros where a primitive lacks the set). colors: (V, 4)
     float64 linear RGBA (ones where absent; ``coloured`` says whether any vertex has one).
     triangles: (T, 3) int64 into positions.
-    tri_instance / tri_local / tri_material: (T,) int64, the triangle's instance, its index inside
-    the primitive, its material. vertex_start / tri_start: (I + 1,) int64 offsets of each instance.
+    tri_instance / tri_material: (T,) int64, the triangle's instance and its material.
+    vertex_start / tri_start: (I + 1,) int64 offsets of each instance.
     alpha: ``materials.AlphaTest`` when some triangle may let rays through (alphaMode MASK or
     BLEND), else None; the tracer reads it.
     """
@@ -49,7 +49,6 @@ class World:
     colors: np.ndarray
     triangles: np.ndarray
     tri_instance: np.ndarray
-    tri_local: np.ndarray
     tri_material: np.ndarray
     vertex_start: np.ndarray
     tri_start: np.ndarray
@@ -169,8 +168,7 @@ def build_world(scene: Scene) -> World:
     """Transform every instance of ``scene`` to world space and concatenate them."""
     sets = _texcoord_sets(scene)
     parts: dict[str, list[np.ndarray]] = {k: [] for k in (
-        "positions", "normals", "smooth", "colors", "triangles", "tri_instance", "tri_local",
-        "tri_material")}
+        "positions", "normals", "smooth", "colors", "triangles", "tri_instance", "tri_material")}
     uv_parts: list[list[np.ndarray]] = [[] for _ in range(sets)]
     vertex_start, tri_start = [0], [0]
     for i, inst in enumerate(scene.instances):
@@ -197,7 +195,6 @@ def build_world(scene: Scene) -> World:
         parts["colors"].append(prim.colors if prim.colors is not None else np.ones((n, 4)))
         parts["triangles"].append(triangles + vertex_start[-1])
         parts["tri_instance"].append(np.full(len(triangles), i, np.int64))
-        parts["tri_local"].append(np.arange(len(triangles), dtype=np.int64))
         parts["tri_material"].append(np.full(len(triangles), prim.material, np.int64))
         for k in range(sets):
             has = k < len(prim.texcoords)
@@ -221,7 +218,6 @@ def build_world(scene: Scene) -> World:
         colors=cat("colors", (0, 4), np.float64),
         triangles=cat("triangles", (0, 3), np.int64).astype(np.int64),
         tri_instance=cat("tri_instance", (0,), np.int64),
-        tri_local=cat("tri_local", (0,), np.int64),
         tri_material=cat("tri_material", (0,), np.int64),
         vertex_start=np.asarray(vertex_start, np.int64),
         tri_start=np.asarray(tri_start, np.int64),

@@ -13,8 +13,8 @@ its error names the figures and the largest item:
   fallback buffers, which hold nothing until decoded, and the accessors of Draco primitives), at
   most ``DECODE_RATIO`` times the bytes the buffers hold, or ``MAX_DECODED_GEOMETRY``;
 - ``MAX_NODES`` nodes, nested at most ``MAX_NODE_DEPTH`` deep;
-- the accessors baker reads, against the data backing them (``load._check_declared_sizes``):
-  ``load.MAX_SCENE_COMPONENTS`` numbers in all, of which ``MAX_UNBACKED_NUMBERS`` at most in
+- the accessors baker reads, against the data backing them (``instances.check_declared_sizes``):
+  ``instances.MAX_SCENE_COMPONENTS`` numbers in all, of which ``MAX_UNBACKED_NUMBERS`` at most in
   accessors without a bufferView (zeros: nothing in the file bounds their count);
 - ``MAX_SCENE_PIXELS``: the pixels of all images together (every level of a KTX 2), from their
   headers, all read before the first image is decoded (``images.header``; one image at most

@@ -8,8 +8,8 @@ accessors as usual:
 
 - a meshopt bufferView's decoded bytes are put where the view says uncompressed data lies, in its
   own (fallback) buffer, and the view loses the extension. A fallback buffer without data
-  (``fallback: true``, no uri) comes in as zeros of its byteLength (``load._buffer_bytes``) and is
-  filled here; one whose data is there is used as it is, nothing decoded.
+  (``fallback: true``, no uri) comes in as zeros of its byteLength (``buffers._buffer_bytes``)
+  and is filled here; one whose data is there is used as it is, nothing decoded.
 - a Draco primitive's decoded attributes and indices go to a new buffer appended after the
   file's, one bufferView each, set on the accessors the extension maps (their counts set to the
   decoded ones), and the primitive loses the extension.

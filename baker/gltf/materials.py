@@ -73,10 +73,6 @@ class Classification:
     unlit: bool
 
     @property
-    def diffuse_weight(self) -> float:
-        return float(self.weights[DIFFUSE])
-
-    @property
     def alpha_tested(self) -> bool:
         """Whether some ray may pass through this material's surfaces (alpha below opaque)."""
         if self.alpha_mode == "MASK":

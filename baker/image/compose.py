@@ -52,16 +52,6 @@ def effective_r_ave(ambient: Ambient, rho: str) -> np.ndarray:
     return ambient.r_ave if ambient.escape is None else ambient.escape
 
 
-def compose(atlas: Atlas, texels: Texels, terms: Terms, ambient: Ambient, rho: str,
-            direct: Direct | None = None, light_colours: np.ndarray | None = None,
-            indirect: np.ndarray | None = None, visibility: bool = True) -> Lightmaps:
-    """Scatter the texels' light L = D + I_A·W and their visibility into new page images
-    (``compose_into``; ``visibility``: keep the pages of the visibility too)."""
-    lightmaps = blank(atlas, visibility)
-    compose_into(lightmaps, texels, terms, ambient, rho, direct, light_colours, indirect)
-    return lightmaps
-
-
 def blank(atlas: Atlas, visibility: bool = True, directional: bool = False) -> Lightmaps:
     """Lightmaps of zeros, no texel covered, the atlas's pages in size (``visibility``: with
     pages of the visibility, else 0 of them; ``directional``: with directional pages)."""

@@ -156,24 +156,6 @@ def decode(texels: np.ndarray, intensity: float, encoding: str) -> np.ndarray:
     return (srgb_to_linear(unit) if encoding == "srgb" else unit) * intensity
 
 
-def error_bound(values: np.ndarray, intensity: float, encoding: str) -> np.ndarray:
-    """The largest |decoded − value| that encoding ``values`` (linear, ≥ 0, any shape) can give.
-
-    Below ``intensity``: half a code step of the curve at the value, measured exactly on the
-    curve (``linear``: intensity/510 everywhere; ``srgb``: smaller in the darks, larger near the
-    top). Above it the texel clips: the error is ``value − intensity``.
-    """
-    x = np.asarray(values, np.float64) / intensity
-    inside = np.clip(x, 0.0, 1.0)
-    if encoding == "srgb":
-        e = linear_to_srgb(inside)
-        half = 0.5 / 255.0
-        step = np.maximum(srgb_to_linear(e + half) - inside, inside - srgb_to_linear(e - half))
-    else:
-        step = np.full_like(inside, 0.5 / 255.0)
-    return np.where(x > 1.0, x - 1.0, step) * intensity
-
-
 @jit
 def _covered_brightest(light: np.ndarray, covered: np.ndarray) -> np.ndarray:
     """(n,) the brightest channel of each of the n ``covered`` (H, W) texels of ``light``

@@ -29,8 +29,8 @@ def texel_errors(done) -> np.ndarray:
     - the obscurance's, I_A·W: each texel's e² from its rays' two independent halves
       (``Terms.split_errors``), or with ``--method gi`` its paths' variance
       (``gi.Indirect.variance``); and the direct light's, from its rays' halves too
-      (``direct.mean_and_variance``). A texel's halves give one degree of freedom, so these
-      are averaged over the baked texels of the (2·``POOL_RADIUS`` + 1)² window about it on
+      (``direct_estimators.mean_and_variance``). A texel's halves give one degree of freedom, so
+      these are averaged over the baked texels of the (2·``POOL_RADIUS`` + 1)² window about it on
       its page, whose light is alike (rescaled to keep their sum: the map's mean square is
       the report's), and a texel's error is not judged from two numbers;
     - I_A's own, common to every texel: I_A·W × I_A's relative standard error

@@ -123,19 +123,11 @@ def _dilate_in_place(pages: tuple[np.ndarray, ...], filled: np.ndarray, rings: i
     return filled
 
 
-def fill_invalid(values: np.ndarray, covered: np.ndarray, invalid: np.ndarray,
-                 rings: int = _FILL_RINGS) -> np.ndarray:
-    """``values`` (P, H, W, C) with each invalid texel (P, H, W) given the mean of its valid
-    8-neighbours, ring after ring inwards (up to ``rings``); invalid texels no valid texel
-    reaches keep their own value."""
-    filled = np.array(values, np.float64, order="C")
-    _fill_invalid_in_place((filled,), covered, invalid, rings)
-    return filled
-
-
 def _fill_invalid_in_place(pages: tuple[np.ndarray, ...], covered: np.ndarray,
                            invalid: np.ndarray, rings: int = _FILL_RINGS) -> None:
-    """``fill_invalid`` on each of ``pages`` itself (C-contiguous float64)."""
+    """Each of ``pages`` (P, H, W, C; C-contiguous float64, changed in place) with each invalid
+    texel (P, H, W) given the mean of its valid 8-neighbours, ring after ring inwards (up to
+    ``rings``); invalid texels no valid texel reaches keep their own value."""
     _dilate_in_place(pages, covered & ~invalid, rings, into=invalid & covered)
 
 

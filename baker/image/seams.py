@@ -153,19 +153,6 @@ def _taps(page: np.ndarray, uv: np.ndarray, shape: tuple[int, int, int]) -> tupl
     return (page[:, None] * h + ys) * w + xs, weights
 
 
-def seam_steps(values: np.ndarray, seams: Seams) -> np.ndarray:
-    """(S,) largest channel difference of bilinear lookups on side A and side B of each seam
-    sample, for pages ``values`` (P, H, W, C)."""
-    if not len(seams):
-        return np.zeros(0)
-    flat = values.reshape(-1, values.shape[-1])
-    ia, wa = _taps(seams.page_a, seams.uv_a, values.shape[:3])
-    ib, wb = _taps(seams.page_b, seams.uv_b, values.shape[:3])
-    a = np.einsum("sk,skc->sc", wa, flat[ia])
-    b = np.einsum("sk,skc->sc", wb, flat[ib])
-    return np.abs(a - b).max(axis=1)
-
-
 @jit
 def _normal_product(weight: np.ndarray, local: np.ndarray, lam: np.ndarray, x: np.ndarray,
                     out: np.ndarray) -> np.ndarray:

@@ -16,7 +16,7 @@ flagged in the report whenever the truncation changes I_A by more than 0.1 %.
 With direct light baked apart (direct.py), the lightmap is L = D + I_A·W and I_A carries only
 the light that has bounced at least once: I_A = R_ave·Σ_{k<K} R_ave^k · Φ / A_T, where Φ is the
 power every source (punctual lights, emissive surfaces, sky) lays on the scene's surfaces, in
-irradiance × area (``direct.Power``). docs/direct_light.md derives it.
+irradiance × area (``power.Power``). docs/direct_light.md derives it.
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ from baker.geometry.world import World
 from baker.gltf.scene import Scene
 
 if TYPE_CHECKING:
-    from baker.light.direct import Power
+    from baker.light.power import Power
 
 MAX_BOUNCES = 1000
 
@@ -50,7 +50,7 @@ class Ambient:
     truncated: bool  # the bounce series was cut (R_ave close to 1)
     escape: np.ndarray | None = None  # (3,) what rays that meet nothing count; None: R_ave
     relative_variance: float = 0.0  # of I_A's estimate (I_A from the power of sources,
-    # estimated at points, ``direct.Power``); 0 when I_A is exact (the user's, equation 3)
+    # estimated at points, ``power.Power``); 0 when I_A is exact (the user's, equation 3)
 
 
 def bounce_factor(r_ave: np.ndarray) -> tuple[np.ndarray, bool]:
@@ -67,7 +67,7 @@ def ambient_terms(scene: Scene, world: World, user_intensity: float | None,
                   power: Power | None = None, neutral: bool = False) -> Ambient:
     """R_ave and I_A of the scene; ``user_intensity`` overrides I_A (all channels).
 
-    ``power``: what the direct-light sources lay on the surfaces (direct.delivered_power); then
+    ``power``: what the direct-light sources lay on the surfaces (power.delivered_power); then
     I_A = R_ave·series·Φ/A_T, the light after its first bounce (D holds the direct light). Without
     it, equation (3) on the emissive surfaces alone, as when emission is not baked as direct light.
     ``neutral``: rays that meet nothing count white (``environment.environment``), and without

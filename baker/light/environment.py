@@ -24,7 +24,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from baker.geometry.world import World
-from baker.light.direct import Sources, power_points, sky_irradiance
+from baker.light.direct_estimators import sky_irradiance
+from baker.light.power import power_points
+from baker.light.sources import Sources
 from baker.light.sky import Sky
 from baker.rays.trace import Tracer
 

@@ -51,15 +51,14 @@ from baker.geometry.surface import LUMINANCE, albedo, emission
 from baker.geometry.world import World
 from baker.gltf.scene import Scene
 from baker.light.adaptive import WITHIN, neighbour_mean, pooled_gain
-from baker.light.direct import (
-    SHADOW_SHORTEN,
-    Emitters,
+from baker.light.direct import direct_at
+from baker.light.direct_estimators import (
     Receivers,
-    Sources,
-    direct_at,
+    SHADOW_SHORTEN,
     emitter_radiance,
     emitter_samples,
 )
+from baker.light.sources import Emitters, Sources
 from baker.rays.dimensions import GI_BOUNCE, GI_EMITTER, GI_FIRST, GI_ROULETTE
 from baker.rays.sampling import (
     cosine_hemisphere,
@@ -301,9 +300,9 @@ def _emitter_light(scene: Scene, world: World, tracer: Tracer, emitters: Emitter
                    position: np.ndarray, normal: np.ndarray, lift: np.ndarray, keys: np.ndarray,
                    seed: int) -> tuple[np.ndarray, int]:
     """One next-event sample of the emitters' irradiance (m, 3) at each vertex (position,
-    normal (m, 3), ``lift`` (m,) off the surface), sampled as ``direct.emissive_irradiance``
-    does and weighted against the cosine-sampled direction that may meet the same point; and
-    the shadow rays cast."""
+    normal (m, 3), ``lift`` (m,) off the surface), sampled as
+    ``direct_estimators.emissive_irradiance`` does and weighted against the cosine-sampled direction
+    that may meet the same point; and the shadow rays cast."""
     m = len(position)
     origins = position + lift[:, None] * normal
     chosen, bary, directions, distance, weight = emitter_samples(

@@ -373,10 +373,10 @@ def world_rays(texels: Texels, rows: np.ndarray | slice, rays: int, x: np.ndarra
 
 
 # Columns of the per-texel sums the kernel accumulates.
-_RGB, _ESCAPED, _SQUARE = slice(0, 3), 3, 4
-_HALF = slice(5, 7)  # (hit luminance, escaped) over the first half of the rays
-_HALF_ESCAPED = _HALF.stop - 1
-_COLUMNS = 7
+RGB, ESCAPED, SQUARE = slice(0, 3), 3, 4
+HALF = slice(5, 7)  # (hit luminance, escaped) over the first half of the rays
+_HALF_ESCAPED = HALF.stop - 1
+COLUMNS = 7
 # With directions (``Resolved.directional_pages``): luminance of R·ρ and escaped weight, each
 # × the ray's direction, over all rays, then over the first half.
 _AIM, _AIM_HALF = slice(7, 13), slice(13, 19)
@@ -384,11 +384,11 @@ _AIM_COLUMNS = 19
 
 
 def columns(directional: bool) -> int:
-    """How many sums a texel's rays make (``_accumulate_kernel``)."""
-    return _AIM_COLUMNS if directional else _COLUMNS
+    """How many sums a texel's rays make (``accumulate_kernel``)."""
+    return _AIM_COLUMNS if directional else COLUMNS
 
 
-_CONSTANT, _VARYING, _SPECIAL = 0, 1, 2  # per-triangle kinds of ``_accumulate_kernel``
+_CONSTANT, _VARYING, _SPECIAL = 0, 1, 2  # per-triangle kinds of ``accumulate_kernel``
 
 # Each ray's values are rounded to multiples of 2^-40 before they are summed (``_on_grid``).
 # Sums of such values stay exact in float64 while below 2^13, so they do not depend on the
@@ -400,7 +400,7 @@ _SHIFT = 1.5 * 2.0 ** 12  # x + _SHIFT for x in [−2^11, 2^11) has float64 spac
 EXACT_RAYS = 1 << 11
 
 
-def _grid_values(x: np.ndarray) -> np.ndarray:
+def grid_values(x: np.ndarray) -> np.ndarray:
     """``_on_grid`` of an array of values (a new array)."""
     return (x + _SHIFT) - _SHIFT
 
@@ -412,14 +412,14 @@ def _on_grid(x):
     return (x + _SHIFT) - _SHIFT
 
 
-# ``_accumulate_kernel``'s (target, sample) for rays laid out texel by texel.
+# ``accumulate_kernel``'s (target, sample) for rays laid out texel by texel.
 _TEXEL_MAJOR = (np.zeros(0, np.int64), np.zeros(0, np.int64))
-_NO_DIRECTIONS = np.zeros((0, 3), np.float32)  # its ``directions`` when they are not kept
+NO_DIRECTIONS = np.zeros((0, 3), np.float32)  # its ``directions`` when they are not kept
 
 
 @jit
-def _accumulate_kernel(rays, primitive, distance, d_max, rho_kind, table, kind, ray_albedo,
-                       luminance, sums, target, sample, sign, directions):
+def accumulate_kernel(rays, primitive, distance, d_max, rho_kind, table, kind, ray_albedo,
+                      luminance, sums, target, sample, sign, directions):
     """Add each ray's values to its texel's sums (k, 7): R(Q)·ρ(d) (RGB), escaped weight (1 for
     a miss), squared luminance of R·ρ; then, for the rays among the first ⌊rays/2⌋ of their
     texel, luminance of R·ρ and escaped weight (for the split error estimate, see
@@ -487,7 +487,7 @@ class Surfaces:
     """What the shading of obscurance hits needs, built once per bake (``surfaces_of``) and
     passed to ``integrate`` for each part of the texels.
 
-    kind: (T,) uint8 per world triangle for ``_accumulate_kernel`` (``_CONSTANT``, ``_VARYING``,
+    kind: (T,) uint8 per world triangle for ``accumulate_kernel`` (``_CONSTANT``, ``_VARYING``,
     ``_SPECIAL``); materials: the scene's ``materials.MaterialTable``; normals: (T, 3) unit
     geometric normals, only when some triangle is ``_SPECIAL`` (else (0, 3)); step: world
     units a continued ray starts off its surface, besides 64 float32 ulps.
@@ -715,7 +715,7 @@ def _special_hits(surfaces: Surfaces, tracer: Tracer, origins: np.ndarray,
     escape = escaped.mean(axis=1)
     out[ray, :3] = value
     out[ray, 3] = escape
-    grid = _grid_values(escaped - escape[:, None])
+    grid = grid_values(escaped - escape[:, None])
     for c in range(3):
         chains.tint[:, c] += np.bincount(texel, grid[:, c], minlength=len(chains.tint))
 
@@ -730,9 +730,9 @@ def _rho(kind: int, x: np.ndarray) -> np.ndarray:
     return np.zeros_like(x)
 
 
-def _shading(surfaces: Surfaces, settings: Resolved, hits: LocalHits
-             ) -> tuple[np.ndarray, np.ndarray]:
-    """What ``_accumulate_kernel`` needs to shade the rays with ``hits``: the
+def hit_shading(surfaces: Surfaces, settings: Resolved, hits: LocalHits
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """What ``accumulate_kernel`` needs to shade the rays with ``hits``: the
     triangles' kinds (T,) uint8 and ray_albedo, one row of 4 per ray (the albedo at hits on
     varying triangles; rows that ``_special_hits`` fills for special ones), or (0, 4) when
     neither occurs."""
@@ -753,7 +753,7 @@ def _shading(surfaces: Surfaces, settings: Resolved, hits: LocalHits
 def _chunk_sums(surfaces: Surfaces, tracer: Tracer, texels: Texels, rows: np.ndarray,
                 first: int, rays: int, settings: Resolved) -> tuple[np.ndarray, _Chains]:
     """(k, 7) sums over samples ``first`` … ``first + rays − 1`` of the texels ``rows``, as
-    ``_accumulate_kernel`` lays them out, and the chunk's chain counts."""
+    ``accumulate_kernel`` lays them out, and the chunk's chain counts."""
     sub = (sub_positions(tracer, texels, rows, settings.supersample, settings.seed)
            if settings.supersample > 1 else None)
     origins, directions = hemisphere_rays(texels, rows, rays, settings.seed, tracer.center,
@@ -762,28 +762,28 @@ def _chunk_sums(surfaces: Surfaces, tracer: Tracer, texels: Texels, rows: np.nda
     chains = _Chains(np.zeros(len(rows), np.int64), np.zeros(len(rows), np.int64),
                      np.zeros((len(rows), 3)))
     sums = np.zeros((len(rows), columns(settings.directional_pages)))
-    aims = directions if settings.directional_pages else _NO_DIRECTIONS
+    aims = directions if settings.directional_pages else NO_DIRECTIONS
     if blocking_only(surfaces, settings):
         blocked = tracer.blocked_local(origins, directions, lengths)
         if settings.directional_pages:
-            _accumulate_kernel(rays, blocked, lengths, np.float32(settings.d_max),
-                               RHO_KINDS[settings.rho], *_BLOCKER, LUMINANCE, sums,
-                               *_TEXEL_MAJOR, 1.0, aims)
+            accumulate_kernel(rays, blocked, lengths, np.float32(settings.d_max),
+                              RHO_KINDS[settings.rho], *_BLOCKER, LUMINANCE, sums,
+                              *_TEXEL_MAJOR, 1.0, aims)
         else:
             _escapes_kernel(rays, blocked, sums)
         return sums, chains
     hits = tracer.cast_local(origins, directions, lengths)
-    kind, ray_albedo = _shading(surfaces, settings, hits)
+    kind, ray_albedo = hit_shading(surfaces, settings, hits)
     if surfaces.special:
         _special_hits(surfaces, tracer, origins, directions, hits, texels.key[rows], first, rays,
                       settings, ray_albedo, chains)
-    _accumulate_kernel(rays, hits.triangle, hits.distance, np.float32(settings.d_max),
-                       RHO_KINDS[settings.rho], surfaces.table, kind, ray_albedo, LUMINANCE,
-                       sums, *_TEXEL_MAJOR, 1.0, aims)
+    accumulate_kernel(rays, hits.triangle, hits.distance, np.float32(settings.d_max),
+                      RHO_KINDS[settings.rho], surfaces.table, kind, ray_albedo, LUMINANCE,
+                      sums, *_TEXEL_MAJOR, 1.0, aims)
     return sums, chains
 
 
-# ``_accumulate_kernel``'s (table, kind, ray_albedo) for rays whose primitive is
+# ``accumulate_kernel``'s (table, kind, ray_albedo) for rays whose primitive is
 # ``Tracer.blocked_local``'s 0 (blocked) or −1: one triangle, constant, its albedo never read
 # but × ρ = 0 (``blocking_only``).
 _BLOCKER = (np.zeros((1, 3)), np.zeros(1, np.uint8), np.zeros((0, 4)))
@@ -791,7 +791,7 @@ _BLOCKER = (np.zeros((1, 3)), np.zeros(1, np.uint8), np.zeros((0, 4)))
 
 @jit
 def _escapes_kernel(rays, blocked, sums):
-    """Add to ``sums`` (k, 7) what ``_accumulate_kernel`` adds for rays laid out texel by
+    """Add to ``sums`` (k, 7) what ``accumulate_kernel`` adds for rays laid out texel by
     texel that are only blocked (0) or not (−1) (``Tracer.blocked_local``, ``blocking_only``:
     an escaped ray's value is 1, a blocked one's R·ρ = 0): the escaped rays counted, over all
     and over the first half, and 0 to every other column. The same bits, without a branch
@@ -803,7 +803,7 @@ def _escapes_kernel(rays, blocked, sums):
             first += blocked[r] < 0
         for r in range(i * rays + half, (i + 1) * rays):
             rest += blocked[r] < 0
-        sums[i, _ESCAPED] += first + rest
+        sums[i, ESCAPED] += first + rest
         sums[i, _HALF_ESCAPED] += first
 
 
@@ -871,14 +871,14 @@ def hemisphere_terms(scene: Scene, world: World, tracer: Tracer, texels: Texels,
         first += batch
         if settings.target_error is None or 2 * first > settings.max_rays:
             break
-        going = _means(sums[active], counts[active])
+        going = terms_of_sums(sums[active], counts[active])
         errors[active] = predicted_error(going, error_scale, texels, rows[active])
         target = settings.target_error if targets is None else targets[active]
         active = active[WITHIN * _stopping_error(errors, counts, texels, rows, active) > target]
         batch = first
         if progress is not None and len(active):
             progress(0, 0, len(active) * batch)
-    terms = _means(sums, counts)
+    terms = terms_of_sums(sums, counts)
     if chaining:
         terms = replace(terms, chain_rays=chain_counts[:, 0], capped=chain_counts[:, 1],
                         escaped_tint=tints / np.maximum(counts, 1)[:, None])
@@ -959,9 +959,9 @@ def neighbours_error(error: np.ndarray, counts: np.ndarray, blind: np.ndarray, t
     return out
 
 
-def _luminance_and_escaped(sums: np.ndarray) -> np.ndarray:
+def luminance_and_escaped(sums: np.ndarray) -> np.ndarray:
     """(k, 2) summed luminance of R·ρ and escaped rays, from sums (k, 7)."""
-    return np.column_stack([sums[:, _RGB] @ LUMINANCE, sums[:, _ESCAPED]])
+    return np.column_stack([sums[:, RGB] @ LUMINANCE, sums[:, ESCAPED]])
 
 
 def _split(part: np.ndarray, part_count: np.ndarray, whole: np.ndarray,
@@ -972,13 +972,13 @@ def _split(part: np.ndarray, part_count: np.ndarray, whole: np.ndarray,
     return np.where((part_count >= 1)[:, None] & (whole_count > part_count)[:, None], split, 0.0)
 
 
-_MEAN_ROWS = 1 << 16  # texels ``_means`` works on at once
+_MEAN_ROWS = 1 << 16  # texels ``terms_of_sums`` works on at once
 
 
-def _means(sums: np.ndarray, counts: np.ndarray) -> Terms:
+def terms_of_sums(sums: np.ndarray, counts: np.ndarray) -> Terms:
     """Terms from per-texel sums (k, 7 or ``_AIM_COLUMNS``) over ``counts`` (k,) rays, ``_MEAN_ROWS`` rows at a time
     (the split's temporaries for every texel at once would be larger than the terms)."""
-    means = np.empty((len(counts), _HALF.start))
+    means = np.empty((len(counts), HALF.start))
     first_half = np.empty((len(counts), 2))
     aimed = sums.shape[1] == _AIM_COLUMNS
     aims = np.empty((len(counts) if aimed else 0, 6))
@@ -986,12 +986,12 @@ def _means(sums: np.ndarray, counts: np.ndarray) -> Terms:
     for start in range(0, len(counts), _MEAN_ROWS):
         rows = slice(start, start + _MEAN_ROWS)
         part, count = sums[rows], counts[rows]
-        means[rows] = part[:, :_HALF.start] / np.maximum(count, 1)[:, None]
-        first_half[rows] = _split(part[:, _HALF], count // 2, _luminance_and_escaped(part),
+        means[rows] = part[:, :HALF.start] / np.maximum(count, 1)[:, None]
+        first_half[rows] = _split(part[:, HALF], count // 2, luminance_and_escaped(part),
                                   count)
         if aimed:
             aims[rows] = part[:, _AIM] / np.maximum(count, 1)[:, None]
             aim_split[rows] = _split(part[:, _AIM_HALF], count // 2, part[:, _AIM], count)
-    return Terms(w_hit=means[:, _RGB], escaped=means[:, _ESCAPED], hit_sq=means[:, _SQUARE],
+    return Terms(w_hit=means[:, RGB], escaped=means[:, ESCAPED], hit_sq=means[:, SQUARE],
                  counts=counts, half_split=first_half, aim_hit=aims[:, :3],
                  aim_escaped=aims[:, 3:], aim_split=aim_split)

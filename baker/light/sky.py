@@ -26,8 +26,8 @@ out, as in a uniform or two-level image, whose rays are then the cosine rays of 
 a small bright sun that one cosine ray in 10⁴ meets is met by half the rays, every one at
 nearly the same weight. benchmarks/bench_sky_image.py measures it.
 
-The same sky lights the direct term (``direct.sky_samples``), the power that sets I_A — the
-light that obscurance rays escaping within d_max bring back (``direct.delivered_power``) — and
+The same sky lights the direct term (``direct_estimators.sky_samples``), the power that sets I_A —
+the light that obscurance rays escaping within d_max bring back (``power.delivered_power``) — and
 every vertex of a GI path (``gi.py``, next-event estimation), so all three see one sky.
 """
 

@@ -24,7 +24,7 @@ import numpy as np
 from baker.geometry.surface import base_colour, interpolate, metallic_roughness_at
 from baker.geometry.world import World
 from baker.gltf.scene import Light, Scene
-from baker.light.direct import range_window, spot_attenuation
+from baker.light.direct_estimators import range_window, spot_attenuation
 
 _MIN_ROUGHNESS = 0.0525  # three.js clamps roughness here (its lights' highlights stay finite)
 

@@ -45,7 +45,7 @@ from baker.errors import InputError, OutputError, SettingsError
 from baker.gltf import document as gltf_document
 from baker.gltf import images
 from baker.gltf.document import COMPONENT_DTYPES
-from baker.gltf.load import read_accessor
+from baker.gltf.accessors import read_accessor
 from baker.gltf.scene import Material, Scene
 from baker.image.encode import PNG_SIGNATURE, EncodedPage
 from baker.output.specular import dielectric_f0, mixed_pair, without_diffuse
@@ -205,7 +205,7 @@ def _document_data(document: pygltflib.GLTF2) -> dict:
 
 
 def _as_stored(values: np.ndarray, component_type: int, normalized: bool) -> np.ndarray:
-    """Numbers from ``load.read_accessor`` back in the accessor's component type.
+    """Numbers from ``accessors.read_accessor`` back in the accessor's component type.
 
     Exact for floats and plain integers; normalized integers are rounded back from their [0, 1]
     or [-1, 1] values (a signed minimum, e.g. -128, comes back as -127: the same -1.0).

@@ -1,19 +1,19 @@
-"""The whole bake, stage by stage (docs/design.md §3):
+"""The full bake from a loaded scene to its float lightmaps, as a list of stages (``STAGES``,
+docs/design.md §3):
 
-    load → plan → unwrap → rasterise → trace/integrate → compose → post-process → write
+    lights and plan → unwrap → rasterise → parts → foliage fit → texels and rays → post-process
 
-Each stage is one module with one entry function; this module only runs them in order, times
-them, and gathers the report.
+Each stage calls the modules that do its work; ``run.stages.run_stages`` runs them in order,
+prints a line for each and times them. Loading before and encoding and writing after are the
+API's (``baker.load``, ``baker.encode``, ``baker.write``).
 """
 
 from __future__ import annotations
 
 import math
 import os
-import time
-from contextlib import contextmanager
 from dataclasses import dataclass, replace
-from typing import Callable, Iterator, Protocol
+from typing import Callable, Protocol
 
 import numpy as np
 
@@ -52,15 +52,9 @@ from baker.light.adaptive import (
 )
 from baker.light.ambient import Ambient, ambient_terms
 from baker.light.environment import environment
-from baker.light.direct import (
-    Direct,
-    Power,
-    Sources,
-    adaptive_direct_light,
-    delivered_power,
-    direct_light,
-    light_sources,
-)
+from baker.light.direct import Direct, adaptive_direct_light, direct_light
+from baker.light.power import Power, delivered_power
+from baker.light.sources import Sources, light_sources
 from baker.light.foliage import (
     FitInputs,
     Foliage,
@@ -75,22 +69,11 @@ from baker.pipeline import cluster
 from baker.pipeline.parts import PerTexel, Tally, TexelPoints, part_slices
 from baker.pipeline.plan import Plan, make_plan
 from baker.rays.trace import Tracer
-from baker.run.interruptible import check_interrupted
 from baker.run.progress import Meter, StageLines, Steps, bar, wanted
 from baker.run.spill import Spill
+from baker.run.stages import Stage, run_stages, timed
 from baker.errors import SettingsError
 from baker.settings import Resolved, Settings, resolve
-
-
-@contextmanager
-def timed(times: dict[str, float], name: str) -> Iterator[None]:
-    """Add the wall time of the block to ``times[name]``, in seconds. An interrupt some code
-    swallowed is raised again as the block starts and ends (``run.interruptible``)."""
-    check_interrupted()
-    start = time.perf_counter()
-    yield
-    times[name] = times.get(name, 0.0) + time.perf_counter() - start
-    check_interrupted()
 
 
 def bounds_of_baked(world, scene) -> tuple[float, float]:
@@ -125,7 +108,7 @@ class Computed:
     tally: Tally
     lightmaps: Lightmaps
     stage_seconds: dict[str, float]
-    sources: Sources | None = None  # what lights the scene directly (direct.py)
+    sources: Sources | None = None  # what lights the scene directly (sources.py)
     power: Power | None = None  # what each source lays on the surfaces, for I_A
     denoised: DenoiseInfo | None = None  # what --denoise did (denoise.py); None: not denoised
     foliage: Foliage | None = None  # --foliage approx: the crowns and their fit (foliage.py)
@@ -253,60 +236,137 @@ class StateSink(Protocol):
               ) -> None: ...
 
 
+@dataclass(frozen=True)
+class Underway:
+    """A full bake between two of its ``STAGES``: what was asked (the scene, the settings, how
+    to run), the seconds of each ``stage_seconds`` key so far, and what the stages before made
+    (None until made)."""
+
+    scene: Scene
+    asked: Settings
+    quiet: bool
+    spill_folder: str | os.PathLike | None
+    staging: StateSink | None
+    prepared: tuple[World, Lighting] | None
+    times: dict[str, float]
+    world: World | None = None
+    settings: Resolved | None = None  # ``asked`` resolved for the scene; the unwrap's density
+    lit: Lighting | None = None
+    atlas: Atlas | None = None
+    coverage: Coverage | None = None
+    owned: Owners | None = None
+    baking: Baking | None = None  # what every part needs (``parts``)
+    slices: tuple[slice, ...] = ()  # the coverage rows of each part
+    spill: Spill | None = None  # where the parts' rows go, with more than one part
+    pages: _Pages | None = None
+    per_texel: PerTexel | None = None
+    computed: Computed | None = None
+
+    def abandon(self) -> None:
+        """A stage failed (an error, Ctrl-C): no spilled rows left behind."""
+        if self.spill is not None:
+            self.spill.close()
+
+
+def _lights_and_plan(w: Underway) -> Underway:
+    """The world (timed as "load"), the settings resolved for its bounds, and its ``Lighting``
+    (``lighting``), or the world and ``Lighting`` a rebake ``prepared``."""
+    scene = w.scene
+    with timed(w.times, "load"):
+        world = build_world(scene) if w.prepared is None else w.prepared[0]
+    area, diagonal = bounds_of_baked(world, scene)
+    resolved = resolve(w.asked, area, diagonal, normal_maps=has_normal_maps(scene),
+                       lights_needed=scene.lights_needed())
+    lit = lighting(scene, world, resolved, w.times) if w.prepared is None else w.prepared[1]
+    return replace(w, world=world, settings=resolved, lit=lit)
+
+
+def _unwrap(w: Underway, steps: Steps) -> Underway:
+    """The atlas: the artist's lightmap UVs (``settings.uv``), else the unwrap's
+    (``_unwrapped``), with the density it used in the settings."""
+    if w.asked.uv is not None:  # the artist's lightmap UVs: no unwrap
+        return replace(w, atlas=authored_atlas(w.scene, w.world, w.settings))
+    atlas, resolved = _unwrapped(w.scene, w.world, w.asked, w.settings, steps)
+    return replace(w, atlas=atlas, settings=resolved)
+
+
+def _rasterise(w: Underway) -> Underway:
+    """Which triangle owns each texel and what the texels take from it (``rasterise``)."""
+    coverage = cover(w.atlas, w.world)
+    return replace(w, coverage=coverage, owned=owners(w.atlas, w.world, coverage))
+
+
+def _parts(w: Underway) -> Underway:
+    """What every part needs (``Baking``), the ray budget checked (``check_ray_budget``), the
+    texels cut into parts and, for more than one, the folder their rows go to."""
+    scene, world, resolved = w.scene, w.world, w.settings
+    count = len(w.coverage.key)
+    slices = part_slices(count, cluster.part_texels(count) if resolved.cluster is not None
+                         else None)
+    baking = Baking(scene, world, resolved, w.lit, w.atlas, w.coverage, w.owned,
+                    Faces(scene, world), surfaces_of(scene, world))
+    check_ray_budget(baking, count)
+    spill = Spill(w.spill_folder) if len(slices) > 1 else None
+    return replace(w, baking=baking, slices=tuple(slices), spill=spill)
+
+
+def _fit_foliage(w: Underway) -> Underway:
+    """--foliage approx: the crowns fitted to the leaves they stand for (``foliage.py``)."""
+    baking, lit = w.baking, w.lit
+    return replace(w, baking=replace(baking, foliage=prepare_foliage(
+        w.scene, w.world, lit.tracer, w.settings, FitInputs(
+            w.atlas, w.coverage, w.owned, baking.faces, baking.surfaces,
+            effective_r_ave(lit.ambient, w.settings.rho)))))
+
+
+def _texels_and_rays(w: Underway) -> Underway:
+    """Every part's texels made, probed, traced, lit and composed (``_bake_parts``); their
+    results, held or spilled (``PerTexel``)."""
+    pages, last = _bake_parts(w.baking, list(w.slices), w.spill, w.times, w.quiet)
+    per_texel = (PerTexel.spilled(w.spill, w.atlas, w.world) if w.spill is not None
+                 else last.held())
+    return replace(w, pages=pages, per_texel=per_texel)
+
+
+def _post_process(w: Underway, steps: Steps) -> Underway:
+    """The bake state started, the pages denoised and post-processed (``_finish_pages``)."""
+    return replace(w, computed=_finish_pages(w.baking, w.per_texel, w.pages, w.times,
+                                             w.staging, steps=steps))
+
+
+STAGES: tuple[Stage[Underway], ...] = (
+    Stage("lights and plan", _lights_and_plan),
+    Stage("unwrap", _unwrap, "unwrap", "triangles"),
+    Stage("rasterise", _rasterise, "rasterise"),
+    Stage("parts", _parts, shown=False),
+    Stage("foliage fit", _fit_foliage, "foliage fit",
+          when=lambda w: w.settings.foliage == "approx"),
+    Stage("texels and rays", _texels_and_rays,
+          detail=lambda w: f"{len(w.baking.coverage.key):,} texels"),
+    Stage("post-process", _post_process, unit="texels"),
+)
+"""The full bake, stage by stage, from the loaded scene to the post-processed float lightmaps:
+each stage's name is the line a bake prints as it ends, its second field the function that
+does it, its third the key of ``stage_seconds`` its time goes to (none: it times its own
+keys) and its fourth what its progress counts (``run.stages.Stage``)."""
+
+
 def compute(scene: Scene, settings: Settings, quiet: bool = True,
             spill_folder: str | os.PathLike | None = None,
             staging: StateSink | None = None,
             prepared: tuple[World, Lighting] | None = None) -> Computed:
-    """Run every stage from the loaded scene up to the post-processed float lightmaps.
+    """Run every stage (``STAGES``) from the loaded scene up to the post-processed float
+    lightmaps; ``quiet=False`` prints a line per stage with its time, and the rays' bar.
 
     The texels are made, traced and composed a part at a time (``parts.py``); when there are
     several parts, each part's results go to a temporary folder in ``spill_folder`` (None: the
     system's) until the bake state is written (``Computed.per_texel``). ``staging``: where the
     bake state starts to be written once the texels are done. ``prepared``: the scene's world
     and ``Lighting`` with these settings, already made (by a rebake that fell back to this
-    bake, ``rebake.incremental.FullBake``): the same objects this bake would make.
+    bake, ``rebake.fallback.FullBake``): the same objects this bake would make.
     """
-    times: dict[str, float] = {}
-    log = StageLines(not quiet)
-    with log.stage("lights and plan"):
-        with timed(times, "load"):
-            world = build_world(scene) if prepared is None else prepared[0]
-        area, diagonal = bounds_of_baked(world, scene)
-        resolved = resolve(settings, area, diagonal, normal_maps=has_normal_maps(scene),
-                           lights_needed=scene.lights_needed())
-        lit = lighting(scene, world, resolved, times) if prepared is None else prepared[1]
-    with timed(times, "unwrap"), log.stage("unwrap", "triangles") as steps:
-        if settings.uv is not None:  # the artist's lightmap UVs: no unwrap
-            atlas = authored_atlas(scene, world, resolved)
-        else:
-            atlas, resolved = _unwrapped(scene, world, settings, resolved, steps)
-    with timed(times, "rasterise"), log.stage("rasterise"):
-        coverage = cover(atlas, world)
-        owned = owners(atlas, world, coverage)
-    count = len(coverage.key)
-    slices = part_slices(count, cluster.part_texels(count) if resolved.cluster is not None
-                         else None)
-    spill = Spill(spill_folder) if len(slices) > 1 else None
-    baking = Baking(scene, world, resolved, lit, atlas, coverage, owned, Faces(scene, world),
-                    surfaces_of(scene, world))
-    check_ray_budget(baking, count)
-    if resolved.foliage == "approx":
-        with timed(times, "foliage fit"), log.stage("foliage fit"):
-            baking = replace(baking, foliage=prepare_foliage(
-                scene, world, lit.tracer, resolved, FitInputs(
-                    atlas, coverage, owned, baking.faces, baking.surfaces,
-                    effective_r_ave(lit.ambient, resolved.rho))))
-    try:
-        with log.stage(f"texels and rays ({count:,} texels)"):
-            pages, last = _bake_parts(baking, slices, spill, times, quiet)
-        per_texel = (PerTexel.spilled(spill, atlas, world) if spill is not None
-                     else last.held())
-        with log.stage("post-process", "texels") as steps:
-            return _finish_pages(baking, per_texel, pages, times, staging, steps=steps)
-    except BaseException:  # an error or Ctrl-C: no spilled rows left behind
-        if spill is not None:
-            spill.close()
-        raise
+    underway = Underway(scene, settings, quiet, spill_folder, staging, prepared, times={})
+    return run_stages(STAGES, underway, StageLines(not quiet)).computed
 
 
 def _unwrapped(scene: Scene, world: World, settings: Settings, resolved: Resolved,
@@ -370,7 +430,7 @@ def check_ray_budget(baking: Baking, texels: int) -> None:
 
 
 @dataclass(frozen=True)
-class _Stages:
+class _RayStages:
     """The progress reports ``(texels, rays)`` of a bake's ray-casting stages, registered on
     one ``run.progress.Meter`` with their first estimates of rays per texel: obscurance rays,
     direct light's shadow and sky rays, GI's paths (``gi.rays_per_path``)."""
@@ -382,7 +442,7 @@ class _Stages:
     estimates: tuple[float, ...]  # the first rays per texel of each stage there is, in order
 
     @classmethod
-    def of(cls, meter: Meter, baking: Baking, count: int) -> "_Stages":
+    def of(cls, meter: Meter, baking: Baking, count: int) -> "_RayStages":
         estimates = rays_per_texel(baking)
         stages = [None if per is None else meter.stage(count, per) for per in estimates]
         return cls(meter, *stages, estimates=tuple(per for per in estimates if per is not None))
@@ -408,7 +468,7 @@ def _bake_parts(baking: Baking, slices: list[slice], spill: Spill | None,
     count = len(baking.coverage.key)
     pages = _Pages.blank(baking)
     with bar("baking", wanted(quiet)) as meter:
-        stages = _Stages.of(meter, baking, count)
+        stages = _RayStages.of(meter, baking, count)
         made = (cluster.parts(_bake_part, baking, slices, times, stages.whole_parts())
                 if baking.settings.cluster is not None else
                 (_bake_part(baking, rows, times, stages) for rows in slices))
@@ -425,10 +485,10 @@ def _bake_parts(baking: Baking, slices: list[slice], spill: Spill | None,
 
 
 def _bake_part(baking: Baking, rows: slice, times: dict[str, float],
-               stages: "_Stages | None") -> BakedPart:
+               stages: "_RayStages | None") -> BakedPart:
     """Make, probe, trace and light the texels ``rows``, reporting to ``stages`` (None: to no
     bar, as on a cluster's worker)."""
-    stages = stages or _Stages.of(Meter(), baking, 0)
+    stages = stages or _RayStages.of(Meter(), baking, 0)
     s, ambient, scene, world, tracer = (baking.settings, baking.ambient, baking.scene,
                                         baking.world, baking.tracer)
     with timed(times, "rasterise"):
@@ -469,7 +529,7 @@ def _bake_part(baking: Baking, rows: slice, times: dict[str, float],
 
 
 def _adaptive_direct(baking: Baking, texels: Texels, targets: np.ndarray,
-                     times: dict[str, float], stages: "_Stages") -> tuple[Direct, np.ndarray]:
+                     times: dict[str, float], stages: "_RayStages") -> tuple[Direct, np.ndarray]:
     """The direct light in adaptive rounds to ``targets`` (N,), and what it leaves of the
     target to the other term (``adaptive.what_is_left``)."""
     with timed(times, "direct"):

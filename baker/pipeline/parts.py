@@ -193,7 +193,7 @@ class PerTexel:
         return cls(spill.groups, rebuild=(atlas, world), spill=spill)
 
     def state_groups(self) -> dict:
-        """The per-texel groups of the bake state (``incremental.bake_state_writer``), by name: the
+        """The per-texel groups of the bake state (``staging.bake_state_writer``), by name: the
         dataclasses, or their spilled rows (``spill.Group``), which are written from disk."""
         return dict(self._groups)
 

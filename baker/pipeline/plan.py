@@ -15,7 +15,7 @@ from baker.geometry.surface import LUMINANCE
 from baker.gltf.materials import material_table, normal_mapped
 from baker.gltf.scene import Scene
 from baker.light.ambient import Ambient
-from baker.light.direct import Sources
+from baker.light.sources import Sources
 from baker.light.environment import Environment
 
 
@@ -55,7 +55,7 @@ def _node_label(scene: Scene, node: int) -> str:
 
 def make_plan(scene: Scene, ambient: Ambient, rho: str, sources: Sources | None = None,
               surround: Environment | None = None, directional: bool = False) -> Plan:
-    """What this bake does with ``scene``; ``sources``: its direct light (direct.light_sources);
+    """What this bake does with ``scene``; ``sources``: its direct light (sources.light_sources);
     ``surround``: what rays that meet nothing count, and why (environment.environment);
     ``directional``: whether directional lightmaps were asked for."""
     baked, left_out = [], [(s.where, s.reason) for s in scene.skipped]
@@ -77,7 +77,7 @@ def make_plan(scene: Scene, ambient: Ambient, rho: str, sources: Sources | None 
                           "(docs/direct_light.md)")
     if ambient.source == "none" and sources is not None and sources.any():
         ambient_text = ("the scene's light sources lay no light on its surfaces (measured at "
-                        "their power points, direct.delivered_power): I_A = 1, as with no source")
+                        "their power points, power.delivered_power): I_A = 1, as with no source")
     if ambient.source == "emission" and sources is not None:
         ambient_text = ambient_text.replace("(eq. 3)", "after their first bounce (docs/direct_light.md)")
     if ambient.source == "emission":

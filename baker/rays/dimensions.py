@@ -3,8 +3,8 @@
 A random number is a pure function of (seed, key, sample, dimension) (docs/design.md §4). Two
 estimators that use the same dimension with the same keys get the same numbers, so their errors
 are correlated instead of independent: each estimator owns a range of dimensions here, and
-``tests/test_dimensions.py`` checks that no two ranges of one stream overlap for any number of
-lights or bounces.
+``tests/test_dimensions.py`` lists every range in use (its ``ranges``: a new range goes there
+too) and checks that no two of one stream overlap for any number of lights or bounces.
 
 The numbers come from three streams, whose hashes never take the same words:
 
@@ -19,14 +19,12 @@ The numbers come from three streams, whose hashes never take the same words:
   (``trace._coin``), keyed by no texel at all.
 
 Keys are texel keys, a texel's other side (``inner.OTHER_SIDE``), the power-estimate points
-(``direct._POWER_KEY_BASE``), the sources whose power is traced from them
-(``direct._TRACED_KEY_BASE``) or the GI paths' vertices (``gi._bounce_keys``); a range says
+(``power._POWER_KEY_BASE``), the sources whose power is traced from them
+(``power._TRACED_KEY_BASE``) or the GI paths' vertices (``gi._bounce_keys``); a range says
 which.
 """
 
 from __future__ import annotations
-
-from dataclasses import dataclass
 
 # --- the sobol stream ---------------------------------------------------------------------------
 OBSCURANCE = 0  # the hemisphere directions of obscurance rays (texel keys, other-side keys)
@@ -73,32 +71,3 @@ def material_dimension(depth: int) -> int:
 def alpha_dimension(step: int) -> int:
     """The ray-stream dimension of the alpha-blend coin at continuation ``step``."""
     return ALPHA + ALPHA_STRIDE * step
-
-
-@dataclass(frozen=True)
-class Range:
-    """Dimensions ``start`` … ``stop − 1`` of ``stream``, owned by ``owner``."""
-
-    owner: str
-    stream: str
-    start: int
-    stop: int
-
-
-def ranges(lights: int, max_depth: int, continuations: int) -> list[Range]:
-    """Every range in use by a bake with ``lights`` punctual lights, material chains of at most
-    ``max_depth`` bounces and ``continuations`` alpha-test steps a ray."""
-    table = [Range("obscurance", "sobol", OBSCURANCE, OBSCURANCE + 1),
-             Range("supersample", "sobol", SUPERSAMPLE, SUPERSAMPLE + 1),
-             Range("power", "sobol", POWER[0], POWER[1] + 1),
-             Range("sky", "sobol", SKY, SKY + 1),
-             Range("emissive", "sobol", EMISSIVE, EMISSIVE + 1),
-             Range("traced power", "sobol", POWER_TRACED[0], POWER_TRACED[1] + 1),
-             Range("gi", "sobol", GI_FIRST, GI_EMITTER + 1)]
-    table += [Range(f"light {l}", "sobol", light_dimension(l), light_dimension(l) + 1)
-              for l in range(lights)]
-    table += [Range("foliage fit", "uniform", FOLIAGE_FIT, FOLIAGE_FIT + 1),
-              Range("material", "uniform", MATERIAL,
-                    material_dimension(max_depth) + MATERIAL_STRIDE),
-              Range("alpha", "ray", ALPHA, alpha_dimension(continuations))]
-    return table

@@ -65,7 +65,7 @@ def hash4(a, b, c, d):
 
 
 @jit
-def _reverse_bits(x):
+def reverse_bits(x):
     """Reverse the 32 bits of a uint32."""
     x = ((x >> _U32(1)) & _U32(0x55555555)) | ((x & _U32(0x55555555)) << _U32(1))
     x = ((x >> _U32(2)) & _U32(0x33333333)) | ((x & _U32(0x33333333)) << _U32(2))
@@ -75,7 +75,7 @@ def _reverse_bits(x):
 
 
 @jit
-def _laine_karras(x, seed):
+def laine_karras(x, seed):
     """Burley's improved Laine–Karras permutation: each bit flips depending on lower bits only."""
     x = _U32(x + seed)
     x ^= _U32(x * _U32(0x6C50B47C))
@@ -88,7 +88,7 @@ def _laine_karras(x, seed):
 @jit
 def owen_scramble(x, seed):
     """Nested uniform (Owen) scrambling of a 32-bit fixed-point value ``x`` with ``seed``."""
-    return _reverse_bits(_laine_karras(_reverse_bits(_U32(x)), _U32(seed)))
+    return reverse_bits(laine_karras(reverse_bits(_U32(x)), _U32(seed)))
 
 
 def _sobol_second_directions() -> list[int]:
@@ -101,7 +101,7 @@ def _sobol_second_directions() -> list[int]:
     return directions
 
 
-_SOBOL_SECOND_DIRECTIONS = np.array(_sobol_second_directions(), np.uint32)
+SOBOL_SECOND_DIRECTIONS = np.array(_sobol_second_directions(), np.uint32)
 
 
 def _sobol_second_table() -> np.ndarray:
@@ -126,10 +126,10 @@ _SOBOL_SECOND_REVERSED = np.array(
 
 
 @jit
-def _sobol_second_reversed(index):
+def sobol_second_reversed(index):
     """Dimension 1 of the Sobol sequence at ``index``, 32-bit fixed point, bits reversed.
 
-    (Dimension 0 is the van der Corput sequence, ``_reverse_bits(index)``.)
+    (Dimension 0 is the van der Corput sequence, ``reverse_bits(index)``.)
     """
     table = _SOBOL_SECOND_REVERSED
     return _U32(table[0, index & _U32(255)] ^ table[1, (index >> _U32(8)) & _U32(255)]
@@ -157,8 +157,8 @@ def _sobol_point(sample, shuffle, sx, sy):
     is rev(LK(index)), and dimension 1 is read from the bit-reversed table.
     """
     index = owen_scramble(_U32(sample), shuffle)
-    return (_unit(_reverse_bits(_laine_karras(index, sx))),
-            _unit(_reverse_bits(_laine_karras(_sobol_second_reversed(index), sy))))
+    return (_unit(reverse_bits(laine_karras(index, sx))),
+            _unit(reverse_bits(laine_karras(sobol_second_reversed(index), sy))))
 
 
 @jit

@@ -178,8 +178,8 @@ class Diff:
     moved: instance indices (same in both scenes) whose node moved rigidly.
     recoloured: material indices whose base colour changed.
     lights_placed: light indices whose position, direction, cone, range or size changed.
-    recompose: only global terms changed (light colours, R_ave, I_A, encoding): no ray needed
-    for them.
+    What changes only global terms (light colours, R_ave, I_A, encoding: no ray needed for
+    them) is only said in ``changes``: the rebake recomposes every texel anyway.
     """
 
     full: str | None = None
@@ -187,13 +187,6 @@ class Diff:
     moved: list[int] = field(default_factory=list)
     recoloured: list[int] = field(default_factory=list)
     lights_placed: list[int] = field(default_factory=list)
-    recompose: bool = False
-
-    @property
-    def nothing(self) -> bool:
-        """Nothing at all changed (the state is up to date)."""
-        return self.full is None and not (self.changes or self.moved or self.recoloured
-                                          or self.lights_placed or self.recompose)
 
 
 def _setting_changes(old: dict, new: dict) -> list[str]:
@@ -258,7 +251,6 @@ def diff(old: dict, new: dict) -> Diff:
             result.changes.append(f"light {l} (node {b['node']}): moved or reshaped → its "
                                   "shadow rays")
         elif a["colour"] != b["colour"]:
-            result.recompose = True
             result.changes.append(f"light {l} (node {b['node']}): colour/intensity → recompose")
     for i, (a, b) in enumerate(zip(oi, ni)):
         if a["world"] != b["world"]:
@@ -267,7 +259,6 @@ def diff(old: dict, new: dict) -> Diff:
             if line not in result.changes:
                 result.changes.append(line)
     if so["recompose"] != sn["recompose"]:
-        result.recompose = True
         result.changes.append("settings: " + ", ".join(_setting_changes(so["values"], sn["values"]))
                               + " → recompose")
     return result

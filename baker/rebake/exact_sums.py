@@ -14,19 +14,19 @@ import numpy as np
 
 from baker.geometry.surface import LUMINANCE
 from baker.light.hemisphere import (
-    _COLUMNS,
-    _ESCAPED,
-    _HALF,
-    _RGB,
-    _NO_DIRECTIONS,
-    _SQUARE,
+    COLUMNS,
+    ESCAPED,
+    HALF,
+    NO_DIRECTIONS,
+    RGB,
+    SQUARE,
     Surfaces,
     Terms,
-    _accumulate_kernel,
-    _grid_values,
-    _luminance_and_escaped,
-    _means,
-    _shading,
+    accumulate_kernel,
+    grid_values,
+    hit_shading,
+    luminance_and_escaped,
+    terms_of_sums,
 )
 from baker.light.obscurance import RHO_KINDS
 from baker.rays.trace import LocalHits
@@ -36,31 +36,31 @@ from baker.settings import Resolved
 def ray_changes(surfaces: Surfaces, settings: Resolved, target: np.ndarray,
                 sample: np.ndarray, before: LocalHits, after: LocalHits,
                 count: int) -> np.ndarray:
-    """(count, 7) what some rays' change adds to their texels' sums (``_accumulate_kernel``'s
+    """(count, 7) what some rays' change adds to their texels' sums (``accumulate_kernel``'s
     columns, exact): rays of no mirror, glass or translucent surface (``Surfaces.special``),
     ray j being sample ``sample[j]`` (m,) of texel ``target[j]`` (m,) (rows 0 … count − 1),
     whose hits went from ``before`` to ``after`` (within d_max)."""
-    changes = np.zeros((count, _COLUMNS))
+    changes = np.zeros((count, COLUMNS))
     for sign, hits in ((-1.0, before), (1.0, after)):
-        kind, ray_albedo = _shading(surfaces, settings, hits)
-        _accumulate_kernel(settings.rays, hits.triangle, hits.distance,
-                           np.float32(settings.d_max), RHO_KINDS[settings.rho], surfaces.table,
-                           kind, ray_albedo, LUMINANCE, changes, target, sample, sign,
-                           _NO_DIRECTIONS)
+        kind, ray_albedo = hit_shading(surfaces, settings, hits)
+        accumulate_kernel(settings.rays, hits.triangle, hits.distance,
+                          np.float32(settings.d_max), RHO_KINDS[settings.rho], surfaces.table,
+                          kind, ray_albedo, LUMINANCE, changes, target, sample, sign,
+                          NO_DIRECTIONS)
     return changes
 
 
 def _sums_of(terms: Terms) -> np.ndarray:
-    """(k, 7) the sums ``_means`` made ``terms`` from (of one round of rays), worked back from
+    """(k, 7) the sums ``terms_of_sums`` made ``terms`` from (of one round of rays), worked back from
     the means: each is a multiple of 2^-40 far smaller than float64's precision can tell apart,
     so rounding recovers it. ``changed_terms`` checks the result."""
     n = terms.counts.astype(np.float64)
-    sums = np.zeros((len(n), _COLUMNS))
-    sums[:, _RGB] = _grid_values(terms.w_hit * n[:, None])
-    sums[:, _ESCAPED] = _grid_values(terms.escaped * n)
-    sums[:, _SQUARE] = _grid_values(terms.hit_sq * n)
-    sums[:, _HALF] = _part_sums(terms.half_split, terms.counts // 2,
-                                _luminance_and_escaped(sums), terms.counts)
+    sums = np.zeros((len(n), COLUMNS))
+    sums[:, RGB] = grid_values(terms.w_hit * n[:, None])
+    sums[:, ESCAPED] = grid_values(terms.escaped * n)
+    sums[:, SQUARE] = grid_values(terms.hit_sq * n)
+    sums[:, HALF] = _part_sums(terms.half_split, terms.counts // 2,
+                               luminance_and_escaped(sums), terms.counts)
     return sums
 
 
@@ -73,7 +73,7 @@ def _part_sums(split: np.ndarray, part: np.ndarray, whole: np.ndarray,
     rest = (whole_count - part).astype(np.float64)[:, None]
     with np.errstate(divide="ignore", invalid="ignore"):
         found = (split + whole / rest) * (p * rest) / (p + rest)
-    return np.where((p >= 1) & (rest >= 1), _grid_values(found), 0.0)
+    return np.where((p >= 1) & (rest >= 1), grid_values(found), 0.0)
 
 
 def changed_terms(terms: Terms, changes: np.ndarray) -> tuple[Terms, np.ndarray]:
@@ -82,10 +82,10 @@ def changed_terms(terms: Terms, changes: np.ndarray) -> tuple[Terms, np.ndarray]
     others must be traced anew). ``terms``: the texels' terms from one round of rays (no
     adaptive rounds, no light through translucent surfaces)."""
     sums = _sums_of(terms)
-    again = _means(sums, terms.counts)
+    again = terms_of_sums(sums, terms.counts)
     exact = np.ones(len(sums), bool)
     for name in ("w_hit", "escaped", "hit_sq", "half_split"):
         mine, theirs = getattr(again, name), getattr(terms, name)
         same = mine == theirs
         exact &= same.all(axis=tuple(range(1, same.ndim)))
-    return _means(sums + changes, terms.counts), exact
+    return terms_of_sums(sums + changes, terms.counts), exact

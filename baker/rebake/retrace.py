@@ -1,6 +1,6 @@
 """A rebake's traced work, a part at a time, on this machine or on a Ray cluster (``--cluster``).
 
-Once the dirty search has said which texels a change reaches (``incremental._dirty_search``),
+Once the dirty search has said which texels a change reaches (``dirty.dirty_search``),
 a rebake casts rays again for three kinds of rows: the obscurance rays of the dirty texels
 whose terms cannot follow from their stored ones, the shadow and sky rays of every dirty
 texel, and, for each light placed anew, the shadow rays of every clean texel. Each texel's
@@ -24,21 +24,16 @@ from baker.geometry.surface import LUMINANCE
 from baker.gltf.scene import Scene
 from baker.geometry.world import World
 from baker.image.compose import effective_r_ave
-from baker.light.direct import (
-    Direct,
-    aim_of,
-    direct_light,
-    mean_and_variance,
-    punctual_samples,
-    texel_receivers,
-)
+from baker.light.direct import Direct, aim_of, direct_light, texel_receivers
+from baker.light.direct_estimators import mean_and_variance, punctual_samples
 from baker.light.hemisphere import Surfaces, Terms, surfaces_of
 from baker.light.integrate import integrate
 from baker.pipeline import cluster
-from baker.pipeline.full import Lighting, timed
+from baker.pipeline.full import Lighting
 from baker.pipeline.parts import part_slices, take, texel_rows
 from baker.rays.dimensions import light_dimension
 from baker.rays.trace import Tracer
+from baker.run.stages import timed
 from baker.settings import Resolved
 
 

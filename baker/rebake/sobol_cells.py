@@ -15,18 +15,19 @@ import numpy as np
 
 from baker.jit import inline, jit
 from baker.rays.sampling import (
-    _SOBOL_SECOND_DIRECTIONS,
-    _U32,
-    _laine_karras,
-    _reverse_bits,
-    _sobol_second_reversed,
+    SOBOL_SECOND_DIRECTIONS,
+    laine_karras,
     owen_scramble,
+    reverse_bits,
+    sobol_second_reversed,
 )
+
+_U32 = np.uint32  # the points' 32-bit fixed point, as ``rays.sampling`` computes them
 
 
 @inline
 def _laine_karras_preimage(target, seed, bits, most):
-    """The x < 2^bits with ``_laine_karras(x, seed)`` ≡ ``target`` (mod 2^bits). Bit j of the
+    """The x < 2^bits with ``laine_karras(x, seed)`` ≡ ``target`` (mod 2^bits). Bit j of the
     permutation is bit j of x flipped by a function of x's lower bits, so x is found a bit at a
     time from the lowest, ``bits`` evaluations in all. The loop runs ``most`` ≥ ``bits`` times
     (a constant where it is inlined, ``sobol_cell_sample``), the steps past ``bits`` doing
@@ -35,7 +36,7 @@ def _laine_karras_preimage(target, seed, bits, most):
     for j in range(most):
         if j < bits:
             bit = _U32(1) << _U32(j)
-            if (_laine_karras(x, seed) ^ _U32(target)) & bit:
+            if (laine_karras(x, seed) ^ _U32(target)) & bit:
                 x |= bit
     return x
 
@@ -51,9 +52,9 @@ def _sample_of_index(low, shuffle, bits, most):
         if q < bits:
             p = 32 - bits + q
             want = (_U32(low) >> _U32(bits - 1 - q)) & _U32(1)
-            if ((_laine_karras(w, shuffle) >> _U32(p)) & _U32(1)) != want:
+            if ((laine_karras(w, shuffle) >> _U32(p)) & _U32(1)) != want:
                 w |= _U32(1) << _U32(p)
-    return _reverse_bits(w)
+    return reverse_bits(w)
 
 
 @jit
@@ -61,7 +62,7 @@ def net_solve(bits):
     """(bits + 1, 24) uint32: row a solves for the index bits a … bits − 1 of a point of the
     first 2^bits of a texel's ``sobol`` points from the top bits − a bits of its Sobol y
     (``sobol_cell_sample``). Those y bits are the XOR of the direction numbers v_k
-    (``_SOBOL_SECOND_DIRECTIONS``) of the index's set bits; with the index's other bits known,
+    (``SOBOL_SECOND_DIRECTIONS``) of the index's set bits; with the index's other bits known,
     that is a square system over GF(2), invertible because the points form a (0, bits, 2)-net.
     Entry r of row a is the mask (over y bits j = 0 … bits − a − 1, bit 31 − j of y as bit j)
     whose parity is index bit a + r: Gauss–Jordan elimination, made once per search."""
@@ -72,7 +73,7 @@ def net_solve(bits):
         for j in range(c):  # row j of the system: which unknowns bit 31 − j of y holds
             system[j] = _U32(0)
             for r in range(c):
-                if (_SOBOL_SECOND_DIRECTIONS[a + r] >> _U32(31 - j)) & _U32(1):
+                if (SOBOL_SECOND_DIRECTIONS[a + r] >> _U32(31 - j)) & _U32(1):
                     system[j] |= _U32(1) << _U32(r)
             out[a, j] = _U32(1) << _U32(j)
         for r in range(c):
@@ -106,14 +107,14 @@ def _cell_sample(columns, column, row, bits, scrambles, solve, most):
     c = bits - columns
     low = _U32(0)
     if columns > 0:  # x = rev(LK(index, sx)): its top bits are LK(index)'s low ones
-        target = _reverse_bits(_U32(column)) >> _U32(32 - columns)  # lowest first
+        target = reverse_bits(_U32(column)) >> _U32(32 - columns)  # lowest first
         low = _laine_karras_preimage(target, sx, columns, most)
     if c > 0:  # y = rev(LK(rev(sobol2(index)), sy)): the top c bits of sobol2(index)
-        target = _reverse_bits(_U32(row)) >> _U32(32 - c)
-        top = _reverse_bits(_laine_karras_preimage(target, sy, c, most))
+        target = reverse_bits(_U32(row)) >> _U32(32 - c)
+        top = reverse_bits(_laine_karras_preimage(target, sy, c, most))
         mask = (_U32(1) << _U32(bits)) - _U32(1)
         known = (owen_scramble(0, shuffle) & ~mask) | low  # the same for every sample < 2^bits
-        rhs = _reverse_bits(top ^ _reverse_bits(_sobol_second_reversed(known)))
+        rhs = reverse_bits(top ^ reverse_bits(sobol_second_reversed(known)))
         for r in range(most):
             if r < c:
                 low |= _parity(solve[columns, r] & rhs) << _U32(columns + r)
@@ -127,7 +128,7 @@ def sobol_cell_sample(columns, column, row, bits, scrambles, solve):
     [0, 1)²; bits ≤ 24, ``solve`` = ``net_solve(bits)``. The first 2^bits points of each texel
     form a (0, bits, 2)-net, so exactly one lies in each such cell: a texel's rays that can go
     in a narrow cone of directions are found without drawing the others
-    (``incremental._cell_candidates``), in the grid whose cells a box of the cone crosses
+    (``near_rays._cell_candidates``), in the grid whose cells a box of the cone crosses
     fewest of (columns = bits: strips of x; 0: strips of y). Both coordinates are
     Owen-scrambled values of the index, and the index an Owen-scrambled sample number: each
     scramble is undone a bit at a time (``_laine_karras_preimage``); x gives the index's low

@@ -4,13 +4,20 @@ from __future__ import annotations
 
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
+from typing import BinaryIO, Callable
 
+import numpy as np
+
+from baker.atlas.layout import Atlas
+from baker.geometry.world import World
+from baker.gltf.scene import Scene
 from baker.pipeline.full import Baking
 from baker.pipeline.parts import PerTexel
-from baker.rebake.incremental import bake_state_writer
+from baker.rebake import state as state_file
+from baker.rebake.diff import fingerprints
 from baker.run.atomic import Outputs, remove_temporary, stage_atomically
 from baker.run.interruptible import deferred
-from baker.settings import Settings
+from baker.settings import Resolved, Settings
 
 
 class StateStaging:
@@ -48,3 +55,21 @@ class StateStaging:
             remove_temporary(self._future.result())
         except Exception:
             pass  # it failed too; the bake's own error is the one to report
+
+
+def bake_state_writer(scene: Scene, world: World, resolved: Resolved, atlas: Atlas,
+                      per_texel: PerTexel, settings: Settings | None = None,
+                      fingerprint: dict | None = None) -> Callable[[BinaryIO], None]:
+    """What writes the bake state to an open file (``state.write_state``): the texels'
+    results ``per_texel`` (``parts.PerTexel``) on ``atlas``, with the ``fingerprint`` of the
+    scene baked (by default that of ``scene`` and ``world`` baked with ``resolved``, asked as
+    ``settings``; a rebake has made it already). ``StateStaging`` runs it beside
+    post-processing and the output's encoding, and the file is renamed into place only once
+    the output is written."""
+    if fingerprint is None:
+        fingerprint = fingerprints(scene, world, resolved, settings)
+    state = state_file.BakeState(
+        fingerprints=fingerprint, atlas=atlas, groups=per_texel.state_groups(),
+        instance_world=np.array([inst.world for inst in scene.instances], np.float64
+                                ).reshape(-1, 4, 4))
+    return lambda file: state_file.write_state(file, state)

@@ -40,6 +40,10 @@ import numpy as np
 from isal import isal_zlib
 
 from baker.atlas.layout import Atlas, InstanceUV
+from baker.atlas.validity import Validity
+from baker.light.direct import Direct
+from baker.light.hemisphere import Terms
+from baker.pipeline.parts import TexelPoints
 from baker.rebake.zipwriter import BLOCK_BYTES, DEFLATED, STORED, ZipWriter, deflate
 from baker.run.atomic import write_atomically
 from baker.run.spill import Column, Group
@@ -53,6 +57,11 @@ _NPY_HEAD = 1 << 16  # bytes enough for any .npy header baker writes (version 1.
 
 class StateUnusable(Exception):
     """The bake state cannot be used; ``str(error)`` says why in one line."""
+
+
+def state_classes() -> dict[str, type]:
+    """The dataclasses a bake state stores, by group name (``load``'s ``classes``)."""
+    return {"texels": TexelPoints, "validity": Validity, "terms": Terms, "direct": Direct}
 
 
 def default_path(output: str | Path) -> Path:
@@ -75,7 +84,7 @@ def save_full_bake_seconds(state_path: str | Path, seconds: float,
                            rebake_overhead: float | None = None) -> None:
     """Record that a full bake for this state took ``seconds``, and ``stages`` (stage name →
     seconds, as the bake's report has them) if given; and, as the last rebake measured them,
-    its search and rays' time over the cost model's figure (``incremental.rebake_measured``)
+    its search and rays' time over the cost model's figure (``cost.rebake_measured``)
     and its seconds besides them, if given; with ``write(path, bytes)`` (an atomic writer, or
     ``run.atomic.Outputs.stage``)."""
     record: dict = {"full_bake_seconds": round(float(seconds), 3)}

@@ -7,7 +7,7 @@ atlas width of 0, a triangle index out of range), or bake a wrong lightmap witho
 terms: all black; ``escaped`` of 5: a page five times too bright). So every member is checked
 against what this build writes — dtype, shape, rows, range, finite values, index bounds, the
 fingerprints' structure — and anything else raises ``StateUnusable``, which the rebake turns into
-a full bake with the reason (``incremental.FullBake``): "the bake state is unusable: …".
+a full bake with the reason (``fallback.FullBake``): "the bake state is unusable: …".
 
 What cannot be told from a well-formed state is a plausible value edited into another plausible
 value (an ``escaped`` of 0.7 for 0.6): the state is trusted as far as the files beside the output

@@ -7,8 +7,8 @@ The worker then calls a stale function pointer: SIGSEGV in an xatlas worker, see
 fresh-clone CI runs here and in 2 runs with numba's bounds checks on (gdb: ``?? ()`` called
 from ``TaskScheduler::workerThread``, the main thread in ``AddMeshJoin``).
 The same race can leave a task unfinished, so that xatlas waits for it for ever (a fuzzed bake
-of a few triangles once ran past the test's 20 s). ``unwrap.py`` runs xatlas through
-``call_forked``: the child is forked (copy-on-write, so the inputs cost nothing to pass), its
+of a few triangles once ran past the test's 20 s). ``charts.py`` runs xatlas through
+``call_forked_together``: each child is forked (copy-on-write, so the inputs cost nothing to pass), its
 result comes back pickled through a pipe, and a child killed by a signal, or hung, is killed and
 run again — xatlas's result does not depend on its threads' timing. Where ``os.fork`` is
 missing (Windows) the call runs in this process, unprotected.
@@ -46,23 +46,16 @@ class ChildCrashed(BakerError):
     """Every attempt at a forked call died of a signal or hung."""
 
 
-def call_forked(function: Callable[[], Any], what: str, seconds: float) -> Any:
-    """``function()`` run in a forked child: its value, or the exception it raised, raised here
-    (as RuntimeError when it cannot be pickled). A child killed by a signal, or hung (more than
-    ``seconds`` of CPU time, or none gained for ``STALL_SECONDS``, or ``seconds`` if less), is
-    killed and run again, up to ``ATTEMPTS`` times; then ChildCrashed names ``what`` was being
-    done. Ctrl-C here kills the child. Without ``os.fork``,
-    ``function()`` is simply called."""
-    return call_forked_together([function], what, seconds)[0]
-
-
 def call_forked_together(functions: list[Callable[[], Any]], what: str, seconds: float,
                          tick: Callable[[], None] | None = None) -> list[Any]:
-    """Every function of ``functions`` run as ``call_forked`` runs one, each in its own child
-    and all at once (one per core would be busy), ``seconds`` of CPU time for each: their
-    values in order. ``tick()`` is called every ``_POLL_SECONDS`` while they run (to show
-    their progress).
-    A crashed or hung child is run again on its own; the first error raised ends them all."""
+    """Every function of ``functions`` run in a forked child of its own, all at once (one per
+    core would be busy): their values in order. A function's exception is raised here (as
+    RuntimeError when it cannot be pickled); the first error raised ends them all. A child
+    killed by a signal, or hung (more than ``seconds`` of CPU time, or none gained for
+    ``STALL_SECONDS``, or ``seconds`` if less), is killed and run again on its own, up to
+    ``ATTEMPTS`` times; then ChildCrashed names ``what`` was being done. Ctrl-C here kills the
+    children. ``tick()`` is called every ``_POLL_SECONDS`` while they run (to show their
+    progress). Without ``os.fork`` (or off Linux) each function is simply called."""
     if not hasattr(os, "fork") or not sys.platform.startswith("linux"):
         return [function() for function in functions]
     values: dict[int, Any] = {}
