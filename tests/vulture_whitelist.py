@@ -24,8 +24,9 @@ lightmap_texcoord  # output/write.py: WriteInfo, what baker.write returns
 calibration  # study.py: do the error estimates hold? (docs/model.md, bench_calibration.py)
 back_fraction  # atlas/validity.py: Validity's field, written to the bake state
 
-# Used only by tests, in files that another change (the estimators' speed) holds: to go with
-# it, or to earn a place (issue 41).
+# Used only by tests, as the plain statement of what a compiled pass computes (the directions a
+# texel's kernel draws, a texel's standard error, the texels' masks on the pages), which the
+# tests hold the kernels to; the next change of these files moves them into the tests.
 _.standard_error  # light/hemisphere.py: Terms.standard_error
 _.page_masks  # atlas/validity.py: Validity.page_masks
 cosine_directions  # light/hemisphere.py: the bake draws its directions in its kernels now

@@ -12,7 +12,7 @@ Three techniques (``TECHNIQUES``), all pure functions of those four numbers:
   texel's N samples are two such nets, independently scrambled (the first ⌊N/2⌋ and the rest),
   and each adaptive round's batch a net of its own (``fill_points``): like the stratified
   grid's two layers, independent halves make the error measurable without a model of how it
-  falls (``hemisphere.Terms.rmse``, ``direct.mean_and_variance``).
+  falls (``hemisphere.Terms.rmse``, ``direct_estimators.mean_and_variance``).
 - ``stratified``: a jittered grid of ⌊N/2⌋ cells (rows × columns, as square as N allows) laid
   twice: the first half of the texel's N samples puts one point in every cell and so does the
   second, independently (an odd last sample is independent). Two samples per stratum are what
@@ -219,7 +219,7 @@ def fill_points(technique, seed, keys, first, count, dimension, u, v):
     (``_grid(count)``), as ``point`` gives them.
 
     ``sobol``: independent scrambled nets, so that the error of a texel's mean can be measured
-    from its halves (``hemisphere.Terms.rmse``, ``direct.mean_and_variance``): from
+    from its halves (``hemisphere.Terms.rmse``, ``direct_estimators.mean_and_variance``): from
     ``first`` = 0, samples 0 … ⌊count/2⌋ − 1 are the first points of one net and the rest the
     first points of another; from ``first`` > 0 (an adaptive round) the ``count`` samples are
     one net. The net that starts at sample f takes the scrambles of ``net_word(dimension, f)``
@@ -312,8 +312,8 @@ def split_samples(seed: int, keys: np.ndarray, n: int, dimension: int) -> np.nda
     """(k, n, 2) ``sobol`` points for ``n`` samples of each of the (k,) ``keys``, as
     ``fill_points`` draws them from sample 0: two independent nets, samples 0 … ⌊n/2⌋ − 1 and
     ⌊n/2⌋ … n − 1, so that the difference of their means measures the error of the whole mean
-    without bias (``direct.mean_and_variance``). n = 1 gives sample 0 of ``dimension``, as
-    ``sample_2d`` does."""
+    without bias (``direct_estimators.mean_and_variance``). n = 1 gives sample 0 of
+    ``dimension``, as ``sample_2d`` does."""
     keys = np.ascontiguousarray(np.asarray(keys, np.uint64).reshape(-1))
     u, v = np.empty(len(keys) * n), np.empty(len(keys) * n)
     fill_points(0, _U64(seed), keys, 0, n, _U64(dimension), u, v)
