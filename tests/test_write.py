@@ -502,8 +502,8 @@ def test_gltf_output_writes_bin_and_round_trips(tmp_path, baked):
         np.testing.assert_array_equal(_read(document, blob, i), _read(glb_document, glb_blob, i))
 
 
-def test_gltf_output_copies_referenced_images(tmp_path):
-    source_dir = tmp_path / "src"
+def _textured_gltf(source_dir: Path) -> Path:
+    """``source_dir``/level.gltf whose base colour texture is the file textures/brick.png."""
     (source_dir / "textures").mkdir(parents=True)
     (source_dir / "textures" / "brick.png").write_bytes(_png(128))
     doc = _input_doc()
@@ -512,6 +512,11 @@ def test_gltf_output_copies_referenced_images(tmp_path):
     doc.json["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = {"index": 0}
     source = source_dir / "level.gltf"
     doc.gltf(source)
+    return source
+
+
+def test_gltf_output_copies_referenced_images(tmp_path):
+    source = _textured_gltf(tmp_path / "src")
     _assert_valid(source)
     scene = _scene(source)
     output = tmp_path / "out" / "level.gltf"
@@ -529,16 +534,8 @@ def test_gltf_output_copies_referenced_images(tmp_path):
 def test_a_glb_output_holds_the_images_its_input_names_by_uri(tmp_path, beside):
     """A .gltf whose texture is a file beside it, baked to a .glb (in its folder or another):
     the .glb is one file, its image a bufferView with its mimeType, its bytes the file's."""
-    source_dir = tmp_path / "src"
-    (source_dir / "textures").mkdir(parents=True)
-    (source_dir / "textures" / "brick.png").write_bytes(_png(128))
-    doc = _input_doc()
-    doc.json["images"] = [{"uri": "textures/brick.png"}]
-    doc.json["textures"] = [{"source": 0}]
-    doc.json["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = {"index": 0}
-    source = source_dir / "level.gltf"
-    doc.gltf(source)
-    output = (source_dir if beside else tmp_path / "out") / "level_baked.glb"
+    source = _textured_gltf(tmp_path / "src")
+    output = (source.parent if beside else tmp_path / "out") / "level_baked.glb"
     output.parent.mkdir(exist_ok=True)
     before = sorted(p.name for p in output.parent.iterdir())
     write(_scene(source), _atlas(), _pages(), output, WriteOptions())
