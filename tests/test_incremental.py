@@ -914,3 +914,15 @@ def test_a_rebake_measures_itself_and_the_next_one_of_the_state_goes_by_it(tmp_p
         "a rebake would cost more than a full bake: the last rebake of this state took 0.60 s "
         "besides its search and rays, the last full bake 0.50 s in all")
     assert (tmp_path / "out.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()
+
+def test_the_state_docs_name_the_format_version_a_state_carries(base):
+    """docs/bake_state.md's title and header table name the version a written state's header
+    holds (``state.VERSION``): a format change that forgets its docs fails here."""
+    import json
+    import re
+
+    with zipfile.ZipFile(default_path(base)) as archive:
+        version = json.loads(archive.read("header.json"))["version"]
+    text = (Path(__file__).resolve().parent.parent / "docs" / "bake_state.md").read_text()
+    assert re.search(r"format version (\d+)", text).group(1) == str(version)
+    assert re.search(r"`version` = `(\d+)`", text).group(1) == str(version)
