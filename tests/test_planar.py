@@ -18,7 +18,7 @@ from assets.gltf_builder import rotation_matrix, uv_sphere
 from assets.many_objects import grid_box
 from baker.atlas import packing, planar
 from baker.atlas.rasterise import _cover_kernel, _edge_terms
-from baker.atlas.unwrap import _MARGIN, unwrap
+from baker.atlas.unwrap import _MARGIN, _packed, unwrap
 from baker.geometry.world import build_world
 from baker.settings import Settings, resolve
 from tests.bakehelp import loaded
@@ -116,6 +116,33 @@ def test_a_turned_box_of_split_faces_is_six_charts_of_its_faces(seed):
     found = np.sort(charts.sides, axis=1)
     found = found[np.lexsort((found[:, 1].round(6), found[:, 0].round(6)))]
     np.testing.assert_allclose(found, faces, rtol=1e-9)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_loose_degenerate_triangles_take_no_room_in_the_atlas(seed):
+    """A box beside thousands of loose triangles of no area (points and segments scattered
+    around it, as a file of zero indices makes): the box keeps its six charts; the others are
+    points (sides 0) and share one rectangle, so the atlas is about the box's alone."""
+    rng = np.random.default_rng(seed)
+    positions, triangles, _n, _uv = grid_box(rng.uniform(0.5, 2.0, 3), 2)
+    count = 3000
+    loose = rng.uniform(-5, 5, (count, 3, 3))
+    loose[:, 2] = loose[:, 1]  # a segment: two corners at one place
+    loose[: count // 2] = loose[: count // 2, :1]  # half of them a point: one place thrice
+    joined = np.concatenate([positions, loose.reshape(-1, 3)])
+    extra = len(positions) + np.arange(3 * count).reshape(-1, 3)
+    both = planar.project(joined, np.concatenate([triangles, extra]))
+    box = planar.project(positions, triangles)
+    assert both is not None and box is not None
+    _check_charts(both, joined, np.concatenate([triangles, extra]))
+    degenerate = both.chart[both.triangles[len(triangles):, 0]]
+    assert not both.sides[degenerate].any()
+    np.testing.assert_array_equal(np.sort(np.delete(both.sides, degenerate, axis=0), axis=0),
+                                  np.sort(box.sides, axis=0))
+    settings = resolve(Settings(page_size=256, texel_density=20.0), 10.0, 1.0)
+    alone, with_loose = _packed([box], 20.0, settings), _packed([both], 20.0, settings)
+    assert with_loose.pages == alone.pages == 1
+    assert with_loose.width * with_loose.height <= 1.2 * alone.width * alone.height
 
 
 @pytest.mark.parametrize("rings", [6, 24, 56])

@@ -15,6 +15,7 @@ bit for bit as it was (incremental rebake).
 from __future__ import annotations
 
 import functools
+from dataclasses import replace
 from typing import Callable
 
 import numpy as np
@@ -162,8 +163,20 @@ def _cells(charts: list[Charts], density: float) -> tuple[np.ndarray, np.ndarray
 
 
 def _packed(charts: list[Charts], density: float, settings: Resolved) -> packing.Packed:
-    """The charts' rectangles at ``density`` packed into pages (``packing.pack``)."""
-    return packing.pack(_cells(charts, density)[1], settings.padding, settings.page_size)
+    """The charts' rectangles at ``density`` packed into pages (``packing.pack``). Charts of
+    no extent (degenerate triangles collapsed to a point, ``planar._no_area``) get no texels:
+    they all share the first one's rectangle."""
+    extent, cells = _cells(charts, density)
+    point = ~extent.any(axis=1)
+    if np.count_nonzero(point) < 2:
+        return packing.pack(cells, settings.padding, settings.page_size)
+    keep = ~point
+    keep[np.argmax(point)] = True
+    packed = packing.pack(cells[keep], settings.padding, settings.page_size)
+    row = np.cumsum(keep) - 1
+    row[point] = row[np.argmax(point)]
+    return replace(packed, page=packed.page[row], corner=packed.corner[row],
+                   turned=packed.turned[row])
 
 
 def _fitted(charts: list[Charts], settings: Resolved, spilled: packing.Packed
