@@ -44,13 +44,13 @@ from baker.geometry.surface import (LUMINANCE, SRGB_TO_LINEAR, albedo, alpha, ba
                                     emission, transformed_uv, viewer_diffuse_weight_at)
 from baker.geometry.world import World, build_world
 from baker.gltf.load import load
-from baker.gltf.materials import BLEND
 from baker.gltf.read_images import image_pixels
 from baker.gltf.read_nodes import trs_matrices
 from baker.gltf.scene import Scene
 from baker.light.viewer_lights import punctual_shading
 from baker.image.encode import linear_to_srgb, png_bytes
 from baker.light.directional import decode_vectors, shading_factor, texel_vectors
+from baker.materials import BLEND
 from baker.output.write import DIRECTIONAL_EXTENSION
 from baker.rays.trace import Tracer
 from baker.run.atomic import write_atomically
@@ -627,7 +627,7 @@ def _shade(scene: Scene, world: World, lightmaps: SceneLightmaps, mode: str, tri
                          + emission(scene, world, tris, b))
         if mode == "lit" and baked.any():  # the file's lights, as a viewer adds them
             on = hit[baked]
-            radiance[on] += punctual_shading(scene, world, tris[baked], b[baked],
+            radiance[on] += punctual_shading(scene.lights, scene, world, tris[baked], b[baked],
                                              _points(world, triangle[on], bary[on]),
                                              -directions[on])
         if mode == "lit":

@@ -123,12 +123,12 @@ def run_study(done: Computed, rays: tuple[int, ...] = DEFAULT_RAYS,
     seed, threads) are kept, only the rays and the technique change. ``progress(text)`` is told
     of each run as it starts.
     """
-    tracer = Tracer(done.world)
+    context = done.context()
 
     def estimate(technique: str, count: int) -> tuple[Terms, float]:
         settings = replace(done.settings, rays=count, sampling=technique, target_error=None)
         started = time.perf_counter()
-        terms = integrate(done.scene, done.world, tracer, done.texels, settings)
+        terms = integrate(context.with_settings(settings), done.texels)
         return terms, time.perf_counter() - started
 
     if progress:
@@ -247,14 +247,14 @@ def compare_with_gi(done: Computed, rays: int = 64, paths: int = 256) -> dict:
     Returns the lightmaps' RMSE (luminance, lightmap units), that RMSE over the GI lightmap's
     mean, the ratio of the mean indirect light of both, and the seconds each took.
     """
-    tracer = Tracer(done.world)
-    settings = replace(done.settings, rays=rays, sampling="sobol", target_error=None)
+    context = done.context(replace(done.settings, rays=rays, sampling="sobol",
+                                   target_error=None))
     started = time.perf_counter()
-    terms = integrate(done.scene, done.world, tracer, done.texels, settings)
+    terms = integrate(context, done.texels)
     obscurance_seconds = time.perf_counter() - started
     started = time.perf_counter()
-    indirect = indirect_light(done.scene, done.world, tracer, done.sources, done.texels,
-                              settings, paths).irradiance @ LUMINANCE
+    indirect = indirect_light(context, done.sources, done.texels,
+                              paths).irradiance @ LUMINANCE
     gi_seconds = time.perf_counter() - started
     lit = done.direct.irradiance() @ LUMINANCE if done.direct is not None else 0.0
     ambient = _luminance(done, terms)

@@ -64,7 +64,7 @@ def raw_embree_rate(done, threads: int, query: str = "INTERSECT") -> tuple[float
 
 def stage_query(done) -> str:
     """The query the bake's obscurance rays were cast with (``hemisphere.blocking_only``)."""
-    surfaces = surfaces_of(done.scene, done.world)
+    surfaces = surfaces_of(done.context())
     return "OCCLUDED" if blocking_only(surfaces, done.settings) else "INTERSECT"
 
 
@@ -88,7 +88,7 @@ def main() -> None:
     # busy with other work: the two raw figures show how much that moved).
     raw_before, raw_rays = raw_embree_rate(done, threads)
     started = time.perf_counter()
-    integrate(done.scene, done.world, Tracer(done.world), done.texels, done.settings)
+    integrate(done.context(), done.texels)
     end_to_end = rays / (time.perf_counter() - started)
     raw_after, _ = raw_embree_rate(done, threads)
     raw = (raw_before + raw_after) / 2

@@ -37,6 +37,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import baker  # noqa: E402
 from assets.foliage_scenes import tree  # noqa: E402
+from baker.context import context_of
 from baker.atlas.rasterise import cover, owners  # noqa: E402
 from baker.atlas.validity import Faces  # noqa: E402
 from baker.geometry.surface import LUMINANCE  # noqa: E402
@@ -113,15 +114,16 @@ def main() -> None:
               f"({stages})")
 
     coverage = cover(done.atlas, world)
+    context = context_of(scene, world, tracer, s)
     inputs = FitInputs(done.atlas, coverage, owners(done.atlas, world, coverage),
-                       Faces(scene, world), surfaces_of(scene, world), r_ave)
+                       Faces(scene, world), surfaces_of(context), r_ave)
 
     def approx_run():
-        foliage = prepare_foliage(scene, world, tracer, s, inputs)
-        return foliage_terms(foliage, scene, world, texels, crown)
+        foliage = prepare_foliage(context, inputs)
+        return foliage_terms(foliage, world, texels, crown)
 
     def traced_run(rays: int, rows: np.ndarray):
-        return integrate(scene, world, tracer, texels, replace(s, rays=rays), rows=rows,
+        return integrate(context.with_settings(replace(s, rays=rays)), texels, rows=rows,
                          surfaces=inputs.surfaces)
 
     approx_run(), traced_run(4, crown[:64])  # compile numba's kernels before timing

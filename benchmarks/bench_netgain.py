@@ -97,14 +97,15 @@ def compare(name: str, rays: int, factor: int, every: int, folder: Path) -> dict
     make, overrides = SCENES[name]
     scene = _probe_only(load(make().save(folder / "scene.glb")))
     done = compute(scene, Settings(rays=rays, seed=1, **overrides))
-    tracer, surfaces = Tracer(done.world), surfaces_of(done.scene, done.world)
+    context = done.context()
+    tracer, surfaces = context.tracer, surfaces_of(context)
     assert not surfaces.special, name
     r_ave = effective_r_ave(done.ambient, done.settings.rho)
     lum, intensity = float(r_ave @ LUMINANCE), float(done.ambient.intensity @ LUMINANCE)
 
     def bake(count: int, seed: int):
         settings = replace(done.settings, rays=count, seed=seed, target_error=None)
-        return integrate(done.scene, done.world, tracer, done.texels, settings)
+        return integrate(context.with_settings(settings), done.texels)
 
     fine = bake(rays * factor, 2)
     reference = (fine.obscurance(r_ave) @ LUMINANCE) * intensity

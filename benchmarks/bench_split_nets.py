@@ -60,7 +60,7 @@ def main() -> None:
         with tempfile.TemporaryDirectory() as folder:
             scene = load(make().save(Path(folder) / "scene.glb"))
         done = compute(scene, Settings(page_size=256, rays=4, rho=rho, d_max=1.0, threads=1))
-        tracer, surfaces = Tracer(done.world), surfaces_of(done.scene, done.world)
+        tracer, surfaces = Tracer(done.world), surfaces_of(done.context())
         rows = np.arange(0, len(done.texels), max(1, len(done.texels) // args.texels))
         reference = np.mean([luminance_w(done, tracer, surfaces, rows, args.reference, 0,
                                          1000 + k) for k in range(4)], axis=0)

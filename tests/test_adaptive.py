@@ -16,7 +16,6 @@ from baker.light.integrate import integrate
 from baker.errors import SettingsError
 from baker.settings import DEFAULT_RAYS, FIRST_ROUND_RAYS, Settings, resolve
 from baker.geometry.surface import LUMINANCE
-from baker.rays.trace import Tracer
 from tests.bakehelp import computed, saved
 
 SETTINGS = dict(texel_density=6.0, rays=16, max_rays=256, d_max=0.6)
@@ -198,8 +197,7 @@ def test_a_subset_of_rows_gets_the_same_terms_as_the_full_bake(tmp_path):
     ``hemisphere.predicted_error``)."""
     done = computed(cornell_box(), tmp_path, **SETTINGS)
     rows = np.random.default_rng(1).choice(len(done.texels), 300, replace=False)
-    part = integrate(done.scene, done.world, Tracer(done.world), done.texels, done.settings,
-                     rows=rows)
+    part = integrate(done.context(), done.texels, rows=rows)
     assert np.array_equal(part.w_hit, done.terms.w_hit[rows])
     assert np.array_equal(part.escaped, done.terms.escaped[rows])
     assert np.array_equal(part.counts, done.terms.counts[rows])

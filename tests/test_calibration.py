@@ -10,6 +10,7 @@ import pytest
 from assets.light_scenes import floor_under_box, penumbra
 from assets.make_scenes import cornell_box, parallel_planes
 from assets.rebake_scenes import box_room, grid_boxes
+from baker.context import context_of
 from baker.geometry.surface import LUMINANCE
 from baker.geometry.world import build_world
 from baker.gltf.load import load
@@ -68,10 +69,9 @@ def test_the_ambient_intensity_spreads_over_seeds_as_its_variance_says(tmp_path)
     tracer = Tracer(world)
     levels, predicted = [], []
     for seed in range(16):
-        resolved = resolve(Settings(seed=seed), 1.0, 1.0)
-        sources = light_sources(scene, world, resolved)
-        power = delivered_power(scene, world, tracer, sources, resolved)
-        ambient = ambient_terms(scene, world, None, power)
+        context = context_of(scene, world, tracer, resolve(Settings(seed=seed), 1.0, 1.0))
+        power = delivered_power(context, light_sources(context))
+        ambient = ambient_terms(context, power)
         levels.append(float(ambient.intensity @ LUMINANCE))
         predicted.append(ambient.relative_variance)
     measured = np.var(levels, ddof=1) / np.mean(levels) ** 2
@@ -86,9 +86,9 @@ def test_a_lamp_in_a_closed_room_lays_all_its_power_on_it(tmp_path):
     world = build_world(scene)
     tracer = Tracer(world)
     for seed, rays in ((0, 32), (1, 64), (2, 1024)):
-        resolved = resolve(Settings(seed=seed, rays=rays), 1.0, 1.0)
-        power = delivered_power(scene, world, tracer, light_sources(scene, world, resolved),
-                                resolved)
+        context = context_of(scene, world, tracer, resolve(Settings(seed=seed, rays=rays), 1.0,
+                                                           1.0))
+        power = delivered_power(context, light_sources(context))
         assert power.punctual[0] == pytest.approx(4 * np.pi, rel=1e-12)
         assert power.relative_variance == 0.0
 
@@ -110,9 +110,9 @@ def test_the_ambient_intensity_is_estimated_with_the_work_asked(tmp_path):
     for rays in (64, 1024):
         levels = []
         for seed in range(8):
-            resolved = resolve(Settings(seed=seed, rays=rays, sky=(0.3, 0.4, 0.6)), 1.0, 1.0)
-            sources = light_sources(scene, world, resolved)
-            levels.append(float(delivered_power(scene, world, tracer, sources, resolved).total()
+            context = context_of(scene, world, tracer, resolve(
+                Settings(seed=seed, rays=rays, sky=(0.3, 0.4, 0.6)), 1.0, 1.0))
+            levels.append(float(delivered_power(context, light_sources(context)).total()
                                 @ LUMINANCE))
         spread[rays] = np.std(levels, ddof=1) / np.mean(levels)
     assert spread[1024] <= spread[64] / 3, spread

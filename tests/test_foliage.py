@@ -9,13 +9,16 @@ import pytest
 import baker
 from assets.foliage_scenes import tree, tree_and_boxes
 from assets.light_scenes import _add_light
+from baker.context import context_of
 from baker.errors import InputError, SettingsError
 from baker.geometry.surface import LUMINANCE
 from baker.geometry.world import build_world
 from baker.image.compose import effective_r_ave
 from baker.light.foliage import find_foliage
 from baker.pipeline import parts
+from baker.rays.trace import Tracer
 from baker.rebake.state import default_path
+from baker.settings import Settings, resolve
 from tests.bakehelp import loaded, saved
 
 # escape "scene": the environment the errors below were measured in (R_ave, not the neutral
@@ -43,16 +46,22 @@ def _w(done) -> np.ndarray:
     return done.terms.obscurance(effective_r_ave(done.ambient, done.settings.rho)) @ LUMINANCE
 
 
+def _foliage_of(scene):
+    """``find_foliage`` of a loaded scene, with the default settings."""
+    world = build_world(scene)
+    return find_foliage(context_of(scene, world, Tracer(world), resolve(Settings(), 1.0, 1.0)))
+
+
 def test_foliage_is_found_from_materials_and_extras(tmp_path):
     b = _tree()
     scene = loaded(b, tmp_path)
-    found = {node: (kind, len(tris)) for node, kind, tris, _ in find_foliage(scene, build_world(scene))}
+    found = {node: (kind, len(tris)) for node, kind, tris, _ in _foliage_of(scene)}
     nodes = b.info["nodes"]
     assert found == {nodes["crown"]: ("crown", 2 * 1500), nodes["grass"]: ("grass", 2 * 300)}
     b._nodes[nodes["crown"]].extras = {"foliage": "none"}  # a node may say it is not foliage
     b._nodes[nodes["trunk"]].extras = {"foliage": "crown", "foliage_density": 2.0}
     scene = loaded(b, tmp_path)
-    found = find_foliage(scene, build_world(scene))
+    found = _foliage_of(scene)
     assert [(n, k, d) for n, k, _, d in found] == [(nodes["trunk"], "crown", 2.0),
                                                    (nodes["grass"], "grass", None)]
 

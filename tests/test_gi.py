@@ -6,7 +6,6 @@ from assets.gltf_builder import GltfBuilder, box
 from baker.light.sources import light_sources
 from baker.light.gi import indirect_light
 from baker.study import compare_with_gi
-from baker.rays.trace import Tracer
 from tests.bakehelp import computed
 
 
@@ -23,9 +22,9 @@ def test_furnace_a_glowing_closed_room_reaches_pi_over_one_minus_albedo(tmp_path
     E_ind = π·(a + a² + …) = π·a/(1 − a) everywhere (the path tracer's closed form)."""
     for a in (0.3, 0.6):
         done = computed(_glowing_room(a), tmp_path, texel_density=3.0, rays=4)
-        sources = light_sources(done.scene, done.world, done.settings)
-        indirect = indirect_light(done.scene, done.world, Tracer(done.world), sources,
-                                  done.texels, done.settings, paths=64, max_bounces=64)
+        sources = light_sources(done.context())
+        indirect = indirect_light(done.context(), sources, done.texels, paths=64,
+                                  max_bounces=64)
         values = indirect.irradiance[:, 0]
         expected = np.pi * a / (1 - a)
         stderr = values.std() / np.sqrt(len(values))
@@ -44,9 +43,8 @@ def test_a_small_lamp_is_found_from_every_path_vertex(tmp_path):
     from baker.geometry.surface import LUMINANCE
 
     done = computed(cornell_box(), tmp_path, page_size=48, rays=4)
-    tracer = Tracer(done.world)
-    a, b = (indirect_light(done.scene, done.world, tracer, done.sources, done.texels,
-                           replace(done.settings, seed=seed), paths=64).irradiance @ LUMINANCE
+    a, b = (indirect_light(done.context(replace(done.settings, seed=seed)), done.sources,
+                           done.texels, paths=64).irradiance @ LUMINANCE
             for seed in (1, 2))
     noise = np.sqrt(np.mean((a - b) ** 2) / 2)
     assert noise < 0.3 * a.mean(), noise / a.mean()
@@ -77,9 +75,8 @@ def test_obscurances_sit_near_full_gi_in_a_lit_room(tmp_path):
     """The paper's figure 13 comparison: same direct light, the ambient term I_A·W against
     path-traced indirect light, on the same texels."""
     done = computed(_lamp_room(), tmp_path, texel_density=4.0, rays=128)
-    sources = light_sources(done.scene, done.world, done.settings)
-    indirect = indirect_light(done.scene, done.world, Tracer(done.world), sources, done.texels,
-                              done.settings, paths=128).irradiance
+    sources = light_sources(done.context())
+    indirect = indirect_light(done.context(), sources, done.texels, paths=128).irradiance
     ambient = done.terms.obscurance(done.ambient.r_ave) * done.ambient.intensity
     lum = np.array([0.2126, 0.7152, 0.0722])
     # Of the same magnitude (measured: obscurances give about half the path-traced light here;
@@ -114,9 +111,8 @@ def test_furnace_at_high_albedo_within_three_sigma_of_its_own_error(tmp_path):
     """
     for a in (0.9, 0.99):
         done = computed(_glowing_room(a), tmp_path, texel_density=2.0, rays=4)
-        sources = light_sources(done.scene, done.world, done.settings)
-        indirect = indirect_light(done.scene, done.world, Tracer(done.world), sources,
-                                  done.texels, done.settings, paths=32)
+        sources = light_sources(done.context())
+        indirect = indirect_light(done.context(), sources, done.texels, paths=32)
         values = indirect.irradiance @ np.array([0.2126, 0.7152, 0.0722])
         expected = np.pi * a / (1 - a)
         sigma = np.sqrt(indirect.variance.sum()) / len(values)
@@ -124,6 +120,6 @@ def test_furnace_at_high_albedo_within_three_sigma_of_its_own_error(tmp_path):
         assert indirect.capped < 0.001 * indirect.variance.size * 32  # P = a^1023 a path
         spread = np.mean((values - expected) ** 2) / np.mean(indirect.variance)
         assert 0.5 < spread < 2.0, (a, spread)
-        cut = indirect_light(done.scene, done.world, Tracer(done.world), sources, done.texels,
-                             done.settings, paths=32, max_bounces=16)  # the test can fail
+        cut = indirect_light(done.context(), sources, done.texels, paths=32,
+                             max_bounces=16)  # the test can fail
         assert cut.irradiance.mean() < expected - 3 * sigma and cut.capped > 0

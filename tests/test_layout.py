@@ -20,10 +20,12 @@ LAYERS = (
     ("baker.errors", "baker.jit", "baker.frozen"),  # errors; compiled kernels; read-only hand-offs
     ("baker.run",),  # processes, threads, progress, spilled rows, atomic files
     ("baker.settings",),  # what the user may set
+    ("baker.materials", "baker.punctual"),  # materials and lights as the estimators see them
     ("baker.gltf",),  # reading glTF into a Scene; what its materials mean
     ("baker.geometry",),  # the world's triangles; what a surface looks like
     ("baker.rays",),  # sample points and Embree
     ("baker.atlas",),  # unwrap, authored UVs, rasterise, validity, supersample
+    ("baker.context",),  # what every estimator needs of a bake, made once
     ("baker.light",),  # obscurance terms, translucency, direct light, ambient, GI
     ("baker.image",),  # compose, post-process, seams, denoise, encode, float files
     ("baker.output",),  # the glTF written back
@@ -166,6 +168,16 @@ def test_imports_are_read_at_any_depth_but_type_checking(tmp_path):
     finally:
         PACKAGE = saved
 
+
+
+def test_the_estimators_never_import_the_gltf_layer():
+    """``baker/light/`` reads the scene through ``context.Context`` (world, materials, tracer,
+    lights, settings) and the format-free records (``materials``, ``punctual``), never through
+    ``baker.gltf``: the estimators know nothing of the file format (lazy imports included)."""
+    imports = graph()
+    found = sorted(f"{a} → {b}" for a, deps in imports.items() if a.startswith("baker.light")
+                   for b in deps if b == "baker.gltf" or b.startswith("baker.gltf."))
+    assert found == []
 
 
 def test_the_design_table_names_every_module():

@@ -12,6 +12,7 @@ import baker.light.hemisphere as integrate_module
 from assets.material_scenes import (DIFFUSE_TRANSMISSION, TRANSMISSION, VOLUME, WAX,
                                     alpha_cut_quad, facing_mirrors, glass_slab, leaf, material_zoo,
                                     mirror_wall, wax_cylinder)
+from baker.context import context_of
 from baker.geometry.world import build_world
 from baker.light.hemisphere import _Chains, _refract, _special_hits, hemisphere_rays, surfaces_of
 from baker.light.integrate import integrate
@@ -243,7 +244,7 @@ def test_a_ray_through_a_glass_slab_finds_the_colour_along_the_refracted_path(tm
     hits = tracer.cast_local(origins, directions, np.full(n, 10.0, np.float32))
     out = np.zeros((n, 4))
     chains = _Chains(np.zeros(n, np.int64), np.zeros(n, np.int64), np.zeros((n, 3)))
-    _special_hits(surfaces_of(scene, world), tracer, origins, directions, hits,
+    _special_hits(surfaces_of(context_of(scene, world, tracer, settings)), tracer, origins, directions, hits,
                   np.arange(n, dtype=np.uint64), 0, 1, settings, out, chains)
     landed = out[:, :3].sum(axis=1) > 0  # the rest escaped (Fresnel, ≈ 4 % per face) or
     assert landed.mean() > 0.75  # ended by Russian roulette (5 % from the second bounce)
@@ -260,10 +261,10 @@ def test_russian_roulette_is_unbiased_between_facing_mirrors(tmp_path, monkeypat
     diffs = []
     for seed in range(12):
         settings = replace(done.settings, seed=seed)
-        rr = integrate(done.scene, done.world, Tracer(done.world), done.texels, settings)
+        rr = integrate(done.context(settings), done.texels)
         with monkeypatch.context() as m:
             m.setattr(integrate_module, "_ROULETTE_FROM", 10 ** 6)
-            exact = integrate(done.scene, done.world, Tracer(done.world), done.texels, settings)
+            exact = integrate(done.context(settings), done.texels)
         r_ave = done.ambient.r_ave
         diffs.append(float((rr.obscurance(r_ave) - exact.obscurance(r_ave)).mean()))
         if seed == 0:
@@ -297,7 +298,7 @@ def test_surfaces_that_would_not_show_a_lightmap_get_none(tmp_path):
 
 def test_a_diffuse_scene_runs_no_material_stage(tmp_path):
     done = computed(mirror_wall(mirror=False), tmp_path, rays=16, texel_density=4)
-    assert done.world.alpha is None and not surfaces_of(done.scene, done.world).special
+    assert done.world.alpha is None and not surfaces_of(done.context()).special
     assert all(done.plan.stages[s].startswith("off") for s in
                ("specular chains", "refraction", "translucency", "alpha testing"))
     assert done.terms.chain_rays.sum() == 0 and done.terms.capped.sum() == 0
@@ -450,7 +451,7 @@ def test_other_side_rays_are_what_a_rebake_must_test(tmp_path):
     tracer, tx, s = Tracer(done.world), done.texels, done.settings
     node = done.world.tri_instance[tx.triangle]
     rows = np.flatnonzero((node == b.info["leaf"]) | (node == 0) | (node == 3))
-    which, origins, directions, lengths = other_side_rays(done.scene, done.world, tx, rows, s,
+    which, origins, directions, lengths = other_side_rays(done.context(), tx, rows,
                                                           tracer.center)
     owner = node[rows[which]]
     assert set(owner.tolist()) == {b.info["leaf"], 3}  # leaves and closed translucency only

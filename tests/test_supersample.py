@@ -27,14 +27,14 @@ def _obscurance(done, terms=None) -> np.ndarray:
 def _box_filtered_reference(done) -> np.ndarray:
     """(N,) W averaged over each texel's square: W at 8 × 8 points of the square (on the
     triangle's plane, ``Texels.axes``), 64 rays each with a seed of its own."""
-    texels, tracer = done.texels, Tracer(done.world)
+    texels, context = done.texels, done.context()
     offsets = (np.arange(_GRID) + 0.5) / _GRID - 0.5
     total = np.zeros(len(texels))
     for i, (a, b) in enumerate((a, b) for a in offsets for b in offsets):
         moved = replace(texels, position=texels.position + a * texels.axes()[:, 0]
                         + b * texels.axes()[:, 1])
-        total += _obscurance(done, integrate(done.scene, done.world, tracer, moved,
-                                             replace(done.settings, seed=1000 + i)))
+        total += _obscurance(done, integrate(
+            context.with_settings(replace(done.settings, seed=1000 + i)), moved))
     return total / _GRID ** 2
 
 

@@ -15,8 +15,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from baker.geometry.rows import row_groups
-from baker.gltf.materials import BLEND, MASK, material_table
 from baker.gltf.scene import CLAMP_TO_EDGE, MIRRORED_REPEAT, Image, Scene, TextureRef
+from baker.materials import BLEND, MASK
 
 if TYPE_CHECKING:  # world.build_world makes the AlphaTest below: a type, not an import
     from baker.geometry.world import World
@@ -107,10 +107,10 @@ def _textured(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray,
     return result
 
 
-def diffuse_factors(scene: Scene) -> np.ndarray:
-    """(M, 3) diffuse albedo factor of every material: baseColorFactor RGB × diffuse weight."""
-    table = material_table(scene)
-    return np.array([c.diffuse for c in table.classes], np.float64).reshape(-1, 3)
+def diffuse_factors(world: World) -> np.ndarray:
+    """(M, 3) diffuse albedo factor of every material: baseColorFactor RGB × diffuse weight
+    (``World.materials``)."""
+    return np.array([c.diffuse for c in world.materials.classes], np.float64).reshape(-1, 3)
 
 
 def metallic_roughness_at(scene: Scene, world: World, tris: np.ndarray,
@@ -153,7 +153,7 @@ def base_colour(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray) 
 
 def albedo(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray) -> np.ndarray:
     """Diffuse albedo (k, 3), linear RGB, at barycentric points (k, 3) of world triangles (k,)."""
-    colour = _textured(scene, world, tris, bary, diffuse_factors(scene),
+    colour = _textured(scene, world, tris, bary, diffuse_factors(world),
                        lambda m: m.base_color_texture)
     return _vertex_coloured(colour, world, tris, bary)
 
@@ -194,6 +194,39 @@ def triangle_means(scene: Scene, world: World, lookup, texture_of) -> np.ndarray
     bary = np.tile(MEAN_POINTS, (len(first), 1))
     means = lookup(scene, world, tris, bary).reshape(len(first), len(MEAN_POINTS), 3).mean(axis=1)
     return means[group]
+
+
+def albedo_means(scene: Scene, world: World) -> np.ndarray:
+    """(T, 3) each world triangle's mean diffuse albedo (``triangle_means`` of ``albedo``)."""
+    return triangle_means(scene, world, albedo, lambda m: m.base_color_texture)
+
+
+def emission_means(scene: Scene, world: World) -> np.ndarray:
+    """(T, 3) each world triangle's mean emitted radiance (``triangle_means`` of ``emission``)."""
+    return triangle_means(scene, world, emission, emission_texture)
+
+
+def emission_texture(material) -> TextureRef | None:
+    """The emissive texture of a ``scene.Material``, None without one."""
+    return material.emissive_texture
+
+
+def emission_textured(scene: Scene) -> np.ndarray:
+    """(M,) bool: which materials have an emissive texture (their emission varies over a
+    triangle, so it is looked up where it is sampled)."""
+    return np.array([emission_texture(m) is not None for m in scene.materials], bool)
+
+
+def viewer_brdf_at(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray
+                   ) -> tuple[np.ndarray, ...]:
+    """What a glTF viewer's BRDF reads at barycentric points (k, 3) of world triangles (k,):
+    base colour (k, 3) linear RGB, metallic (k,) and roughness (k,) in [0, 1], the material's
+    transmission factor (k,) and index of refraction (k,) as the file gives them."""
+    metallic, roughness = metallic_roughness_at(scene, world, tris, bary)
+    material = world.tri_material[tris]
+    transmission = np.array([m.transmission for m in scene.materials])[material]
+    ior = np.array([m.ior for m in scene.materials])[material]
+    return base_colour(scene, world, tris, bary), metallic, roughness, transmission, ior
 
 
 def sample_alpha(image: Image, ref: TextureRef, uv: np.ndarray) -> np.ndarray:
@@ -237,14 +270,14 @@ def triangle_albedo(scene: Scene, world: World) -> tuple[np.ndarray, np.ndarray]
     corners = world.colors[world.triangles][..., :3]  # (T, 3 corners, 3)
     uniform = np.all(corners == corners[:, :1], axis=(1, 2))
     textured = np.array([m.base_color_texture is not None for m in scene.materials], bool)
-    table = diffuse_factors(scene)[world.tri_material] * corners[:, 0]
+    table = diffuse_factors(world)[world.tri_material] * corners[:, 0]
     return table, textured[world.tri_material] | ~uniform
 
 
 def emission(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray) -> np.ndarray:
     """Emitted radiance (k, 3), linear RGB, at barycentric points of world triangles."""
     factor = np.array([m.emissive for m in scene.materials], np.float64)
-    return _textured(scene, world, tris, bary, factor, lambda m: m.emissive_texture)
+    return _textured(scene, world, tris, bary, factor, emission_texture)
 
 
 @dataclass(frozen=True)
@@ -274,7 +307,7 @@ class AlphaTest:
 
 def alpha_test(scene, world) -> AlphaTest | None:
     """The scene's ``AlphaTest``, or None when no triangle can let a ray through."""
-    classes = material_table(scene).classes
+    classes = world.materials.classes
     by_material = np.array([{"MASK": MASK, "BLEND": BLEND}.get(c.alpha_mode, 0) for c in classes],
                            np.uint8)
     tested = np.array([c.alpha_tested for c in classes], bool)

@@ -22,8 +22,10 @@ import numpy as np
 
 from baker.frozen import read_only
 from baker.geometry.surface import alpha_test
+from baker.gltf.materials import material_table
 from baker.gltf.scene import Scene
 from baker.jit import jit
+from baker.materials import MaterialTable
 
 
 @dataclass(frozen=True)
@@ -38,8 +40,10 @@ class World:
     triangles: (T, 3) int64 into positions.
     tri_instance / tri_material: (T,) int64, the triangle's instance and its material.
     vertex_start / tri_start: (I + 1,) int64 offsets of each instance.
-    alpha: ``materials.AlphaTest`` when some triangle may let rays through (alphaMode MASK or
+    alpha: ``surface.AlphaTest`` when some triangle may let rays through (alphaMode MASK or
     BLEND), else None; the tracer reads it.
+    materials: the scene's materials as the estimators see them (``materials.MaterialTable``,
+    rows follow ``tri_material``'s indices), made once with the world (``build_world``).
     """
 
     positions: np.ndarray
@@ -54,6 +58,7 @@ class World:
     tri_start: np.ndarray
     center: np.ndarray
     alpha: object = field(default=None, compare=False, repr=False)
+    materials: MaterialTable | None = field(default=None, compare=False, repr=False)
     coloured: bool = True  # some vertex has a COLOR_0 (else ``colors`` is all ones)
 
 
@@ -165,7 +170,8 @@ def bounds_scale(positions: np.ndarray) -> float:
 
 
 def build_world(scene: Scene) -> World:
-    """Transform every instance of ``scene`` to world space and concatenate them."""
+    """Transform every instance of ``scene`` to world space and concatenate them; classify
+    its materials (``gltf.materials.material_table``)."""
     sets = _texcoord_sets(scene)
     parts: dict[str, list[np.ndarray]] = {k: [] for k in (
         "positions", "normals", "smooth", "colors", "triangles", "tri_instance", "tri_material")}
@@ -224,5 +230,6 @@ def build_world(scene: Scene) -> World:
         center=center,
         coloured=any(scene.primitives[inst.primitive].colors is not None
                      for inst in scene.instances),
+        materials=material_table(scene),
     )
     return replace(world, alpha=alpha_test(scene, world))

@@ -1,6 +1,7 @@
 """What a glTF material does to an obscurance ray: the paper's §3–5 cases, from glTF.
 
-``classify`` maps one ``scene.Material`` to the weights of four branches that sum to 1 —
+``classify`` maps one ``scene.Material`` to the ``materials.Classification`` the estimators
+read: the weights of four branches that sum to 1 —
 diffuse, perfect specular (§3.1), transparent (§3.2) and translucent (§3.3) — plus its alpha
 test, sidedness and unlit flag (docs/design.md §2, materials table):
 
@@ -26,103 +27,23 @@ let a ray through: a scene without alpha-tested materials pays nothing.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
+
+from baker.materials import (
+    BRANCHES,
+    DIFFUSE,
+    SPECULAR,
+    TRANSLUCENT,
+    TRANSPARENT,
+    Classification,
+    MaterialTable,
+    table_of,
+)
 
 MIRROR_ROUGHNESS = 0.1
 """Default threshold: metals with (mean) roughness below it are perfect mirrors."""
 
 UNLIT_REASON = "unlit material"
-
-# Branches of a hit, in the column order of ``MaterialTable.weights``.
-DIFFUSE, SPECULAR, TRANSPARENT, TRANSLUCENT = range(4)
-BRANCHES = ("diffuse", "specular", "transparent", "translucent")
-
-
-@dataclass(frozen=True)
-class Classification:
-    """One material as the obscurance model sees it. Colours are (3,) float64 linear RGB
-    factors (textures and vertex colours multiply the diffuse one at each hit).
-
-    weights: (4,) fractions of the light a hit sends into each branch (DIFFUSE, SPECULAR,
-    TRANSPARENT, TRANSLUCENT), summing to 1. diffuse: base colour × weights[DIFFUSE], the
-    diffuse albedo factor. specular_color / transmission_color / translucent_color: the tint
-    of each branch. ior: index of refraction. thickness (mesh units, 0 thin-walled),
-    attenuation_distance (metres, inf none) and attenuation_color: KHR_materials_volume.
-    metallic / roughness: the effective values (factors × texture means). alpha: base colour
-    alpha; alpha_textured: the base colour texture has alpha below 1 somewhere.
-    """
-
-    weights: np.ndarray
-    diffuse: np.ndarray
-    specular_color: np.ndarray
-    transmission_color: np.ndarray
-    translucent_color: np.ndarray
-    ior: float
-    thickness: float
-    attenuation_distance: float
-    attenuation_color: np.ndarray
-    metallic: float
-    roughness: float
-    alpha_mode: str
-    alpha_cutoff: float
-    alpha: float
-    alpha_textured: bool
-    double_sided: bool
-    unlit: bool
-
-    @property
-    def alpha_tested(self) -> bool:
-        """Whether some ray may pass through this material's surfaces (alpha below opaque)."""
-        if self.alpha_mode == "MASK":
-            return self.alpha < self.alpha_cutoff or self.alpha_textured
-        if self.alpha_mode == "BLEND":
-            return self.alpha < 1.0 or self.alpha_textured
-        return False
-
-    @property
-    def invisible(self) -> bool:
-        """Every ray passes (MASK with constant alpha below the cutoff, BLEND with alpha 0)."""
-        if self.alpha_textured:
-            return False
-        return (self.alpha_mode == "MASK" and self.alpha < self.alpha_cutoff) or (
-            self.alpha_mode == "BLEND" and self.alpha <= 0.0)
-
-    @property
-    def translucency(self) -> np.ndarray:
-        """(3,) the share of light that crosses the surface (§4): the translucent branch's
-        weight × its tint (base colour × diffuseTransmissionColor)."""
-        return self.weights[TRANSLUCENT] * self.translucent_color
-
-    @property
-    def leaf(self) -> bool:
-        """Thin double-sided translucent geometry (no KHR_materials_volume thickness): a leaf
-        (§4), whose texels add the back face's obscurance × ``translucency`` to the front's."""
-        return self.weights[TRANSLUCENT] > 0 and self.double_sided and self.thickness <= 0.0
-
-    @property
-    def inner(self) -> bool:
-        """A closed translucent object (KHR_materials_volume thickness > 0): its texels get the
-        inner obscurance (§4, equation 5)."""
-        return self.weights[TRANSLUCENT] > 0 and self.thickness > 0.0
-
-    def stages(self) -> set[str]:
-        """Which of the bake's material stages this material needs."""
-        out = set()
-        if self.leaf:
-            out.add("leaves")
-        if self.inner:
-            out.add("inner obscurances")
-        if self.weights[SPECULAR] > 0:
-            out.add("specular chains")
-        if self.weights[TRANSPARENT] > 0:
-            out.add("refraction")
-        if self.weights[TRANSLUCENT] > 0:
-            out.add("translucency")
-        if self.alpha_tested:
-            out.add("alpha testing")
-        return out
 
 
 def _texture_mean(images, ref, channel: int) -> float:
@@ -194,59 +115,12 @@ def no_lightmap_reason(c: Classification) -> str:
     return "black base colour: zero diffuse albedo"
 
 
-@dataclass(frozen=True)
-class MaterialTable:
-    """Every material's classification as arrays, for vectorised shading of hits.
-
-    weights: (M, 4) branch weights; specular / transmission / translucent: (M, 3) tints;
-    ior: (M,); special: (M,) bool, some branch other than diffuse has weight; thin: (M,) bool,
-    no KHR_materials_volume thickness (a thin wall: refraction does not bend). Rows follow
-    ``Scene.materials``.
-    """
-
-    classes: tuple[Classification, ...]
-    weights: np.ndarray
-    specular: np.ndarray
-    transmission: np.ndarray
-    translucent: np.ndarray
-    ior: np.ndarray
-    special: np.ndarray
-    thin: np.ndarray
-
-    def stages(self) -> set[str]:
-        """Union of the material stages the materials need."""
-        return set().union(*(c.stages() for c in self.classes)) if self.classes else set()
-
-
 def material_table(scene) -> MaterialTable:
-    """``classify`` every material of ``scene`` with the scene's mirror threshold.
-
-    Computed once per scene and kept on it (the scene is immutable; ``surface.albedo`` asks for
-    it on every batch of hits, and the texture means cost a pass over each image)."""
-    cached = scene.__dict__.get("_material_table")
-    if cached is not None:
-        return cached
-    classes = tuple(classify(m, scene.images, scene.mirror_roughness) for m in scene.materials)
-
-    def rows(get, width):
-        return np.array([get(c) for c in classes], np.float64).reshape(-1, width)
-
-    weights = rows(lambda c: c.weights, 4)
-    table = MaterialTable(classes=classes, weights=weights,
-                          specular=rows(lambda c: c.specular_color, 3),
-                          transmission=rows(lambda c: c.transmission_color, 3),
-                          translucent=rows(lambda c: c.translucent_color, 3),
-                          ior=rows(lambda c: [c.ior], 1)[:, 0],
-                          special=weights[:, DIFFUSE] < 1.0,
-                          thin=np.array([c.thickness <= 0.0 for c in classes], bool))
-    object.__setattr__(scene, "_material_table", table)
-    return table
-
-
-# ------------------------------------------------------------------------------------------
-# Alpha testing
-
-MASK, BLEND = 1, 2
+    """``classify`` every material of ``scene`` with the scene's mirror threshold: built once
+    per bake, with its world (``geometry.world.build_world``: the texture means cost a pass
+    over each image)."""
+    return table_of(tuple(classify(m, scene.images, scene.mirror_roughness)
+                          for m in scene.materials))
 
 
 def normal_mapped(scene, material: int) -> bool:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from baker.gltf.context import Context, checked_item, finite, invalid, or_default, schema
-from baker.gltf.scene import Light
+from baker.punctual import Light
 
 
 _LIGHT_KINDS = ("directional", "point", "spot")

@@ -26,9 +26,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from baker.geometry.surface import albedo, emission, triangle_means
-from baker.geometry.world import World
-from baker.gltf.scene import Scene
+from baker.context import Context
+from baker.geometry.surface import albedo_means, emission_means
 
 if TYPE_CHECKING:
     from baker.light.power import Power
@@ -63,9 +62,10 @@ def bounce_factor(r_ave: np.ndarray) -> tuple[np.ndarray, bool]:
     return series, bool(np.any(series < 0.999 * closed))
 
 
-def ambient_terms(scene: Scene, world: World, user_intensity: float | None,
-                  power: Power | None = None, neutral: bool = False) -> Ambient:
-    """R_ave and I_A of the scene; ``user_intensity`` overrides I_A (all channels).
+def ambient_terms(context: Context, power: Power | None = None, neutral: bool = False
+                  ) -> Ambient:
+    """R_ave and I_A of the scene; the settings' ``ambient``, when given, overrides I_A (all
+    channels).
 
     ``power``: what the direct-light sources lay on the surfaces (power.delivered_power); then
     I_A = R_ave·series·Φ/A_T, the light after its first bounce (D holds the direct light). Without
@@ -73,7 +73,7 @@ def ambient_terms(scene: Scene, world: World, user_intensity: float | None,
     ``neutral``: rays that meet nothing count white (``environment.environment``), and without
     punctual lights or sky I_A is 1, not what emissive surfaces would give.
     """
-    ambient = _ambient_terms(scene, world, user_intensity, power)
+    ambient = _ambient_terms(context, power)
     if not neutral:
         return ambient
     unlit = power is None or not (len(power.punctual) or np.any(power.sky > 0))
@@ -82,16 +82,16 @@ def ambient_terms(scene: Scene, world: World, user_intensity: float | None,
     return replace(ambient, escape=np.ones(3))
 
 
-def _ambient_terms(scene: Scene, world: World, user_intensity: float | None,
-                   power: Power | None) -> Ambient:
+def _ambient_terms(context: Context, power: Power | None) -> Ambient:
     """``ambient_terms`` as the model has it, rays that meet nothing counting R_ave."""
+    world, user_intensity = context.world, context.settings.ambient
     areas = world.areas()
     total = areas.sum()
     if total <= 0:
         zero = np.zeros(3)
         return Ambient(zero, zero, np.ones(3), "none", False)
-    reflected = triangle_means(scene, world, albedo, lambda m: m.base_color_texture)
-    emitted = triangle_means(scene, world, emission, lambda m: m.emissive_texture)
+    reflected = albedo_means(context.surfaces, world)
+    emitted = emission_means(context.surfaces, world)
     r_ave = (areas[:, None] * reflected).sum(axis=0) / total
     mean_emission = (areas[:, None] * emitted).sum(axis=0) / total
     series, truncated = bounce_factor(r_ave)

@@ -52,9 +52,8 @@ import numpy as np
 
 from baker.atlas.rasterise import Texels
 from baker.atlas.supersample import sub_positions
+from baker.context import Context
 from baker.geometry.surface import LUMINANCE
-from baker.geometry.world import World
-from baker.gltf.scene import Scene
 from baker.light.adaptive import WITHIN, neighbour_mean, pooled_gain
 from baker.light.direct_estimators import (
     Receivers,
@@ -68,7 +67,6 @@ from baker.light.sources import Sources, all_sources
 from baker.rays.dimensions import light_dimension
 from baker.rays.trace import Tracer, ray_lift
 from baker.run.parallel import run_chunks, texels_per_chunk
-from baker.settings import Resolved
 
 
 def _source_terms(count: int, present: bool) -> tuple[np.ndarray, np.ndarray]:
@@ -181,14 +179,14 @@ def texel_receivers(texels: Texels, rows: slice | np.ndarray, center: np.ndarray
                      raised=np.any(texels.terminator(rows) != 0.0, axis=1))
 
 
-def direct_at(scene: Scene, world: World, tracer: Tracer, sources: Sources,
-              receivers: Receivers, seed: int, samples: int | None = None) -> Direct:
+def direct_at(context: Context, sources: Sources, receivers: Receivers, seed: int,
+              samples: int | None = None) -> Direct:
     """Direct irradiance at ``receivers`` from every source, kept apart per source.
 
     ``samples``: shadow/sky rays per receiver for every source (None: each source's own count,
     as a bake uses them; the full-GI reference takes 1 at each bounce).
     """
-    return _direct_rows(scene, world, tracer, sources, receivers, seed, samples)[0]
+    return _direct_rows(context, sources, receivers, seed, samples)[0]
 
 
 @dataclass(frozen=True)
@@ -225,11 +223,12 @@ def _noise_of(values: np.ndarray, unoccluded: np.ndarray, scale: float) -> tuple
     return iid, floor * floor, ~alike
 
 
-def _direct_rows(scene: Scene, world: World, tracer: Tracer, sources: Sources,
-                 receivers: Receivers, seed: int, samples: int | None = None,
-                 scale: int = 1, aims: bool = False) -> tuple[Direct, _Noise]:
+def _direct_rows(context: Context, sources: Sources, receivers: Receivers, seed: int,
+                 samples: int | None = None, scale: int = 1, aims: bool = False
+                 ) -> tuple[Direct, _Noise]:
     """``direct_at``, with each noisy source's rays × ``scale`` (an adaptive round:
     ``Sources.counts``), and its ``_Noise``; ``aims``: keep each source's ``Direct.aim``."""
+    tracer = context.tracer
     k = len(receivers.position)
     lights = len(sources.lights)
     punctual, punctual_var = np.zeros((k, lights)), np.zeros((k, lights))
@@ -249,7 +248,7 @@ def _direct_rows(scene: Scene, world: World, tracer: Tracer, sources: Sources,
             aim.punctual[:, l], aim.punctual_var[:, l] = aim_of(values, directions)
     if sources.emitters is not None:
         values, unoccluded, directions = emissive_samples(
-            scene, world, sources.emitters, int(counts[-2]), receivers, tracer, seed)
+            context, sources.emitters, int(counts[-2]), receivers, seed)
         emitted, emitted_var = rgb_mean_and_variance(values)
         _add(noise, _noise_of(values @ LUMINANCE, unoccluded, 1.0))
         if aims:
@@ -313,15 +312,15 @@ def _add(noise: _Noise, source: tuple[np.ndarray, ...]) -> None:
     noise.partial[:] |= source[2]
 
 
-def direct_light(scene: Scene, world: World, tracer: Tracer, texels: Texels, sources: Sources,
-                 settings: Resolved, progress: Callable[[int, int], None] | None = None) -> Direct:
+def direct_light(context: Context, texels: Texels, sources: Sources,
+                 progress: Callable[[int, int], None] | None = None) -> Direct:
     """Estimate every texel's direct irradiance from every source (no ray when there is none);
     ``progress(texels, rays)`` after each chunk (its shadow and sky rays)."""
-    return _rounds(scene, world, tracer, texels, sources, settings, progress, None)[0]
+    return _rounds(context, texels, sources, progress, None)[0]
 
 
-def adaptive_direct_light(scene: Scene, world: World, tracer: Tracer, texels: Texels,
-                          sources: Sources, settings: Resolved, targets: np.ndarray,
+def adaptive_direct_light(context: Context, texels: Texels, sources: Sources,
+                          targets: np.ndarray,
                           progress: Callable[[int, int], None] | None = None
                           ) -> tuple[Direct, np.ndarray]:
     """``direct_light`` in adaptive rounds, and each texel's predicted error σ (N,) after them.
@@ -329,17 +328,18 @@ def adaptive_direct_light(scene: Scene, world: World, tracer: Tracer, texels: Te
     A texel whose predicted error (``_predicted``) times ``adaptive.WITHIN`` is above its
     target (``targets`` (N,)) is estimated again with twice the rays of every noisy source
     (``Sources.counts``), from the start, until it is within or the rays would pass
-    ``settings.max_rays``: a texel with m times the rays holds what a bake with m times the
+    ``max_rays`` (the context's settings): a texel with m times the rays holds what a bake with m times the
     rays would give it, byte for byte. The rounds depend on the texels asked for (the error
     model is pooled over them), not on the chunks.
     """
-    return _rounds(scene, world, tracer, texels, sources, settings, progress, targets)
+    return _rounds(context, texels, sources, progress, targets)
 
 
-def _rounds(scene: Scene, world: World, tracer: Tracer, texels: Texels, sources: Sources,
-            settings: Resolved, progress: Callable[[int, int], None] | None,
+def _rounds(context: Context, texels: Texels, sources: Sources,
+            progress: Callable[[int, int], None] | None,
             targets: np.ndarray | None) -> tuple[Direct, np.ndarray | None]:
     """``adaptive_direct_light`` (one round when ``targets`` is None: no σ then)."""
+    tracer, settings = context.tracer, context.settings
     count = len(texels)
     if not sources.any():
         return no_direct(count), (None if targets is None else np.zeros(count))
@@ -365,8 +365,8 @@ def _rounds(scene: Scene, world: World, tracer: Tracer, texels: Texels, sources:
         def work(rows: np.ndarray, scale=scale) -> None:
             receivers = texel_receivers(texels, rows, tracer.center, tracer, settings.supersample,
                                          settings.seed)
-            part, part_noise = _direct_rows(scene, world, tracer, sources, receivers,
-                                            settings.seed, scale=scale, aims=aims)
+            part, part_noise = _direct_rows(context, sources, receivers, settings.seed,
+                                            scale=scale, aims=aims)
             _store(out, noise, rows, part, part_noise)
             texel_rays[rows] += part.rays_per_texel
             if progress is not None:

@@ -12,12 +12,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from baker.context import Context
 from baker.geometry.surface import LUMINANCE, emission
-from baker.geometry.world import World
-from baker.gltf.scene import Light, Scene
 from baker.jit import jit
 from baker.light.sky import Sky
 from baker.light.sources import Emitters
+from baker.punctual import Light
 from baker.rays.dimensions import EMISSIVE, SKY
 from baker.rays.sampling import (
     cosine_hemisphere,
@@ -251,21 +251,21 @@ def emitter_samples(u, n, cdf, probability, corners, normals, two_sided, areas, 
     return chosen, bary, directions, distance, weight
 
 
-def emissive_irradiance(scene: Scene, world: World, emitters: Emitters, n: int,
-                        receivers: Receivers, tracer: Tracer, seed: int) -> tuple[np.ndarray, np.ndarray]:
+def emissive_irradiance(context: Context, emitters: Emitters, n: int, receivers: Receivers,
+                        seed: int) -> tuple[np.ndarray, np.ndarray]:
     """Irradiance (k, 3) from the emissive triangles, and the variance (k,) of its luminance.
 
     Each of ``n`` samples picks a triangle in proportion to its power and a uniform point q on
     it; the estimate is Le(q)·cosθ_p·cosθ_q / d² · V / (P_t / A_t), unbiased for the irradiance
     of every emitter (a triangle whose mean emission is 0 at the fixed points is never picked).
+    Shadow rays go through ``context.tracer``.
     """
-    value, _, _ = emissive_samples(scene, world, emitters, n, receivers, tracer, seed)
+    value, _, _ = emissive_samples(context, emitters, n, receivers, seed)
     return rgb_mean_and_variance(value)
 
 
-def emissive_samples(scene: Scene, world: World, emitters: Emitters, n: int,
-                     receivers: Receivers, tracer: Tracer, seed: int
-                     ) -> tuple[np.ndarray, np.ndarray]:
+def emissive_samples(context: Context, emitters: Emitters, n: int, receivers: Receivers,
+                     seed: int) -> tuple[np.ndarray, np.ndarray]:
     """``emissive_irradiance``'s samples (k, n, 3), the luminance (k, n) each would give
     unoccluded and their unit directions (k, n, 3)."""
     k = len(receivers.position)
@@ -282,23 +282,23 @@ def emissive_samples(scene: Scene, world: World, emitters: Emitters, n: int,
     value = np.zeros((k * n, 3))
     unoccluded = np.zeros(k * n)
     if live.any():
-        visible = ~tracer.occluded(origins[live], directions[live],
+        visible = ~context.tracer.occluded(origins[live], directions[live],
                                    distance[live] * (1.0 - SHADOW_SHORTEN))
-        radiance = emitter_radiance(scene, world, emitters, chosen[live], bary[live])
+        radiance = emitter_radiance(context, emitters, chosen[live], bary[live])
         unoccluded[live] = (radiance @ LUMINANCE) * weight[live]
         value[live] = radiance * (weight[live] * visible)[:, None]
     return value.reshape(k, n, 3), unoccluded.reshape(k, n), directions.reshape(k, n, 3)
 
 
-def emitter_radiance(scene: Scene, world: World, emitters: Emitters, picked: np.ndarray,
+def emitter_radiance(context: Context, emitters: Emitters, picked: np.ndarray,
                      bary: np.ndarray) -> np.ndarray:
     """Emitted radiance (k, 3) at points ``bary`` (k, 3) of the emitter triangles ``picked``
     (k,): each triangle's constant radiance, or its emissive texture's where it has one."""
     radiance = emitters.radiance[picked]
     textured = emitters.textured[picked]
     if textured.any():
-        radiance[textured] = emission(scene, world, emitters.triangles[picked[textured]],
-                                      bary[textured])
+        radiance[textured] = emission(context.surfaces, context.world,
+                                      emitters.triangles[picked[textured]], bary[textured])
     return radiance
 
 

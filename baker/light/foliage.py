@@ -41,9 +41,8 @@ from baker.atlas.layout import Atlas
 from baker.atlas.validity import Faces, check_texels
 from baker.errors import InputError
 from baker.geometry.surface import LUMINANCE
+from baker.context import Context
 from baker.geometry.world import World
-from baker.gltf.materials import TRANSLUCENT, material_table
-from baker.gltf.scene import Scene
 from baker.light.crowns import (
     DensityFit,
     Shell,
@@ -59,10 +58,10 @@ from baker.light.directional import uniform_aim
 from baker.light.hemisphere import Surfaces, Terms
 from baker.light.inner import translucent
 from baker.light.integrate import integrate
+from baker.materials import TRANSLUCENT
 from baker.rays.dimensions import FOLIAGE_FIT
 from baker.rays.sampling import hash_u32
 from baker.rays.trace import Tracer
-from baker.settings import Resolved
 
 FIT_TEXELS = 128
 """Texels a crown's fit traces (and as many again held out for its error), at most."""
@@ -173,38 +172,38 @@ def hidden_leaves(group: np.ndarray, kinds: list[str]) -> np.ndarray:
     return crown[group]  # −1 indexes the appended False
 
 
-def _node_kind(scene: Scene, node: int) -> tuple[str | None, float | None]:
-    """(extras.foliage, extras.foliage_density) of glTF node ``node``; InputError for values
+def _node_kind(context: Context, node: int) -> tuple[str | None, float | None]:
+    """(extras.foliage, extras.foliage_density) of node ``node``; InputError for values
     that are not one of ``KINDS`` or not a number above 0."""
-    extras = scene.document.nodes[node].extras
-    extras = extras if isinstance(extras, dict) else {}
+    extras = context.nodes[node].extras
     kind, density = extras.get("foliage"), extras.get("foliage_density")
     where = f"nodes[{node}].extras"
     if kind is not None and kind not in KINDS:
         raise InputError(f"foliage {kind!r} is not one of {', '.join(KINDS)}",
-                         file=str(scene.path), where=where + ".foliage",
+                         file=context.source, where=where + ".foliage",
                          fix='set "foliage" to "crown", "grass" or "none", or leave it out')
     if density is not None and not (isinstance(density, (int, float)) and not isinstance(
             density, bool) and math.isfinite(density) and density > 0):
         raise InputError(f"foliage_density {density!r} is not a number above 0",
-                         file=str(scene.path), where=where + ".foliage_density",
+                         file=context.source, where=where + ".foliage_density",
                          fix="give a positive αρ (per cubic metre), or leave it out to fit it")
     return kind, None if density is None else float(density)
 
 
-def find_foliage(scene: Scene, world: World) -> list[tuple[int, str, np.ndarray, float | None]]:
+def find_foliage(context: Context) -> list[tuple[int, str, np.ndarray, float | None]]:
     """The scene's foliage, node by node: (node, kind, world triangles (k,) int64, density
     from the extras or None). A node's extras decide; without them its triangles of leaf
     materials (thin, double-sided, alpha-cut or translucent) are a crown."""
-    classes = material_table(scene).classes
+    world = context.world
+    classes = context.materials.classes
     leafy = np.array([c.double_sided and c.thickness <= 0.0 and (
         c.alpha_tested or c.weights[TRANSLUCENT] > 0) for c in classes], bool)
     by_node: dict[int, list[int]] = {}
-    for i, instance in enumerate(scene.instances):
-        by_node.setdefault(instance.node, []).append(i)
+    for i, node in enumerate(context.instance_node.tolist()):
+        by_node.setdefault(node, []).append(i)
     found = []
     for node, instances in sorted(by_node.items()):
-        kind, density = _node_kind(scene, node)
+        kind, density = _node_kind(context, node)
         tris = np.concatenate([world.instance_triangles(i) for i in instances])
         if kind is None:
             tris, kind = tris[leafy[world.tri_material[tris]]], "crown"
@@ -243,10 +242,10 @@ class FitInputs:
     r_ave: np.ndarray  # (3,) the R_ave the estimator uses, for W's luminance
 
 
-def prepare_foliage(scene: Scene, world: World, tracer: Tracer, settings: Resolved,
-                    inputs: FitInputs) -> Foliage | None:
+def prepare_foliage(context: Context, inputs: FitInputs) -> Foliage | None:
     """The scene's ``Foliage`` with every crown fitted, or None when it has none."""
-    found = find_foliage(scene, world)
+    world, tracer, settings = context.world, context.tracer, context.settings
+    found = find_foliage(context)
     if not found:
         return None
     group = np.full(len(world.triangles), -1, np.int64)
@@ -258,26 +257,26 @@ def prepare_foliage(scene: Scene, world: World, tracer: Tracer, settings: Resolv
         samples.append(_ranked_rows(inputs.coverage, wanted, settings.seed)[:2 * FIT_TEXELS])
     rows = np.concatenate(samples)
     texels = texels_of(inputs.atlas, world, inputs.coverage, rows, inputs.owned)
-    texels, _ = check_texels(scene, world, tracer, texels, settings.d_max,
+    texels, _ = check_texels(context.surfaces, world, tracer, texels, settings.d_max,
                              threads=settings.threads, faces=inputs.faces)
-    traced = integrate(scene, world, tracer, texels, settings, surfaces=inputs.surfaces)
+    traced = integrate(context, texels, surfaces=inputs.surfaces)
     offsets = np.cumsum([0] + [len(s) for s in samples])
     mine = [np.arange(offsets[j], offsets[j + 1]) for j in range(len(found))]
-    crowns = tuple(_fit_crown(scene, world, inputs, settings, node, kind, tris, density, texels,
-                              traced, mine[j])
+    crowns = tuple(_fit_crown(context, inputs, node, kind, tris, density, texels, traced,
+                              mine[j])
                    for j, (node, kind, tris, density) in enumerate(found))
     hidden = hidden_leaves(group, [kind for _, kind, _, _ in found])
     foliage = Foliage(group, crowns, Tracer(world, hidden=hidden), {},
                       traced.rays + int(traced.chain_ray_counts().sum()))
-    return _with_errors(foliage, scene, world, texels, traced, mine, inputs.r_ave)
+    return _with_errors(foliage, world, texels, traced, mine, inputs.r_ave)
 
 
-def _with_errors(foliage: Foliage, scene: Scene, world: World, texels: Texels, traced: Terms,
+def _with_errors(foliage: Foliage, world: World, texels: Texels, traced: Terms,
                  mine: list[np.ndarray], r_ave: np.ndarray) -> Foliage:
     """``foliage`` with each crown's Error and the overall one: crown j's sample texels are the
     rows ``mine[j]`` of ``texels`` (traced: ``traced``), every other one fitted (``_fit_crown``)
     and the rest held out; W's luminance at R_ave ``r_ave`` (3,)."""
-    approx = foliage_terms(foliage, scene, world, texels, np.arange(len(texels)))
+    approx = foliage_terms(foliage, world, texels, np.arange(len(texels)))
     w_approx, w_traced = (t.obscurance(r_ave) @ LUMINANCE for t in (approx, traced))
 
     def errors(fit: np.ndarray, held: np.ndarray) -> dict:
@@ -290,12 +289,12 @@ def _with_errors(foliage: Foliage, scene: Scene, world: World, texels: Texels, t
     return replace(foliage, crowns=crowns, errors=errors(*every))
 
 
-def _fit_crown(scene: Scene, world: World, inputs: FitInputs, settings: Resolved, node: int,
-               kind: str, tris: np.ndarray, density: float | None, texels: Texels,
-               traced: Terms, mine: np.ndarray) -> Crown:
+def _fit_crown(context: Context, inputs: FitInputs, node: int, kind: str, tris: np.ndarray,
+               density: float | None, texels: Texels, traced: Terms, mine: np.ndarray) -> Crown:
     """One crown fitted on the sample rows ``mine`` of ``texels`` (every other one: the rest
     are held out), whose traced terms are ``traced``."""
-    name = scene.document.nodes[node].name or f"node {node}"
+    world, settings = context.world, context.settings
+    name = context.nodes[node].name or f"node {node}"
     corners = world.positions[world.triangles[tris]].reshape(-1, 3)
     shells = () if kind == "grass" else tuple(fit_shells(corners))
     layer = (float(corners[:, 1].min()), float(np.ptp(corners[:, 1])))
@@ -325,8 +324,8 @@ def _fit_crown(scene: Scene, world: World, inputs: FitInputs, settings: Resolved
     return replace(crown, colour=np.clip(colour, 0.0, None), fit=fitted)
 
 
-def foliage_terms(foliage: Foliage, scene: Scene, world: World, texels: Texels,
-                  rows: np.ndarray, directional: bool = False) -> Terms:
+def foliage_terms(foliage: Foliage, world: World, texels: Texels, rows: np.ndarray,
+                  directional: bool = False) -> Terms:
     """The closed-form terms of the foliage texels ``rows`` (k,): escaped = V, w_hit = (1 − V)·c,
     no ray (counts 0, the splits 0); hit_sq as if a share 1 − V of rays met c. A leaf's back
     face (a leaf material, ``inner.py``) adds t·(1 − V_back)·c and t·V_back as the light through
@@ -349,7 +348,7 @@ def foliage_terms(foliage: Foliage, scene: Scene, world: World, texels: Texels,
     if directional:  # the closed form follows no direction: uniform (``light.directional``)
         terms = replace(terms, aim_hit=uniform_aim(w_hit @ LUMINANCE, normals),
                         aim_escaped=uniform_aim(visibility, normals), aim_split=np.zeros((k, 6)))
-    table = translucent(scene)
+    table = translucent(world.materials)
     if not table.any:
         return terms
     material = world.tri_material[texels.triangle[rows]]
@@ -419,20 +418,22 @@ def shaded(foliage: Foliage, texels: Texels, terms: Terms, d_max: float) -> Term
     return replace(terms, **columns)
 
 
-def integrate_with_foliage(foliage: Foliage, scene: Scene, world: World, texels: Texels,
-                           settings: Resolved, progress=None, error_scale=None,
+def integrate_with_foliage(foliage: Foliage, context: Context, texels: Texels,
+                           progress=None, error_scale=None,
                            surfaces: Surfaces | None = None,
                            targets: np.ndarray | None = None) -> Terms:
     """``integrate.integrate`` of every texel in foliage mode: the foliage texels' terms from
     the closed forms, the others traced without the crowns' leaves (not yet shaded by them:
     ``shaded`` does that when their light is composed), in ``texels`` order (``targets``:
-    every texel's adaptive target, as ``hemisphere.hemisphere_terms`` takes them)."""
+    every texel's adaptive target, as ``hemisphere.hemisphere_terms`` takes them). The
+    context's settings; its tracer is left for the foliage's, without the crowns' leaves."""
     group = foliage.texel_groups(texels)
     closed, traced_rows = np.flatnonzero(group >= 0), np.flatnonzero(group < 0)
-    traced = integrate(scene, world, foliage.tracer, texels, settings, progress, traced_rows,
+    traced = integrate(context.with_tracer(foliage.tracer), texels, progress, traced_rows,
                        error_scale, surfaces=surfaces,
                        targets=None if targets is None else targets[traced_rows])
-    approx = foliage_terms(foliage, scene, world, texels, closed, settings.directional_pages)
+    approx = foliage_terms(foliage, context.world, texels, closed,
+                           context.settings.directional_pages)
     if progress is not None and len(closed):
         progress(len(closed), 0)  # closed forms: no ray
     return _merged(len(texels), (traced_rows, traced), (closed, approx))

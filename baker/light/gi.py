@@ -47,9 +47,9 @@ from typing import Callable
 import numpy as np
 
 from baker.atlas.rasterise import Texels
+from baker.context import Context
 from baker.geometry.surface import LUMINANCE, albedo, emission
 from baker.geometry.world import World
-from baker.gltf.scene import Scene
 from baker.light.adaptive import WITHIN, neighbour_mean, pooled_gain
 from baker.light.direct import direct_at
 from baker.light.direct_estimators import (
@@ -68,9 +68,8 @@ from baker.rays.sampling import (
     sample_2d,
     tangent_frames,
 )
-from baker.rays.trace import Tracer, ray_lift
+from baker.rays.trace import ray_lift
 from baker.run.parallel import run_chunks
-from baker.settings import Resolved
 
 _FAR = 1e30  # "no length limit" for Embree's float32 tfar
 MAX_BOUNCES = 1024  # a path cut here at albedo 0.99 has throughput 0.99^1023 = 3.4e-5
@@ -143,12 +142,13 @@ class _Paths:
     aim_square: np.ndarray
 
 
-def _chunk(scene: Scene, world: World, tracer: Tracer, sources: Sources, texels: Texels,
-           rows: slice | np.ndarray, settings: Resolved, paths: int, max_bounces: int,
-           first: int = 0, start: int = 0) -> _Paths:
+def _chunk(context: Context, sources: Sources, texels: Texels, rows: slice | np.ndarray,
+           paths: int, max_bounces: int, first: int = 0, start: int = 0) -> _Paths:
     """Paths ``first`` … ``first + paths − 1`` of the texels ``rows`` (k of them). Their first
     directions are two independent nets (``sampling.net_points``; ``start``: the first round's
     paths, when this is a later one), the first ⌊paths/2⌋ paths from the first net."""
+    world, tracer, settings, scene = (context.world, context.tracer, context.settings,
+                                      context.surfaces)
     keys = texels.key[rows]
     k = len(keys)
     path_keys = _path_keys(keys, paths, first)
@@ -163,7 +163,7 @@ def _chunk(scene: Scene, world: World, tracer: Tracer, sources: Sources, texels:
     others = replace(sources, emitters=None)  # punctual lights and sky: next-event estimation
     lit, emitters = others.any(), sources.emitters
     emitter_of = _emitter_index(world, emitters)
-    two_sided = np.array([m.double_sided for m in scene.materials], bool)
+    two_sided = np.array([c.double_sided for c in context.materials.classes], bool)
     alive = np.arange(k * paths)
     rays = 0
     first_directions = np.zeros((0, 3))
@@ -204,7 +204,7 @@ def _chunk(scene: Scene, world: World, tracer: Tracer, sources: Sources, texels:
                              * (front * mis)[:, None])
         reflectance = albedo(scene, world, tris, bary)
         if emitters is not None:
-            light, cast = _emitter_light(scene, world, tracer, emitters, position, normal,
+            light, cast = _emitter_light(context, emitters, position, normal,
                                          ray_lift(position, size, tracer.center),
                                          _bounce_keys(path_keys[alive], bounce), settings.seed)
             rays += cast
@@ -213,7 +213,7 @@ def _chunk(scene: Scene, world: World, tracer: Tracer, sources: Sources, texels:
             receivers = Receivers(position=position, normal=normal, geometric=normal,
                                   lift=ray_lift(position, size, tracer.center),
                                   key=_bounce_keys(path_keys[alive], bounce))
-            direct = direct_at(scene, world, tracer, others, receivers, settings.seed, samples=1)
+            direct = direct_at(context, others, receivers, settings.seed, samples=1)
             rays += direct.rays
             total[alive] += throughput * reflectance * direct.irradiance()
         throughput = throughput * reflectance
@@ -296,8 +296,8 @@ def _power_heuristic(mine: np.ndarray, other: np.ndarray) -> np.ndarray:
     return np.where(total > 0, mine * mine / np.where(total > 0, total, 1.0), 0.0)
 
 
-def _emitter_light(scene: Scene, world: World, tracer: Tracer, emitters: Emitters,
-                   position: np.ndarray, normal: np.ndarray, lift: np.ndarray, keys: np.ndarray,
+def _emitter_light(context: Context, emitters: Emitters, position: np.ndarray,
+                   normal: np.ndarray, lift: np.ndarray, keys: np.ndarray,
                    seed: int) -> tuple[np.ndarray, int]:
     """One next-event sample of the emitters' irradiance (m, 3) at each vertex (position,
     normal (m, 3), ``lift`` (m,) off the surface), sampled as
@@ -313,11 +313,11 @@ def _emitter_light(scene: Scene, world: World, tracer: Tracer, emitters: Emitter
     live = np.flatnonzero(weight > 0)
     if not len(live):
         return light, 0
-    visible = ~tracer.occluded(origins[live], directions[live],
-                               distance[live] * (1.0 - SHADOW_SHORTEN))
+    visible = ~context.tracer.occluded(origins[live], directions[live],
+                                       distance[live] * (1.0 - SHADOW_SHORTEN))
     live = live[visible]
     picked = chosen[live]
-    radiance = emitter_radiance(scene, world, emitters, picked, bary[live])
+    radiance = emitter_radiance(context, emitters, picked, bary[live])
     cos_p = np.einsum("ij,ij->i", directions[live], normal[live])
     cos_q = np.abs(np.einsum("ij,ij->i", directions[live], emitters.normals[picked]))
     mis = _power_heuristic(_light_pdf(emitters, picked, distance[live], cos_q), cos_p / np.pi)
@@ -342,8 +342,8 @@ def rays_per_path(sources: Sources, r_ave: np.ndarray) -> float:
     return vertices * (1 + next_event)
 
 
-def indirect_light(scene: Scene, world: World, tracer: Tracer, sources: Sources, texels: Texels,
-                   settings: Resolved, paths: int, max_bounces: int = MAX_BOUNCES,
+def indirect_light(context: Context, sources: Sources, texels: Texels, paths: int,
+                   max_bounces: int = MAX_BOUNCES,
                    progress: Callable[[int, int], None] | None = None,
                    targets: np.ndarray | None = None) -> Indirect:
     """E_ind at every texel from ``paths`` paths each (see the module's docstring);
@@ -353,8 +353,9 @@ def indirect_light(scene: Scene, world: World, tracer: Tracer, sources: Sources,
     whose neighbours' σ (``adaptive.neighbour_mean`` of ``Indirect.variance`` per path, over
     the texel's own paths) times ``adaptive.WITHIN`` is above its target gets as many paths
     again — the next ones, paths n … 2n − 1 — while it would stay within
-    ``settings.max_rays`` paths. The rounds do not depend on the chunks.
+    ``max_rays`` paths (the context's settings). The rounds do not depend on the chunks.
     """
+    settings = context.settings
     count = len(texels)
     kept = count if settings.directional_pages else 0
     state = _Paths(np.zeros((count, 3)), np.zeros(count), np.zeros(count), 0, 0, 0,
@@ -369,8 +370,8 @@ def indirect_light(scene: Scene, world: World, tracer: Tracer, sources: Sources,
 
         def work(item: tuple[int, np.ndarray], batch=batch, first=first) -> None:
             i, rows = item
-            found[i] = part = _chunk(scene, world, tracer, sources, texels, rows, settings,
-                                     batch, max_bounces, first, paths if first else 0)
+            found[i] = part = _chunk(context, sources, texels, rows, batch, max_bounces, first,
+                                     paths if first else 0)
             if progress is not None:
                 progress(len(rows) if first == 0 else 0, part.rays)
 

@@ -28,19 +28,12 @@ from baker.geometry.surface import (
     diffuse_factors,
     triangle_albedo,
 )
+from baker.context import Context
 from baker.geometry.world import World
-from baker.gltf.materials import (
-    DIFFUSE,
-    SPECULAR,
-    TRANSLUCENT,
-    TRANSPARENT,
-    MaterialTable,
-    material_table,
-)
-from baker.gltf.scene import Scene
 from baker.jit import inline, jit
 from baker.light.adaptive import WITHIN, neighbours_among, pooled_gain
 from baker.light.obscurance import RHO_KINDS, UNIT_REFLECTIVITY, rho
+from baker.materials import DIFFUSE, SPECULAR, TRANSLUCENT, TRANSPARENT, MaterialTable
 from baker.rays.dimensions import OBSCURANCE, material_dimension
 from baker.rays.sampling import (
     extend_nets,
@@ -493,7 +486,7 @@ class Surfaces:
     units a continued ray starts off its surface, besides 64 float32 ulps.
     """
 
-    scene: Scene
+    scene: object  # the loaded scene, for the albedo lookups (``Context.surfaces``)
     world: World
     table: np.ndarray  # (T, 3) constant albedo per world triangle
     varying: np.ndarray  # (T,) bool: albedo varies over the triangle (texture, vertex colours)
@@ -513,7 +506,7 @@ class Surfaces:
         rays are exact (``_on_grid``): no special triangle, and albedos within [0, 1] (base
         colours and vertex colours are; textures always are)."""
         colours = self.world.colors[:, :3]
-        base = diffuse_factors(self.scene)
+        base = diffuse_factors(self.world)
         return (not self.special and bool(((base >= 0) & (base <= 1)).all())
                 and bool(((colours >= 0) & (colours <= 1)).all()))
 
@@ -529,11 +522,13 @@ class Surfaces:
         return out
 
 
-def surfaces_of(scene: Scene, world: World) -> Surfaces:
-    """The shading tables of ``scene``: special triangles only where a material has a mirror,
-    glass or translucent branch (a scene of diffuse surfaces gets the diffuse kernel alone)."""
+def surfaces_of(context: Context) -> Surfaces:
+    """The shading tables of the context's scene: special triangles only where a material has
+    a mirror, glass or translucent branch (a scene of diffuse surfaces gets the diffuse kernel
+    alone)."""
+    scene, world = context.surfaces, context.world
     table, varying = triangle_albedo(scene, world)
-    materials = material_table(scene)
+    materials = world.materials
     special = materials.special[world.tri_material] if len(world.triangles) else np.zeros(0, bool)
     kind = np.where(special, _SPECIAL, np.where(varying, _VARYING, _CONSTANT)).astype(np.uint8)
     normals = world.geometric_normals() if special.any() else np.zeros((0, 3))
@@ -816,13 +811,14 @@ def blocking_only(surfaces: Surfaces, settings: Resolved) -> bool:
     return settings.rho == "step" and not surfaces.special
 
 
-def hemisphere_terms(scene: Scene, world: World, tracer: Tracer, texels: Texels,
-                     settings: Resolved, progress: Callable[[int, int], None] | None = None,
+def hemisphere_terms(context: Context, texels: Texels,
+                     progress: Callable[[int, int], None] | None = None,
                      rows: np.ndarray | None = None,
                      error_scale: tuple[np.ndarray, float] | None = None,
                      surfaces: Surfaces | None = None,
                      targets: np.ndarray | None = None) -> Terms:
-    """Estimate the obscurance terms of the texels ``rows`` (default: all), in that order.
+    """Estimate the obscurance terms of the texels ``rows`` (default: all), in that order,
+    with the context's tracer and settings.
 
     Without ``settings.target_error`` every texel gets ``settings.rays`` rays. With it, rays come
     in rounds — ``rays``, then doubling each texel's count while it stays within ``max_rays``
@@ -836,12 +832,13 @@ def hemisphere_terms(scene: Scene, world: World, tracer: Tracer, texels: Texels,
     rays)`` is told after each chunk how many texels it finished (in the first round; 0 after)
     and the rays it cast, and ``progress(0, 0, coming)`` before a round the rays it will cast
     (``run.progress.Meter``).
-    ``surfaces``: ``surfaces_of(scene, world)``, made here when not given. Light through
+    ``surfaces``: ``surfaces_of(context)``, made here when not given. Light through
     translucent surfaces is not in these terms: ``light.integrate.integrate`` adds it
     (``inner.add_translucency``, §4).
     """
+    tracer, settings = context.tracer, context.settings
     rows = np.arange(len(texels)) if rows is None else np.asarray(rows, np.int64)
-    surfaces = surfaces_of(scene, world) if surfaces is None else surfaces
+    surfaces = surfaces_of(context) if surfaces is None else surfaces
     sums = np.zeros((len(rows), columns(settings.directional_pages)))
     chaining = surfaces.special  # else no chain is counted: the counts stay empty
     chain_counts = np.zeros((len(rows) if chaining else 0, 2), np.int64)  # rays, capped chains

@@ -39,10 +39,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from baker.atlas.rasterise import Texels
-from baker.geometry.world import World
-from baker.gltf.materials import material_table
-from baker.gltf.scene import Scene
+from baker.context import Context
 from baker.light.hemisphere import Terms, hemisphere_rays, hemisphere_terms
+from baker.materials import MaterialTable
 from baker.rays.trace import Tracer
 from baker.run.parallel import run_chunks
 from baker.settings import Resolved
@@ -73,9 +72,9 @@ class Translucent:
         return bool(self.leaf.any() or self.inner.any())
 
 
-def translucent(scene: Scene) -> Translucent:
-    """The scene's ``Translucent`` table, from ``materials.material_table``."""
-    classes = material_table(scene).classes
+def translucent(materials: MaterialTable) -> Translucent:
+    """The ``Translucent`` table of a scene's ``materials`` (``World.materials``)."""
+    classes = materials.classes
     finite = np.array([np.isfinite(c.attenuation_distance) and c.attenuation_distance > 0
                        for c in classes], bool)
     distance = np.array([c.attenuation_distance if f else 1.0 for c, f in zip(classes, finite)])
@@ -96,13 +95,7 @@ def other_side(texels: Texels) -> Texels:
                    key=texels.key | OTHER_SIDE)
 
 
-def _instance_scale(scene: Scene) -> np.ndarray:
-    """(I,) each instance's linear scale, |det|^(1/3) of its world matrix (mesh → world units)."""
-    return np.array([abs(np.linalg.det(i.world[:3, :3])) ** (1.0 / 3.0) for i in scene.instances])
-
-
-def add_translucency(scene: Scene, world: World, tracer: Tracer, texels: Texels,
-                     rows: np.ndarray, settings: Resolved, terms: Terms,
+def add_translucency(context: Context, texels: Texels, rows: np.ndarray, terms: Terms,
                      error_scale: tuple[np.ndarray, float] | None = None,
                      targets: np.ndarray | None = None) -> Terms:
     """``terms`` (of the texels ``rows``) with the leaves' and inner obscurances' terms set
@@ -112,7 +105,8 @@ def add_translucency(scene: Scene, world: World, tracer: Tracer, texels: Texels,
     materials, else left None (a scene without them pays nothing); ``chain_rays`` counts the
     rays cast for them too (the back face's own and chain rays, the inner rays).
     """
-    table = translucent(scene)
+    world, settings = context.world, context.settings
+    table = translucent(world.materials)
     if not table.any:
         return terms
     material = world.tri_material[texels.triangle[rows]]
@@ -120,8 +114,7 @@ def add_translucency(scene: Scene, world: World, tracer: Tracer, texels: Texels,
     extra = terms.chain_ray_counts()
     leaves = np.flatnonzero(table.leaf[material])
     if len(leaves):
-        back = hemisphere_terms(scene, world, tracer, other_side(texels), settings,
-                                rows=rows[leaves], error_scale=error_scale,
+        back = hemisphere_terms(context, other_side(texels), rows=rows[leaves], error_scale=error_scale,
                                 targets=None if targets is None else targets[leaves])
         t = table.factor[material[leaves]]
         hit[leaves] = t * back.w_hit
@@ -130,19 +123,21 @@ def add_translucency(scene: Scene, world: World, tracer: Tracer, texels: Texels,
     inside = np.flatnonzero(table.inner[material])
     if len(inside):
         texel_rows = rows[inside]
-        w_in = inner_obscurance(tracer, texels, texel_rows,
-                                _reach(scene, table, material[inside], texels.instance(texel_rows)),
+        w_in = inner_obscurance(context.tracer, texels, texel_rows,
+                                _reach(context, table, material[inside],
+                                       texels.instance(texel_rows)),
                                 table.sigma[material[inside]], settings)
         ave[inside] += table.factor[material[inside]] * w_in
         extra[inside] += settings.rays
     return replace(terms, through_hit=hit, through_ave=ave, chain_rays=extra)
 
 
-def _reach(scene: Scene, table: Translucent, material: np.ndarray,
+def _reach(context: Context, table: Translucent, material: np.ndarray,
            instance: np.ndarray) -> np.ndarray:
-    """(k,) d_in in world units of texels of ``material`` (k,) on ``instance`` (k,)."""
+    """(k,) d_in in world units of texels of ``material`` (k,) on ``instance`` (k,): a
+    thickness in mesh units scales with its instance (``Context.instance_scale``)."""
     return table.reach[material] * np.where(table.by_thickness[material],
-                                            _instance_scale(scene)[instance], 1.0)
+                                            context.instance_scale[instance], 1.0)
 
 
 def _inner_rays(texels: Texels, rows: np.ndarray, reach: np.ndarray, settings: Resolved,
@@ -154,8 +149,7 @@ def _inner_rays(texels: Texels, rows: np.ndarray, reach: np.ndarray, settings: R
     return origins, directions, np.repeat(reach, settings.rays).astype(np.float32)
 
 
-def other_side_rays(scene: Scene, world: World, texels: Texels, rows: np.ndarray,
-                    settings: Resolved, center: np.ndarray
+def other_side_rays(context: Context, texels: Texels, rows: np.ndarray, center: np.ndarray
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The rays the texels ``rows`` cast from their other side, for a rebake's dirty search
     (geometry that meets one of them changes the texel, as for its own rays): leaves' back-face
@@ -163,16 +157,17 @@ def other_side_rays(scene: Scene, world: World, texels: Texels, rows: np.ndarray
     (d_in long). Returns (m,) the positions in ``rows`` of the texels that cast such rays, and
     their origins, directions (m·rays, 3) float32 in ``center``'s frame and lengths (m·rays,)
     float32, texel-major. The back faces' mirror/glass chains are not included (nor are the
-    front's in ``integrate.hemisphere_rays``)."""
+    front's in ``integrate.hemisphere_rays``). Settings: the context's."""
+    world, settings = context.world, context.settings
     rows = np.asarray(rows, np.int64)
-    table = translucent(scene)
+    table = translucent(world.materials)
     material = world.tri_material[texels.triangle[rows]] if len(rows) else np.zeros(0, np.int64)
     leaves = np.flatnonzero(table.leaf[material]) if table.any else np.zeros(0, np.int64)
     inside = np.flatnonzero(table.inner[material]) if table.any else np.zeros(0, np.int64)
     origins, directions = hemisphere_rays(other_side(texels), rows[leaves], settings.rays,
                                           settings.seed, center, settings.sampling)
     lengths = np.full(len(origins), settings.d_max, np.float32)
-    inner = _inner_rays(texels, rows[inside], _reach(scene, table, material[inside],
+    inner = _inner_rays(texels, rows[inside], _reach(context, table, material[inside],
                                                      texels.instance(rows[inside])),
                         settings, center)
     return (np.concatenate([leaves, inside]), np.concatenate([origins, inner[0]]),

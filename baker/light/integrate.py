@@ -8,27 +8,23 @@ from typing import Callable
 import numpy as np
 
 from baker.atlas.rasterise import Texels
-from baker.geometry.world import World
-from baker.gltf.scene import Scene
+from baker.context import Context
 from baker.light.hemisphere import Surfaces, Terms, hemisphere_terms
 from baker.light.inner import add_translucency
-from baker.rays.trace import Tracer
-from baker.settings import Resolved
 
 
-def integrate(scene: Scene, world: World, tracer: Tracer, texels: Texels, settings: Resolved,
+def integrate(context: Context, texels: Texels,
               progress: Callable[[int, int], None] | None = None, rows: np.ndarray | None = None,
               error_scale: tuple[np.ndarray, float] | None = None,
               translucency: bool = True, surfaces: Surfaces | None = None,
               targets: np.ndarray | None = None) -> Terms:
-    """The obscurance terms of the texels ``rows`` (default: all), in that order
+    """The obscurance terms of the texels ``rows`` (default: all), in that order, with the
+    context's world, tracer and settings
     (``hemisphere.hemisphere_terms``: rays, rounds, ``progress``, ``error_scale``,
     ``surfaces``, ``targets``). ``translucency``: add the leaves' back faces and the inner
     obscurances of closed translucent objects (``inner.add_translucency``, §4)."""
-    terms = hemisphere_terms(scene, world, tracer, texels, settings, progress, rows, error_scale,
-                             surfaces, targets)
+    terms = hemisphere_terms(context, texels, progress, rows, error_scale, surfaces, targets)
     if not translucency:
         return terms
     rows = np.arange(len(texels)) if rows is None else np.asarray(rows, np.int64)
-    return add_translucency(scene, world, tracer, texels, rows, settings, terms, error_scale,
-                            targets)
+    return add_translucency(context, texels, rows, terms, error_scale, targets)

@@ -10,9 +10,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from baker.context import Context
 from baker.geometry.surface import LUMINANCE
 from baker.geometry.world import World
-from baker.gltf.scene import Light, Scene
 from baker.light.direct_estimators import (
     Receivers,
     cone_directions,
@@ -24,6 +24,7 @@ from baker.light.direct_estimators import (
     spot_attenuation,
 )
 from baker.light.sources import Emitters, Sources, all_sources
+from baker.punctual import Light
 from baker.rays.dimensions import POWER, POWER_TRACED, light_dimension
 from baker.rays.sampling import cosine_hemisphere, sample_2d, split_samples, tangent_frames
 from baker.rays.trace import Tracer, ray_lift
@@ -117,8 +118,7 @@ def power_samples(settings: Resolved) -> int:
     return POWER_POINTS * max(1, -(-int(rays) // DEFAULT_RAYS))
 
 
-def delivered_power(scene: Scene, world: World, tracer: Tracer, sources: Sources,
-                    settings: Resolved) -> Power:
+def delivered_power(context: Context, sources: Sources) -> Power:
     """Estimate the power each source lays on all the scene's surfaces (baked or not).
 
     Φ = ∫ D dA over every triangle's front face, with ``power_samples`` samples a source, two
@@ -134,6 +134,7 @@ def delivered_power(scene: Scene, world: World, tracer: Tracer, sources: Sources
     comes from the two halves of each traced source's rays (two independent nets) and from
     the points' neighbouring strata taken two by two (``Power``).
     """
+    world, tracer, settings = context.world, context.tracer, context.settings
     lights = len(sources.lights)
     area = float(world.areas().sum()) if len(world.triangles) else 0.0
     punctual, emitted, sky = np.zeros(lights), np.zeros(3), np.zeros(3)
@@ -157,10 +158,9 @@ def delivered_power(scene: Scene, world: World, tracer: Tracer, sources: Sources
             else:
                 variance += spread * luminance ** 2
         if sources.emitters is not None:
-            mean, _ = emissive_irradiance(scene, world, sources.emitters, 1, receivers, tracer,
-                                          settings.seed)
-            traced = _traced_emitter_power(scene, world, sources.emitters, tracer, count,
-                                           settings.seed, _traced_keys(lights))
+            mean, _ = emissive_irradiance(context, sources.emitters, 1, receivers, settings.seed)
+            traced = _traced_emitter_power(context, sources.emitters, count, settings.seed,
+                                           _traced_keys(lights))
             emitted, spread = _kept(area * mean, traced)
             if spread is None:
                 seen += mean @ LUMINANCE
@@ -239,8 +239,8 @@ def _traced_light_power(light: Light, world: World, tracer: Tracer, count: int, 
     return np.where(front, weight, 0.0).reshape(len(keys), -1)
 
 
-def _traced_emitter_power(scene: Scene, world: World, emitters: Emitters, tracer: Tracer,
-                          count: int, seed: int, keys: np.ndarray) -> np.ndarray:
+def _traced_emitter_power(context: Context, emitters: Emitters, count: int, seed: int,
+                          keys: np.ndarray) -> np.ndarray:
     """(G, count/G, 3) samples of the power the emissive triangles lay on front faces, a group
     per key of ``keys`` (G,): each picks a triangle in proportion to its power and a uniform
     point q on it (as ``emitter_samples`` does), a side (either, for a two-sided one) and a
@@ -263,9 +263,11 @@ def _traced_emitter_power(scene: Scene, world: World, emitters: Emitters, tracer
     local = cosine_hemisphere(v)
     t1, t2 = tangent_frames(normal)
     directions = local[:, :1] * t1 + local[:, 1:2] * t2 + local[:, 2:] * normal
+    world = context.world
     lift = ray_lift(point, np.sqrt(emitters.areas[picked]), world.center)
-    front, _ = _front_hits(world, tracer, point + lift[:, None] * normal, directions, np.inf)
+    front, _ = _front_hits(world, context.tracer, point + lift[:, None] * normal, directions,
+                           np.inf)
     weight = (np.pi * emitters.areas[picked] * np.where(two, 2.0, 1.0)
               / emitters.probability[picked])
-    radiance = emitter_radiance(scene, world, emitters, picked, bary)
+    radiance = emitter_radiance(context, emitters, picked, bary)
     return (radiance * np.where(front, weight, 0.0)[:, None]).reshape(len(keys), -1, 3)

@@ -10,11 +10,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from baker.geometry.surface import LUMINANCE, emission, triangle_means
-from baker.geometry.world import World
-from baker.gltf.scene import Light, Scene
+from baker.context import Context
+from baker.geometry.surface import LUMINANCE, emission_textured, emission_means
 from baker.light.sky import Sky, sky_of
-from baker.settings import Resolved
+from baker.punctual import Light
 
 
 def all_sources(terms, light_colours: np.ndarray | None) -> np.ndarray:
@@ -59,7 +58,7 @@ class Emitters:
 class Sources:
     """What lights the scene directly, as this bake treats it.
 
-    lights: the scene's punctual lights (order of ``Scene.lights``). spread: (L,) float64, a
+    lights: the scene's punctual lights (order of ``Context.lights``). spread: (L,) float64, a
     point/spot light's sphere radius (scene units) or a directional light's cone half-angle
     (radians), 0 for a hard light. samples: (L,) int64 shadow rays per texel (1 when hard, or
     the supersample count when that is more: one ray from each sub-position).
@@ -124,13 +123,15 @@ class Sources:
         return bool(self.lights) or self.emitters is not None or self.sky is not None
 
 
-def find_emitters(scene: Scene, world: World) -> Emitters | None:
+def find_emitters(context: Context) -> Emitters | None:
     """The triangles that emit (positive mean emission and area), None when there are none."""
+    world = context.world
     if len(world.triangles) == 0:
         return None
-    mean = triangle_means(scene, world, emission, lambda m: m.emissive_texture)
+    mean = emission_means(context.surfaces, world)
     areas = world.areas()
-    sides = np.where([m.double_sided for m in scene.materials], 2.0, 1.0)[world.tri_material]
+    sides = np.where([c.double_sided for c in context.materials.classes], 2.0,
+                     1.0)[world.tri_material]
     weight = areas * np.maximum(mean @ LUMINANCE, 0.0) * sides
     emitting = np.flatnonzero((weight > 0) & np.isfinite(weight))
     if len(emitting) == 0:
@@ -139,7 +140,7 @@ def find_emitters(scene: Scene, world: World) -> Emitters | None:
     probability = w / w.sum()
     cdf = np.cumsum(probability)
     cdf[-1] = 1.0
-    textured = np.array([m.emissive_texture is not None for m in scene.materials], bool)
+    textured = emission_textured(context.surfaces)
     return Emitters(triangles=emitting, probability=probability, cdf=cdf, areas=areas[emitting],
                     normals=world.geometric_normals(emitting), two_sided=sides[emitting] > 1,
                     power=float(math.pi * w.sum()),
@@ -148,10 +149,11 @@ def find_emitters(scene: Scene, world: World) -> Emitters | None:
                     area_share=float(areas[emitting].sum() / areas.sum()))
 
 
-def light_sources(scene: Scene, world: World, settings: Resolved) -> Sources:
+def light_sources(context: Context) -> Sources:
     """The scene's direct-light sources with the settings' fallbacks and ray counts applied."""
+    settings = context.settings
     spread, samples = [], []
-    for light in scene.lights:
+    for light in context.lights:
         if light.kind == "directional":
             diameter = (light.angular_diameter if light.angular_diameter is not None
                         else math.radians(settings.light_angle))
@@ -160,7 +162,7 @@ def light_sources(scene: Scene, world: World, settings: Resolved) -> Sources:
             size = light.radius if light.radius is not None else settings.light_radius
         spread.append(size)
         samples.append(max(settings.shadow_rays if size > 0 else 1, settings.supersample))
-    return Sources(lights=tuple(scene.lights), spread=np.asarray(spread, np.float64).reshape(-1),
+    return Sources(lights=context.lights, spread=np.asarray(spread, np.float64).reshape(-1),
                    samples=np.asarray(samples, np.int64).reshape(-1),
-                   emitters=find_emitters(scene, world), emissive_rays=settings.emissive_rays,
+                   emitters=find_emitters(context), emissive_rays=settings.emissive_rays,
                    sky=sky_of(settings), sky_rays=settings.sky_rays)

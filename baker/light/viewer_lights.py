@@ -21,34 +21,31 @@ from __future__ import annotations
 
 import numpy as np
 
-from baker.geometry.surface import base_colour, interpolate, metallic_roughness_at
+from baker.geometry.surface import interpolate, viewer_brdf_at
 from baker.geometry.world import World
-from baker.gltf.scene import Light, Scene
 from baker.light.direct_estimators import range_window, spot_attenuation
+from baker.punctual import Light
 
 _MIN_ROUGHNESS = 0.0525  # three.js clamps roughness here (its lights' highlights stay finite)
 
 
-def punctual_shading(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray,
-                     points: np.ndarray, to_eye: np.ndarray) -> np.ndarray:
-    """(k, 3) linear radiance the scene's punctual lights add at points (k, 3) of world
+def punctual_shading(lights: tuple[Light, ...], surfaces, world: World, tris: np.ndarray,
+                     bary: np.ndarray, points: np.ndarray, to_eye: np.ndarray) -> np.ndarray:
+    """(k, 3) linear radiance the punctual ``lights`` add at points (k, 3) of world
     triangles ``tris`` (k,) at barycentric ``bary`` (k, 3), seen from unit directions ``to_eye``
-    (k, 3) pointing from the points to the eye."""
+    (k, 3) pointing from the points to the eye; ``surfaces``: the loaded scene, for what its
+    materials look like there (``surface.viewer_brdf_at``)."""
     out = np.zeros((len(tris), 3))
-    if not scene.lights or not len(tris):
+    if not lights or not len(tris):
         return out
     normal = _facing(interpolate(world.normals, world, tris, bary),
                      world.geometric_normals(tris), to_eye)
-    metallic, roughness = metallic_roughness_at(scene, world, tris, bary)
-    base = base_colour(scene, world, tris, bary)
-    material = world.tri_material[tris]
-    transmission = np.array([m.transmission for m in scene.materials])[material]
-    ior = np.array([m.ior for m in scene.materials])[material]
+    base, metallic, roughness, transmission, ior = viewer_brdf_at(surfaces, world, tris, bary)
     dielectric = (((ior - 1.0) / (ior + 1.0)) ** 2)[:, None]
     f0 = (1.0 - metallic[:, None]) * dielectric + metallic[:, None] * base
     diffuse = base * ((1.0 - metallic) * (1.0 - np.clip(transmission, 0.0, 1.0)))[:, None]
     alpha = np.maximum(roughness, _MIN_ROUGHNESS) ** 2
-    for light in scene.lights:
+    for light in lights:
         to_light, irradiance = _incident(light, points)
         cos_l = np.einsum("kj,kj->k", normal, to_light)
         lit = cos_l > 0

@@ -566,7 +566,7 @@ def _shipped(baking):
     per-triangle texel counts stay)."""
     coverage = baking.coverage
     empty = Coverage(coverage.key[:0], coverage.triangle[:0], coverage.triangle_texels)
-    return replace(baking, lit=replace(baking.lit, tracer=None), faces=None, surfaces=None,
+    return replace(baking, lit=baking.lit.without_tracer(), faces=None, surfaces=None,
                    coverage=empty)
 
 
@@ -576,8 +576,9 @@ def _ready_bake(shipped: tuple):
     part, baking = shipped
     scene, world = baking.scene, baking.world
     threads = max(1, baking.settings.threads)
-    return part, replace(baking, lit=replace(baking.lit, tracer=Tracer(world)),
-                         faces=Faces(scene, world), surfaces=surfaces_of(scene, world),
+    lit = baking.lit.with_tracer(Tracer(world))
+    return part, replace(baking, lit=lit, faces=Faces(scene, world),
+                         surfaces=surfaces_of(lit.context),
                          settings=replace(baking.settings, threads=threads))
 
 

@@ -30,6 +30,7 @@ from baker.atlas.authored import authored_atlas
 from baker.atlas.unwrap import PageTooSmall, baked_instances, frame_area, unwrap
 from baker.atlas.validity import (HEMISPHERE_RAYS, TANGENT_RAYS, TANGENT_ROUNDS, Faces, Validity,
                                   check_texels)
+from baker.context import Context, context_of
 from baker.geometry.surface import LUMINANCE
 from baker.geometry.world import World, build_world
 from baker.gltf.materials import has_normal_maps
@@ -118,6 +119,12 @@ class Computed:
     def texels(self) -> Texels:
         return self.per_texel.texels
 
+    def context(self, settings: Resolved | None = None) -> Context:
+        """What every estimator needs of this bake (its ``Context``), Embree's scene made anew,
+        with its settings or ``settings``: for studies and tests that trace its texels again."""
+        return context_of(self.scene, self.world, Tracer(self.world),
+                          self.settings if settings is None else settings)
+
     @property
     def validity(self) -> Validity:
         """Which sample points were moved or flagged (validity.py)."""
@@ -156,29 +163,44 @@ class Computed:
 
 @dataclass(frozen=True)
 class Lighting:
-    """What a bake and a rebake both need before any texel (``lighting``): Embree's scene, the
-    light sources, the power they deliver, I_A and R_ave, and the plan."""
+    """What a bake and a rebake both need before any texel (``lighting``): what every
+    estimator needs (``context.Context``: the world, its materials, Embree's scene, the lights,
+    the settings), the light sources, the power they deliver, I_A and R_ave, and the plan."""
 
-    tracer: Tracer
+    context: Context
     sources: Sources
     power: Power
     ambient: Ambient
     plan: Plan
 
+    @property
+    def tracer(self) -> Tracer:
+        return self.context.tracer
+
+    def without_tracer(self) -> Lighting:
+        """This ``Lighting`` without Embree's scene, to be sent to another process (which
+        makes its own: ``with_tracer``)."""
+        return replace(self, context=self.context.with_tracer(None))
+
+    def with_tracer(self, tracer: Tracer) -> Lighting:
+        """This ``Lighting`` tracing with ``tracer``."""
+        return replace(self, context=self.context.with_tracer(tracer))
+
 
 def lighting(scene: Scene, world: World, resolved: Resolved, times: dict[str, float]
              ) -> Lighting:
-    """The scene's ``Lighting``; adds the stages "lights" and "plan" to ``times``."""
+    """The scene's ``Lighting``, its ``Context`` made here once; adds the stages "lights" and
+    "plan" to ``times``."""
     with timed(times, "lights"):
-        tracer = Tracer(world)
-        sources = light_sources(scene, world, resolved)
-        power = delivered_power(scene, world, tracer, sources, resolved)
+        context = context_of(scene, world, Tracer(world), resolved)
+        sources = light_sources(context)
+        power = delivered_power(context, sources)
     with timed(times, "plan"):
-        surround = environment(world, tracer, sources, resolved.escape, resolved.seed)
-        ambient = ambient_terms(scene, world, resolved.ambient, power, surround.neutral)
-        plan = make_plan(scene, ambient, resolved.rho, sources, surround,
+        surround = environment(world, context.tracer, sources, resolved.escape, resolved.seed)
+        ambient = ambient_terms(context, power, surround.neutral)
+        plan = make_plan(scene, world.materials, ambient, resolved.rho, sources, surround,
                          resolved.directional)
-    return Lighting(tracer, sources, power, ambient, plan)
+    return Lighting(context, sources, power, ambient, plan)
 
 
 @dataclass(frozen=True)
@@ -199,6 +221,11 @@ class Baking:
     @property
     def tracer(self) -> Tracer:
         return self.lit.tracer
+
+    @property
+    def context(self) -> Context:
+        """What every estimator needs, with the settings as the unwrap left them."""
+        return self.lit.context.with_settings(self.settings)
 
     @property
     def sources(self) -> Sources:
@@ -304,7 +331,7 @@ def _parts(w: Underway) -> Underway:
     slices = part_slices(count, cluster.part_texels(count) if resolved.cluster is not None
                          else None)
     baking = Baking(scene, world, resolved, w.lit, w.atlas, w.coverage, w.owned,
-                    Faces(scene, world), surfaces_of(scene, world))
+                    Faces(scene, world), surfaces_of(w.lit.context))
     check_ray_budget(baking, count)
     spill = Spill(w.spill_folder) if len(slices) > 1 else None
     return replace(w, baking=baking, slices=tuple(slices), spill=spill)
@@ -314,7 +341,7 @@ def _fit_foliage(w: Underway) -> Underway:
     """--foliage approx: the crowns fitted to the leaves they stand for (``foliage.py``)."""
     baking, lit = w.baking, w.lit
     return replace(w, baking=replace(baking, foliage=prepare_foliage(
-        w.scene, w.world, lit.tracer, w.settings, FitInputs(
+        baking.context, FitInputs(
             w.atlas, w.coverage, w.owned, baking.faces, baking.surfaces,
             effective_r_ave(lit.ambient, w.settings.rho)))))
 
@@ -504,27 +531,24 @@ def _bake_part(baking: Baking, rows: slice, times: dict[str, float],
             direct, targets = _adaptive_direct(baking, texels, targets, times, stages)
     if s.method == "gi":  # the full-GI reference instead of I_A·W (gi.py); first, as it is
         with timed(times, "gi"):  # most of the work: the bar's rate is then its rate
-            indirect = indirect_light(scene, world, tracer, baking.sources, texels, s, s.rays,
+            indirect = indirect_light(baking.context, baking.sources, texels, s.rays,
                                       progress=stages.gi, targets=targets)
     with timed(times, "trace"):
         error_scale = (effective_r_ave(ambient, s.rho), float(ambient.intensity @ LUMINANCE))
-        traced = obscurance_settings(s)
+        traced = baking.context.with_settings(obscurance_settings(s))
         if baking.foliage is None:
-            terms = integrate(scene, world, tracer, texels, traced, stages.obscurance,
-                              error_scale=error_scale, surfaces=baking.surfaces,
-                              targets=targets)
+            terms = integrate(traced, texels, stages.obscurance, error_scale=error_scale,
+                              surfaces=baking.surfaces, targets=targets)
         else:
-            terms = integrate_with_foliage(baking.foliage, scene, world, texels, traced,
-                                           stages.obscurance, error_scale, baking.surfaces,
-                                           targets)
+            terms = integrate_with_foliage(baking.foliage, traced, texels, stages.obscurance,
+                                           error_scale, baking.surfaces, targets)
     if direct is None and s.target_error is not None:
         error = texel_errors(terms, error_scale, texels, np.arange(len(texels)))
         left = what_is_left(s.target_error, error)
         direct, _ = _adaptive_direct(baking, texels, left, times, stages)
     elif direct is None:
         with timed(times, "direct"):
-            direct = direct_light(scene, world, tracer, texels, baking.sources, s,
-                                  stages.direct)
+            direct = direct_light(baking.context, texels, baking.sources, stages.direct)
     return BakedPart(texels, points, validity, terms, direct, indirect)
 
 
@@ -533,8 +557,7 @@ def _adaptive_direct(baking: Baking, texels: Texels, targets: np.ndarray,
     """The direct light in adaptive rounds to ``targets`` (N,), and what it leaves of the
     target to the other term (``adaptive.what_is_left``)."""
     with timed(times, "direct"):
-        direct, error = adaptive_direct_light(baking.scene, baking.world, baking.tracer, texels,
-                                              baking.sources, baking.settings, targets,
+        direct, error = adaptive_direct_light(baking.context, texels, baking.sources, targets,
                                               stages.direct)
     return direct, what_is_left(baking.settings.target_error, error)
 

@@ -12,11 +12,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from baker.geometry.surface import LUMINANCE
-from baker.gltf.materials import material_table, normal_mapped
+from baker.gltf.materials import normal_mapped
 from baker.gltf.scene import Scene
 from baker.light.ambient import Ambient
 from baker.light.sources import Sources
 from baker.light.environment import Environment
+from baker.materials import MaterialTable
 
 
 @dataclass(frozen=True)
@@ -53,9 +54,9 @@ def _node_label(scene: Scene, node: int) -> str:
     return f"nodes[{node}]" + (f" ({name})" if name else "")
 
 
-def make_plan(scene: Scene, ambient: Ambient, rho: str, sources: Sources | None = None,
-              surround: Environment | None = None, directional: bool = False) -> Plan:
-    """What this bake does with ``scene``; ``sources``: its direct light (sources.light_sources);
+def make_plan(scene: Scene, materials: MaterialTable, ambient: Ambient, rho: str,
+              sources: Sources | None = None, surround: Environment | None = None, directional: bool = False) -> Plan:
+    """What this bake does with ``scene``, whose materials are ``materials``; ``sources``: its direct light (sources.light_sources);
     ``surround``: what rays that meet nothing count, and why (environment.environment);
     ``directional``: whether directional lightmaps were asked for."""
     baked, left_out = [], [(s.where, s.reason) for s in scene.skipped]
@@ -92,7 +93,7 @@ def make_plan(scene: Scene, ambient: Ambient, rho: str, sources: Sources | None 
     }
     if surround is not None and rho not in ("step",):
         stages["escaping rays"] = f"rays that meet nothing within d_max count {surround.reason}"
-    stages.update(material_stages(scene))
+    stages.update(material_stages(scene, materials))
     stages.update(_direct_stages(scene, sources))
     stages["directional"] = _directional_stage(scene, directional)
     return Plan(stages=stages, baked=tuple(baked), left_out=tuple(left_out))
@@ -119,10 +120,10 @@ def _emitter_warning(sources: Sources | None, ambient: Ambient) -> str:
             "alone (decals?): --ambient 1 or --escape white gives the scene a neutral ambient")
 
 
-def material_stages(scene: Scene) -> dict[str, str]:
+def material_stages(scene: Scene, table: MaterialTable) -> dict[str, str]:
     """What the material stages do here (materials.py, integrate.py), or why they are off: a
-    scene of opaque diffuse surfaces runs none of them (the diffuse kernel alone)."""
-    table = material_table(scene)
+    scene of opaque diffuse surfaces runs none of them (the diffuse kernel alone). ``table``:
+    the scene's materials as the estimators see them (``World.materials``)."""
     used = sorted({scene.primitives[i.primitive].material for i in scene.instances})
 
     def names(stage: str) -> tuple[str, int]:

@@ -10,9 +10,9 @@ from dataclasses import replace
 import numpy as np
 
 from baker.geometry.world import World
-from baker.gltf.materials import SPECULAR, TRANSPARENT, material_table
 from baker.gltf.scene import Scene
 from baker.jit import jit
+from baker.materials import SPECULAR, TRANSPARENT
 from baker.rays.trace import Hits, LocalHits, Tracer
 
 
@@ -138,10 +138,10 @@ def world_before(scene: Scene, world: World, moved: np.ndarray,
     return replace(world, positions=positions)
 
 
-def chain_corners(scene: Scene, world: World) -> np.ndarray:
+def chain_corners(world: World) -> np.ndarray:
     """(t, 3, 3) world corners of the triangles whose material reflects or refracts rays on
     (a mirror or glass branch, ``materials.SPECULAR``/``TRANSPARENT``)."""
-    weights = material_table(scene).weights
+    weights = world.materials.weights
     chained = (weights[:, SPECULAR] > 0) | (weights[:, TRANSPARENT] > 0)
     tris = np.flatnonzero(chained[world.tri_material]) if len(weights) else np.zeros(0, np.int64)
     a, b, c = world.corners(tris)

@@ -80,12 +80,12 @@ def dirty_search(scene: Scene, start: Compared, lit: Lighting, stored: Stored,
     rays are judged in the scene without the crowns' leaves, as they were traced."""
     hidden = None if foliage is None else foliage.hidden()
     world, resolved, change, moved = start.world, start.resolved, start.change, start.moved
-    surfaces = surfaces_of(scene, world)
+    surfaces = surfaces_of(lit.context)
     # Texels whose rays changed take only those rays' change (``incremental._by_ray``) when
     # each ray's part of its texel's terms stands alone and their sums are exact: no chains, no
     # other side, no adaptive rounds, albedos within [0, 1], no directions (their sums are not
     # recovered).
-    by_ray = (surfaces.exact_sums and resolved.rays <= EXACT_RAYS and not translucent(scene).any
+    by_ray = (surfaces.exact_sums and resolved.rays <= EXACT_RAYS and not translucent(world.materials).any
               and resolved.target_error is None and not change.recoloured
               and not resolved.directional_pages)
     raw = stored.raw
@@ -100,17 +100,17 @@ def dirty_search(scene: Scene, start: Compared, lit: Lighting, stored: Stored,
             corners = np.stack([a, b, c], axis=1)
             box = ([(corners.reshape(-1, 3).min(0), corners.reshape(-1, 3).max(0))]
                    if len(tris) else [])
-            search.tested += mark_seen(scene, world, Changed([corners], world.center), box,
+            search.tested += mark_seen(lit.context, Changed([corners], world.center), box,
                                        search.texels, search.reason, REASONS.index("colour"),
                                        resolved, NotStopped(_obscurance_tracer(lit, foliage),
                                                             np.isin(world.tri_material,
                                                                     change.recoloured)))
-        chains = chain_corners(scene, world)
+        chains = chain_corners(world)
         if (len(moved) or change.recoloured) and len(chains):
             # A ray that meets a mirror or glass goes on where the searches above do not follow:
             # every texel whose rays meet one is recomputed.
             box = [(chains.reshape(-1, 3).min(0), chains.reshape(-1, 3).max(0))]
-            search.tested += mark_seen(scene, world, Changed([chains], world.center), box,
+            search.tested += mark_seen(lit.context, Changed([chains], world.center), box,
                                        search.texels, search.reason, REASONS.index("chain"),
                                        resolved)
     return search
@@ -171,9 +171,9 @@ def moved_reach(scene: Scene, start: Compared, lit: Lighting, stored: Stored,
     if hidden is not None:
         tracer, tracer_before = Tracer(world, hidden=hidden), Tracer(before, hidden=hidden)
     search.judge = HitsCompared(tracer, tracer_before, resolved.d_max, keep=search.by_ray)
-    search.tested += mark_seen(scene, world, small, boxes, texels, reason,
+    search.tested += mark_seen(lit.context, small, boxes, texels, reason,
                                REASONS.index("obscurance"), resolved, search.judge)
     rest = np.flatnonzero(reason < 0)
-    shadow, n = shadow_dirty(scene, world, small, texels, rest, lit.sources, resolved)
+    shadow, n = shadow_dirty(lit.context, small, texels, rest, lit.sources, resolved)
     search.tested += n
     reason[rest[shadow]] = REASONS.index("shadow")

@@ -132,9 +132,10 @@ def _foliage_again(scene: Scene, start: Compared, lit: Lighting, stored: Stored)
     a crown that moved, or whose fit an edit changed, shades every texel anew."""
     world, atlas = start.world, stored.atlas
     coverage = Coverage(stored.texels.key, stored.texels.triangle, stored.texels.triangle_texels)
-    return prepare_foliage(scene, world, lit.tracer, start.resolved, FitInputs(
+    context = lit.context.with_settings(start.resolved)
+    return prepare_foliage(context, FitInputs(
         atlas, coverage, owners(atlas, world, coverage), Faces(scene, world),
-        surfaces_of(scene, world), effective_r_ave(lit.ambient, start.resolved.rho)))
+        surfaces_of(context), effective_r_ave(lit.ambient, start.resolved.rho)))
 
 
 def _by_ray(stored: Terms, judge: HitsCompared, surfaces, settings
@@ -201,7 +202,7 @@ def _traced_again(scene: Scene, start: Compared, lit: Lighting, stored: Stored,
     if updated is not None:
         terms = merge(terms, *updated)
     if len(closed):
-        approx = foliage_terms(foliage, scene, start.world, search.texels, closed,
+        approx = foliage_terms(foliage, start.world, search.texels, closed,
                                resolved.directional_pages)
         terms = merge(terms, approx, closed)
     return terms, direct, rays

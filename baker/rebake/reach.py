@@ -11,8 +11,7 @@ import numpy as np
 
 from baker.atlas import validity as validity_module
 from baker.atlas.rasterise import Texels
-from baker.geometry.world import World
-from baker.gltf.scene import Scene
+from baker.context import Context
 from baker.jit import jit
 from baker.light.hemisphere import world_rays
 from baker.light.inner import other_side_rays, translucent
@@ -149,7 +148,7 @@ def probes_meet(tracer: RayCaster, texels: Texels, rows: np.ndarray, d_max: floa
     return meets, len(rows) * validity_module.HEMISPHERE_RAYS
 
 
-def mark_seen(scene: Scene, world: World, changed: Changed, boxes: list, texels: Texels,
+def mark_seen(context: Context, changed: Changed, boxes: list, texels: Texels,
               reason: np.ndarray, mark: int, settings, judge: Callable | None = None) -> int:
     """Mark with ``mark`` (in ``reason`` (N,), in place: an index into ``dirty.REASONS``) the
     texels not yet dirty whose
@@ -160,7 +159,8 @@ def mark_seen(scene: Scene, world: World, changed: Changed, boxes: list, texels:
     test = np.flatnonzero(near_boxes(texels, boxes, settings.d_max) & (reason < 0))
     meets, tested = rays_meet(changed, texels, test, settings, judge)
     reason[test[meets]] = mark
-    table = translucent(scene)
+    world = context.world
+    table = translucent(world.materials)
     if not table.any:
         return tested
     rest = np.flatnonzero(reason < 0)
@@ -169,7 +169,8 @@ def mark_seen(scene: Scene, world: World, changed: Changed, boxes: list, texels:
     for part in even_slices(len(rest), max(1, _TEST_RAYS // settings.rays)):
         rows = rest[part]
         which, origins, directions, lengths = other_side_rays(
-            scene, world, take(texels, rows), np.arange(len(rows)), settings, changed.center)
+            context.with_settings(settings), take(texels, rows), np.arange(len(rows)),
+            changed.center)
         if not len(which):
             continue
         hit = changed.cast_local(origins, directions, lengths.copy()).triangle >= 0

@@ -116,33 +116,32 @@ def retraced(work: Retracing, texels: Texels, rows: np.ndarray, obscurance: np.n
 def _shipped(work: Retracing) -> Retracing:
     """What a worker fetches once: ``work`` without Embree's scene and the surfaces, which it
     builds from the scene and world (``_ready``)."""
-    return replace(work, lit=replace(work.lit, tracer=None), surfaces=None)
+    return replace(work, lit=work.lit.without_tracer(), surfaces=None)
 
 
 def _ready(shipped: Retracing) -> Retracing:
     """In a worker: the shipped work with Embree's scene and the surfaces built again, bit for
     bit the driver's, and the task's CPUs (``Settings.threads``, at least 1) as threads."""
-    scene, world, settings = shipped.scene, shipped.world, shipped.settings
-    return replace(shipped, lit=replace(shipped.lit, tracer=Tracer(world)),
-                   surfaces=surfaces_of(scene, world),
-                   settings=replace(settings, threads=max(1, settings.threads)))
+    lit = shipped.lit.with_tracer(Tracer(shipped.world))
+    return replace(shipped, lit=lit, surfaces=surfaces_of(lit.context),
+                   settings=replace(shipped.settings, threads=max(1, shipped.settings.threads)))
 
 
 def _retrace_part(work: Retracing, rows: _Rows, seconds: dict[str, float]) -> Retraced:
     """Trace one part (``_Rows``) with the same estimators as a full bake; ``seconds`` gets
     "trace" (obscurance) and "direct" (shadow and sky rays)."""
-    scene, world, s, lit = work.scene, work.world, work.settings, work.lit
+    s, lit = work.settings, work.lit
     texels = replace(work.texels, **rows.texels)
     with timed(seconds, "trace"):
         error_scale = (effective_r_ave(lit.ambient, s.rho),
                        float(lit.ambient.intensity @ LUMINANCE))
+        context = lit.context.with_settings(s)
         tracer = lit.tracer if work.obscurance is None else work.obscurance
-        terms = integrate(scene, world, tracer, texels, s, None,
+        terms = integrate(context.with_tracer(tracer), texels, None,
                           rows=np.flatnonzero(rows.obscurance), error_scale=error_scale,
                           surfaces=work.surfaces)
     with timed(seconds, "direct"):
-        direct = direct_light(scene, world, lit.tracer, take(texels, rows.direct), lit.sources,
-                              s)
+        direct = direct_light(context, take(texels, rows.direct), lit.sources)
         clean = np.flatnonzero(~rows.direct) if work.relit else np.zeros(0, np.int64)
         relit = np.zeros((len(clean), len(work.relit)))
         relit_var = np.zeros_like(relit)

@@ -98,7 +98,7 @@ def _shadow_may_pass(origin: np.ndarray, directional: np.ndarray, light_position
     return out
 
 
-def shadow_dirty(scene, world, recorder_tracer: RayCaster, texels: Texels, rows: np.ndarray,
+def shadow_dirty(context, recorder_tracer: RayCaster, texels: Texels, rows: np.ndarray,
                  sources, settings) -> tuple[np.ndarray, int]:
     """(k,) bool: whether any shadow, emissive or sky ray of the texels ``rows`` meets the
     changed geometry; and the rays cast. Runs ``direct.direct_light`` itself against it, a
@@ -113,7 +113,7 @@ def shadow_dirty(scene, world, recorder_tracer: RayCaster, texels: Texels, rows:
         chosen = maybe[part]
         recorder = Recorder(recorder_tracer)
         texels_part = take(texels, rows[chosen])
-        direct_light(scene, world, recorder, texels_part, sources, settings)
+        direct_light(context.with_settings(settings).with_tracer(recorder), texels_part, sources)
         rays += recorder.rays
         if not recorder.origins:
             continue
