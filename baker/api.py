@@ -401,7 +401,8 @@ def bake_or_rebake(scene: Scene, settings: Settings, state_path, incremental: bo
     """(``pipeline.full.Computed``, Rebaked | str | None): a rebake from the state at ``state_path`` when
     ``incremental`` and it can follow, else a full bake and the one-line reason (a str), or None
     when no rebake was asked for. ``relight``: only a recomposition (light colours and
-    intensities) may follow; anything else raises InputError before any ray is cast.
+    intensities) may follow; anything else raises InputError before any ray is cast. A
+    relight casts no ray, so the last bakes' times never price it out (``rebake.cost``).
     ``spill_folder``: where a full bake keeps its texels' results until the state is written
     (``pipeline.full.compute``); ``staging``: where the bake state is written (``rebake.staging.StateStaging``)."""
     if not incremental and not relight:
@@ -412,7 +413,7 @@ def bake_or_rebake(scene: Scene, settings: Settings, state_path, incremental: bo
     else:
         try:
             rebaked = rebake(scene, settings, state_path, quiet, relight, staging,
-                             priced=incremental != "always")
+                             priced=incremental != "always" and not relight)
             return rebaked.computed, rebaked
         except FullBake as why:  # keeping what the rebake kept (a derived d_max) and made
             reason, settings, prepared = str(why), why.settings or settings, why.prepared

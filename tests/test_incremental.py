@@ -335,6 +335,30 @@ def test_baker_relight_recomposes_without_rays_and_refuses_other_edits(tmp_path,
     assert out.read_bytes() == (tmp_path / "full.glb").read_bytes()
 
 
+def test_relight_is_never_priced_out_by_the_last_rebakes_time(tmp_path):
+    """A relight casts no ray: however slow the state's last rebake was recorded (its overhead
+    above the whole full bake, which prices an ordinary rebake out: ``cost.worth_reading``), a
+    relight of it goes on, and gives the full bake's bytes."""
+    import json
+
+    from assets.light_scenes import lit_floor
+    from baker.rebake.state import timing_path
+
+    lit_floor("point", intensity=10.0).save(tmp_path / "scene.glb")
+    out = tmp_path / "lit.glb"
+    settings = baker.Settings(rays=4, page_size=64)
+    baker.bake(tmp_path / "scene.glb", out, settings)
+    record = timing_path(default_path(out))
+    recorded = json.loads(record.read_text())
+    record.write_text(json.dumps({**recorded, "rebake_overhead": 1e3 * recorded[
+        "full_bake_seconds"], "rebake_correction": 1.0}))
+    brighter = lit_floor("point", intensity=25.0, color=(0.2, 0.4, 1.0)).save(tmp_path / "b.glb")
+    result = baker.bake(brighter, out, settings, relight=True)
+    assert result.rebake["incremental"] and result.rebake["rays"] == 0
+    baker.bake(brighter, tmp_path / "full.glb", settings, state=False)
+    assert out.read_bytes() == (tmp_path / "full.glb").read_bytes()
+
+
 def test_moving_an_alpha_cut_quad_rebakes_like_a_full_bake(tmp_path):
     """The dirty search casts against the moved geometry without its alpha (a ray through a hole
     counts as meeting it: more texels recomputed, never fewer); the recomputed texels use the
