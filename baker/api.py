@@ -164,79 +164,130 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
     ``overwrite``, the output's own files may (``output_files``).
     """
     input_path, output = Path(input), Path(output)
-    state_path = None if state is False else (
-        default_state_path(output) if state is None or state is True else Path(state))
-    check_output(input_path, output, overwrite, None if report_path is None else Path(report_path),
-                 state_path, tuple(None if f is None else Path(f)
-                                   for f in (lightmaps_dir, error_map_dir)))
+    files = _Files.asked(output, report_path, lightmaps_dir, lightmaps_format, error_map_dir,
+                         state)
+    check_output(input_path, output, overwrite, files.report, files.state,
+                 (files.lightmaps, files.error_maps))
     settings.check()
     check_format(lightmaps_format)
     started = time.perf_counter()
-    loading: dict[str, float] = {}
     log = StageLines(not quiet)
-    with timed(loading, "load"), log.stage("load"):
-        scene = load(input_path, settings.mirror_roughness, settings.animated,
-                     settings.allow_hard_links, contained)
-    # every file of the bake, put in place together, none over a file the scene reads
-    # (run/atomic.py): checked here before any work, and again before the first rename
-    own = output_files(scene, output)
-    outputs = Outputs(scene.inputs, own, overwrite)
-    state_files = [] if state_path is None else [state_path, timing_path(state_path)]
-    for path in own + state_files + ([] if report_path is None else [Path(report_path)]):
-        outputs.check(path)
+    scene, load_seconds = _loaded(input_path, settings, contained, log)
+    outputs = _claimed(scene, output, overwrite, files)
     with ThreadPoolExecutor(1) as beside, CompileClock() as compiling, \
             cluster.session(settings.cluster, settings.threads, cluster_identity) as on_cluster:
-        staging = None if state_path is None else StateStaging(beside, state_path, settings)
+        staging = None if files.state is None else StateStaging(beside, files.state, settings)
         try:
-            for path in (output, report_path, state_path):  # made if missing, like mkdir -p
+            for path in (output, files.report, files.state):  # made if missing, like mkdir -p
                 if path is not None:
-                    outputs.folder(Path(path).parent)
-            try:
-                done, rebaked = bake_or_rebake(scene, settings, state_path, incremental, quiet,
-                                               relight, (state_path or output).parent, staging)
-            except BakerError as error:  # a setting this scene cannot meet: name the scene
-                error.file = error.file or str(input_path)
-                raise
+                    outputs.folder(path.parent)
+            done, rebaked = _computed(scene, settings, files.state, incremental, quiet, relight,
+                                      (files.state or output).parent, staging)
             times = dict(done.stage_seconds)
-            times["load"] += loading["load"]
-            resolved = done.settings
+            times["load"] += load_seconds
             # closing(): the rows the state is written from (parts.py), if on disk, are
             # removed once the state is written.
             with closing(done.per_texel), timed(times, "write"), \
                     log.stage("write", "steps") as steps:
-                texels = done.lightmaps.covered.size  # the pages' texels encoded: as many steps
-                steps.expect(texels)
-                pages = encode_pages(done)
-                steps.advance(texels)
-                info = write_output(done, pages, output, outputs, steps)
-                if lightmaps_dir is not None:
-                    write_page_files(outputs.folder(Path(lightmaps_dir)), output.stem, pages,
-                                     done.lightmaps.light, lightmaps_format, outputs.stage)
-                if error_map_dir is not None:  # per-texel standard error pages (errormap.py)
-                    write_error_maps(outputs.folder(Path(error_map_dir)), output.stem, done,
-                                     outputs.stage)
+                pages, info = _written(done, output, files, outputs, steps)
                 if staging is not None:
                     staging.stage_into(outputs)
-                    record_full_bake(state_path, rebaked, time.perf_counter() - started
+                    record_full_bake(files.state, rebaked, time.perf_counter() - started
                                      - compiling.seconds, outputs.stage, times)
             seconds = time.perf_counter() - started
             report = _report(input_path, output, done, info, pages, times, seconds,
-                             summary(rebaked, state_path, incremental, seconds,
+                             summary(rebaked, files.state, incremental, seconds,
                                      compiling.seconds))
             if on_cluster is not None:  # which worker baked what, the stages' time on them
                 report["cluster"] = on_cluster.report()
-            if report_path is not None:
-                outputs.stage(Path(report_path), json.dumps(report, indent=2).encode())
+            if files.report is not None:
+                outputs.stage(files.report, json.dumps(report, indent=2).encode())
             outputs.commit()
         except BaseException:
             outputs.discard()
             if staging is not None:
                 staging.discard()
             raise
-    return BakeResult(output=output, settings=resolved, plan=done.plan, texels=done.tally.texels,
-                      rays=done.tally.rays, pages=done.atlas.page_count, seconds=seconds,
+    return BakeResult(output=output, settings=done.settings, plan=done.plan,
+                      texels=done.tally.texels, rays=done.tally.rays,
+                      pages=done.atlas.page_count, seconds=seconds,
                       rmse_estimate=report["rmse_estimate"], report=report,
                       rebake=details(report["rebake"], rebaked))
+
+
+@dataclass(frozen=True)
+class _Files:
+    """The files a bake writes besides its output, as paths (None: not written): the JSON
+    report, the folders of page files (``lightmaps_format``) and error maps, the bake state."""
+
+    report: Path | None
+    lightmaps: Path | None
+    lightmaps_format: str
+    error_maps: Path | None
+    state: Path | None
+
+    @staticmethod
+    def asked(output: Path, report, lightmaps, lightmaps_format: str, error_maps,
+              state) -> "_Files":
+        """``bake``'s arguments as paths; ``state`` None or True: ``<output>.bake``, False:
+        none."""
+        def path(value) -> Path | None:
+            return None if value is None else Path(value)
+        state_path = None if state is False else (
+            default_state_path(output) if state is None or state is True else Path(state))
+        return _Files(path(report), path(lightmaps), lightmaps_format, path(error_maps),
+                      state_path)
+
+
+def _loaded(input_path: Path, settings: Settings, contained: bool, log: StageLines
+            ) -> tuple[Scene, float]:
+    """The scene at ``input_path`` (``gltf.load.load``) and the seconds its loading took."""
+    loading: dict[str, float] = {}
+    with timed(loading, "load"), log.stage("load"):
+        scene = load(input_path, settings.mirror_roughness, settings.animated,
+                     settings.allow_hard_links, contained)
+    return scene, loading["load"]
+
+
+def _claimed(scene: Scene, output: Path, overwrite: bool, files: _Files) -> Outputs:
+    """The ``Outputs`` every file of the bake is staged in and put in place together
+    (run/atomic.py), none over a file the scene reads: checked here before any work, and
+    again before the first rename."""
+    own = output_files(scene, output)
+    outputs = Outputs(scene.inputs, own, overwrite)
+    state_files = [] if files.state is None else [files.state, timing_path(files.state)]
+    for path in own + state_files + ([] if files.report is None else [files.report]):
+        outputs.check(path)
+    return outputs
+
+
+def _computed(scene: Scene, settings: Settings, state_path: Path | None,
+              incremental: bool | str, quiet: bool, relight: bool, spill_folder: Path,
+              staging: StateStaging | None):
+    """``bake_or_rebake``, its errors of settings the scene cannot meet naming the scene."""
+    try:
+        return bake_or_rebake(scene, settings, state_path, incremental, quiet, relight,
+                              spill_folder, staging)
+    except BakerError as error:
+        error.file = error.file or str(scene.path)
+        raise
+
+
+def _written(done: Computed, output: Path, files: _Files, outputs: Outputs, steps
+             ) -> tuple[list[EncodedPage], WriteInfo]:
+    """Encode ``done``'s pages and stage the output, the page files and the error maps in
+    ``outputs``, counting the encoded texels and the written ones on ``steps``."""
+    texels = done.lightmaps.covered.size  # the pages' texels encoded: as many steps
+    steps.expect(texels)
+    pages = encode_pages(done)
+    steps.advance(texels)
+    info = write_output(done, pages, output, outputs, steps)
+    if files.lightmaps is not None:
+        write_page_files(outputs.folder(files.lightmaps), output.stem, pages,
+                         done.lightmaps.light, files.lightmaps_format, outputs.stage)
+    if files.error_maps is not None:  # per-texel standard error pages (errormap.py)
+        write_error_maps(outputs.folder(files.error_maps), output.stem, done, outputs.stage)
+    return pages, info
 
 
 def last_settings(output: str | os.PathLike, state: str | os.PathLike | None = None,
