@@ -41,7 +41,8 @@ import numpy as np
 
 from baker.errors import InputError, OutputError, SettingsError
 from baker.geometry.surface import (LUMINANCE, SRGB_TO_LINEAR, albedo, alpha, base_colour,
-                                    emission, transformed_uv, viewer_diffuse_weight_at)
+                                    emission, transformed_uv, viewer_brdf_at,
+                                    viewer_diffuse_weight_at)
 from baker.geometry.world import World, build_world
 from baker.gltf.load import load
 from baker.gltf.read_images import image_pixels
@@ -495,20 +496,22 @@ def _see_through(scene: Scene, world: World, tris: np.ndarray,
                  bary: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """For hits (k,) on world triangles: the share (k,) of the surface's own shading a viewer
     shows (alpha for a blended material, else 1), and what of the scene behind it shows through
-    (k, 3): 1 − alpha for a blended material, transmission × base colour for a transmissive one
-    (three.js tints what it lets through by the base colour), else 0."""
+    (k, 3): 1 − alpha for a blended material; for a transmissive one its dielectric part's
+    transmission, (1 − metallic) × transmission (``transmission_at``), × base colour (three.js
+    tints what it lets through by the base colour, and a metal lets nothing through); else 0."""
     material = world.tri_material[tris]
     blended = np.array([m.alpha_mode == "BLEND" for m in scene.materials])[material]
-    transmission = np.array([m.transmission for m in scene.materials])[material]
+    transmissive = np.array([m.transmission > 0 for m in scene.materials])[material]
     own = np.ones(len(tris))
     behind = np.zeros((len(tris), 3))
     if blended.any():
         own[blended] = np.clip(alpha(scene, world, tris[blended], bary[blended]), 0.0, 1.0)
         behind[blended] = (1.0 - own[blended])[:, None]
-    clear = ~blended & (transmission > 0)
+    clear = ~blended & transmissive
     if clear.any():
-        behind[clear] = (np.clip(transmission[clear], 0.0, 1.0)[:, None]
-                         * base_colour(scene, world, tris[clear], bary[clear]))
+        base, metallic, _, transmission, _ = viewer_brdf_at(scene, world, tris[clear],
+                                                            bary[clear])
+        behind[clear] = ((1.0 - metallic) * transmission)[:, None] * base
     return own, behind
 
 

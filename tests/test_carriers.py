@@ -210,3 +210,40 @@ def test_the_metals_note_reads_the_metallic_texture(tmp_path, metal_rows, noted)
     assert bool(notes) == noted, done.report["notes"]
     if noted:
         assert "× its texture" in notes[0] and "0% of its base colour" in notes[0], notes
+
+
+def test_the_transmission_texture_shares_the_page_and_what_shows_through(tmp_path):
+    """A rough quad of transmissionFactor 0.5 whose transmissionTexture is clear (red 255) on
+    its top 8 of 16 rows and opaque (red 0) on the rest: viewers multiply the factor by the
+    texture's red (three.js's transmissionMap), so they light all of the opaque half's diffuse
+    part with the lightmap and half of the other's, and let the scene through that half only.
+    The emissive page is base × (1 − t) × E / π, and the preview lets base × t through (the
+    factor alone made the whole quad half clear)."""
+    from assets.gltf_builder import GltfBuilder, quad
+    from baker.geometry.surface import base_colour, transmission_at
+    from baker.preview import _see_through
+
+    b = GltfBuilder()
+    pixels = np.zeros((16, 16, 3), np.uint8)
+    pixels[:8, :, 0] = 255
+    texture = b._image_texture(pixels, "transmission")
+    pane = b.material("pane", (0.8, 0.6, 0.4), metallic=0.0, roughness=1.0, extensions={
+        "KHR_materials_transmission": {"transmissionFactor": 0.5,
+                                       "transmissionTexture": {"index": texture}}})
+    b.node("pane", b.shape_mesh("pane", quad(2.0, 2.0), material=pane))
+    done = computed(b, tmp_path, texel_density=8, rays=4)
+    rows = np.flatnonzero((done.texels.key & OTHER_SIDE) == 0)
+    index = done.texels.pixel_index(rows)
+    bary = texel_barycentrics(done.atlas, done.world, done.texels)[rows]
+    tris = done.texels.triangle[rows]
+    clear = transmission_at(done.scene, done.world, tris, bary)
+    assert (abs(clear - 0.5) < 0.01).mean() > 0.3 and (clear < 0.01).mean() > 0.3
+    base = base_colour(done.scene, done.world, tris, bary)
+    out = emissive_lightmaps(done.scene, done.world, done.atlas, done.texels, done.lightmaps,
+                             done.settings.padding, None)
+    irradiance = flat_pages(done.lightmaps.light)[index]
+    np.testing.assert_allclose(flat_pages(out.light)[index],
+                               base * (1.0 - clear)[:, None] * irradiance / np.pi, atol=1e-12)
+    own, behind = _see_through(done.scene, done.world, tris, bary)
+    np.testing.assert_allclose(behind, base * clear[:, None], atol=1e-12)
+    assert (own == 1).all()

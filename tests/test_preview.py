@@ -224,13 +224,15 @@ def test_command_previews_every_scene(name, cornell, small_bake, tmp_path):
 
 
 def test_the_viewer_weight_reads_the_metallic_texture_at_texel_centres():
-    """LightsPunctualLamp's stand and shade take their metallic from a texture (blue channel,
-    linear): at points whose UV is a texel centre, the diffuse weight a viewer shades is
-    1 − metallicFactor × texel / 255 (× (1 − transmission)), whatever the texel."""
+    """LightsPunctualLamp's stand takes its metallic from a texture (blue channel, linear): at
+    points whose UV is a texel centre, the diffuse weight a viewer shades is
+    1 − metallicFactor × texel / 255, whatever the texel (the shade, whose transmission comes
+    from a texture of its own, is left out)."""
     scene = load(REAL_SCENES["LightsPunctualLamp"])
     world = build_world(scene)
     textured = [m for m, material in enumerate(scene.materials)
-                if material.metallic_roughness_texture is not None]
+                if material.metallic_roughness_texture is not None
+                and material.transmission_texture is None]
     assert textured
     tris = np.flatnonzero(np.isin(world.tri_material, textured))
     ref = scene.materials[textured[0]].metallic_roughness_texture

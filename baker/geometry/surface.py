@@ -130,6 +130,17 @@ def metallic_at(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray) 
     return metallic_roughness_at(scene, world, tris, bary)[0]
 
 
+def transmission_at(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray
+                    ) -> np.ndarray:
+    """(k,) KHR_materials_transmission's share in [0, 1] at barycentric points (k, 3) of world
+    triangles (k,): its factor × the transmissionTexture's red channel (linear) where there is
+    one, as viewers sample it per pixel."""
+    factor = np.array([[m.transmission] * 3 for m in scene.materials], np.float64).reshape(-1, 3)
+    values = _textured(scene, world, tris, bary, factor, lambda m: m.transmission_texture,
+                       LINEAR_LEVELS)
+    return np.clip(values[:, 0], 0.0, 1.0)
+
+
 def viewer_diffuse_weight_at(scene: Scene, world: World, tris: np.ndarray,
                              bary: np.ndarray) -> np.ndarray:
     """(k,) the share of the base colour that a glTF viewer shades as diffuse at barycentric
@@ -137,10 +148,9 @@ def viewer_diffuse_weight_at(scene: Scene, world: World, tris: np.ndarray,
     MeshPhysicalMaterial, and every viewer that follows glTF's BRDF): the part that a lightmap
     lights. A metal or glass therefore shows little or nothing of a MOZ_lightmap, whatever the
     bake gave it. Metallic is read per point (``metallic_at``): a textured metal's dielectric
-    parts show a lightmap (LightsPunctualLamp's stand)."""
-    transmission = np.array([m.transmission for m in scene.materials], np.float64)
+    parts show a lightmap (LightsPunctualLamp's stand); transmission too (``transmission_at``)."""
     return ((1.0 - metallic_at(scene, world, tris, bary))
-            * (1.0 - np.clip(transmission, 0.0, 1.0)[world.tri_material[tris]]))
+            * (1.0 - transmission_at(scene, world, tris, bary)))
 
 
 def base_colour(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray) -> np.ndarray:
@@ -220,13 +230,12 @@ def emission_textured(scene: Scene) -> np.ndarray:
 def viewer_brdf_at(scene: Scene, world: World, tris: np.ndarray, bary: np.ndarray
                    ) -> tuple[np.ndarray, ...]:
     """What a glTF viewer's BRDF reads at barycentric points (k, 3) of world triangles (k,):
-    base colour (k, 3) linear RGB, metallic (k,) and roughness (k,) in [0, 1], the material's
-    transmission factor (k,) and index of refraction (k,) as the file gives them."""
+    base colour (k, 3) linear RGB, metallic (k,), roughness (k,) and transmission (k,) in
+    [0, 1] (``transmission_at``), and the material's index of refraction (k,)."""
     metallic, roughness = metallic_roughness_at(scene, world, tris, bary)
-    material = world.tri_material[tris]
-    transmission = np.array([m.transmission for m in scene.materials])[material]
-    ior = np.array([m.ior for m in scene.materials])[material]
-    return base_colour(scene, world, tris, bary), metallic, roughness, transmission, ior
+    ior = np.array([m.ior for m in scene.materials])[world.tri_material[tris]]
+    return (base_colour(scene, world, tris, bary), metallic, roughness,
+            transmission_at(scene, world, tris, bary), ior)
 
 
 def sample_alpha(image: Image, ref: TextureRef, uv: np.ndarray) -> np.ndarray:

@@ -76,6 +76,10 @@ def _read_material(ctx: Context, i: int, material: pygltflib.Material) -> Materi
         extensions=tuple(extensions),
         transmission=value(_extension(extensions, "KHR_materials_transmission"),
                            "transmissionFactor", 0.0, 0.0, 1.0, f"{ext}.KHR_materials_transmission"),
+        transmission_texture=_optional_texture(
+            ctx, _texture_info(_extension(extensions, "KHR_materials_transmission")
+                               .get("transmissionTexture")),
+            f"{ext}.KHR_materials_transmission.transmissionTexture", "the transmission factor"),
         ior=value(_extension(extensions, "KHR_materials_ior"), "ior", 1.5, 1.0, math.inf,
                   f"{ext}.KHR_materials_ior"),
         thickness=value(volume, "thicknessFactor", 0.0, 0.0, math.inf,
@@ -102,11 +106,7 @@ def _base_terms(ctx: Context, material: pygltflib.Material, extensions: dict,
     spec_gloss = extensions.get(_SPEC_GLOSS)
     if isinstance(spec_gloss, dict):
         at = f"{where}.extensions.{_SPEC_GLOSS}"
-        texture = spec_gloss.get("diffuseTexture")
-        info = None
-        if isinstance(texture, dict):
-            info = pygltflib.TextureInfo(index=texture.get("index"), texCoord=texture.get("texCoord"),
-                                         extensions=texture.get("extensions"))
+        info = _texture_info(spec_gloss.get("diffuseTexture"))
         glossiness = _material_number(ctx, spec_gloss, "glossinessFactor", 1.0, 0.0, 1.0,
                                       f"{at}.glossinessFactor")
         return dict(
@@ -124,17 +124,28 @@ def _base_terms(ctx: Context, material: pygltflib.Material, extensions: dict,
         roughness=_material_number(ctx, {"roughnessFactor": pbr.roughnessFactor}, "roughnessFactor",
                                    1.0, 0.0, 1.0, f"{at}.roughnessFactor"),
         metallic_roughness_texture=_optional_texture(ctx, pbr.metallicRoughnessTexture,
-                                                     f"{at}.metallicRoughnessTexture"))
+                                                     f"{at}.metallicRoughnessTexture",
+                                                     "metallic and roughness factors"))
 
 
-def _optional_texture(ctx: Context, info: Any, where: str) -> TextureRef | None:
-    """``_texture_ref`` for a texture the bake can do without (metallic-roughness): one it
-    cannot read is left out and recorded in ``ctx.skipped`` instead of stopping the bake."""
+def _optional_texture(ctx: Context, info: Any, where: str, factors: str) -> TextureRef | None:
+    """``_texture_ref`` for a texture the bake can do without (metallic-roughness,
+    transmission): one it cannot read is left out and recorded in ``ctx.skipped`` instead of
+    stopping the bake, its material's ``factors`` used alone."""
     try:
         return _texture_ref(ctx, info, where)
     except InputError as error:
-        ctx.skip(where, f"cannot be read ({error.message}): metallic and roughness factors used alone")
+        ctx.skip(where, f"cannot be read ({error.message}): {factors} used alone")
         return None
+
+
+def _texture_info(texture: Any) -> pygltflib.TextureInfo | None:
+    """A textureInfo of an extension's JSON (a dict with ``index``, ``texCoord``,
+    ``extensions``) as pygltflib's, for ``_texture_ref``; None when it is not one."""
+    if not isinstance(texture, dict):
+        return None
+    return pygltflib.TextureInfo(index=texture.get("index"), texCoord=texture.get("texCoord"),
+                                 extensions=texture.get("extensions"))
 
 
 def _extension(extensions: dict, name: str) -> dict:

@@ -76,6 +76,8 @@ class Material:
     # metallicRoughnessTexture (linear: G roughness, B metallic), None when absent.
     metallic_roughness_texture: TextureRef | None = None
     transmission: float = 0.0  # KHR_materials_transmission transmissionFactor
+    # KHR_materials_transmission transmissionTexture (linear, R: × the factor), None when absent.
+    transmission_texture: TextureRef | None = None
     ior: float = 1.5  # KHR_materials_ior
     thickness: float = 0.0  # KHR_materials_volume thicknessFactor, mesh units (0: thin-walled)
     attenuation_distance: float = float("inf")  # KHR_materials_volume, metres

@@ -25,7 +25,7 @@ import numpy as np
 
 from baker.atlas.layout import Atlas
 from baker.atlas.rasterise import Texels, flat_pages, texel_barycentrics
-from baker.geometry.surface import (base_colour, emission, metallic_at,
+from baker.geometry.surface import (base_colour, emission, metallic_at, transmission_at,
                                     viewer_diffuse_weight_at)
 from baker.geometry.world import World
 from baker.gltf.scene import Scene
@@ -55,8 +55,8 @@ def emissive_lightmaps(scene: Scene, world: World, atlas: Atlas, texels: Texels,
     index = texels.pixel_index(front)
     irradiance = flat_pages(lightmaps.light)[index]
     metal = metallic_at(scene, world, tris, bary)[:, None]
-    transmission = np.array([m.transmission for m in scene.materials])[world.tri_material[tris]]
-    diffuse = (1.0 - metal) * (1.0 - np.clip(transmission, 0.0, 1.0))[:, None] * irradiance
+    clear = transmission_at(scene, world, tris, bary)[:, None]
+    diffuse = (1.0 - metal) * (1.0 - clear) * irradiance
     if metal.any():
         punctual = _punctual_irradiance(kept, front, len(texels.key))
         diffuse += metal * np.maximum(irradiance - punctual, 0.0)
