@@ -5,15 +5,17 @@ A bake is cut into parts whose results depend only on their texels' keys (``part
 four for each worker of the cluster (``part_texels``): that is the unit sent to the cluster. ``run_parts`` is the
 one dispatcher: it puts a ``Work`` (what every part needs) into Ray's object store once, asks
 for the parts as tasks, each carrying only its own input, and gives their results back in
-order, whatever order they finish in, counting which worker made what (``Session``). A worker
-process fetches the shipped work once (``_ready``), makes it ready (Embree's scene, built from
-the shipped scene and world) and runs the part function on each part it is given.
+order, whatever order they finish in, counting which worker made what (``Session``). Each node
+may make something of the shipped work once, shared by its worker processes through its object
+store (``Work.node``); a worker process makes it ready once (``_ready``: Embree's scene) and
+runs the part function on each part it is given.
 
 A full bake (``parts``): the driver (the process that runs ``baker``) loads the scene, has the
 workers chart its distinct meshes (``chart_on_workers``), packs their charts and rasterises as a
-local bake does, ships what every part needs (``_shipped``: scene,
-world, resolved settings, light sources, I_A, atlas and the texels' owners) and sends each
-part only its texels' coverage rows; the worker runs the same part function as a local bake
+local bake does, ships what every part needs (``_shipped``: the scene
+as the file has it, resolved settings, light sources, I_A, atlas, which triangles own texels;
+each node builds the world and what derives from it once, ``_node_bake``) and sends each part
+only its texels' coverage rows; the worker runs the same part function as a local bake
 (``full._bake_part``) and sends back the part's results less what the driver can make itself
 (``_BakedRemotely``), so that the driver composes, spills and writes exactly as a local bake
 does: the same bytes whatever the workers and their threads. A rebake's parts are its dirty
