@@ -389,9 +389,20 @@ class Owners:
 
 def owners(atlas: Atlas, world: World, coverage: Coverage) -> Owners:
     """The per-triangle terms of the triangles that own texels in ``coverage``."""
+    return owners_of(atlas, world, owning_triangles(world, coverage))
+
+
+def owning_triangles(world: World, coverage: Coverage) -> np.ndarray:
+    """(T,) bool: which world triangles own a texel of ``coverage``."""
+    return np.bincount(coverage.triangle, minlength=len(world.triangles)) > 0
+
+
+def owners_of(atlas: Atlas, world: World, owns: np.ndarray) -> Owners:
+    """The per-triangle terms of the world triangles where ``owns`` (T,) bool (those that own
+    texels: ``owning_triangles``); a cluster's node makes them from the mask alone."""
     triangles = len(world.triangles)
     uv = owners_uv(atlas, world)
-    owning = np.flatnonzero(np.bincount(coverage.triangle, minlength=triangles))
+    owning = np.flatnonzero(owns)
     normal, size, axes = np.zeros((triangles, 3)), np.zeros(triangles), np.zeros((triangles, 2, 3))
     normal[owning], size[owning], axes[owning] = _triangle_terms(world, owning, uv[owning])
     return Owners(uv=uv, normal=normal, size=size, axes=axes)

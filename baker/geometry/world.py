@@ -169,9 +169,59 @@ def bounds_scale(positions: np.ndarray) -> float:
     return float(2.0 ** np.ceil(np.log2(diagonal)))
 
 
+@jit
+def rows_times(rows: np.ndarray, matrix: np.ndarray) -> np.ndarray:
+    """(n, 3) the row vectors ``rows`` (n, 3) times ``matrix`` (3, 3): out[i, j] =
+    (r_i0·m_0j + r_i1·m_1j) + r_i2·m_2j, each product rounded, summed in that order, in one
+    compiled pass. ``rows @ matrix`` would hand the product to BLAS, whose kernels (fused
+    multiply-adds, row blocks cut by its thread count) change the last bit with the number of
+    threads: a cluster's nodes must build the driver's world to the bit."""
+    out = np.empty((len(rows), 3))
+    for i in range(len(rows)):
+        x, y, z = rows[i, 0], rows[i, 1], rows[i, 2]
+        for j in range(3):
+            out[i, j] = (x * matrix[0, j] + y * matrix[1, j]) + z * matrix[2, j]
+    return out
+
+
+def _cofactor(linear: np.ndarray) -> tuple[np.ndarray, float]:
+    """The cofactor matrix det(M)·M⁻¹ (3, 3) of the linear part ``linear`` (3, 3) of an
+    instance's matrix, as rows, and det(M) from it (elementwise arithmetic, no LAPACK): both
+    exist for a singular M too."""
+    cofactor = np.stack([np.cross(linear[:, 1], linear[:, 2]), np.cross(linear[:, 2], linear[:, 0]),
+                         np.cross(linear[:, 0], linear[:, 1])])
+    det = (cofactor[0, 0] * linear[0, 0] + cofactor[0, 1] * linear[1, 0]) \
+        + cofactor[0, 2] * linear[2, 0]
+    return cofactor, float(det)
+
+
+def placed_positions(positions: np.ndarray, matrix: np.ndarray) -> np.ndarray:
+    """(n, 3) world positions of mesh ``positions`` (n, 3) placed by the world ``matrix``
+    (4, 4): M·p + t, through ``rows_times`` (every world position baker makes: the same bits
+    on every machine and thread count)."""
+    return rows_times(positions, np.ascontiguousarray(matrix[:3, :3].T)) + matrix[:3, 3]
+
+
+def placed(prim, matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One instance of the primitive ``prim`` (``gltf.scene.Primitive``) placed by its world
+    ``matrix`` (4, 4): world positions (n, 3), unit world normals (n, 3) and triangles (m, 3),
+    two corners swapped where the matrix mirrors (see the module notes). Normals go through
+    det(M)·M⁻ᵀ with det's sign (a zero scale flattens them, never NaNs them); a primitive
+    without normals gets flat ones (``_flat_normals``). Elementwise arithmetic and
+    ``rows_times`` only: the same bits on every machine and thread count."""
+    positions = placed_positions(prim.positions, matrix)
+    cofactor, det = _cofactor(matrix[:3, :3])
+    triangles = prim.triangles[:, [0, 2, 1]] if det < 0 else prim.triangles
+    if prim.normals is None:
+        return positions, _unit(_flat_normals(positions, triangles)), triangles
+    return positions, _unit(rows_times(prim.normals, cofactor if det >= 0 else -cofactor)), triangles
+
+
 def build_world(scene: Scene) -> World:
-    """Transform every instance of ``scene`` to world space and concatenate them; classify
-    its materials (``gltf.materials.material_table``)."""
+    """Transform every instance of ``scene`` to world space (``placed``) and concatenate them;
+    classify its materials (``gltf.materials.material_table``). A pure function of the scene
+    whose bits depend on no thread count: a cluster's nodes build the driver's world from the
+    shipped scene (``pipeline.cluster``)."""
     sets = _texcoord_sets(scene)
     parts: dict[str, list[np.ndarray]] = {k: [] for k in (
         "positions", "normals", "smooth", "colors", "triangles", "tri_instance", "tri_material")}
@@ -179,21 +229,8 @@ def build_world(scene: Scene) -> World:
     vertex_start, tri_start = [0], [0]
     for i, inst in enumerate(scene.instances):
         prim = scene.primitives[inst.primitive]
-        linear, offset = inst.world[:3, :3], inst.world[:3, 3]
-        positions = prim.positions @ linear.T + offset
-        triangles = prim.triangles
-        if np.linalg.det(linear) < 0:
-            triangles = triangles[:, [0, 2, 1]]
-        if prim.normals is not None:
-            # (M^-T n) as row vectors, through the cofactor matrix det(M)·M^-T (sign kept), which
-            # exists for a singular M too: a zero scale flattens normals, never NaNs them.
-            cofactor = np.stack([np.cross(linear[:, 1], linear[:, 2]), np.cross(linear[:, 2], linear[:, 0]),
-                                 np.cross(linear[:, 0], linear[:, 1])])  # rows: det(M)·M^-1
-            normals = _unit(prim.normals @ (cofactor if np.linalg.det(linear) >= 0 else -cofactor))
-            smooth = np.ones(len(positions), bool)
-        else:
-            normals = _unit(_flat_normals(positions, triangles))
-            smooth = np.zeros(len(positions), bool)
+        positions, normals, triangles = placed(prim, inst.world)
+        smooth = np.full(len(positions), prim.normals is not None)
         n = len(positions)
         parts["positions"].append(positions)
         parts["normals"].append(normals)

@@ -5,15 +5,17 @@ A bake is cut into parts whose results depend only on their texels' keys (``part
 four for each worker of the cluster (``part_texels``): that is the unit sent to the cluster. ``run_parts`` is the
 one dispatcher: it puts a ``Work`` (what every part needs) into Ray's object store once, asks
 for the parts as tasks, each carrying only its own input, and gives their results back in
-order, whatever order they finish in, counting which worker made what (``Session``). A worker
-process fetches the shipped work once (``_ready``), makes it ready (Embree's scene, built from
-the shipped scene and world) and runs the part function on each part it is given.
+order, whatever order they finish in, counting which worker made what (``Session``). Each node
+may make something of the shipped work once, shared by its worker processes through its object
+store (``Work.node``); a worker process makes it ready once (``_ready``: Embree's scene) and
+runs the part function on each part it is given.
 
 A full bake (``parts``): the driver (the process that runs ``baker``) loads the scene, has the
 workers chart its distinct meshes (``chart_on_workers``), packs their charts and rasterises as a
-local bake does, ships what every part needs (``_shipped``: scene,
-world, resolved settings, light sources, I_A, atlas and the texels' owners) and sends each
-part only its texels' coverage rows; the worker runs the same part function as a local bake
+local bake does, ships what every part needs (``_shipped``: the scene
+as the file has it, resolved settings, light sources, I_A, atlas, which triangles own texels;
+each node builds the world and what derives from it once, ``_node_bake``) and sends each part
+only its texels' coverage rows; the worker runs the same part function as a local bake
 (``full._bake_part``) and sends back the part's results less what the driver can make itself
 (``_BakedRemotely``), so that the driver composes, spills and writes exactly as a local bake
 does: the same bytes whatever the workers and their threads. A rebake's parts are its dirty
@@ -44,11 +46,13 @@ from importlib import metadata
 from typing import Callable, Iterator
 
 import numpy as np
+from isal import isal_zlib
 
 from baker.atlas.charts import balanced, chart_list
-from baker.atlas.rasterise import Coverage, texels_of
+from baker.atlas.rasterise import Coverage, owners_of, owning_triangles, texels_of
 from baker.atlas.validity import Faces
 from baker.errors import SettingsError
+from baker.geometry.world import build_world
 from baker.light.hemisphere import surfaces_of
 from baker.pipeline import parts as parts_module
 from baker.pipeline.parts import TexelPoints
@@ -210,7 +214,7 @@ def connect(address: str, threads: int, identity: Callable[[], dict[str, str]]) 
                     f"6379 by default), or start one with `ray start --head --port {port}` on "
                     f"{host}") from None
     try:
-        nodes = [n for n in ray.nodes() if n["Alive"] and n["Resources"].get("CPU", 0) > 0]
+        nodes = _baking_nodes(ray)
         if not nodes:
             raise SettingsError(f"the Ray cluster at {address} has no node with CPUs to bake on",
                                 fix=f"start workers with `ray start --address {address}` on the "
@@ -228,6 +232,11 @@ def connect(address: str, threads: int, identity: Callable[[], dict[str, str]]) 
         raise
     return Session(address, sum(int(n["Resources"]["CPU"]) for n in nodes), len(nodes),
                    connected_here, threads)
+
+
+def _baking_nodes(ray) -> list[dict]:
+    """The cluster's live nodes that have CPUs (``ray.nodes()``'s entries)."""
+    return [n for n in ray.nodes() if n["Alive"] and n["Resources"].get("CPU", 0) > 0]
 
 
 def _within(seconds: float, call: Callable[[], object]) -> object:
@@ -340,14 +349,18 @@ def current() -> Session:
 @dataclass(frozen=True)
 class Work:
     """What a cluster runs, part by part, for a bake or a rebake: ``shipped`` goes into the
-    object store once and each worker process makes it ready once (``ready(shipped)``: what
-    is not shipped, such as Embree's scene, built there from what is); then each part is
-    ``run(ready, item, seconds)``, ``item`` the part's own input, ``seconds`` the worker's
-    stages. ``ready`` and ``run`` are module-level functions, which Ray sends by name."""
+    object store once; with a ``node`` function, each node makes ``node(shipped)`` once, into
+    its own object store, which its worker processes share read-only (``_made_on_nodes``);
+    each worker process makes it ready once (``ready(made)``, ``made`` the node's value, or
+    ``shipped`` without a ``node``: what cannot be shared, such as Embree's scene, built there);
+    then each part is ``run(ready, item, seconds)``, ``item`` the part's own input, ``seconds``
+    the worker's stages. ``node``, ``ready`` and ``run`` are module-level functions, which Ray
+    sends by name."""
 
     shipped: object
     ready: Callable[[object], object]
     run: Callable[[object, object, dict[str, float]], object]
+    node: Callable[[object], object] | None = None
 
 
 @dataclass(frozen=True)
@@ -413,7 +426,9 @@ def run_parts(work: Work, sizes: list[int], item: Callable[[int], object],
     ray, account = _ray(), current()
     task = ray.remote(num_cpus=account.threads, max_retries=0)(_run_part)
     start = time.perf_counter()
-    box = [ray.put(work)]  # in a list: Ray hands the reference over, not the value
+    shipped = ray.put(work.shipped)
+    made = {} if work.node is None else _made_on_nodes(ray, work.node, shipped)
+    box = [replace(work, shipped=shipped), made]  # in a list: Ray hands references over
     account.shipped_bytes += _array_bytes(work.shipped)
     _add_seconds(times, "ship", start)
     running = max(2, 2 * account.cpus // account.threads)
@@ -492,25 +507,44 @@ def _wait_for(ray, wanted, pending: dict, sizes: list[int], advance: Callable[[i
             ended()
 
 
+def _made_on_nodes(ray, node: Callable[[object], object], shipped) -> dict:
+    """``node(shipped)`` made once on each node with CPUs, by a task of no CPU pinned to it:
+    node id → the reference of its value, which stays in that node's object store, where the
+    node's worker processes read its arrays without a copy (``_ready``)."""
+    from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
+
+    task = ray.remote(num_cpus=0, max_retries=_RETRIES)(node)
+    return {n["NodeID"]: task.options(scheduling_strategy=NodeAffinitySchedulingStrategy(
+        n["NodeID"], soft=False)).remote(shipped) for n in _baking_nodes(ray)}
+
+
 _READY: dict = {}  # in a worker process: the shipped work's reference → (work, its ready value)
 
 
 def _ready(box: list, seconds: dict[str, float]) -> tuple[Work, object]:
-    """In a worker, the shipped ``Work`` of the reference ``box[0]`` and its ready value, made
-    once per process and kept for the next parts; a new run's replaces the last one's (a
-    worker holds one scene)."""
-    key = box[0].hex()
+    """In a worker, the ``Work`` ``box[0]`` (its ``shipped`` a reference) and its ready value,
+    made once per process and kept for the next parts; a new run's replaces the last one's (a
+    worker holds one scene). With a ``node`` function, what this node made of the shipped work
+    (``box[1]``: node id → reference), or, on a node that joined after the run began, made
+    here."""
+    work, made = box
+    key = work.shipped.hex()
     if key not in _READY:
         started = time.perf_counter()
         _READY.clear()
-        work = _ray().get(box[0])
-        _READY[key] = work, work.ready(work.shipped)
+        ray = _ray()
+        here = ray.get_runtime_context().get_node_id()
+        if work.node is None:
+            value = ray.get(work.shipped)
+        else:
+            value = ray.get(made[here]) if here in made else work.node(ray.get(work.shipped))
+        _READY[key] = work, work.ready(value)
         seconds["receive"] = time.perf_counter() - started
     return _READY[key]
 
 
 def _run_part(box: list, item) -> _Returned:
-    """A Ray task: one part, ``item``, of the shipped work ``box[0]`` (``run_parts``)."""
+    """A Ray task: one part, ``item``, of the work ``box[0]`` (``run_parts``, ``_ready``)."""
     seconds: dict[str, float] = {}
     work, ready = _ready(box, seconds)
     value = work.run(ready, item, seconds)
@@ -525,7 +559,7 @@ def parts(part: Callable, baking, slices: list[slice], times: dict[str, float],
     part sends only its texels' coverage rows and gets back the part less its texels, which
     the driver makes again (``_received``: "rasterise" in ``times``)."""
     coverage = baking.coverage
-    work = Work((part, _shipped(baking)), _ready_bake, _bake_part)
+    work = Work(_shipped(part, baking), _ready_bake, _bake_part, _node_bake)
     made = run_parts(work, [s.stop - s.start for s in slices],
                      lambda k: (coverage.key[slices[k]], coverage.triangle[slices[k]]),
                      times, advance)
@@ -559,26 +593,88 @@ def _received(baking, rows: slice, returned: _BakedRemotely, times: dict[str, fl
     return replace(returned.part, texels=texels, points=points)
 
 
-def _shipped(baking):
-    """What every worker needs of ``baking`` (``full.Baking``), once: without Embree's scene,
-    the back faces and the surfaces, which a worker builds from the scene and world
-    (``_ready_bake``), and without the texels' coverage, whose rows each part carries (the
-    per-triangle texel counts stay)."""
-    coverage = baking.coverage
+@dataclass(frozen=True)
+class _ShippedBake:
+    """What every node of a full bake's cluster receives once (``_shipped``): the part
+    function; the bake (``full.Baking``) without its world (the scene as the file has it:
+    distinct meshes and each instance's matrix, ``_read_scene``), what the texels take from their triangles,
+    Embree's scene, the back faces, the surfaces and the texels' coverage rows; which world
+    triangles own texels (``owns``: ``np.packbits`` of (T,) bool); and ``crc``, the CRC-32 of
+    what a node makes from them (``_made_crc``) as the driver made it."""
+
+    part: Callable
+    baking: object
+    owns: np.ndarray
+    crc: int
+
+
+def _shipped(part: Callable, baking) -> _ShippedBake:
+    """What every node needs of ``baking`` (``full.Baking``), once (``_ShippedBake``): a node
+    builds the rest (``_node_bake``); each part carries its own coverage rows (the
+    per-triangle texel counts are shipped)."""
+    coverage, lit = baking.coverage, baking.lit
     empty = Coverage(coverage.key[:0], coverage.triangle[:0], coverage.triangle_texels)
-    return replace(baking, lit=baking.lit.without_tracer(), faces=None, surfaces=None,
-                   coverage=empty)
+    scene = _read_scene(baking.scene)
+    context = replace(lit.context, world=None, tracer=None, surfaces=scene)
+    bare = replace(baking, scene=scene, world=None, owned=None, faces=None, surfaces=None,
+                   coverage=empty, lit=replace(lit, context=context))
+    return _ShippedBake(part, bare, np.packbits(owning_triangles(baking.world, coverage)),
+                        _made_crc(baking))
 
 
-def _ready_bake(shipped: tuple):
-    """In a worker: the part function and the shipped bake with Embree's scene, the back
-    faces and the surfaces built from its scene and world, with the task's CPUs as threads."""
-    part, baking = shipped
-    scene, world = baking.scene, baking.world
+def _read_scene(scene):
+    """The loaded ``scene`` (``gltf.scene.Scene``) as a node reads it: without the file's own
+    bytes (its glTF document, each buffer's bytes, each image file's), which only the
+    driver's writer reads; the meshes, instances, materials and decoded images stay."""
+    images = tuple(replace(image, data=None) for image in scene.images)
+    return replace(scene, document=None, buffers=(), images=images)
+
+
+def _node_bake(shipped: _ShippedBake) -> tuple:
+    """On a node, once (``Work.node``): the part function and the bake its worker processes
+    share, the world built from the shipped scene (``build_world``: the driver's bits, on any
+    machine and thread count), what the texels take from their triangles, the back faces and
+    the surfaces made from it, as the driver made them; a RuntimeError if their CRC-32 is not
+    the driver's (another build of a library, a CPU that rounds otherwise), rather than a bake
+    of other bytes."""
+    baking = shipped.baking
+    world = build_world(baking.scene)
+    owns = np.unpackbits(shipped.owns, count=len(world.triangles)).astype(bool)
+    context = replace(baking.lit.context, world=world)
+    made = replace(baking, world=world, owned=owners_of(baking.atlas, world, owns),
+                   lit=replace(baking.lit, context=context), faces=Faces(baking.scene, world),
+                   surfaces=surfaces_of(context))
+    crc = _made_crc(made)
+    if crc != shipped.crc:
+        raise RuntimeError(f"node {socket.gethostname()} built another world from the shipped "
+                           f"scene than the driver's (CRC-32 {crc:08x}, the driver's "
+                           f"{shipped.crc:08x}): its libraries or CPU round otherwise")
+    return shipped.part, made
+
+
+def _made_crc(baking) -> int:
+    """CRC-32 of every array a node makes of a bake (``_node_bake``): the world's, the texels'
+    per-triangle terms, the back faces and the surfaces' tables, with their dtypes and shapes,
+    in a fixed order (not the scene's, which is shipped)."""
+    crc = 0
+    for array in _arrays(_made(baking), {id(baking.scene)}):
+        crc = isal_zlib.crc32(f"{array.dtype.str}{array.shape}".encode(), crc)
+        crc = isal_zlib.crc32(np.ascontiguousarray(array).reshape(-1).view(np.uint8), crc)
+    return crc
+
+
+def _made(baking) -> tuple:
+    """What a node makes of a bake (``_node_bake``): its world, the texels' per-triangle terms,
+    the back faces' arrays and the surfaces."""
+    return baking.world, baking.owned, vars(baking.faces), baking.surfaces
+
+
+def _ready_bake(made: tuple):
+    """In a worker: the part function and the bake its node made (``_node_bake``) with
+    Embree's scene built from its world, with the task's CPUs as threads."""
+    part, baking = made
     threads = max(1, baking.settings.threads)
-    lit = baking.lit.with_tracer(Tracer(world))
-    return part, replace(baking, lit=lit, faces=Faces(scene, world),
-                         surfaces=surfaces_of(lit.context),
+    return part, replace(baking, lit=baking.lit.with_tracer(Tracer(baking.world)),
                          settings=replace(baking.settings, threads=threads))
 
 
@@ -596,22 +692,30 @@ def _bake_part(ready: tuple, item: tuple[np.ndarray, np.ndarray], seconds: dict[
                           baked.texels.position[moved])
 
 
-def _array_bytes(value, seen: set | None = None) -> int:
-    """Bytes of the numpy arrays in ``value`` (dataclasses, tuples, lists, dicts, nested), each
-    array counted once: what crosses the network beyond a few bytes of framing."""
+def _array_bytes(value) -> int:
+    """Bytes of the numpy arrays in ``value`` (``_arrays``), each array counted once: what
+    crosses the network beyond a few bytes of framing."""
+    return sum(array.nbytes for array in _arrays(value))
+
+
+def _arrays(value, seen: set | None = None) -> Iterator[np.ndarray]:
+    """The numpy arrays in ``value`` (dataclasses, tuples, lists, dicts, nested), each once,
+    in a fixed order; none within an object whose id is in ``seen``."""
     seen = set() if seen is None else seen
+    if id(value) in seen:
+        return
+    seen.add(id(value))
     if isinstance(value, np.ndarray):
-        if id(value) in seen:
-            return 0
-        seen.add(id(value))
-        return value.nbytes
-    if isinstance(value, (tuple, list)):
-        return sum(_array_bytes(v, seen) for v in value)
-    if isinstance(value, dict):
-        return sum(_array_bytes(v, seen) for v in value.values())
-    if hasattr(value, "__dataclass_fields__"):
-        return sum(_array_bytes(getattr(value, name), seen) for name in value.__dataclass_fields__)
-    return 0
+        yield value
+    elif isinstance(value, (tuple, list)):
+        for item in value:
+            yield from _arrays(item, seen)
+    elif isinstance(value, dict):
+        for item in value.values():
+            yield from _arrays(item, seen)
+    elif hasattr(value, "__dataclass_fields__"):
+        for name in value.__dataclass_fields__:
+            yield from _arrays(getattr(value, name), seen)
 
 
 def _add_seconds(times: dict[str, float], name: str, start: float) -> None:

@@ -9,7 +9,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from baker.geometry.world import World
+from baker.geometry.world import World, placed_positions
 from baker.gltf.scene import Scene
 from baker.jit import jit
 from baker.materials import SPECULAR, TRANSPARENT
@@ -115,8 +115,8 @@ class Changed:
 def _placed_positions(scene: Scene, instance: int, matrix: np.ndarray) -> np.ndarray:
     """(v, 3) world positions of an instance's vertices had its node the world ``matrix``,
     with the arithmetic of ``geometry.build_world`` (so the new place matches it bit for bit)."""
-    prim = scene.primitives[scene.instances[instance].primitive]
-    return prim.positions @ matrix[:3, :3].T + matrix[:3, 3]
+    return placed_positions(scene.primitives[scene.instances[instance].primitive].positions,
+                            matrix)
 
 
 def placed_corners(scene: Scene, world: World, instance: int, matrix: np.ndarray) -> np.ndarray:
