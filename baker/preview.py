@@ -40,8 +40,8 @@ from pathlib import Path
 import numpy as np
 
 from baker.errors import InputError, OutputError, SettingsError
-from baker.geometry.surface import (LUMINANCE, SRGB_TO_LINEAR, albedo, alpha, base_colour,
-                                    emission, transformed_uv, viewer_brdf_at,
+from baker.geometry.surface import (SRGB_TO_LINEAR, albedo, alpha, base_colour, emission,
+                                    luminance, transformed_uv, viewer_brdf_at,
                                     viewer_diffuse_weight_at)
 from baker.geometry.world import World, build_world
 from baker.gltf.load import load
@@ -457,7 +457,7 @@ def render(scene: Scene, mode: str = "lit", size: tuple[int, int] | None = None,
                                radiance)
     if exposure is None:
         exposure = 1.0
-        shown = radiance[lightmapped] @ LUMINANCE
+        shown = luminance(radiance[lightmapped])
         shown = shown[shown > 0]  # a metal shows black: it says nothing of the level
         if mode != "checker" and len(shown):
             exposure = _WHITE / np.percentile(shown, 99)
@@ -612,7 +612,7 @@ def _shade(scene: Scene, world: World, lightmaps: SceneLightmaps, mode: str, tri
     if mode != "checker" and lightmaps.directional is not None:
         light *= _directional_factor(world, lightmaps, tris, b, texel)[:, None]
     cosine = np.abs(np.einsum("kj,kj->k", world.geometric_normals(tris), directions[hit]))
-    level = (light[baked] @ LUMINANCE).mean() if baked.any() else 1.0
+    level = luminance(light[baked]).mean() if baked.any() else 1.0
     if mode == "checker":
         light[~baked] = _UNBAKED_CHECKER
         radiance[hit] = light

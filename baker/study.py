@@ -18,7 +18,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from baker.geometry.surface import LUMINANCE
+from baker.geometry.surface import luminance
 from baker.gltf.scene import Scene
 from baker.image.compose import effective_r_ave
 from baker.image.errormap import texel_errors
@@ -105,13 +105,13 @@ class Study:
 def _luminance(done: Computed, terms: Terms) -> np.ndarray:
     """(N,) lightmap luminance I_A·W of the terms."""
     w = terms.obscurance(effective_r_ave(done.ambient, done.settings.rho))
-    return (w @ LUMINANCE) * float(done.ambient.intensity @ LUMINANCE)
+    return luminance(w) * float(luminance(done.ambient.intensity))
 
 
 def _estimated_rmse(done: Computed, terms: Terms) -> float:
     """The RMSE a bake would report for these terms (obscurance part, lightmap units)."""
     rmse = terms.rmse(effective_r_ave(done.ambient, done.settings.rho))
-    return rmse * float(done.ambient.intensity @ LUMINANCE)
+    return rmse * float(luminance(done.ambient.intensity))
 
 
 def run_study(done: Computed, rays: tuple[int, ...] = DEFAULT_RAYS,
@@ -155,7 +155,7 @@ def _aim_row(done: Computed, technique: str, count: int, seconds: float, terms: 
     luminance (× I_A's): the RMS length of its difference from the reference's, and the
     estimate from the rays' halves (``Terms.aim_errors``)."""
     r_ave = effective_r_ave(done.ambient, done.settings.rho)
-    scale = float(done.ambient.intensity @ LUMINANCE)
+    scale = float(luminance(done.ambient.intensity))
     gap = (terms.aim(r_ave) - reference.aim(r_ave)) * scale
     rmse = float(np.sqrt(np.mean(np.sum(gap * gap, axis=1))))
     return Row(f"U {technique}", count, seconds, rmse,
@@ -187,7 +187,7 @@ def sky_rows(done: Computed, rays: tuple[int, ...] = DEFAULT_RAYS,
             started = time.perf_counter()
             got, variance = sky_irradiance(drawn, count, receivers, tracer, done.settings.seed)
             seconds = time.perf_counter() - started
-            rmse = float(np.sqrt(np.mean(((got - reference) @ LUMINANCE) ** 2)))
+            rmse = float(np.sqrt(np.mean(luminance(got - reference) ** 2)))
             rows.append(Row(name, count, seconds, rmse, float(np.sqrt(np.mean(variance)))))
     return tuple(rows)
 
@@ -253,10 +253,10 @@ def compare_with_gi(done: Computed, rays: int = 64, paths: int = 256) -> dict:
     terms = integrate(context, done.texels)
     obscurance_seconds = time.perf_counter() - started
     started = time.perf_counter()
-    indirect = indirect_light(context, done.sources, done.texels,
-                              paths).irradiance @ LUMINANCE
+    indirect = luminance(indirect_light(context, done.sources, done.texels,
+                                        paths).irradiance)
     gi_seconds = time.perf_counter() - started
-    lit = done.direct.irradiance() @ LUMINANCE if done.direct is not None else 0.0
+    lit = luminance(done.direct.irradiance()) if done.direct is not None else 0.0
     ambient = _luminance(done, terms)
     gi = lit + indirect
     rmse = float(np.sqrt(np.mean((lit + ambient - gi) ** 2)))
@@ -280,7 +280,7 @@ def _calibration_bake(scene: Scene, settings: dict, rays: int, seed: int
     covered = done.lightmaps.covered
     pages = np.zeros(covered.shape)
     pages[done.texels.pixels()] = texel_errors(done)
-    return (done.lightmaps.light @ LUMINANCE)[covered], pages[covered], done.rmse_estimate()
+    return luminance(done.lightmaps.light)[covered], pages[covered], done.rmse_estimate()
 
 
 def calibration(scene: Scene, settings: dict, rays: int, factor: int) -> dict:

@@ -87,8 +87,10 @@ def test_a_bake_is_cut_into_four_parts_a_worker_whatever_its_size(ray_cluster, t
                                                                   monkeypatch):
     """At the parts' default size the demo at a 128² page is one part locally; on a cluster
     of two one-CPU workers it is cut into eight (``cluster.part_texels``), with the same
-    bytes, and each worker takes parts as it ends its last. Its meshes are charted on the
-    workers (no cache), and the atlas packed here from their charts is the local one."""
+    bytes, and each worker takes parts as it ends its last (which of them takes how many
+    depends on when each is ready: on a loaded machine one may take all eight). Its meshes are
+    charted on the workers (no cache), and the atlas packed here from their charts is the
+    local one."""
     from baker.pipeline import cluster
 
     monkeypatch.setattr(cluster, "_LEAST_PART", 100)
@@ -99,7 +101,7 @@ def test_a_bake_is_cut_into_four_parts_a_worker_whatever_its_size(ray_cluster, t
     report = result.report["cluster"]
     assert report["parts"] == 8 and report["parts_run_again"] == []
     assert report["meshes_charted"] >= 3  # the room's walls, the blocks
-    assert len(report["workers"]) >= 2  # both nodes took parts
+    assert sum(worker["parts"] for worker in report["workers"].values()) == 8
 
 
 @pytest.mark.long

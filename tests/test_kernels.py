@@ -99,3 +99,67 @@ def test_a_cache_from_another_environment_is_compiled_again(tmp_path):
     assert (saved, loaded) == ("data saved", "data loaded")
     assert recompiled == "data saved"  # not loaded from the other environment's cache
     assert first == again == other
+
+
+# Products on per-texel and per-ray rows (docs/design.md §4): numpy's ``@`` and ``np.dot`` go
+# through BLAS, whose sum for a row can change in its last bit with the row's place in the
+# array; a rebake computes its texels in other arrays than a full bake, so the packages that
+# make or compose the texels' values use ``baker.rowwise`` (and ``surface.luminance``) instead.
+ROW_PACKAGES = ("light", "image", "rebake", "pipeline", "rays")
+SMALL_PRODUCTS = {  # products over the same rows whichever texels a bake computes, and why
+    ("light/crowns.py", "spread.T @ spread"): "a crown's 3 × 3 spread over all its leaf points",
+    ("light/foliage.py", "occluded @ occluded"): "a crown's fit over all its fitting texels",
+    ("light/foliage.py", "occluded @ traced.w_hit[fit_rows]"): "the same fit",
+}
+
+
+def row_products(source: str) -> list[str]:
+    """Every ``@``, ``np.dot``, ``.dot``, ``np.matmul``, ``np.inner`` or ``np.tensordot`` of
+    ``source`` (a module's text), as written."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.BinOp) and isinstance(node.op, ast.MatMult):
+            found.append(ast.unparse(node))
+        elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+              and node.func.attr in {"dot", "vdot", "matmul", "inner", "tensordot"}):
+            found.append(ast.unparse(node))
+    return found
+
+
+def test_no_blas_product_makes_a_texel_s_value():
+    found = {(str(path.relative_to(PACKAGE)), product)
+             for package in ROW_PACKAGES for path in (PACKAGE / package).rglob("*.py")
+             for product in row_products(path.read_text())}
+    assert found - set(SMALL_PRODUCTS) == set()
+
+
+def test_the_row_check_finds_every_kind_of_product():
+    source = "a @ b\nnp.dot(a, b)\nx.dot(y)\nnp.matmul(a, b)\nnp.einsum('ij,j->i', a, b)\n"
+    assert row_products(source) == ["a @ b", "np.dot(a, b)", "x.dot(y)", "np.matmul(a, b)"]
+
+
+def test_row_sums_give_a_row_the_same_bits_in_any_array():
+    """BLAS gives some rows other bits within shorter slices of the same array (measured:
+    12 of 7,000 rows × a 7 × 3 matrix); ``rowwise`` gives each row its bits in the whole."""
+    import numpy as np
+
+    from baker.geometry.surface import luminance
+    from baker.rowwise import matmul_rows
+
+    rng = np.random.default_rng(0)
+    rows, matrix = rng.uniform(size=(7000, 7)), rng.uniform(size=(7, 3))
+    colours = rng.uniform(0, 8, (7000, 3))
+    whole, lum = matmul_rows(rows, matrix), luminance(colours)
+    blas_whole, blas_lum = rows @ matrix, colours @ np.array([0.2126, 0.7152, 0.0722])
+    ours = blas = 0
+    for start in range(0, 60):
+        for length in (1, 2, 3, 5, 7, 13, 100):
+            part = slice(start, start + length)
+            ours += np.count_nonzero(matmul_rows(rows[part], matrix) != whole[part])
+            ours += np.count_nonzero(luminance(colours[part]) != lum[part])
+            blas += np.count_nonzero(rows[part] @ matrix != blas_whole[part])
+            blas += np.count_nonzero(colours[part] @ np.array([0.2126, 0.7152, 0.0722])
+                                     != blas_lum[part])
+    assert ours == 0
+    np.testing.assert_allclose(whole, rows @ matrix, rtol=1e-14)
+    print(f"rows given other bits in a slice: rowwise {ours}, BLAS {blas}")

@@ -17,7 +17,8 @@ PACKAGE = Path(__file__).resolve().parents[1] / "baker"
 
 # Lowest first. A module belongs to the longest prefix that names it.
 LAYERS = (
-    ("baker.errors", "baker.jit", "baker.frozen"),  # errors; compiled kernels; read-only hand-offs
+    ("baker.errors", "baker.jit", "baker.frozen", "baker.rowwise"),  # errors; compiled kernels;
+    # read-only hand-offs; products summed row by row
     ("baker.run",),  # processes, threads, progress, spilled rows, atomic files
     ("baker.settings",),  # what the user may set
     ("baker.materials", "baker.punctual"),  # materials and lights as the estimators see them

@@ -17,11 +17,20 @@ import numpy as np
 from baker.geometry.rows import row_groups
 from baker.gltf.scene import CLAMP_TO_EDGE, MIRRORED_REPEAT, Image, Scene, TextureRef
 from baker.materials import BLEND, MASK
+from baker.rowwise import dot_rows
 
 if TYPE_CHECKING:  # world.build_world makes the AlphaTest below: a type, not an import
     from baker.geometry.world import World
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])  # Rec. 709 weights of linear RGB
+
+
+def luminance(rgb: np.ndarray) -> np.ndarray:
+    """(...,) the luminance of linear RGB (..., 3): R, G and B times ``LUMINANCE`` added in that
+    order, the same bits for a row in any array (``rowwise.dot_rows``; ``rgb @ LUMINANCE``
+    can differ in the last bit with the row's place, and the rebake's texels lie elsewhere
+    than the full bake's)."""
+    return dot_rows(rgb, LUMINANCE)
 
 # sRGB transfer function, decoded once for every 8-bit value.
 _levels = np.arange(256) / 255.0

@@ -33,6 +33,7 @@ from baker.image.compose import Lightmaps
 from baker.image.postprocess import dilate
 from baker.light.direct import Direct
 from baker.light.inner import OTHER_SIDE
+from baker.rowwise import matmul_rows
 
 _DARK_WEIGHT = 0.5  # a viewer shows less than half the bake's diffuse light: worth a warning
 
@@ -74,7 +75,7 @@ def _punctual_irradiance(direct: Direct | None, rows: np.ndarray, count: int) ->
     baked (0 where there is no such light)."""
     if direct is None or not direct.punctual.shape[1] or len(direct.punctual) != count:
         return np.zeros((len(rows), 3))
-    return direct.punctual[rows] @ direct.light_colours
+    return matmul_rows(direct.punctual[rows], direct.light_colours)
 
 
 def viewer_notes(scene: Scene, world: World, instances: list[int], carrier: str) -> list[str]:

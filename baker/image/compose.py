@@ -15,7 +15,7 @@ from baker.atlas.layout import Atlas
 from baker.atlas.rasterise import Texels, flat_pages
 from baker.jit import jit
 from baker.light.ambient import Ambient
-from baker.geometry.surface import LUMINANCE
+from baker.geometry.surface import luminance
 from baker.light.direct import Direct
 from baker.light.directional import encode_vectors, fit, smoothed, uniform_aim
 from baker.light.hemisphere import Terms, obscurance_at
@@ -114,12 +114,12 @@ def _directions(light: np.ndarray, normals: np.ndarray, terms: Terms, ambient: A
         aim += indirect_aim
     else:
         front = terms.w_hit + terms.escaped[:, None] * r_ave
-        own = front @ LUMINANCE
-        lit = (front * ambient.intensity) @ LUMINANCE
+        own = luminance(front)
+        lit = luminance(front * ambient.intensity)
         aim += np.where(own > 0, lit / np.where(own > 0, own, 1.0), 0.0)[:, None] * terms.aim(r_ave)
         whole = terms.obscurance(r_ave)
-        aim += uniform_aim(((whole - front) * ambient.intensity) @ LUMINANCE, normals)
-    return fit(light @ LUMINANCE, aim, normals)
+        aim += uniform_aim(luminance((whole - front) * ambient.intensity), normals)
+    return fit(luminance(light), aim, normals)
 
 
 def directional_pages(lightmaps: Lightmaps) -> Lightmaps:
@@ -128,7 +128,7 @@ def directional_pages(lightmaps: Lightmaps) -> Lightmaps:
     ``encode_vectors``); as they are without directional pages."""
     if not len(lightmaps.direction):
         return lightmaps
-    weight = np.where(lightmaps.covered, lightmaps.light @ LUMINANCE, 0.0)
+    weight = np.where(lightmaps.covered, luminance(lightmaps.light), 0.0)
     return replace(lightmaps, direction=encode_vectors(smoothed(lightmaps.direction, weight)))
 
 

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 from PIL import Image as PILImage
 
-from baker.geometry.surface import LUMINANCE
+from baker.geometry.surface import luminance
 from baker.image.compose import Lightmaps
 from baker.jit import jit
 from baker.light.directional import page_texels
@@ -215,7 +215,7 @@ def encode(lightmaps: Lightmaps, encoding: str, occlusion: bool,
         occlusion_png = None
         if occlusion:
             occlusion_png = png_bytes(_page_texels(lightmaps.visibility[p], lambda rows: quantise(
-                np.repeat((rows @ LUMINANCE)[..., None], 3, axis=-1), "linear")))
+                np.repeat(luminance(rows)[..., None], 3, axis=-1), "linear")))
         if encoding == "linear":
             texels = np.empty(light.shape[:2] + (3,), np.uint8)
             _quantise_linear(np.ascontiguousarray(light, np.float64), intensity, texels)

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from baker.geometry.surface import LUMINANCE
+from baker.geometry.surface import luminance
 from baker.image.compose import effective_r_ave
 from baker.image.hdr import hdr_bytes
 
@@ -44,7 +44,7 @@ def texel_errors(done) -> np.ndarray:
     if done.settings.method == "gi":
         own = done.indirect_variance
     else:
-        own = done.terms.split_errors(r_ave) * float(intensity @ LUMINANCE) ** 2
+        own = done.terms.split_errors(r_ave) * float(luminance(intensity)) ** 2
     if done.direct is not None:
         own = own + done.direct.variance()
     around = pooled(own, texels.pixels(),
@@ -52,7 +52,7 @@ def texel_errors(done) -> np.ndarray:
     total = float(around.sum())
     variance = around * (float(own.sum()) / total if total > 0 else 0.0)
     if done.settings.method != "gi":
-        shared = (done.terms.obscurance(r_ave) * intensity) @ LUMINANCE
+        shared = luminance(done.terms.obscurance(r_ave) * intensity)
         variance = variance + done.ambient.relative_variance * shared ** 2
     return np.sqrt(variance)
 

@@ -24,6 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from baker.rowwise import matmul_rows
+
 SHELLS_MAX = 8
 """Most shells one crown is split into."""
 SPLIT_GAIN = 0.7
@@ -104,12 +106,12 @@ class Shell:
 
     def to_unit(self, points: np.ndarray) -> np.ndarray:
         """(k, 3) ``points`` (k, 3) world in the frame where the shell is the unit sphere."""
-        return ((points - self.center) @ self.axes.T) / self.radii
+        return matmul_rows(points - self.center, self.axes.T) / self.radii
 
     def normals_to_unit(self, normals: np.ndarray) -> np.ndarray:
         """(k, 3) unit normals in the unit-sphere frame (the inverse transpose of ``to_unit``:
         a plane through a point stays the plane through its image)."""
-        mapped = (normals @ self.axes.T) * self.radii
+        mapped = matmul_rows(normals, self.axes.T) * self.radii
         return mapped / np.maximum(np.linalg.norm(mapped, axis=1, keepdims=True), 1e-300)
 
     def as_dict(self) -> dict:
@@ -146,7 +148,7 @@ def enclosing_shell(points: np.ndarray) -> Shell:
     radius = max(float(np.linalg.norm(points - center, axis=1).max()), 1e-9)
     sphere = Shell(center, np.eye(3), np.full(3, radius))
     axes = _principal_axes(points, center)
-    local = (points - center) @ axes.T
+    local = matmul_rows(points - center, axes.T)
     spread = np.maximum(local.std(axis=0), 1e-6 * radius)
     scale = float(np.linalg.norm(local / spread, axis=1).max())
     ellipsoid = Shell(center, axes, np.maximum(spread * scale, 1e-9))

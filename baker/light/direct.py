@@ -53,7 +53,7 @@ import numpy as np
 from baker.atlas.rasterise import Texels
 from baker.atlas.supersample import sub_positions
 from baker.context import Context
-from baker.geometry.surface import LUMINANCE
+from baker.geometry.surface import luminance
 from baker.light.adaptive import WITHIN, neighbour_mean, pooled_gain
 from baker.light.direct_estimators import (
     Receivers,
@@ -66,6 +66,7 @@ from baker.light.direct_estimators import (
 from baker.light.sources import Sources, all_sources
 from baker.rays.dimensions import light_dimension
 from baker.rays.trace import Tracer, ray_lift
+from baker.rowwise import dot_rows
 from baker.run.parallel import run_chunks, texels_per_chunk
 
 
@@ -117,7 +118,7 @@ class Direct:
         if not len(self.punctual_aim):
             return np.zeros((0, 3))
         colours = self.light_colours if light_colours is None else np.asarray(light_colours, np.float64)
-        out = np.einsum("nlc,l->nc", self.punctual_aim, colours @ LUMINANCE)
+        out = np.einsum("nlc,l->nc", self.punctual_aim, luminance(colours))
         for term in (self.emission_aim, self.sky_aim):
             if len(term):
                 out += term
@@ -128,7 +129,7 @@ class Direct:
         if not len(self.punctual_aim):
             return np.zeros(0)
         colours = self.light_colours if light_colours is None else np.asarray(light_colours, np.float64)
-        out = self.punctual_aim_var @ (colours @ LUMINANCE) ** 2
+        out = dot_rows(self.punctual_aim_var, luminance(colours) ** 2)
         for term in (self.emission_aim_var, self.sky_aim_var):
             if len(term):
                 out += term
@@ -148,7 +149,7 @@ class Direct:
     def variance(self, light_colours: np.ndarray | None = None) -> np.ndarray:
         """(N,) variance of the luminance of D's estimate (the sources' estimates are independent)."""
         colours = self.light_colours if light_colours is None else np.asarray(light_colours, np.float64)
-        out = self.punctual_var @ (colours @ LUMINANCE) ** 2  # a new array, summed in place
+        out = dot_rows(self.punctual_var, luminance(colours) ** 2)  # a new array, summed in place
         for term in (self.emission_var, self.sky_var):
             if len(term):
                 out += term
@@ -237,7 +238,7 @@ def _direct_rows(context: Context, sources: Sources, receivers: Receivers, seed:
     aim = _Aims.blank(k if aims else 0, lights, sources)
     noise = _Noise(np.zeros(k), np.zeros(k), np.zeros(k, bool))
     counts = sources.counts(samples, scale)
-    colours = sources.light_colours() @ LUMINANCE
+    colours = luminance(sources.light_colours())
     for l, light in enumerate(sources.lights):
         values, unoccluded, directions = punctual_samples(
             light, float(sources.spread[l]), int(counts[l]), receivers, tracer, seed,
@@ -250,16 +251,16 @@ def _direct_rows(context: Context, sources: Sources, receivers: Receivers, seed:
         values, unoccluded, directions = emissive_samples(
             context, sources.emitters, int(counts[-2]), receivers, seed)
         emitted, emitted_var = rgb_mean_and_variance(values)
-        _add(noise, _noise_of(values @ LUMINANCE, unoccluded, 1.0))
+        _add(noise, _noise_of(luminance(values), unoccluded, 1.0))
         if aims:
-            aim.emission[:], aim.emission_var[:] = aim_of(values @ LUMINANCE, directions)
+            aim.emission[:], aim.emission_var[:] = aim_of(luminance(values), directions)
     if sources.sky is not None:
         values, unoccluded, directions = sky_samples(sources.sky, int(counts[-1]), receivers,
                                                      tracer, seed)
         sky, sky_var = rgb_mean_and_variance(values)
-        _add(noise, _noise_of(values @ LUMINANCE, unoccluded, 1.0))
+        _add(noise, _noise_of(luminance(values), unoccluded, 1.0))
         if aims:
-            aim.sky[:], aim.sky_var[:] = aim_of(values @ LUMINANCE, directions)
+            aim.sky[:], aim.sky_var[:] = aim_of(luminance(values), directions)
     rays = sources.rays_per_texel(counts)
     return (Direct(punctual=punctual, punctual_var=punctual_var,
                    light_colours=sources.light_colours(), emission=emitted,

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from baker.context import Context
-from baker.geometry.surface import LUMINANCE, emission
+from baker.geometry.surface import emission, luminance
 from baker.jit import jit
 from baker.light.sky import Sky
 from baker.light.sources import Emitters
@@ -27,6 +27,7 @@ from baker.rays.sampling import (
     tangent_frames,
 )
 from baker.rays.trace import Tracer
+from baker.rowwise import dot_rows
 
 
 # Shadow rays stop this fraction short of the point they aim at (a light sample on a surface).
@@ -105,7 +106,7 @@ def mean_and_variance(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def rgb_mean_and_variance(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Mean (k, 3) of RGB samples (k, n, 3) and the variance (k,) of its luminance
     (``mean_and_variance``)."""
-    _, variance = mean_and_variance(values @ LUMINANCE)
+    _, variance = mean_and_variance(luminance(values))
     return values.mean(axis=1), variance
 
 
@@ -129,7 +130,7 @@ def spot_attenuation(light: Light, to_receiver: np.ndarray) -> np.ndarray:
     """
     cos_outer, cos_inner = math.cos(light.outer_cone), math.cos(light.inner_cone)
     scale = 1.0 / max(0.001, cos_inner - cos_outer)
-    cd = to_receiver @ light.direction
+    cd = dot_rows(to_receiver, light.direction)
     return np.clip(cd * scale - cos_outer * scale, 0.0, 1.0) ** 2
 
 
@@ -285,7 +286,7 @@ def emissive_samples(context: Context, emitters: Emitters, n: int, receivers: Re
         visible = ~context.tracer.occluded(origins[live], directions[live],
                                    distance[live] * (1.0 - SHADOW_SHORTEN))
         radiance = emitter_radiance(context, emitters, chosen[live], bary[live])
-        unoccluded[live] = (radiance @ LUMINANCE) * weight[live]
+        unoccluded[live] = luminance(radiance) * weight[live]
         value[live] = radiance * (weight[live] * visible)[:, None]
     return value.reshape(k, n, 3), unoccluded.reshape(k, n), directions.reshape(k, n, 3)
 
@@ -341,4 +342,4 @@ def sky_samples(sky: Sky, n: int, receivers: Receivers, tracer: Tracer,
     escaped = np.zeros(k * n, bool)
     escaped[live] = ~tracer.occluded(receivers.origins(n)[live], directions[live], np.inf)
     return ((unoccluded * escaped[:, None]).reshape(k, n, 3),
-            (unoccluded @ LUMINANCE).reshape(k, n), directions.reshape(k, n, 3))
+            luminance(unoccluded).reshape(k, n), directions.reshape(k, n, 3))

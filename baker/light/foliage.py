@@ -40,7 +40,7 @@ from baker.atlas.rasterise import Coverage, Owners, Texels, texels_of
 from baker.atlas.layout import Atlas
 from baker.atlas.validity import Faces, check_texels
 from baker.errors import InputError
-from baker.geometry.surface import LUMINANCE
+from baker.geometry.surface import luminance
 from baker.context import Context
 from baker.geometry.world import World
 from baker.light.crowns import (
@@ -277,7 +277,7 @@ def _with_errors(foliage: Foliage, world: World, texels: Texels, traced: Terms,
     rows ``mine[j]`` of ``texels`` (traced: ``traced``), every other one fitted (``_fit_crown``)
     and the rest held out; W's luminance at R_ave ``r_ave`` (3,)."""
     approx = foliage_terms(foliage, world, texels, np.arange(len(texels)))
-    w_approx, w_traced = (t.obscurance(r_ave) @ LUMINANCE for t in (approx, traced))
+    w_approx, w_traced = (luminance(t.obscurance(r_ave)) for t in (approx, traced))
 
     def errors(fit: np.ndarray, held: np.ndarray) -> dict:
         return {"fit": Error.of(w_approx[fit], w_traced[fit]),
@@ -342,11 +342,11 @@ def foliage_terms(foliage: Foliage, world: World, texels: Texels, rows: np.ndarr
         colour[mine] = crown.colour
     occluded = (1.0 - visibility)[:, None]
     w_hit = occluded * colour
-    lum = colour @ LUMINANCE
+    lum = luminance(colour)
     terms = Terms(w_hit=w_hit, escaped=visibility, hit_sq=(1.0 - visibility) * lum * lum,
                   counts=np.zeros(k, np.int64), half_split=np.zeros((k, 2)))
     if directional:  # the closed form follows no direction: uniform (``light.directional``)
-        terms = replace(terms, aim_hit=uniform_aim(w_hit @ LUMINANCE, normals),
+        terms = replace(terms, aim_hit=uniform_aim(luminance(w_hit), normals),
                         aim_escaped=uniform_aim(visibility, normals), aim_split=np.zeros((k, 6)))
     table = translucent(world.materials)
     if not table.any:
@@ -386,7 +386,7 @@ def shade_by_crowns(foliage: Foliage, texels: Texels, rows: np.ndarray, terms: T
     occluded = 1.0 - visibility
     share = np.divide(picked, occluded[:, None], out=np.zeros_like(picked),
                       where=occluded[:, None] > 0)
-    lum = share @ LUMINANCE
+    lum = luminance(share)
     escaped = terms.escaped
     w_hit = terms.w_hit + (escaped * occluded)[:, None] * share
 

@@ -48,7 +48,7 @@ import numpy as np
 
 from baker.atlas.rasterise import Texels
 from baker.context import Context
-from baker.geometry.surface import LUMINANCE, albedo, emission
+from baker.geometry.surface import albedo, emission, luminance
 from baker.geometry.world import World
 from baker.light.adaptive import WITHIN, neighbour_mean, pooled_gain
 from baker.light.direct import direct_at
@@ -225,13 +225,13 @@ def _chunk(context: Context, sources: Sources, texels: Texels, rows: slice | np.
             throughput = throughput[keep] / survive[keep, None]
             alive, position, normal, size = alive[keep], position[keep], normal[keep], size[keep]
     per_path = total.reshape(k, paths, 3)
-    luminance = per_path @ LUMINANCE
-    mean = luminance.mean(axis=1)
-    deviation = luminance - mean[:, None]
-    moment = (luminance.reshape(-1)[:len(first_directions), None]
+    lum = luminance(per_path)
+    mean = lum.mean(axis=1)
+    deviation = lum - mean[:, None]
+    moment = (lum.reshape(-1)[:len(first_directions), None]
               * first_directions).reshape(-1, paths, 3)
     return _Paths(per_path.mean(axis=1), mean, np.add.reduce(deviation * deviation, axis=1),
-                  paths, rays, len(alive), luminance[:, :paths // 2].sum(axis=1),
+                  paths, rays, len(alive), lum[:, :paths // 2].sum(axis=1),
                   moment.mean(axis=1), (moment * moment).sum(axis=2).mean(axis=1))
 
 

@@ -26,6 +26,7 @@ from baker.geometry.surface import (
     albedo,
     base_colour,
     diffuse_factors,
+    luminance,
     triangle_albedo,
 )
 from baker.context import Context
@@ -127,12 +128,12 @@ class Terms:
     def aim(self, r_ave: np.ndarray) -> np.ndarray:
         """(N, 3) the first moment of W's luminance over the texel's rays, world space
         (``light.directional``), for R_ave ``r_ave`` (3,); (0, 3) without directions."""
-        return self.aim_hit + float(r_ave @ LUMINANCE) * self.aim_escaped
+        return self.aim_hit + float(luminance(r_ave)) * self.aim_escaped
 
     def aim_errors(self, r_ave: np.ndarray) -> np.ndarray:
         """(N,) e² per texel of ``aim``'s estimate, summed over its three components, from
         the halves of the texel's rays (as ``split_errors``); (0,) without directions."""
-        lum = float(r_ave @ LUMINANCE)
+        lum = float(luminance(r_ave))
         e = 0.5 * (self.aim_split[:, :3] + lum * self.aim_split[:, 3:])
         return np.sum(np.clip(e, -_SPLIT_MAX, _SPLIT_MAX) ** 2, axis=1)
 
@@ -154,8 +155,8 @@ class Terms:
 
     def _sample_variance(self, r_ave: np.ndarray) -> np.ndarray:
         """(N,) the rays' sample variance of the luminance of R·ρ (or R_ave when escaped)."""
-        mean = self._front(r_ave) @ LUMINANCE
-        second = self.hit_sq + self.escaped * float(r_ave @ LUMINANCE) ** 2
+        mean = luminance(self._front(r_ave))
+        second = self.hit_sq + self.escaped * float(luminance(r_ave)) ** 2
         n = np.maximum(self.counts, 1)
         return np.maximum(second - mean * mean, 0.0) * n / np.maximum(n - 1, 1)
 
@@ -173,7 +174,7 @@ class Terms:
         (``sampling.fill_points``), so e² estimates the variance of the texel's W without bias
         (one degree of freedom; see ``rmse``). Where ``standard_error`` takes the
         ``binomial_floor``, at least its square."""
-        lum = float(r_ave @ LUMINANCE)
+        lum = float(luminance(r_ave))
         e = np.clip(0.5 * (self.half_split[:, 0] + lum * self.half_split[:, 1]),
                     -_SPLIT_MAX, _SPLIT_MAX)
         unseen = self._unseen(self._sample_variance(r_ave))
@@ -208,7 +209,7 @@ def binomial_floor(counts: np.ndarray, r_ave: np.ndarray) -> np.ndarray:
     rule of succession's p̂ = (k + 1)/(n + 2) at k = 0 of n rays giving another value. When
     no ray of n saw an event of probability p, p ≲ 1/n is all they can say, and the texel may
     be off by p·M; one such ray in n gives a sample error of about M/n, so the two meet."""
-    bound = max(1.0, float(r_ave @ LUMINANCE))
+    bound = max(1.0, float(luminance(r_ave)))
     return bound / (np.asarray(counts, np.float64) + 2.0)
 
 
@@ -958,7 +959,7 @@ def neighbours_error(error: np.ndarray, counts: np.ndarray, blind: np.ndarray, t
 
 def luminance_and_escaped(sums: np.ndarray) -> np.ndarray:
     """(k, 2) summed luminance of R·ρ and escaped rays, from sums (k, 7)."""
-    return np.column_stack([sums[:, RGB] @ LUMINANCE, sums[:, ESCAPED]])
+    return np.column_stack([luminance(sums[:, RGB]), sums[:, ESCAPED]])
 
 
 def _split(part: np.ndarray, part_count: np.ndarray, whole: np.ndarray,

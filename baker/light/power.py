@@ -11,7 +11,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from baker.context import Context
-from baker.geometry.surface import LUMINANCE
+from baker.geometry.surface import luminance
 from baker.geometry.world import World
 from baker.light.direct_estimators import (
     Receivers,
@@ -147,33 +147,33 @@ def delivered_power(context: Context, sources: Sources) -> Power:
         for l, light in enumerate(sources.lights):
             mean, _ = punctual_irradiance(light, float(sources.spread[l]), 1, receivers, tracer,
                                           settings.seed, light_dimension(l))
-            luminance = float(colours[l] @ LUMINANCE)
+            lum = float(luminance(colours[l]))
             traced = None
             if light.kind != "directional":
                 traced = _traced_light_power(light, world, tracer, count, settings.seed,
                                              _traced_keys(l))
             punctual[l], spread = _kept(area * mean, traced)
             if spread is None:
-                seen += mean * luminance
+                seen += mean * lum
             else:
-                variance += spread * luminance ** 2
+                variance += spread * lum ** 2
         if sources.emitters is not None:
             mean, _ = emissive_irradiance(context, sources.emitters, 1, receivers, settings.seed)
             traced = _traced_emitter_power(context, sources.emitters, count, settings.seed,
                                            _traced_keys(lights))
             emitted, spread = _kept(area * mean, traced)
             if spread is None:
-                seen += mean @ LUMINANCE
+                seen += luminance(mean)
             else:
                 variance += spread
         if sources.sky is not None:
             mean, _ = sky_irradiance(sources.sky, 1, receivers, tracer, settings.seed)
             sky = area * mean.mean(axis=0)
-            seen += mean @ LUMINANCE
+            seen += luminance(mean)
         variance += area * area * _strata_variance(seen)
     power = Power(punctual=punctual, light_colours=colours, emission=emitted, sky=sky,
                   area=area)
-    level = float(power.total() @ LUMINANCE)
+    level = float(luminance(power.total()))
     return replace(power, relative_variance=variance / level ** 2 if level > 0 else 0.0)
 
 
@@ -200,10 +200,10 @@ def _kept(pointed: np.ndarray, traced: np.ndarray | None) -> tuple[np.ndarray | 
     mean = pointed.mean(axis=0)
     if traced is None:
         return mean, None
-    luminance = (lambda v: v @ LUMINANCE) if traced.ndim == 3 else (lambda v: v)
-    groups = luminance(traced).mean(axis=1)
+    of = luminance if traced.ndim == 3 else (lambda v: v)
+    groups = of(traced).mean(axis=1)
     spread = float(np.var(groups, ddof=1)) / len(groups)
-    if spread <= _strata_variance(luminance(pointed)):
+    if spread <= _strata_variance(of(pointed)):
         return traced.mean(axis=(0, 1)), spread
     return mean, None
 

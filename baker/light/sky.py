@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from baker.errors import InputError
-from baker.geometry.surface import LUMINANCE
+from baker.geometry.surface import luminance
 from baker.jit import jit
 from baker.rays.sampling import concentric_hemisphere, fold, frame
 
@@ -98,11 +98,11 @@ class Sky:
         height, width = image.shape[:2]
         edges = np.cos(np.pi * np.arange(height + 1) / height)
         solid = 2.0 * np.pi / width * (edges[:-1] - edges[1:])  # (H,) sr per pixel
-        luminance = image @ LUMINANCE
-        ceiling = _weighted_quantile(luminance, np.broadcast_to(solid[:, None], luminance.shape),
+        lum = luminance(image)
+        ceiling = _weighted_quantile(lum, np.broadcast_to(solid[:, None], lum.shape),
                                      SMOOTH_SHARE)
-        peak = np.maximum(luminance - ceiling, 0.0) * solid[:, None]
-        power = float((luminance * solid[:, None]).sum())
+        peak = np.maximum(lum - ceiling, 0.0) * solid[:, None]
+        power = float((lum * solid[:, None]).sum())
         share = float(peak.sum()) / power if power > 0 else 0.0
         share = 1.0 if share >= 1.0 else min(share, MOST_IMAGE_SHARE)
         weight = peak if peak.sum() > 0 else np.broadcast_to(solid[:, None], peak.shape)
@@ -173,8 +173,8 @@ class Sky:
                      math.cos(self.rotation), math.sin(self.rotation), self.image_share,
                      directions, factor, row, column, peak)
         radiance = self.image[row, column]
-        luminance = radiance @ LUMINANCE
-        smooth = np.minimum(1.0, self.ceiling / np.where(luminance > 0, luminance, 1.0))
+        lum = luminance(radiance)
+        smooth = np.minimum(1.0, self.ceiling / np.where(lum > 0, lum, 1.0))
         part = np.where(peak, 1.0 - smooth, smooth)
         return directions, radiance * (part * factor)[:, None]
 

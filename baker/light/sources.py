@@ -11,16 +11,17 @@ from dataclasses import dataclass
 import numpy as np
 
 from baker.context import Context
-from baker.geometry.surface import LUMINANCE, emission_textured, emission_means
+from baker.geometry.surface import emission_means, emission_textured, luminance
 from baker.light.sky import Sky, sky_of
 from baker.punctual import Light
+from baker.rowwise import matmul_rows
 
 
 def all_sources(terms, light_colours: np.ndarray | None) -> np.ndarray:
-    """punctual @ colours + emission + sky of a ``Direct`` or ``Power``: the per-light terms at
+    """punctual × colours + emission + sky of a ``Direct`` or ``Power``: the per-light terms at
     unit intensity times the light colours × intensities (L, 3), by default the baked ones."""
     colours = terms.light_colours if light_colours is None else np.asarray(light_colours, np.float64)
-    out = terms.punctual @ colours  # a new array: the sums go into it in place
+    out = matmul_rows(terms.punctual, colours)  # a new array: the sums go into it in place
     for term in (terms.emission, terms.sky):  # empty when the scene has no such source
         if len(term):
             out += term
@@ -132,7 +133,7 @@ def find_emitters(context: Context) -> Emitters | None:
     areas = world.areas()
     sides = np.where([c.double_sided for c in context.materials.classes], 2.0,
                      1.0)[world.tri_material]
-    weight = areas * np.maximum(mean @ LUMINANCE, 0.0) * sides
+    weight = areas * np.maximum(luminance(mean), 0.0) * sides
     emitting = np.flatnonzero((weight > 0) & np.isfinite(weight))
     if len(emitting) == 0:
         return None

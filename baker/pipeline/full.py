@@ -31,7 +31,7 @@ from baker.atlas.unwrap import PageTooSmall, baked_instances, frame_area, unwrap
 from baker.atlas.validity import (HEMISPHERE_RAYS, TANGENT_RAYS, TANGENT_ROUNDS, Faces, Validity,
                                   check_texels)
 from baker.context import Context, context_of
-from baker.geometry.surface import LUMINANCE
+from baker.geometry.surface import luminance
 from baker.geometry.world import World, build_world
 from baker.gltf.materials import has_normal_maps
 from baker.gltf.scene import Scene
@@ -146,7 +146,7 @@ class Computed:
     def obscurance_rmse(self) -> float:
         """RMSE of the luminance of I_A·W estimated from the rays (``Terms.rmse``)."""
         return self.tally.obscurance_rmse() * float(
-            self.ambient.intensity @ LUMINANCE)
+            luminance(self.ambient.intensity))
 
     def rmse_estimate(self) -> float:
         """RMSE of the lightmap's luminance estimated from the rays: D's, and I_A·W's (its
@@ -534,7 +534,7 @@ def _bake_part(baking: Baking, rows: slice, times: dict[str, float],
             indirect = indirect_light(baking.context, baking.sources, texels, s.rays,
                                       progress=stages.gi, targets=targets)
     with timed(times, "trace"):
-        error_scale = (effective_r_ave(ambient, s.rho), float(ambient.intensity @ LUMINANCE))
+        error_scale = (effective_r_ave(ambient, s.rho), float(luminance(ambient.intensity)))
         traced = baking.context.with_settings(obscurance_settings(s))
         if baking.foliage is None:
             terms = integrate(traced, texels, stages.obscurance, error_scale=error_scale,

@@ -18,7 +18,7 @@ import numpy as np
 from baker.atlas.layout import Atlas
 from baker.atlas.rasterise import Coverage, Texels, texels_of
 from baker.atlas.validity import STATE_NAMES, Validity
-from baker.geometry.surface import LUMINANCE
+from baker.geometry.surface import luminance
 from baker.geometry.world import World
 from baker.light.direct import Direct
 from baker.light.gi import Indirect
@@ -143,8 +143,8 @@ class Tally:
         self.rays += terms.rays
         self.split_square += terms.split_square(r_ave)
         if intensity is not None:
-            self.ambient_squares += float(np.sum(((terms.obscurance(r_ave) * intensity)
-                                                  @ LUMINANCE) ** 2))
+            self.ambient_squares += float(np.sum(
+                luminance(terms.obscurance(r_ave) * intensity) ** 2))
         if direct is not None:
             self.shadow_rays += direct.rays
             self.direct_variance += float(np.sum(direct.variance()))
@@ -152,7 +152,7 @@ class Tally:
         if indirect is not None and len(indirect.aim):
             self.aim_variance += float(np.sum(indirect.aim_variance))
         elif len(terms.aim_hit) and intensity is not None:
-            scale = float(intensity @ LUMINANCE) ** 2
+            scale = float(luminance(intensity)) ** 2
             self.aim_variance += scale * float(np.sum(terms.aim_errors(r_ave)))
         if indirect is not None:
             self.indirect_variance += float(np.sum(indirect.variance))

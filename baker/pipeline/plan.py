@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from baker.geometry.surface import LUMINANCE
+from baker.geometry.surface import luminance
 from baker.gltf.materials import normal_mapped
 from baker.gltf.scene import Scene
 from baker.light.ambient import Ambient
@@ -114,7 +114,7 @@ def _emitter_warning(sources: Sources | None, ambient: Ambient) -> str:
     if sources is None or sources.emitters is None:
         return ""
     share = sources.emitters.area_share
-    if share >= EMITTER_SHARE or float(ambient.intensity @ LUMINANCE) >= FAINT_AMBIENT:
+    if share >= EMITTER_SHARE or float(luminance(ambient.intensity)) >= FAINT_AMBIENT:
         return ""
     return (f"; warning: set by emissive surfaces covering {share:.2%} of the surface area "
             "alone (decals?): --ambient 1 or --escape white gives the scene a neutral ambient")

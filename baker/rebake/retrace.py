@@ -20,7 +20,7 @@ from typing import Iterator
 import numpy as np
 
 from baker.atlas.rasterise import Texels
-from baker.geometry.surface import LUMINANCE
+from baker.geometry.surface import luminance
 from baker.gltf.scene import Scene
 from baker.geometry.world import World
 from baker.image.compose import effective_r_ave
@@ -134,7 +134,7 @@ def _retrace_part(work: Retracing, rows: _Rows, seconds: dict[str, float]) -> Re
     texels = replace(work.texels, **rows.texels)
     with timed(seconds, "trace"):
         error_scale = (effective_r_ave(lit.ambient, s.rho),
-                       float(lit.ambient.intensity @ LUMINANCE))
+                       float(luminance(lit.ambient.intensity)))
         context = lit.context.with_settings(s)
         tracer = lit.tracer if work.obscurance is None else work.obscurance
         terms = integrate(context.with_tracer(tracer), texels, None,
