@@ -145,7 +145,7 @@ def start_up(repeat: int) -> None:
                        ("baker --help", "import sys; sys.argv = ['baker', '--help']\n"
                         "from baker.cli.main import main\ntry: main()\nexcept SystemExit: pass")):
         seconds = seconds_of([sys.executable, "-c", code], repeat)
-        print(f"  {what:<33} {seconds:6.3f} s (+{seconds - bare:.3f} s)")
+        print(f"  {what:<33} {seconds:6.3f} s ({seconds - bare:+.3f} s)")
 
 
 def whole_process(name: str, rays: int, repeat: int) -> None:
