@@ -250,6 +250,8 @@ def _file_winding(scene: Scene, unwrap: InstanceUV) -> np.ndarray:
         raise ValueError(f"instance {unwrap.instance}: {len(triangles)} unwrapped triangles for "
                          f"{len(primitive.triangles)} in the primitive")
     mapped = vertices[triangles]
+    if np.array_equal(mapped, primitive.triangles):  # corner for corner: nothing mirrored
+        return triangles
 
     def same_cycle(a: np.ndarray) -> np.ndarray:  # (corner orders by index: np.roll is slow)
         return np.any([np.all(a[:, order] == primitive.triangles, axis=1)
