@@ -247,7 +247,12 @@ def texel_barycentrics(atlas: Atlas, world: World, texels: Texels) -> np.ndarray
 
 def owners_uv(atlas: Atlas, world: World) -> np.ndarray:
     """(T, 3, 2) texel-space UV corners of every world triangle on a page (zeros for others)."""
-    corners, _, tris = _baked_triangles(atlas, world)
+    return _uv_of(world, _baked_triangles(atlas, world))
+
+
+def _uv_of(world: World, baked: tuple[np.ndarray, np.ndarray, np.ndarray]) -> np.ndarray:
+    """``owners_uv`` from the atlas's ``_baked_triangles``."""
+    corners, _, tris = baked
     uv = np.zeros((len(world.triangles), 3, 2))
     uv[tris] = corners
     return uv
@@ -353,7 +358,21 @@ class Coverage:
 def cover(atlas: Atlas, world: World) -> Coverage:
     """The owner of every texel that a baked triangle touches (conservative coverage, the
     deepest triangle at the texel centre, ties to the lower index; see the module notes)."""
-    corners, pages, tris = _baked_triangles(atlas, world)
+    return _cover(atlas, world, _baked_triangles(atlas, world))
+
+
+def cover_and_owners(atlas: Atlas, world: World) -> tuple[Coverage, "Owners"]:
+    """``cover`` and its ``owners``, the atlas's baked triangles gathered once for both (a
+    pass over every triangle's UVs: 7 ms for 98,732)."""
+    baked = _baked_triangles(atlas, world)
+    coverage = _cover(atlas, world, baked)
+    return coverage, _owners(world, coverage, _uv_of(world, baked))
+
+
+def _cover(atlas: Atlas, world: World,
+           baked: tuple[np.ndarray, np.ndarray, np.ndarray]) -> Coverage:
+    """``cover`` from the atlas's ``_baked_triangles``."""
+    corners, pages, tris = baked
     page_texels = max(atlas.page_count, 1) * atlas.width * atlas.height
     best_depth = np.full(page_texels, -np.inf)
     best_owner = np.full(page_texels, -1, np.int32)  # index into corners/tris (4 bytes a page texel)
@@ -389,8 +408,12 @@ class Owners:
 
 def owners(atlas: Atlas, world: World, coverage: Coverage) -> Owners:
     """The per-triangle terms of the triangles that own texels in ``coverage``."""
+    return _owners(world, coverage, owners_uv(atlas, world))
+
+
+def _owners(world: World, coverage: Coverage, uv: np.ndarray) -> Owners:
+    """``owners`` from the atlas's ``owners_uv``."""
     triangles = len(world.triangles)
-    uv = owners_uv(atlas, world)
     owning = np.flatnonzero(np.bincount(coverage.triangle, minlength=triangles))
     normal, size, axes = np.zeros((triangles, 3)), np.zeros(triangles), np.zeros((triangles, 2, 3))
     normal[owning], size[owning], axes[owning] = _triangle_terms(world, owning, uv[owning])
