@@ -182,14 +182,15 @@ def build_world(scene: Scene) -> World:
         linear, offset = inst.world[:3, :3], inst.world[:3, 3]
         positions = prim.positions @ linear.T + offset
         triangles = prim.triangles
-        if np.linalg.det(linear) < 0:
+        mirrors = np.linalg.det(linear) < 0
+        if mirrors:
             triangles = triangles[:, [0, 2, 1]]
         if prim.normals is not None:
             # (M^-T n) as row vectors, through the cofactor matrix det(M)·M^-T (sign kept), which
-            # exists for a singular M too: a zero scale flattens normals, never NaNs them.
-            cofactor = np.stack([np.cross(linear[:, 1], linear[:, 2]), np.cross(linear[:, 2], linear[:, 0]),
-                                 np.cross(linear[:, 0], linear[:, 1])])  # rows: det(M)·M^-1
-            normals = _unit(prim.normals @ (cofactor if np.linalg.det(linear) >= 0 else -cofactor))
+            # exists for a singular M too: a zero scale flattens normals, never NaNs them. Its
+            # rows, columns (1 × 2, 2 × 0, 0 × 1) of M, in one np.cross: det(M)·M^-1.
+            cofactor = np.cross(linear.T[[1, 2, 0]], linear.T[[2, 0, 1]])
+            normals = _unit(prim.normals @ (-cofactor if mirrors else cofactor))
             smooth = np.ones(len(positions), bool)
         else:
             normals = _unit(_flat_normals(positions, triangles))
