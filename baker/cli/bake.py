@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import gc
 from pathlib import Path
 
 import baker
@@ -312,22 +311,9 @@ def print_summary(result: baker.BakeResult) -> None:
                   f"({lost['error']})")
 
 
-def _pipeline_bake():
-    """``baker.bake``, the pipeline's modules (numpy, numba, Embree, baker's own) imported with
-    Python's cyclic collector paused, and what they made then frozen out of it
-    (``gc.freeze``): it lives as long as the process, and the collections during the bake walk
-    only the bake's own objects (0.03 s of collections in the imports, 0.02 s in the bake)."""
-    gc.disable()
-    try:
-        return baker.bake
-    finally:
-        gc.freeze()
-        gc.enable()
-
-
 def run(args: argparse.Namespace) -> int:
     """Bake; exit code 0, or 4 when no surface got a lightmap (``common.exit_code``)."""
-    result = _pipeline_bake()(args.scene, args.output, settings_from(args),
+    result = baker.bake(args.scene, args.output, settings_from(args),
                         report_path=report_file(args), lightmaps_dir=args.lightmaps,
                         lightmaps_format=args.lightmaps_format, error_map_dir=args.error_map,
                         quiet=args.quiet, overwrite=args.overwrite, **state_arguments(args))
