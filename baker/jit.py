@@ -38,6 +38,17 @@ def _source_hash(path: str) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
+@functools.lru_cache(maxsize=None)
+def _bakers(py_file: str) -> bool:
+    """Whether the module file ``py_file`` is one of baker's (resolved once a file: a process
+    makes a hundred kernels in a few dozen modules)."""
+    return str(Path(py_file).resolve()).startswith(_PACKAGE)
+
+
+_WRITABLE: set[str] = set()
+"""The cache folders found writable in this process (``Keyed.ensure_cache_path``)."""
+
+
 def _keyed_by_environment(locator: type) -> type:
     """``locator`` (one of numba's cache locators) for baker's modules only, its source stamp
     extended by ``ENVIRONMENT``: a stamp that differs makes numba compile and cache again."""
@@ -46,9 +57,17 @@ def _keyed_by_environment(locator: type) -> type:
         def get_source_stamp(self):
             return _source_hash(self._py_file), ENVIRONMENT
 
+        def ensure_cache_path(self):
+            """numba's check (the folder made, a file written in it and removed: OSError when
+            it cannot be) once a folder, not once a kernel."""
+            path = self.get_cache_path()
+            if path not in _WRITABLE:
+                super().ensure_cache_path()
+                _WRITABLE.add(path)
+
         @classmethod
         def from_function(cls, py_func, py_file):
-            if not str(Path(py_file).resolve()).startswith(_PACKAGE):
+            if not _bakers(py_file):
                 return None  # not baker's: numba's own locators take it
             return super().from_function(py_func, py_file)
 

@@ -132,6 +132,10 @@ def document(raw: dict) -> pygltflib.GLTF2:
     return result
 
 
+_IMMUTABLE = frozenset((int, float, str, bool))
+"""The JSON leaves ``data`` gives back as they are (exact types: a subclass is deep-copied)."""
+
+
 @functools.cache
 def _field_names(cls) -> tuple[str, ...]:
     return tuple(f.name for f in dataclasses.fields(cls))
@@ -142,7 +146,10 @@ def data(value):
     empty properties dropped, ``extensions`` and ``extras`` values kept verbatim unless they
     are {} (an extension's empty object means something), list items never dropped (indices
     stay valid). What cleaning ``pygltflib.gltf_asdict(value)`` so gives, without building the
-    uncleaned copy first: 18 -> 2 ms for a room of 60 crates."""
+    uncleaned copy first: 18 -> 2 ms for a room of 60 crates. Numbers, strings and booleans
+    are immutable: they are the copy (deepcopy gives them back, at 1 µs a call)."""
+    if type(value) in _IMMUTABLE:
+        return value
     if isinstance(value, pygltflib.Attributes):
         value = value.__dict__
     elif dataclasses.is_dataclass(value):

@@ -32,7 +32,7 @@ import numpy as np
 from baker.atlas.layout import Atlas
 from baker.geometry.rows import row_groups
 from baker.geometry.world import World
-from baker.jit import jit
+from baker.jit import inline, jit
 
 DATA_WEIGHT = 0.02  # λ of a covered texel: how strongly it keeps its baked value
 PADDING_WEIGHT = 0.002  # λ of a padding texel the seam lookups read
@@ -73,17 +73,9 @@ def find_seams(atlas: Atlas, world: World) -> Seams:
     tris = np.concatenate([world.instance_triangles(u.instance) for u in baked])
     uv = np.concatenate([u.uv[u.triangles] for u in baked])  # (m, 3, 2), world corner order
     page = np.concatenate([u.pages for u in baked])
-    ta, tb, lo_a, hi_a, lo_b, hi_b = _shared_edges(world, tris)
+    ta, tb, lo_a, hi_a, lo_b, hi_b = _cut_edges(*_shared_edges(world, tris), uv, page)
     uv_a0, uv_a1 = uv[ta, lo_a], uv[ta, hi_a]
     uv_b0, uv_b1 = uv[tb, lo_b], uv[tb, hi_b]
-    placed = (page[ta] >= 0) & (page[tb] >= 0)
-    split = page[ta] != page[tb]
-    for a, b in ((uv_a0, uv_b0), (uv_a1, uv_b1)):  # column by column: no (k, 2) reductions
-        for axis in range(2):
-            split |= np.abs(a[:, axis] - b[:, axis]) > 1e-9
-    cut = np.flatnonzero(placed & split)  # few: most shared edges lie inside a chart
-    ta, tb, lo_a, hi_a, lo_b, hi_b = ta[cut], tb[cut], lo_a[cut], hi_a[cut], lo_b[cut], hi_b[cut]
-    uv_a0, uv_a1, uv_b0, uv_b1 = uv_a0[cut], uv_a1[cut], uv_b0[cut], uv_b1[cut]
     vertices = world.triangles[tris]  # (m, 3) world vertex ids
     ends = [vertices[t, corner] for t, corner in ((ta, lo_a), (tb, lo_b), (ta, hi_a), (tb, hi_b))]
     normal = [world.normals[v] for v in ends]  # (k, 3) each: A's and B's at either end
@@ -106,16 +98,14 @@ def find_seams(atlas: Atlas, world: World) -> Seams:
                  uv_b0[edge] + t * (uv_b1 - uv_b0)[edge], len(count))
 
 
-def _shared_edges(world: World, tris: np.ndarray) -> tuple[np.ndarray, ...]:
-    """The edges of triangles ``tris`` (m,) (world triangle ids) that exactly two of them share,
-    in 3D: same two end points, whichever instance each triangle belongs to.
+def _shared_edges(world: World, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The edges of triangles ``tris`` (m,) (world triangle ids) in 3D, as ``_cut_edges``
+    takes them: (3m,) each edge's key, the same for the edges of two triangles that have the
+    same two end points, whichever instance each belongs to (edge 3t + c of triangle t runs
+    from its corner c to corner c + 1 mod 3), and the edges' order by key, stable.
 
     Same 3D point ⇔ same position rounded to 1e-7 of the largest coordinate (meshes split
-    vertices at their own seams; touching objects have vertices of their own). An edge used by
-    three or more triangles (a fin, two objects overlapping) is left out. Returns, per edge, the
-    two triangles' positions in ``tris`` (first, second) and the corners (0–2) of its lower and
-    higher end point in each (lo_a, hi_a, lo_b, hi_b): ends matched, whatever the windings.
-    """
+    vertices at their own seams; touching objects have vertices of their own)."""
     corners = world.triangles[tris]  # (m, 3) world vertex ids
     used = np.zeros(len(world.positions), bool)
     used[corners.ravel()] = True  # each vertex once (np.unique's, without its sort)
@@ -123,20 +113,63 @@ def _shared_edges(world: World, tris: np.ndarray) -> tuple[np.ndarray, ...]:
     extent = max(float(np.abs(points).max()), 1e-30)
     _first, ranks = row_groups(np.round(points / (extent * 1e-7)).astype(np.int64))
     point_id = ranks[(np.cumsum(used) - 1)[corners]]  # (m, 3)
-    m = len(tris)
-    tri = np.repeat(np.arange(m), 3)
-    ca, cb = np.tile([0, 1, 2], m), np.tile([1, 2, 0], m)
-    ia, ib = point_id[tri, ca], point_id[tri, cb]
-    swap = ia > ib  # orient every edge from its lower point id to its higher
-    lo_c, hi_c = np.where(swap, cb, ca), np.where(swap, ca, cb)
-    key = np.minimum(ia, ib) * (point_id.max() + 1) + np.maximum(ia, ib)
-    order = np.argsort(key, kind="stable")
-    key_sorted = key[order]
-    pair = np.flatnonzero((key_sorted[1:] == key_sorted[:-1])
-                          & ((np.r_[key_sorted[2:], -1] != key_sorted[1:]))
-                          & ((np.r_[-1, key_sorted[:-2]] != key_sorted[:-1])))
-    one, two = order[pair], order[pair + 1]  # edges shared by exactly two triangles
-    return tri[one], tri[two], lo_c[one], hi_c[one], lo_c[two], hi_c[two]
+    key = np.empty(point_id.size, np.int64)
+    _edge_keys(point_id, key)
+    return point_id, key, np.argsort(key, kind="stable")
+
+
+@jit
+def _edge_keys(point_id: np.ndarray, key: np.ndarray) -> None:
+    """``key`` (3m,): of edge 3t + c, from corner c of triangle t to corner c + 1 mod 3 with
+    end points ``point_id`` (m, 3), lower id × (largest id + 1) + higher id."""
+    width = point_id.max() + 1
+    for t in range(len(point_id)):
+        for c in range(3):
+            a, b = point_id[t, c], point_id[t, (c + 1) % 3]
+            key[3 * t + c] = min(a, b) * width + max(a, b)
+
+
+@jit
+def _cut_edges(point_id: np.ndarray, key: np.ndarray, order: np.ndarray, uv: np.ndarray,
+               page: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                          np.ndarray, np.ndarray]:
+    """The edges that exactly two triangles share in 3D (``_shared_edges``' ``key`` and
+    ``order``) and that the atlas cuts: both triangles placed (``page`` (m,) ≥ 0) and on two
+    pages, or an end point at UVs (``uv`` (m, 3, 2)) more than 1e-9 apart on the two sides.
+    An edge used by three or more triangles (a fin, two objects overlapping) is left out.
+    Returns, per edge in key order, the two triangles (first, second in ``order``) and the
+    corners (0–2) of its lower and higher end point in each (lo_a, hi_a, lo_b, hi_b): ends
+    matched, whatever the windings. One pass: most shared edges lie inside a chart."""
+    n = len(order)
+    found = np.empty((6, n // 2), np.int64)
+    k = 0
+    for j in range(n - 1):
+        if (key[order[j]] != key[order[j + 1]] or (j > 0 and key[order[j - 1]] == key[order[j]])
+                or (j + 2 < n and key[order[j + 2]] == key[order[j]])):
+            continue
+        ta, tb = order[j] // 3, order[j + 1] // 3
+        if page[ta] < 0 or page[tb] < 0:
+            continue
+        lo_a, hi_a = _ends(point_id, order[j])
+        lo_b, hi_b = _ends(point_id, order[j + 1])
+        split = page[ta] != page[tb]
+        for axis in range(2):
+            split |= abs(uv[ta, lo_a, axis] - uv[tb, lo_b, axis]) > 1e-9
+            split |= abs(uv[ta, hi_a, axis] - uv[tb, hi_b, axis]) > 1e-9
+        if split:
+            found[0, k], found[1, k], found[2, k] = ta, tb, lo_a
+            found[3, k], found[4, k], found[5, k] = hi_a, lo_b, hi_b
+            k += 1
+    return found[0, :k], found[1, :k], found[2, :k], found[3, :k], found[4, :k], found[5, :k]
+
+
+@inline
+def _ends(point_id: np.ndarray, edge: int) -> tuple[int, int]:
+    """The corners (lower, higher) of edge ``edge`` (3t + c) of its triangle t by end point id:
+    c and c + 1 mod 3, swapped where c's point id is the higher."""
+    t, c = edge // 3, edge % 3
+    d = (c + 1) % 3
+    return (d, c) if point_id[t, c] > point_id[t, d] else (c, d)
 
 
 def _taps(page: np.ndarray, uv: np.ndarray, shape: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray]:

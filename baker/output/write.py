@@ -250,6 +250,8 @@ def _file_winding(scene: Scene, unwrap: InstanceUV) -> np.ndarray:
         raise ValueError(f"instance {unwrap.instance}: {len(triangles)} unwrapped triangles for "
                          f"{len(primitive.triangles)} in the primitive")
     mapped = vertices[triangles]
+    if np.array_equal(mapped, primitive.triangles):  # corner for corner: nothing mirrored
+        return triangles
 
     def same_cycle(a: np.ndarray) -> np.ndarray:  # (corner orders by index: np.roll is slow)
         return np.any([np.all(a[:, order] == primitive.triangles, axis=1)
@@ -807,13 +809,16 @@ def _carry_as_emission(material: dict, texture: int, texcoord: int, scale: float
 
 
 def _glb(data: dict, blob: bytes) -> bytes:
+    """The .glb file of the JSON ``data`` and the binary chunk ``blob``, joined in one copy
+    (the blob is most of the file: megabytes)."""
     text = json.dumps(data, separators=(",", ":"), allow_nan=False).encode("utf-8")
     text += b" " * (-len(text) % 4)
-    chunks = struct.pack("<II", len(text), _GLB_JSON) + text
+    chunks = [struct.pack("<II", len(text), _GLB_JSON), text]
     if blob:
-        blob += b"\0" * (-len(blob) % 4)
-        chunks += struct.pack("<II", len(blob), _GLB_BIN) + blob
-    return struct.pack("<III", _GLB_MAGIC, 2, 12 + len(chunks)) + chunks
+        padding = b"\0" * (-len(blob) % 4)
+        chunks += [struct.pack("<II", len(blob) + len(padding), _GLB_BIN), blob, padding]
+    size = 12 + sum(len(chunk) for chunk in chunks)
+    return b"".join([struct.pack("<III", _GLB_MAGIC, 2, size), *chunks])
 
 
 # ---------------------------------------------------------------------------------------------

@@ -22,8 +22,7 @@ from baker.atlas.rasterise import (
     Coverage,
     Owners,
     Texels,
-    cover,
-    owners,
+    cover_and_owners,
     texels_of,
 )
 from baker.atlas.authored import authored_atlas
@@ -319,8 +318,8 @@ def _unwrap(w: Underway, steps: Steps) -> Underway:
 
 def _rasterise(w: Underway) -> Underway:
     """Which triangle owns each texel and what the texels take from it (``rasterise``)."""
-    coverage = cover(w.atlas, w.world)
-    return replace(w, coverage=coverage, owned=owners(w.atlas, w.world, coverage))
+    coverage, owned = cover_and_owners(w.atlas, w.world)
+    return replace(w, coverage=coverage, owned=owned)
 
 
 def _parts(w: Underway) -> Underway:
