@@ -191,11 +191,11 @@ def test_more_threads_a_part_than_a_worker_has_is_a_clear_error(ray_cluster, tmp
 
 def _kill_first_part(cluster: LocalCluster, killed: list, stop: threading.Event) -> None:
     """SIGKILL the first worker process of ``cluster`` seen running a part
-    (``_part_processes``)."""
+    (``_part_processes``), at once: a part of a node whose world is built takes well under a
+    second, and a kill after it ended would lose nothing."""
     while not stop.is_set():
         running = _part_processes(cluster)
         if running:
-            time.sleep(0.2)  # well into the part
             os.kill(running[0], signal.SIGKILL)
             killed.append(running[0])
             return
@@ -204,8 +204,9 @@ def _kill_first_part(cluster: LocalCluster, killed: list, stop: threading.Event)
 
 def _with_a_worker_killed(cluster: LocalCluster, bake) -> "baker.BakeResult":
     """``bake()``'s result, the first worker process of ``cluster`` seen running a part
-    SIGKILLed meanwhile (``_kill_first_part``); asserts that one was and that it is counted
-    for no texel."""
+    SIGKILLed meanwhile (``_kill_first_part``); asserts that one was, that the part it lost was
+    run again, and that every texel is counted once: the killed worker only for the parts it
+    had finished (how many depends on the machine's pace)."""
     killed, stop = [], threading.Event()
     killer = threading.Thread(target=_kill_first_part, args=(cluster, killed, stop))
     killer.start()
@@ -215,8 +216,9 @@ def _with_a_worker_killed(cluster: LocalCluster, bake) -> "baker.BakeResult":
         stop.set()
         killer.join()
     assert killed, "no worker was seen running a part"
-    assert not any(f" pid {killed[0]}" in name and w["texels"]
-                   for name, w in result.report["cluster"]["workers"].items())
+    rebaked = result.rebake or {}
+    texels = rebaked["dirty_texels"] if rebaked.get("incremental") else result.texels
+    assert sum(w["texels"] for w in result.report["cluster"]["workers"].values()) == texels
     again = result.report["cluster"]["parts_run_again"]  # the part lost, and its worker
     assert again and all("Worker" in lost["error"] or "Node" in lost["error"] for lost in again)
     return result
