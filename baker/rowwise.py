@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from baker.jit import jit
+
 
 def dot_rows(x: np.ndarray, weights: np.ndarray) -> np.ndarray:
     """(...,) Σ_j x[..., j] · weights[j], added in order of j: x (..., n), weights (n,)."""
@@ -29,11 +31,25 @@ def dot_rows(x: np.ndarray, weights: np.ndarray) -> np.ndarray:
 
 def matmul_rows(x: np.ndarray, matrix: np.ndarray) -> np.ndarray:
     """(..., c) Σ_j x[..., j] · matrix[j], added in order of j: x (..., n), matrix (n, c); what
-    ``x @ matrix`` gives in exact arithmetic, with a row's bits independent of the array."""
-    matrix = np.asarray(matrix, np.float64)
+    ``x @ matrix`` gives in exact arithmetic, with a row's bits independent of the array. A
+    compiled pass (``_matmul_kernel``): 1,000,000 rows of 100 lights in about 0.5 s, where
+    numpy column by column took 5 s (BLAS 0.34 s)."""
+    matrix = np.ascontiguousarray(matrix, np.float64)
     if not matrix.shape[0]:
         return np.zeros((*np.shape(x)[:-1], matrix.shape[1]))
-    out = x[..., 0, None] * matrix[0]
-    for j in range(1, matrix.shape[0]):
-        out = out + x[..., j, None] * matrix[j]
-    return out
+    rows = np.ascontiguousarray(x, np.float64).reshape(-1, matrix.shape[0])
+    out = np.empty((len(rows), matrix.shape[1]))
+    _matmul_kernel(rows, matrix, out)
+    return out.reshape(*np.shape(x)[:-1], matrix.shape[1])
+
+
+@jit
+def _matmul_kernel(x, matrix, out):
+    """out[i, c] = x[i, 0]·matrix[0, c] + x[i, 1]·matrix[1, c] + …, a multiply and an add at a
+    time in that order (no fused multiply-add: numba leaves IEEE's operations as written)."""
+    for i in range(x.shape[0]):
+        for c in range(matrix.shape[1]):
+            total = x[i, 0] * matrix[0, c]
+            for j in range(1, matrix.shape[0]):
+                total = total + x[i, j] * matrix[j, c]
+            out[i, c] = total
