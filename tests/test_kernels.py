@@ -105,8 +105,12 @@ def test_a_cache_from_another_environment_is_compiled_again(tmp_path):
 # through BLAS, whose sum for a row can change in its last bit with the row's place in the
 # array; a rebake computes its texels in other arrays than a full bake, so the packages that
 # make or compose the texels' values use ``baker.rowwise`` (and ``surface.luminance``) instead.
-ROW_PACKAGES = ("light", "image", "rebake", "pipeline", "rays")
+ROW_PACKAGES = ("light", "image", "rebake", "pipeline", "rays", "atlas", "geometry")
 SMALL_PRODUCTS = {  # products over the same rows whichever texels a bake computes, and why
+    ("atlas/unwrap.py", "vt.T * sigma @ vt"): "an instance's 3 × 3 stretch, rounded after",
+    ("atlas/unwrap.py", "scene.primitives[inst.primitive].positions"
+                        " @ stretch(inst.world[:3, :3]).T"):
+        "a whole mesh's charting frame, the same array in every bake of it",
     ("light/crowns.py", "spread.T @ spread"): "a crown's 3 × 3 spread over all its leaf points",
     ("light/foliage.py", "occluded @ occluded"): "a crown's fit over all its fitting texels",
     ("light/foliage.py", "occluded @ traced.w_hit[fit_rows]"): "the same fit",
@@ -127,6 +131,8 @@ def row_products(source: str) -> list[str]:
 
 
 def test_no_blas_product_makes_a_texel_s_value():
+    """Every ``@`` or ``dot`` of the packages that make, place or compose texels is one of
+    ``SMALL_PRODUCTS``."""
     found = {(str(path.relative_to(PACKAGE)), product)
              for package in ROW_PACKAGES for path in (PACKAGE / package).rglob("*.py")
              for product in row_products(path.read_text())}
