@@ -283,7 +283,7 @@ def read_lightmaps(scene: Scene, world: World) -> SceneLightmaps:
         local = world.triangles[tris] - world.vertex_start[i]
         tri_page[tris] = page_of_key[key]
         tri_uv[tris] = transformed_uv(prim.texcoords[texcoord][local],
-                                    _carrier_transform(scene.materials[prim.material], carrier))
+                                      _carrier_transform(scene.materials[prim.material], carrier))
     if not pages and not recorded:
         raise InputError("the scene has no lightmap: no material has a MOZ_lightmap extension",
                          file=str(scene.path),

@@ -91,7 +91,7 @@ def smooth_png_bytes(rgb: np.ndarray) -> bytes:
     against 1,829). Deterministic: no timestamps, fixed settings."""
     out = io.BytesIO()
     PILImage.fromarray(np.ascontiguousarray(rgb, np.uint8)).save(out, format="PNG",
-                                                                compress_level=9)
+                                                                 compress_level=9)
     return out.getvalue()
 
 

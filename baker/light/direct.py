@@ -163,8 +163,8 @@ def no_direct(count: int) -> Direct:
 
 
 def texel_receivers(texels: Texels, rows: slice | np.ndarray, center: np.ndarray,
-                     tracer: Tracer | None = None, supersample: int = 1,
-                     seed: int = 0) -> Receivers:
+                    tracer: Tracer | None = None, supersample: int = 1,
+                    seed: int = 0) -> Receivers:
     """The texels ``rows`` as Receivers: their (moved, raised) sample points and, when
     ``supersample`` > 1, their sub-positions (``supersample.sub_positions``, which need the
     ``tracer`` and the ``seed``)."""
@@ -365,7 +365,7 @@ def _rounds(context: Context, texels: Texels, sources: Sources,
 
         def work(rows: np.ndarray, scale=scale) -> None:
             receivers = texel_receivers(texels, rows, tracer.center, tracer, settings.supersample,
-                                         settings.seed)
+                                        settings.seed)
             part, part_noise = _direct_rows(context, sources, receivers, settings.seed,
                                             scale=scale, aims=aims)
             _store(out, noise, rows, part, part_noise)

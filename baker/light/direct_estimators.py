@@ -210,7 +210,7 @@ def punctual_samples(light: Light, spread: float, n: int, receivers: Receivers, 
 
 @jit
 def emitter_samples(u, n, cdf, probability, corners, normals, two_sided, areas, origins, lift,
-                     shading, geometric, raised):
+                    shading, geometric, raised):
     """The geometry of the k·n emissive samples (``emissive_irradiance``), one compiled pass.
 
     Sample j of receiver i = j // n: its first coordinate u[j, 0] picks the emitter triangle by
@@ -284,7 +284,7 @@ def emissive_samples(context: Context, emitters: Emitters, n: int, receivers: Re
     unoccluded = np.zeros(k * n)
     if live.any():
         visible = ~context.tracer.occluded(origins[live], directions[live],
-                                   distance[live] * (1.0 - SHADOW_SHORTEN))
+                                           distance[live] * (1.0 - SHADOW_SHORTEN))
         radiance = emitter_radiance(context, emitters, chosen[live], bary[live])
         unoccluded[live] = luminance(radiance) * weight[live]
         value[live] = radiance * (weight[live] * visible)[:, None]
