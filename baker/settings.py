@@ -149,6 +149,9 @@ class Settings:
         ray from the texel's sample point.
     denoise: run Intel Open Image Denoise's lightmap filter on each chart of the composed
         pages before dilation (denoise.py; needs ``pip install "baker[denoise]"``).
+    smooth: average each texel's light with the texels near it in the world — across charts
+        and objects, never across a crease, a wall or a gap — as wide as Stein's estimate of
+        the result's error says pays, and report that error (image/world_filter.py).
     foliage: "none" (every texel traced) or "approx": leaves and grass get their obscurance
         from a closed form fitted per crown, the rest is traced without the crowns' leaves
         and shaded by them in closed form (light/foliage.py).
@@ -209,6 +212,7 @@ class Settings:
     max_depth: int = 16
     supersample: int = 1
     denoise: bool = False
+    smooth: bool = False
     foliage: str = "none"
     foliage_density: float | None = None
     cluster: str | None = None
@@ -264,6 +268,10 @@ class Settings:
         self._check_uv()
         self._check_lights()
         self._check_materials()
+        if self.denoise and self.smooth:
+            raise SettingsError("--smooth and --denoise are two ways to remove the same noise; "
+                                "the second would see the first's output, and the error "
+                                "estimate neither", fix="give one of --smooth and --denoise")
         if self.denoise:  # pyoidn is optional: say how to install it before any work
             require_oidn()
         if not (isinstance(self.clip_percentile, (int, float)) and 50 < self.clip_percentile <= 100):

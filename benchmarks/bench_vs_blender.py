@@ -1,7 +1,7 @@
 """Benchmark: baker against Blender Cycles' AO bake, per unit of error (issue 27).
 
     python benchmarks/bench_vs_blender.py [--blender bpy|system] [--repeat 3]
-        [--scenes cornell boxes] [--images DIR]
+        [--scenes cornell boxes] [--images DIR] [--smooth]
 
 ``--blender bpy`` (the default): Blender 4.5 LTS from PyPI (the ``bpy`` wheel, Blender as a
 Python module, for Python 3.11 only), installed by this benchmark into a venv of its own
@@ -66,7 +66,9 @@ texels are, and so in the error's spatial pattern; Blender's margin fill and bak
 post-process (dilation, seams) are not in the RMSE; the seconds are whole processes on this
 machine's 2 cores, Blender's including 1.2–2.7 s of start, import, join and unwrap; baker's
 sampler is Owen-scrambled Sobol, Cycles' its default pattern. ``--images DIR`` writes
-PNGs (clipped to [0, 1]) of repeat 0's pages and the references, to look at.
+PNGs (clipped to [0, 1]) of repeat 0's pages and the references, to look at. ``--smooth``:
+baker's bakes smoothed in world space (``baker bake --smooth``, docs/denoise.md), measured
+against the same unsmoothed reference.
 """
 
 from __future__ import annotations
@@ -183,14 +185,16 @@ def read_exr(path: Path) -> np.ndarray:
         return np.asarray(exr.channels()["RGB"].pixels, np.float64)[..., 0]
 
 
-def baker_bake(scene: Path, rays: int, seed: int, folder: Path) -> tuple[float, np.ndarray]:
-    """(wall seconds, page) of one ``baker bake`` process."""
+def baker_bake(scene: Path, rays: int, seed: int, folder: Path,
+               smooth: bool = False) -> tuple[float, np.ndarray]:
+    """(wall seconds, page) of one ``baker bake`` process (``smooth``: with ``--smooth``)."""
     pages = folder / "pages"
     shutil.rmtree(pages, ignore_errors=True)
     command = [sys.executable, "-m", "baker", "bake", str(scene), "-o", str(folder / "out.glb"),
                "--rho", "step", "--d-max", f"{DISTANCE:g}", "--page-size", str(SIZE),
                "--rays", str(rays), "--threads", str(THREADS), "--quiet", "--no-state",
-               "--lightmaps", str(pages), "--format", "exr", "--seed", str(seed)]
+               "--lightmaps", str(pages), "--format", "exr", "--seed", str(seed)] + (
+                   ["--smooth"] if smooth else [])
     started = time.perf_counter()
     subprocess.run(command, cwd=ROOT, check=True)
     seconds = time.perf_counter() - started
@@ -200,14 +204,15 @@ def baker_bake(scene: Path, rays: int, seed: int, folder: Path) -> tuple[float, 
     return seconds, read_exr(Path(found[0]))
 
 
-def baker_reference(scene: Path, rays: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """(page, covered) of a bake in this process with the CLI's settings: (H, W) float64 (the
-    float32 values the CLI's .exr holds), bool."""
+def baker_reference(scene: Path, rays: int, seed: int,
+                    smooth: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """(page, covered) of a bake in this process with the CLI's settings (``smooth``: and
+    ``--smooth``): (H, W) float64 (the float32 values the CLI's .exr holds), bool."""
     from baker.gltf.load import load
     from baker.pipeline.full import compute
     from baker.settings import Settings
     done = compute(load(scene), Settings(page_size=SIZE, rays=rays, rho="step", d_max=DISTANCE,
-                                         seed=seed, threads=THREADS))
+                                         seed=seed, threads=THREADS, smooth=smooth))
     if done.lightmaps.light.shape[0] != 1:
         sys.exit(f"expected one lightmap page, the bake made {done.lightmaps.light.shape[0]}")
     # as float32, what the .exr holds
@@ -292,8 +297,8 @@ def bench_scene(name: str, script: Path, args, folder: Path) -> None:
     """Bake one scene with both tools; print its table and the time per unit of error."""
     title = SCENES[name][0]
     scene = make_scene(name, folder)
-    _, warm = baker_bake(scene, 4, 0, folder)  # fills the unwrap cache and numba's cache
-    check, covered = baker_reference(scene, 4, 0)
+    _, warm = baker_bake(scene, 4, 0, folder, args.smooth)  # fills the unwrap and numba caches
+    check, covered = baker_reference(scene, 4, 0, args.smooth)
     if warm.shape != check.shape or not np.array_equal(warm, check):
         sys.exit("baker's CLI and API gave different pages: the reference would not match")
     reference, covered = baker_reference(scene, args.reference_rays, REFERENCE_SEED)
@@ -308,7 +313,7 @@ def bench_scene(name: str, script: Path, args, folder: Path) -> None:
     runs = {(tool, n): [] for tool in ("baker", "blender") for n in RAYS}
     for r in range(args.repeat):  # interleaved: every count of both tools in each repeat
         for n in RAYS:
-            seconds, page = baker_bake(scene, n, r, folder)
+            seconds, page = baker_bake(scene, n, r, folder, args.smooth)
             runs["baker", n].append((seconds, None, page))
             seconds, call, page = blender_bake(script, scene, n, r, folder)
             runs["blender", n].append((seconds, call, page))
@@ -369,6 +374,8 @@ def main() -> None:
     parser.add_argument("--reference-rays", type=int, default=2048)
     parser.add_argument("--reference-spp", type=int, default=1024)
     parser.add_argument("--images", metavar="DIR", help="write PNGs of the pages here")
+    parser.add_argument("--smooth", action="store_true",
+                        help="baker's bakes with --smooth (its reference without)")
     parser.add_argument("--blender", choices=("bpy", "system"), default="bpy",
                         help="Blender 4.5 LTS from PyPI in a venv of its own, or blender on PATH")
     parser.add_argument("--bpy-venv", type=Path,
@@ -386,7 +393,8 @@ def main() -> None:
                                  text=True).stdout.splitlines()[0]
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT,
                             capture_output=True, text=True).stdout.strip()
-    print(f"{version or 'blender'} ({args.blender}); baker at {commit}; "
+    print(f"{version or 'blender'} ({args.blender}); baker at {commit}"
+          f"{' with --smooth' if args.smooth else ''}; "
           f"{THREADS} threads each, {os.cpu_count()} cores; "
           f"load average {os.getloadavg()[0]:.2f}")
     with tempfile.TemporaryDirectory(prefix="bench-vs-blender-") as temp:

@@ -1,15 +1,19 @@
-"""Benchmark: the world-space filter chosen by its own error estimate (``image/world_filter``).
+"""Benchmark: ``--smooth``, the world-space filter whose width its own error estimate chooses
+(``image/world_filter``), in the bake, against the same bake unsmoothed.
 
-Classic AO (``--rho step --d-max 1``, 512² page, as ``bench_vs_blender.py``) on the Cornell room
-and the 200 boxes: for each ray count N, W's luminance per valid texel, raw and smoothed by
-``world_filter.smooth`` (the width of least bound on its SURE, σ² from each texel's split,
-``bake``), against a reference of ``--reference`` rays of another seed (whose
-own noise is in the RMSE). Prints the RMSE of both, the estimates of both (raw: today's,
-√mean split²; smoothed: the filter's bound, ``Filtered.error``), estimate ÷ measured, the
-width chosen, the filter's seconds, and the rays a raw bake would need for the smoothed RMSE
-(log-log between the measured raw points).
+Two scenes at baker's default settings but the rays: the demo's Cornell room (its ceiling lamp
+an emitter) and the room of 200 boxes and a sphere (``assets/many_objects.py``). For each ray
+count N (N obscurance and sky rays, N/4 shadow and emissive rays but at least 2: one ray has
+no halves to measure its noise by), a bake without and with ``smooth``
+(``pipeline.full.compute``, in this process after a warm-up), each
+against a reference of ``--reference`` rays of another seed: the RMSE of the light's luminance
+over the valid texels (the reference's own estimated noise taken out in quadrature), the
+bake's ``rmse_estimate`` ÷ that, the width chosen, the bake's and the smoothing's seconds, and
+the rays an unsmoothed bake would need for the smoothed RMSE (log-log between the measured
+unsmoothed points).
 
-    python benchmarks/bench_world_filter.py [--rays 4 16 64 256] [--reference 2048]
+    python benchmarks/bench_world_filter.py [--rays 4 16 64] [--reference 1024]
+        [--scenes cornell boxes]
 """
 
 from __future__ import annotations
@@ -28,33 +32,32 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from assets.make_scenes import cornell_box  # noqa: E402
 from assets.many_objects import boxes_and_sphere  # noqa: E402
 from baker.atlas.validity import MOVED, VALID  # noqa: E402
-from baker.geometry.surface import LUMINANCE  # noqa: E402
+from baker.geometry.surface import luminance  # noqa: E402
 from baker.gltf.load import load  # noqa: E402
-from baker.image.compose import effective_r_ave  # noqa: E402
-from baker.image.world_filter import smooth  # noqa: E402
 from baker.pipeline.full import compute  # noqa: E402
 from baker.settings import Settings  # noqa: E402
 
-SCENES = (("Cornell room", cornell_box), ("200 boxes + sphere", boxes_and_sphere))
+SCENES = {"cornell": ("Cornell room", cornell_box), "boxes": ("200 boxes + sphere",
+                                                              boxes_and_sphere)}
 
 
-def bake(scene, rays: int, seed: int):
-    """(texels, valid (N,) bool, W luminance (N,), split variance (N,)) of a step AO bake: e²,
-    e half the difference of the texel's two halves (``Terms.split_errors`` without its floor
-    for texels whose rays all agree, which is no unbiased estimate: it raised the mean
-    variance on the Cornell room at 4 rays 8 % above the measured, and SURE, which subtracts
-    it, below zero)."""
-    done = compute(scene, Settings(page_size=512, rays=rays, rho="step", d_max=1.0, seed=seed))
-    r_ave = effective_r_ave(done.ambient, done.settings.rho)
+def settings_for(rays: int, seed: int = 0, smooth: bool = False) -> Settings:
+    """The default settings but the ray counts (``rays`` obscurance and sky rays, a quarter of
+    them shadow and emissive rays, at least 2), ``seed`` and ``smooth``."""
+    quarter = max(2, rays // 4)
+    return Settings(rays=rays, sky_rays=rays, shadow_rays=quarter, emissive_rays=quarter,
+                    seed=seed, smooth=smooth)
+
+
+def valid_luminance(done) -> np.ndarray:
+    """(k,) the light's luminance at the bake's valid texels."""
     valid = np.isin(done.validity.state, (VALID, MOVED))
-    terms = done.terms
-    split = 0.5 * (terms.half_split[:, 0] + float(r_ave @ LUMINANCE) * terms.half_split[:, 1])
-    return done.texels, valid, terms.obscurance(r_ave) @ LUMINANCE, split * split
+    return luminance(done.lightmaps.light[done.texels.pixels()])[valid]
 
 
 def rays_for(error: float, points: list[tuple[int, float]]) -> float:
-    """Rays a raw bake needs for RMSE ``error``, log-log along (rays, RMSE) ``points`` (the
-    line through the nearest two past either end)."""
+    """Rays an unsmoothed bake needs for RMSE ``error``, log-log along (rays, RMSE) ``points``
+    (the line through the nearest two past either end)."""
     points = sorted(points)
     pairs = list(zip(points, points[1:]))
     (n0, e0), (n1, e1) = next(((a, b) for a, b in pairs if b[1] <= error <= a[1]),
@@ -63,37 +66,53 @@ def rays_for(error: float, points: list[tuple[int, float]]) -> float:
     return math.exp(math.log(n0) + f * (math.log(n1) - math.log(n0)))
 
 
+def timed_bake(scene, settings: Settings):
+    """(the bake, its wall seconds)."""
+    started = time.perf_counter()
+    done = compute(scene, settings)
+    return done, time.perf_counter() - started
+
+
+def bench_scene(name: str, args) -> None:
+    """Print one scene's table."""
+    title, make = SCENES[name]
+    with tempfile.TemporaryDirectory() as folder:
+        scene = load(make().save(Path(folder) / "scene.glb"))
+    compute(scene, settings_for(4, smooth=True))  # the kernels loaded, the unwrap cached
+    reference = compute(scene, settings_for(args.reference, seed=1000))
+    truth = valid_luminance(reference)
+    floor = reference.rmse_estimate() ** 2
+    print(f"\n{title}: {len(truth):,} valid texels, reference {args.reference} rays "
+          f"(its own RMSE estimate {reference.rmse_estimate():.2e})")
+    print(f"  {'N':>4} | {'RMSE':>9} {'est ÷':>6} {'s':>5} | {'smoothed':>9} {'est ÷':>6} "
+          f"{'width':>5} {'s':>5} {'smooth s':>8} | {'RMSE ×':>6} | raw rays for it")
+    rows = []
+    for n in args.rays:
+        measured = {}
+        for smooth in (False, True):
+            done, seconds = timed_bake(scene, settings_for(n, smooth=smooth))
+            error = math.sqrt(max(float(np.mean((valid_luminance(done) - truth) ** 2)) - floor,
+                                  0.0))
+            measured[smooth] = (error, done.rmse_estimate() / error, seconds, done)
+        rows.append((n, measured))
+    points = [(n, measured[False][0]) for n, measured in rows]
+    for n, measured in rows:
+        raw, raw_ratio, raw_seconds, _ = measured[False]
+        smoothed, ratio, seconds, done = measured[True]
+        print(f"  {n:>4} | {raw:9.2e} {raw_ratio:6.2f} {raw_seconds:5.2f} | {smoothed:9.2e} "
+              f"{ratio:6.2f} {done.smoothed.width:5.2f} {seconds:5.2f} "
+              f"{done.stage_seconds['smooth']:8.2f} | {raw / smoothed:6.2f} | "
+              f"{rays_for(smoothed, points):.0f}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--rays", type=int, nargs="+", default=[4, 16, 64, 256])
-    parser.add_argument("--reference", type=int, default=2048)
+    parser.add_argument("--rays", type=int, nargs="+", default=[4, 16, 64])
+    parser.add_argument("--reference", type=int, default=1024)
+    parser.add_argument("--scenes", nargs="+", choices=sorted(SCENES), default=list(SCENES))
     args = parser.parse_args()
-    for title, make in SCENES:
-        with tempfile.TemporaryDirectory() as folder:
-            scene = load(make().save(Path(folder) / "scene.glb"))
-        texels, valid, reference, _ = bake(scene, args.reference, 1000)
-        rows = np.flatnonzero(valid)
-        position, normal = texels.position[rows], texels.geometric_normal(rows)
-        size = texels.size(rows)
-        print(f"\n{title}: {len(rows):,} valid texels, reference {args.reference} rays")
-        print(f"  {'N':>4} | {'raw RMSE':>9} {'estimate':>9} {'÷':>5} | {'smoothed':>9} "
-              f"{'estimate':>9} {'÷':>5} {'width':>5} {'s':>5} | raw rays for it")
-        results = []
-        for n in args.rays:
-            _, _, w, variance = bake(scene, n, 1)
-            w, variance = w[rows], variance[rows]
-            started = time.perf_counter()
-            done = smooth(position, normal, size, w[:, None], w, variance)
-            seconds = time.perf_counter() - started
-            raw = float(np.sqrt(np.mean((w - reference[rows]) ** 2)))
-            smoothed = float(np.sqrt(np.mean((done.values[:, 0] - reference[rows]) ** 2)))
-            results.append((n, raw, float(np.sqrt(variance.mean())), smoothed,
-                            done.error, done.width, seconds))
-        points = [(n, raw) for n, raw, *_ in results]
-        for n, raw, raw_est, smoothed, estimate, width, seconds in results:
-            print(f"  {n:>4} | {raw:9.5f} {raw_est:9.5f} {raw_est / raw:5.2f} | {smoothed:9.5f} "
-                  f"{estimate:9.5f} {estimate / smoothed:5.2f} {width:5.2f} {seconds:5.2f} | "
-                  f"{rays_for(smoothed, points):.0f}")
+    for name in args.scenes:
+        bench_scene(name, args)
 
 
 if __name__ == "__main__":

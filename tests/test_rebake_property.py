@@ -46,6 +46,7 @@ from baker.rebake.state import default_path
 LONG = bool(os.environ.get("BAKER_LONG"))
 CASES, LONG_CASES, EDITS_PER_ROOM = 25, 400, 6
 FOLIAGE_CASES, LONG_FOLIAGE_CASES = 2, 30
+SMOOTH_CASES, LONG_SMOOTH_CASES = 3, 40
 CROWD = 60
 CROWDED_CASES, CROWDED_EDITS, CROWDED_PAGE = 1, 2, 256
 LONG_CROWDED_CASES, LONG_CROWDED_EDITS = 40, 25  # 1,000 edits at the default page
@@ -74,20 +75,29 @@ def _foliage_cases() -> list[tuple[int, list[int]]]:
     return [(room, [1000 * room + e for e in range(3)]) for room, _ in zip(rooms, range(wanted))]
 
 
+def _smoothed_settings(spec) -> baker.Settings:
+    """--smooth at 8 rays and 4× the room's texel density: noise enough that the filter smooths
+    most rooms (width above 0)."""
+    return replace(_settings(spec), smooth=True, rays=8, texel_density=4 * spec["density"],
+                   page_size=256)
+
+
 def _crowded_settings(spec, page_size: int) -> baker.Settings:
     """The default settings but the page, with the room's sky."""
     return baker.Settings(page_size=page_size, sky=(0.2, 0.25, 0.3) if spec["sky"] else None)
 
 
 def check_case(folder, room_seed: int, edit_seeds, foliage: str = "none",
-               crowd: int | None = None, page_size: int | None = None
+               crowd: int | None = None, page_size: int | None = None, smooth: bool = False
                ) -> tuple[list[str], list[str]]:
     """Bake room ``room_seed`` (``random_room(room_seed, crowd)``; with ``crowd``, at the default
     settings on a ``page_size`` page), then for each edit seed rebake and fully bake the edited
-    room (``foliage``: the --foliage mode), each writing its float pages as .exr files too.
-    Returns (a line per edit whose bytes differ, a line per edit the rebake did as a full
-    bake, with its reason)."""
+    room (``foliage``: the --foliage mode; ``smooth``: ``_smoothed_settings``), each writing
+    its float pages as .exr files too. Returns (a line per edit whose bytes differ, a line per
+    edit the rebake did as a full bake, with its reason)."""
     def settings(spec):
+        if smooth:
+            return _smoothed_settings(spec)
         return (_settings(spec, foliage) if crowd is None
                 else _crowded_settings(spec, page_size))
 
@@ -153,6 +163,20 @@ def test_foliage_rebake_equals_a_full_bake_on_generated_rooms(tmp_path, room_see
     failures, fallbacks = check_case(tmp_path, room_seed, edit_seeds, "approx")
     assert failures == [] and not [f for f in fallbacks if "foliage" in f], "\n".join(
         failures + fallbacks)
+
+
+@pytest.mark.parametrize("room_seed", range(LONG_SMOOTH_CASES if LONG else SMOOTH_CASES))
+def test_smoothed_rebake_equals_a_full_bake_on_generated_rooms(tmp_path, room_seed):
+    """With --smooth, whose width one figure over every texel picks and whose filter reaches
+    past the dirty texels: equal bytes still (the rebake smooths the whole pages again)."""
+    spec = random_room(room_seed)
+    build(spec).save(tmp_path / "room.glb")
+    smoothed = baker.bake(tmp_path / "room.glb", tmp_path / "once.glb", _smoothed_settings(spec),
+                          state=False).report["smooth"]
+    print(f"room {room_seed}: smoothed {smoothed['width_texels']} texel sides wide")
+    failures, _ = check_case(tmp_path, room_seed, [1000 * room_seed + e for e in range(3)],
+                             smooth=True)
+    assert failures == [], "\n".join(failures)
 
 
 def _crowded_cases() -> list[tuple[int, list[int], int]]:

@@ -29,7 +29,9 @@ def texel_errors(done) -> np.ndarray:
     - the obscurance's, I_A·W: each texel's e² from its rays' two independent halves
       (``Terms.split_errors``), or with ``--method gi`` its paths' variance
       (``gi.Indirect.variance``); and the direct light's, from its rays' halves too
-      (``direct_estimators.mean_and_variance``). A texel's halves give one degree of freedom, so
+      (``direct_estimators.mean_and_variance``): ``light_variance``. With ``--smooth``, each
+      texel's Stein risk estimate at the width chosen (``world_filter.Smoothed.sure``, its
+      squared bias and filtered noise) instead. A texel's halves give one degree of freedom, so
       these are averaged over the baked texels of the (2·``POOL_RADIUS`` + 1)² window about it on
       its page, whose light is alike (rescaled to keep their sum: the map's mean square is
       the report's), and a texel's error is not judged from two numbers;
@@ -41,12 +43,11 @@ def texel_errors(done) -> np.ndarray:
         return np.zeros(0)
     r_ave = effective_r_ave(done.ambient, done.settings.rho)
     intensity = done.ambient.intensity
-    if done.settings.method == "gi":
-        own = done.indirect_variance
+    if done.smoothed is not None:  # the smoothed light's own error, texel by texel
+        own = np.maximum(done.smoothed.sure, 0.0)
     else:
-        own = done.terms.split_errors(r_ave) * float(luminance(intensity)) ** 2
-    if done.direct is not None:
-        own = own + done.direct.variance()
+        own = light_variance(done.terms, r_ave, intensity, done.direct,
+                             indirect_variance=done.indirect_variance)
     around = pooled(own, texels.pixels(),
                     (done.atlas.page_count, done.atlas.height, done.atlas.width))
     total = float(around.sum())
@@ -55,6 +56,26 @@ def texel_errors(done) -> np.ndarray:
         shared = luminance(done.terms.obscurance(r_ave) * intensity)
         variance = variance + done.ambient.relative_variance * shared ** 2
     return np.sqrt(variance)
+
+
+def light_variance(terms, r_ave: np.ndarray, intensity: np.ndarray, direct=None,
+                   light_colours: np.ndarray | None = None,
+                   indirect_variance: np.ndarray | None = None,
+                   floor: bool = True) -> np.ndarray:
+    """(N,) each texel's estimated variance of its lightmap luminance from its own rays, lightmap
+    units²: I_A·W's (``Terms.split_errors`` × lum(I_A)², or with ``--method gi``
+    ``indirect_variance``, the paths' own) plus D's (``Direct.variance``, with
+    ``light_colours`` as composed). ``floor``: False for the unbiased e² alone
+    (``Terms.split_squares``: 0 where every ray agreed), what Stein's risk estimate needs
+    (``world_filter``); True for the floor a texel whose rays all agreed takes."""
+    if indirect_variance is not None:
+        own = indirect_variance
+    else:
+        split = terms.split_errors(r_ave) if floor else terms.split_squares(r_ave)
+        own = split * float(luminance(intensity)) ** 2
+    if direct is not None:
+        own = own + direct.variance(light_colours)
+    return own
 
 
 def pooled(values: np.ndarray, pixels: tuple[np.ndarray, np.ndarray, np.ndarray],

@@ -168,18 +168,23 @@ class Terms:
         """(N,) bool: every ray gave one value and none escaped (``standard_error``)."""
         return (variance <= 0) & (self.escaped <= 0)
 
-    def split_errors(self, r_ave: np.ndarray) -> np.ndarray:
+    def split_squares(self, r_ave: np.ndarray) -> np.ndarray:
         """(N,) e² per texel, e = half the difference of the means of its two halves of rays
         in luminance of W (clipped to ±``_SPLIT_MAX``): the halves are independent estimates
         (``sampling.fill_points``), so e² estimates the variance of the texel's W without bias
-        (one degree of freedom; see ``rmse``). Where ``standard_error`` takes the
-        ``binomial_floor``, at least its square."""
+        (one degree of freedom; see ``rmse``), 0 where every ray agreed."""
         lum = float(luminance(r_ave))
         e = np.clip(0.5 * (self.half_split[:, 0] + lum * self.half_split[:, 1]),
                     -_SPLIT_MAX, _SPLIT_MAX)
+        return e * e
+
+    def split_errors(self, r_ave: np.ndarray) -> np.ndarray:
+        """(N,) ``split_squares``, and where ``standard_error`` takes the ``binomial_floor``, at
+        least its square: a texel whose rays all agreed is not taken to have no error."""
+        squares = self.split_squares(r_ave)
         unseen = self._unseen(self._sample_variance(r_ave))
-        return np.where(unseen, np.maximum(e * e, binomial_floor(self.counts, r_ave) ** 2),
-                        e * e)
+        return np.where(unseen, np.maximum(squares, binomial_floor(self.counts, r_ave) ** 2),
+                        squares)
 
     def rmse(self, r_ave: np.ndarray) -> float:
         """Estimated RMSE over the texels of W's luminance, from the rays alone.

@@ -98,6 +98,20 @@ class Sources:
         return np.concatenate([self.samples > 1, [self.emitters is not None,
                                                   self.sky is not None]])
 
+    def unmeasured(self) -> list[str]:
+        """What lights the scene with noise that no error estimate sees: the sources cast with
+        one ray a texel (a soft light's single shadow ray, one ray towards the emitters or the
+        sky), whose texels have no two halves to measure it by
+        (``direct_estimators.mean_and_variance``): a phrase for each."""
+        soft = [light for light, spread, samples in zip(self.lights, self.spread, self.samples)
+                if spread > 0 and samples == 1]
+        out = [f"light {light.index}'s soft shadow, cast with 1 shadow ray" for light in soft]
+        if self.emitters is not None and self.emissive_rays == 1:
+            out.append("the emitters, cast with 1 emissive ray")
+        if self.sky is not None and self.sky_rays == 1:
+            out.append("the sky, cast with 1 sky ray")
+        return out
+
     def noisy(self) -> bool:
         """Whether any source's estimate has noise (``counts``): adaptive rounds can reduce it."""
         return bool(self._noisy_sources().any())

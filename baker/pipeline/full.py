@@ -42,6 +42,8 @@ from baker.image.compose import (
     effective_r_ave,
 )
 from baker.image.denoise import DenoiseInfo, denoise
+from baker.image.errormap import light_variance
+from baker.image.world_filter import Smoothed, smooth_pages
 from baker.image.postprocess import postprocess
 from baker.image.seams import find_seams
 from baker.light.adaptive import (
@@ -113,6 +115,7 @@ class Computed:
     denoised: DenoiseInfo | None = None  # what --denoise did (denoise.py); None: not denoised
     foliage: Foliage | None = None  # --foliage approx: the crowns and their fit (foliage.py)
     indirect_variance: np.ndarray | None = None  # --method gi: (N,) gi.Indirect.variance
+    smoothed: Smoothed | None = None  # what --smooth did (world_filter.py); None: not asked
 
     @property
     def texels(self) -> Texels:
@@ -154,9 +157,13 @@ class Computed:
         if not self.tally.texels:
             return 0.0
         direct = self.tally.direct_variance / self.tally.texels
+        shared = 0.0
+        if self.settings.method != "gi":
+            shared = self.ambient.relative_variance * self.tally.ambient_squares / self.tally.texels
+        if self.smoothed is not None:  # the smoothed light's, its rays' and I_A's own
+            return float(np.sqrt(self.smoothed.error ** 2 + shared))
         if self.settings.method == "gi":
             return float(np.sqrt(direct + self.tally.indirect_variance / self.tally.texels))
-        shared = self.ambient.relative_variance * self.tally.ambient_squares / self.tally.texels
         return float(np.sqrt(self.obscurance_rmse() ** 2 + shared + direct))
 
 
@@ -586,6 +593,7 @@ class _Pages:
     masks: tuple[np.ndarray, np.ndarray]
     tally: Tally
     indirect_variance: list[np.ndarray]  # --method gi: each part's gi.Indirect.variance
+    variance: list[np.ndarray]  # --smooth: each part's errormap.light_variance, unfloored
 
     @classmethod
     def blank(cls, baking: Baking) -> "_Pages":
@@ -593,7 +601,7 @@ class _Pages:
         lightmaps = blank(baking.atlas, visibility=writes_occlusion(baking.settings),
                           directional=baking.settings.directional_pages)
         return cls(lightmaps, (np.zeros_like(lightmaps.covered),
-                               np.zeros_like(lightmaps.covered)), Tally(), [])
+                               np.zeros_like(lightmaps.covered)), Tally(), [], [])
 
     def add(self, baking: Baking, texels: Texels, validity: Validity, terms: Terms,
             direct: Direct, indirect: Indirect | None = None) -> None:
@@ -613,6 +621,10 @@ class _Pages:
                        ambient.intensity)
         if indirect is not None:
             self.indirect_variance.append(indirect.variance)
+        if baking.settings.smooth:  # what the world-space filter weighs its risk by
+            self.variance.append(light_variance(
+                terms, effective_r_ave(ambient, rho), ambient.intensity, direct, colours,
+                None if indirect is None else indirect.variance, floor=False))
 
 
 def writes_occlusion(settings: Resolved) -> bool:
@@ -623,9 +635,10 @@ def writes_occlusion(settings: Resolved) -> bool:
 def _finish_pages(baking: Baking, per_texel: PerTexel, pages: _Pages, times: dict[str, float],
                   staging: StateSink | None = None, fingerprint: dict | None = None,
                   steps: Steps | None = None) -> Computed:
-    """Start writing the bake state (``staging``, if any: the texels are final), then denoise
-    (if asked) and post-process the composed pages; ``steps``: a pass over the pages' texels
-    for the denoiser, one for the seams, and the post-process's own, counted as done."""
+    """Start writing the bake state (``staging``, if any: the texels are final), then smooth or
+    denoise (if asked) and post-process the composed pages; ``steps``: a pass over the pages'
+    texels for the smoothing or the denoiser, one for the seams, and the post-process's own,
+    counted as done."""
     if staging is not None:
         staging.start(baking, per_texel, fingerprint)
     resolved, lightmaps, masks = baking.settings, pages.lightmaps, pages.masks
@@ -633,7 +646,13 @@ def _finish_pages(baking: Baking, per_texel: PerTexel, pages: _Pages, times: dic
         lightmaps = directional_pages(lightmaps)
     steps = steps or Steps()
     texels = lightmaps.covered.size
-    steps.expect(texels * (2 if resolved.denoise else 1))
+    steps.expect(texels * (2 if resolved.denoise or resolved.smooth else 1))
+    smoothed = None
+    if resolved.smooth:  # in world space, before the fill of invalid texels (world_filter.py)
+        with timed(times, "smooth"):
+            lightmaps, smoothed = smooth_pages(lightmaps, per_texel.texels,
+                                               np.concatenate(pages.variance), *masks)
+        steps.advance(texels)
     denoised = None
     if resolved.denoise:  # per chart, before the fill of invalid texels and dilation (denoise.py)
         with timed(times, "denoise"):
@@ -649,7 +668,7 @@ def _finish_pages(baking: Baking, per_texel: PerTexel, pages: _Pages, times: dic
                     ambient=baking.ambient, plan=baking.lit.plan, atlas=baking.atlas,
                     per_texel=per_texel, tally=pages.tally, lightmaps=lightmaps,
                     stage_seconds=times, sources=baking.sources, power=baking.lit.power,
-                    denoised=denoised, foliage=baking.foliage,
+                    denoised=denoised, smoothed=smoothed, foliage=baking.foliage,
                     indirect_variance=(np.concatenate(pages.indirect_variance)
                                        if pages.indirect_variance else None))
 

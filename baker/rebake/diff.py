@@ -36,7 +36,7 @@ from baker.rebake.state import digest
 from baker.settings import CALLER_ONLY, Resolved
 
 # Settings that only the composition, post-processing or encoding read: a recomposition.
-RECOMPOSE_SETTINGS = ("ambient", "encoding", "occlusion", "carrier", "baked_lights")
+RECOMPOSE_SETTINGS = ("ambient", "encoding", "occlusion", "carrier", "baked_lights", "smooth")
 # Settings that change the atlas.
 ATLAS_SETTINGS = ("texel_density", "page_size", "padding", "uv")
 
