@@ -12,7 +12,7 @@ Sloan & al.; the ands/seamoptimizer approach):
 
 λ is ``DATA_WEIGHT`` for covered texels and ``PADDING_WEIGHT`` for the padding texels the
 lookups also read (their values are only dilated filler). The normal equations are solved by
-conjugate gradients, vectorised (np.bincount for the sparse products): no scipy needed.
+conjugate gradients preconditioned by their diagonal, in one compiled kernel: no scipy needed.
 
 Only *smooth* seams are stitched: both sides must have the same shading normals at the edge's
 ends. At a crease (a box's edge) the light really differs on either side; blending it would
@@ -38,7 +38,8 @@ DATA_WEIGHT = 0.02  # λ of a covered texel: how strongly it keeps its baked val
 PADDING_WEIGHT = 0.002  # λ of a padding texel the seam lookups read
 SAMPLES_PER_TEXEL = 2  # seam samples per texel of edge length (on the longer side)
 _SMOOTH_COS = 0.999  # shading normals this close count as the same (about 2.6°)
-_ITERATIONS = 200
+_ITERATIONS = 100  # preconditioned: on a 1M-triangle level's 244k seam rows, 100 leave
+# the texels within 0.4 % of the solution at their 99th percentile (plain CG's 200: 3 %)
 
 
 @dataclass(frozen=True)
@@ -210,23 +211,33 @@ def _solve(weight: np.ndarray, local: np.ndarray, lam: np.ndarray, x0: np.ndarra
            iterations: int) -> np.ndarray:
     """x (n, C) minimising |M x|² + Σ lam·|x − x0|² (M the seam rows, ``_normal_product``):
     conjugate gradients on (MᵀM + Λ) x = Λ x0, every channel at once (they share the matrix),
-    until the residual's square falls under 1e-20 of |Λ x0|² or after ``iterations``."""
+    preconditioned by its diagonal (Jacobi: Σ of a texel's squared weights + its λ, which
+    differ 10× between baked and padding texels and grow with the seam samples a texel
+    meets), until the residual's square falls under 1e-20 of |Λ x0|² or after
+    ``iterations``."""
     n, channels = x0.shape
+    diagonal = lam.copy()
+    for s in range(weight.shape[0]):
+        for k in range(weight.shape[1]):
+            diagonal[local[s, k]] += weight[s, k] * weight[s, k]
     x = x0.copy()
     q = np.empty_like(x0)
     _normal_product(weight, local, lam, x, q)
     r = np.empty_like(x0)
-    rr = np.zeros(channels)
+    z = np.empty_like(x0)
+    rr, rz = np.zeros(channels), np.zeros(channels)
     norm = 0.0
     for i in range(n):
         for c in range(channels):
             b = lam[i] * x0[i, c]
             r[i, c] = b - q[i, c]
+            z[i, c] = r[i, c] / diagonal[i]
             rr[c] += r[i, c] * r[i, c]
+            rz[c] += r[i, c] * z[i, c]
             norm += b * b
-    p = r.copy()
+    p = z.copy()
     target = 1e-20 * max(norm, 1e-300)
-    alpha, beta, pq, rr_new = (np.empty(channels), np.empty(channels), np.empty(channels),
+    alpha, beta, pq, rz_new = (np.empty(channels), np.empty(channels), np.empty(channels),
                                np.empty(channels))
     for _ in range(iterations):
         if rr.sum() <= target:
@@ -237,19 +248,22 @@ def _solve(weight: np.ndarray, local: np.ndarray, lam: np.ndarray, x0: np.ndarra
             for c in range(channels):
                 pq[c] += p[i, c] * q[i, c]
         for c in range(channels):
-            alpha[c] = rr[c] / max(pq[c], 1e-300)
-        rr_new[:] = 0.0
+            alpha[c] = rz[c] / max(pq[c], 1e-300)
+        rr[:] = 0.0
+        rz_new[:] = 0.0
         for i in range(n):
             for c in range(channels):
                 x[i, c] += alpha[c] * p[i, c]
                 r[i, c] -= alpha[c] * q[i, c]
-                rr_new[c] += r[i, c] * r[i, c]
+                z[i, c] = r[i, c] / diagonal[i]
+                rr[c] += r[i, c] * r[i, c]
+                rz_new[c] += r[i, c] * z[i, c]
         for c in range(channels):
-            beta[c] = rr_new[c] / max(rr[c], 1e-300)
+            beta[c] = rz_new[c] / max(rz[c], 1e-300)
         for i in range(n):
             for c in range(channels):
-                p[i, c] = r[i, c] + beta[c] * p[i, c]
-        rr[:] = rr_new
+                p[i, c] = z[i, c] + beta[c] * p[i, c]
+        rz[:] = rz_new
     return x
 
 
