@@ -150,13 +150,17 @@ class Smoothed:
 
 
 def smooth_pages(lightmaps: Lightmaps, texels: Texels, variance: np.ndarray,
-                 invalid: np.ndarray, enclosed: np.ndarray) -> tuple[Lightmaps, Smoothed]:
+                 exact: np.ndarray, invalid: np.ndarray,
+                 enclosed: np.ndarray) -> tuple[Lightmaps, Smoothed]:
     """``lightmaps`` (composed, before post-processing) with the light of their valid texels
     smoothed in world space (``smooth``, the width of least bound on the error of its
-    luminance) and their visibility, when kept, at that same width.
+    luminance) but for its ``exact`` part, and their visibility, when kept, at that same width.
 
     texels: the baked texels (N); variance: (N,) an unbiased estimate of each one's noise
-    variance in luminance (``errormap.light_variance`` without its floor); invalid, enclosed:
+    variance in luminance (``errormap.light_variance`` without its floor); exact: (N, 3) the
+    part of each texel's light that has no noise (``Sources.exact``: the hard lights', whose
+    shadow edges smoothing would only blur; the rest is smoothed, and its blur alone counted
+    in the width's risk); invalid, enclosed:
     (P, H, W) bool masks (``validity.Validity.page_masks``): those texels neither feed
     the filter nor take its output (the post-process fills them from their valid neighbours,
     as it does after ``denoise``)."""
@@ -164,7 +168,8 @@ def smooth_pages(lightmaps: Lightmaps, texels: Texels, variance: np.ndarray,
     pixels = texels.pixel_index()
     rows = np.flatnonzero(~(flat_pages(invalid)[pixels] | flat_pages(enclosed)[pixels]))
     index = pixels[rows]
-    light = flat_pages(lightmaps.light)[index]
+    exact_part = exact[rows]
+    light = flat_pages(lightmaps.light)[index] - exact_part
     kept = len(lightmaps.visibility) > 0  # grey: one channel of it smoothed, then copied
     values = np.hstack([light, flat_pages(lightmaps.visibility)[index][:, :1]]) if kept else light
     seen = variance[rows]
@@ -174,7 +179,8 @@ def smooth_pages(lightmaps: Lightmaps, texels: Texels, variance: np.ndarray,
     sure[rows] = done.sure
     out = lightmaps
     if done.width > 0.0:
-        out = replace(out, light=_written(lightmaps.light, index, done.values[:, :3]))
+        out = replace(out, light=_written(lightmaps.light, index,
+                                          done.values[:, :3] + exact_part))
         if kept:
             out = replace(out, visibility=_written(lightmaps.visibility, index,
                                                    np.repeat(done.values[:, 3:], 3, axis=1)))

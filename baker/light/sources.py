@@ -98,6 +98,15 @@ class Sources:
         return np.concatenate([self.samples > 1, [self.emitters is not None,
                                                   self.sky is not None]])
 
+    def exact(self, terms, light_colours: np.ndarray | None = None) -> np.ndarray:
+        """(N, 3) the light of a ``Direct``'s texels from the hard lights alone (no spread, one
+        shadow ray: no noise, only the shadow's edge), with ``light_colours`` (L, 3) as
+        composed, by default the baked ones: what smoothing leaves as it is (``world_filter``)."""
+        colours = terms.light_colours if light_colours is None else np.asarray(light_colours,
+                                                                                np.float64)
+        hard = (self.spread == 0) & (self.samples == 1)
+        return matmul_rows(terms.punctual, np.where(hard[:, None], colours, 0.0))
+
     def unmeasured(self) -> list[str]:
         """What lights the scene with noise that no error estimate sees: the sources cast with
         one ray a texel (a soft light's single shadow ray, one ray towards the emitters or the

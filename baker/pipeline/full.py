@@ -594,6 +594,7 @@ class _Pages:
     tally: Tally
     indirect_variance: list[np.ndarray]  # --method gi: each part's gi.Indirect.variance
     variance: list[np.ndarray]  # --smooth: each part's errormap.light_variance, unfloored
+    exact: list[np.ndarray]  # --smooth: each part's light from hard lights (Sources.exact)
 
     @classmethod
     def blank(cls, baking: Baking) -> "_Pages":
@@ -601,7 +602,7 @@ class _Pages:
         lightmaps = blank(baking.atlas, visibility=writes_occlusion(baking.settings),
                           directional=baking.settings.directional_pages)
         return cls(lightmaps, (np.zeros_like(lightmaps.covered),
-                               np.zeros_like(lightmaps.covered)), Tally(), [], [])
+                               np.zeros_like(lightmaps.covered)), Tally(), [], [], [])
 
     def add(self, baking: Baking, texels: Texels, validity: Validity, terms: Terms,
             direct: Direct, indirect: Indirect | None = None) -> None:
@@ -621,10 +622,13 @@ class _Pages:
                        ambient.intensity)
         if indirect is not None:
             self.indirect_variance.append(indirect.variance)
-        if baking.settings.smooth:  # what the world-space filter weighs its risk by
+        if baking.settings.smooth:  # what the world-space filter weighs its risk by, and
+            # what it leaves as it is
             self.variance.append(light_variance(
                 terms, effective_r_ave(ambient, rho), ambient.intensity, direct, colours,
                 None if indirect is None else indirect.variance, floor=False))
+            self.exact.append(np.zeros((len(texels), 3)) if direct is None
+                              else baking.sources.exact(direct, colours))
 
 
 def writes_occlusion(settings: Resolved) -> bool:
@@ -651,7 +655,8 @@ def _finish_pages(baking: Baking, per_texel: PerTexel, pages: _Pages, times: dic
     if resolved.smooth:  # in world space, before the fill of invalid texels (world_filter.py)
         with timed(times, "smooth"):
             lightmaps, smoothed = smooth_pages(lightmaps, per_texel.texels,
-                                               np.concatenate(pages.variance), *masks)
+                                               np.concatenate(pages.variance),
+                                               np.concatenate(pages.exact), *masks)
         steps.advance(texels)
     denoised = None
     if resolved.denoise:  # per chart, before the fill of invalid texels and dilation (denoise.py)
