@@ -181,3 +181,15 @@ def test_a_hard_shadow_keeps_its_edge_while_the_noise_around_it_is_smoothed(tmp_
     assert smoothed.width > 0 and exact_step > 0.2
     assert abs(step - exact_step) < 0.005
     assert noise < profiles[False][2] / 4
+
+
+def test_where_smoothing_does_not_pay_the_bake_and_its_estimate_are_as_without(tmp_path):
+    """A floor whose light has hardly any noise (a hard light, an open sky of obscurance): the
+    width chosen is 0, and the pages and the estimate are those of a bake without --smooth
+    (the estimate keeps the floor a texel whose rays all agreed takes)."""
+    done = {smooth: computed(penumbra(0.0, width=0.5), tmp_path, only_nodes={0},
+                             texel_density=100.0, rays=4, page_size=512, smooth=smooth)
+            for smooth in (False, True)}
+    assert done[True].smoothed.width == 0.0
+    assert np.array_equal(done[True].lightmaps.light, done[False].lightmaps.light)
+    assert done[True].rmse_estimate() == done[False].rmse_estimate() > 0

@@ -43,7 +43,7 @@ def texel_errors(done) -> np.ndarray:
         return np.zeros(0)
     r_ave = effective_r_ave(done.ambient, done.settings.rho)
     intensity = done.ambient.intensity
-    if done.smoothed is not None:  # the smoothed light's own error, texel by texel
+    if done.smoothed is not None and done.smoothed.width > 0:  # the smoothed light's own
         own = np.maximum(done.smoothed.sure, 0.0)
     else:
         own = light_variance(done.terms, r_ave, intensity, done.direct,

@@ -160,7 +160,7 @@ class Computed:
         shared = 0.0
         if self.settings.method != "gi":
             shared = self.ambient.relative_variance * self.tally.ambient_squares / self.tally.texels
-        if self.smoothed is not None:  # the smoothed light's, its rays' and I_A's own
+        if self.smoothed is not None and self.smoothed.width > 0:  # the smoothed light's
             return float(np.sqrt(self.smoothed.error ** 2 + shared))
         if self.settings.method == "gi":
             return float(np.sqrt(direct + self.tally.indirect_variance / self.tally.texels))
