@@ -1,8 +1,10 @@
 """Benchmark: ``--smooth``, the world-space filter whose width its own error estimate chooses
 (``image/world_filter``), in the bake, against the same bake unsmoothed.
 
-Two scenes at baker's default settings but the rays: the demo's Cornell room (its ceiling lamp
-an emitter) and the room of 200 boxes and a sphere (``assets/many_objects.py``). For each ray
+Three scenes at baker's default settings but the rays: the demo's Cornell room (its ceiling
+lamp an emitter), the room of 200 boxes and a sphere (``assets/many_objects.py``) and Khronos'
+LightsPunctualLamp (``tests/scenes``: five hard point lights, whose light smoothing leaves as
+it is, and an emissive bulb). For each ray
 count N (N obscurance and sky rays, N/4 shadow and emissive rays but at least 2: one ray has
 no halves to measure its noise by), a bake without and with ``smooth``
 (``pipeline.full.compute``, in this process after a warm-up), each
@@ -13,7 +15,7 @@ the rays an unsmoothed bake would need for the smoothed RMSE (log-log between th
 unsmoothed points).
 
     python benchmarks/bench_world_filter.py [--rays 4 16 64] [--reference 1024]
-        [--scenes cornell boxes]
+        [--scenes cornell boxes lamp]
 """
 
 from __future__ import annotations
@@ -27,7 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
 
 from assets.make_scenes import cornell_box  # noqa: E402
 from assets.many_objects import boxes_and_sphere  # noqa: E402
@@ -37,8 +40,10 @@ from baker.gltf.load import load  # noqa: E402
 from baker.pipeline.full import compute  # noqa: E402
 from baker.settings import Settings  # noqa: E402
 
-SCENES = {"cornell": ("Cornell room", cornell_box), "boxes": ("200 boxes + sphere",
-                                                              boxes_and_sphere)}
+SCENES = {"cornell": ("Cornell room", cornell_box),
+          "boxes": ("200 boxes + sphere", boxes_and_sphere),
+          "lamp": ("LightsPunctualLamp", ROOT / "tests" / "scenes" / "LightsPunctualLamp"
+                   / "LightsPunctualLamp.gltf")}
 
 
 def settings_for(rays: int, seed: int = 0, smooth: bool = False) -> Settings:
@@ -75,9 +80,12 @@ def timed_bake(scene, settings: Settings):
 
 def bench_scene(name: str, args) -> None:
     """Print one scene's table."""
-    title, make = SCENES[name]
-    with tempfile.TemporaryDirectory() as folder:
-        scene = load(make().save(Path(folder) / "scene.glb"))
+    title, source = SCENES[name]
+    if isinstance(source, Path):
+        scene = load(source)
+    else:
+        with tempfile.TemporaryDirectory() as folder:
+            scene = load(source().save(Path(folder) / "scene.glb"))
     compute(scene, settings_for(4, smooth=True))  # the kernels loaded, the unwrap cached
     reference = compute(scene, settings_for(args.reference, seed=1000))
     truth = valid_luminance(reference)
@@ -109,7 +117,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rays", type=int, nargs="+", default=[4, 16, 64])
     parser.add_argument("--reference", type=int, default=1024)
-    parser.add_argument("--scenes", nargs="+", choices=sorted(SCENES), default=list(SCENES))
+    parser.add_argument("--scenes", nargs="+", choices=sorted(SCENES), default=["cornell", "boxes"])
     args = parser.parse_args()
     for name in args.scenes:
         bench_scene(name, args)
