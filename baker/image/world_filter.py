@@ -96,7 +96,7 @@ def smooth(position: np.ndarray, normal: np.ndarray, size: np.ndarray, values: n
     tried = {}
     for stage in STAGES:  # the wider stage only when the narrower's widest was best
         widths = np.array(stage)
-        grid = _grid(position, REACH * float(widths.max()) * float(size.max()) if count else 1.0)
+        grid = _grid(position, size, float(widths.max()))
         smoothed, self_weight = _apply(position, normal, size, luminance[:, None], widths, grid,
                                        probe, len(probes))
         for w, mean, weight in zip(stage, smoothed[:, :, 0], self_weight):
@@ -106,7 +106,7 @@ def smooth(position: np.ndarray, normal: np.ndarray, size: np.ndarray, values: n
             break
     if width == 0.0:
         return Filtered(values, width, variance, tried, _bound(variance, width))
-    grid = _grid(position, REACH * width * float(size.max()))  # cells as small as it allows
+    grid = _grid(position, size, width)  # cells as small as the width allows
     smoothed, self_weight = _apply(position, normal, size, np.hstack([values, luminance[:, None]]),
                                    np.array([width]), grid, np.arange(count), count)
     sure = _sure(smoothed[0, :, -1], self_weight[0], luminance, variance)
@@ -205,25 +205,33 @@ def _bound(sure: np.ndarray, width: float) -> float:
     return float(sure.mean()) + spread
 
 
-def _grid(position: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The texels sorted by grid cell of side ``cell``: (order (N,), starts (M + 1,) of each
-    occupied cell's run in ``order``, cells (M, 3) int64 those cells' coordinates, sorted)."""
+def _grid(position: np.ndarray, size: np.ndarray, width: float
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """The texels sorted by grid cell, for a filter ``width`` texel sides wide: (order (N,),
+    starts (M + 1,) of each occupied cell's run in ``order``, cells (M, 3) int64 those cells'
+    coordinates, sorted, and the cells' side). The side is ``REACH`` × ``width`` × the 99th
+    percentile of the texels' sizes: the 27 cells about a texel hold all it reaches but for the
+    largest 1 % (a chart of few texels grows its texels: on LightsPunctualLamp the largest is
+    2.9× the median, and cells sized for it held 8× the candidates), which look further
+    (``_filter_kernel``)."""
+    cell = REACH * width * float(np.percentile(size, 99)) if len(size) else 0.0
+    cell = cell if cell > 0 else 1.0  # texels of no size: every neighbour in one cell's reach
     coords = np.floor(position / cell).astype(np.int64)
     order = np.lexsort((coords[:, 2], coords[:, 1], coords[:, 0]))
     sorted_coords = coords[order]
     new = np.ones(len(order), bool)
     new[1:] = (sorted_coords[1:] != sorted_coords[:-1]).any(axis=1)
     first = np.flatnonzero(new)
-    return order, np.append(first, len(order)), sorted_coords[first]
+    return order, np.append(first, len(order)), sorted_coords[first], cell
 
 
 def _apply(position, normal, size, values, widths, grid, slot, slots):
     """(F values (W, K, C), F_ii (W, K)) of the filter at each of ``widths`` (W,) texel sides
     (width 0: the values themselves) for the texels i whose ``slot`` (N,) is ≥ 0, in row
     slot[i] of K = ``slots``, from one search for their neighbours (every texel) in ``grid``
-    (``_grid``'s, cells of at least ``REACH`` × the widest width), a run of cells at a time
-    (each cell's neighbour cells looked up once for all its texels)."""
-    order, starts, cells = grid
+    (``_grid``'s for the widest width), a run of cells at a time (each cell's 27 neighbour
+    cells looked up once for all its texels)."""
+    order, starts, cells, cell = grid
     out = np.empty((len(widths), slots, values.shape[1]))
     self_weight = np.empty((len(widths), slots))
     values, widths = np.ascontiguousarray(values, np.float64), np.asarray(widths, np.float64)
@@ -231,7 +239,7 @@ def _apply(position, normal, size, values, widths, grid, slot, slots):
 
     def work(run: slice) -> None:
         _filter_kernel(position, normal, size, values, widths, REACH, PLANE, FACING, order,
-                       starts, cells, slot, run.start, run.stop, out, self_weight)
+                       starts, cells, cell, slot, run.start, run.stop, out, self_weight)
 
     run_chunks(work, even_slices(len(cells), per_cell, 2 * cores()))
     return out, self_weight
@@ -254,14 +262,30 @@ def _find_cell(cells, x, y, z):
 
 
 @jit
+def _cells_about(cells, c, span, into):
+    """The indices of the occupied cells within ``span`` cells each way of cell ``c`` (dx, dy,
+    dz from −span to span, in that nesting) written to ``into``; how many."""
+    found = 0
+    for dx in range(-span, span + 1):
+        for dy in range(-span, span + 1):
+            for dz in range(-span, span + 1):
+                other = _find_cell(cells, cells[c, 0] + dx, cells[c, 1] + dy, cells[c, 2] + dz)
+                if other >= 0:
+                    into[found] = other
+                    found += 1
+    return found
+
+
+@jit
 def _filter_kernel(position, normal, size, values, widths, reach, plane, facing, order, starts,
-                   cells, slot, first, last, out, self_weight):
+                   cells, cell, slot, first, last, out, self_weight):
     """For every texel i of the cells ``first`` … ``last`` − 1 with s = slot[i] ≥ 0 and width
     σ_w = widths[w] × size[i]: out[w, s] = Σ_j w_ij values[j] / Σ_j w_ij over its neighbours
-    j (the texels of the 27 grid cells around its cell within ``reach`` σ_w, within
-    ``plane`` texel sides of i's plane, normals within ``facing``), w_ij = exp(−d²/2σ_w²),
-    w_ii = 1; self_weight[w, s] = 1 / Σ_j w_ij. Width 0: values[i], 1. Each texel's sums run
-    over the same neighbours in the same order however the cells are split into runs."""
+    j (the texels within ``reach`` σ_w, within ``plane`` texel sides of i's plane, normals
+    within ``facing``: found in the 27 grid cells of side ``cell`` about its own, or as many
+    more cells each way as its reach needs), w_ij = exp(−d²/2σ_w²), w_ii = 1;
+    self_weight[w, s] = 1 / Σ_j w_ij. Width 0: values[i], 1. Each texel's sums run over the
+    same neighbours in the same order however the cells are split into runs."""
     channels = values.shape[1]
     count = len(widths)
     total = np.empty((count, channels))
@@ -271,15 +295,7 @@ def _filter_kernel(position, normal, size, values, widths, reach, plane, facing,
     for w in range(count):
         widest = max(widest, widths[w])
     for c in range(first, last):
-        found = 0
-        for dx in range(-1, 2):
-            for dy in range(-1, 2):
-                for dz in range(-1, 2):
-                    other = _find_cell(cells, cells[c, 0] + dx, cells[c, 1] + dy,
-                                       cells[c, 2] + dz)
-                    if other >= 0:
-                        around[found] = other
-                        found += 1
+        near = _cells_about(cells, c, 1, around)
         for t in range(starts[c], starts[c + 1]):
             i = order[t]
             s = slot[i]
@@ -289,10 +305,15 @@ def _filter_kernel(position, normal, size, values, widths, reach, plane, facing,
             nx, ny, nz = normal[i, 0], normal[i, 1], normal[i, 2]
             limit = (reach * widest * size[i]) ** 2
             off_plane = plane * size[i]
+            span = max(1, int(np.ceil(np.sqrt(limit) / cell)))  # cells each way it reaches
+            visit, found = around, near
+            if span > 1:  # a texel larger than the cells were sized for
+                visit = np.empty((2 * span + 1) ** 3, np.int64)
+                found = _cells_about(cells, c, span, visit)
             total[:] = 0.0
             weights[:] = 0.0
             for a in range(found):
-                for k in range(starts[around[a]], starts[around[a] + 1]):
+                for k in range(starts[visit[a]], starts[visit[a] + 1]):
                     j = order[k]
                     ex, ey, ez = position[j, 0] - px, position[j, 1] - py, position[j, 2] - pz
                     d2 = ex * ex + ey * ey + ez * ez
