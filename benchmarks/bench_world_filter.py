@@ -4,7 +4,8 @@
 Three scenes at baker's default settings but the rays: the demo's Cornell room (its ceiling
 lamp an emitter), the room of 200 boxes and a sphere (``assets/many_objects.py``) and Khronos'
 LightsPunctualLamp (``tests/scenes``: five hard point lights, whose light smoothing leaves as
-it is, and an emissive bulb). For each ray
+it is, and an emissive bulb; only with ``--scenes``: its reference's own noise, from the
+emitters, is larger than the errors it would measure). For each ray
 count N (N obscurance and sky rays, N/4 shadow and emissive rays but at least 2: one ray has
 no halves to measure its noise by), a bake without and with ``smooth``
 (``pipeline.full.compute``, in this process after a warm-up), each
