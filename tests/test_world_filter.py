@@ -1,5 +1,6 @@
 """The world-space filter (``image/world_filter``): what it mixes, and its error estimate."""
 
+import json
 from dataclasses import replace
 
 import numpy as np
@@ -10,6 +11,7 @@ from assets.light_scenes import penumbra
 from assets.make_scenes import cornell_box
 from assets.rebake_scenes import box_room, grid_boxes
 from baker.atlas.validity import MOVED, VALID
+from baker.cli.main import main
 from baker.errors import SettingsError
 from baker.geometry.surface import luminance
 from baker.gltf.load import load
@@ -193,3 +195,17 @@ def test_where_smoothing_does_not_pay_the_bake_and_its_estimate_are_as_without(t
     assert done[True].smoothed.width == 0.0
     assert np.array_equal(done[True].lightmaps.light, done[False].lightmaps.light)
     assert done[True].rmse_estimate() == done[False].rmse_estimate() > 0
+
+
+def test_the_command_says_how_wide_it_smoothed_and_the_error_before_and_after(tmp_path, capsys):
+    """``baker bake --smooth`` prints the width and the estimated RMSE before and after (the
+    report's ``smooth`` entry), the after being the bake's estimate."""
+    scene = cornell_box().save(tmp_path / "room.glb")
+    assert main(["bake", str(scene), "-o", str(tmp_path / "out.glb"), "--page-size", "128",
+                 "--rays", "4", "--smooth", "--no-state", "--report",
+                 str(tmp_path / "report.json")]) == 0
+    said = capsys.readouterr().out
+    smooth = json.loads((tmp_path / "report.json").read_text())["smooth"]
+    assert smooth["width_texels"] > 0
+    assert (f"smooth: {smooth['width_texels']:g} texel sides wide; estimated RMSE "
+            f"{smooth['rmse_before']:.3g} before, {smooth['rmse_after']:.3g} after") in said

@@ -304,6 +304,12 @@ def print_summary(result: baker.BakeResult) -> None:
         print(f"  foliage approx: {len(foliage['crowns'])} crown(s) fitted with "
               f"{foliage['rays']:,} rays; against tracing (held out) RMSE {held['rmse']:.3g}, "
               f"bias {held['bias']:+.3g}")
+    smooth = result.report.get("smooth", {})
+    if smooth.get("smoothed"):
+        print(f"  smooth: {smooth['width_texels']:g} texel sides wide; estimated RMSE "
+              f"{smooth['rmse_before']:.3g} before, {smooth['rmse_after']:.3g} after"
+              if smooth["width_texels"] else
+              "  smooth: left as baked (smoothing would not lower the error)")
     unseen = result.report.get("rmse_estimate_leaves_out", [])
     error = (f"estimated RMSE at least {result.rmse_estimate:.3g} (it leaves out the noise of "
              f"{' and '.join(unseen)}: 2 rays or more measure it)" if unseen
