@@ -63,7 +63,7 @@ from baker.light.direct_estimators import (
     rgb_mean_and_variance,
     sky_samples,
 )
-from baker.light.sources import Sources, all_sources
+from baker.light.sources import Sources, all_sources, colours_of
 from baker.rays.dimensions import light_dimension
 from baker.rays.trace import Tracer, ray_lift
 from baker.rowwise import dot_rows
@@ -117,7 +117,7 @@ class Direct:
         lights' colour × intensity (L, 3), by default the baked ones; (0, 3) when not kept."""
         if not len(self.punctual_aim):
             return np.zeros((0, 3))
-        colours = self.light_colours if light_colours is None else np.asarray(light_colours, np.float64)
+        colours = colours_of(self, light_colours)
         out = np.einsum("nlc,l->nc", self.punctual_aim, luminance(colours))
         for term in (self.emission_aim, self.sky_aim):
             if len(term):
@@ -128,7 +128,7 @@ class Direct:
         """(N,) the variance of ``aim``'s estimate (the sources' are independent)."""
         if not len(self.punctual_aim):
             return np.zeros(0)
-        colours = self.light_colours if light_colours is None else np.asarray(light_colours, np.float64)
+        colours = colours_of(self, light_colours)
         out = dot_rows(self.punctual_aim_var, luminance(colours) ** 2)
         for term in (self.emission_aim_var, self.sky_aim_var):
             if len(term):
@@ -148,7 +148,7 @@ class Direct:
 
     def variance(self, light_colours: np.ndarray | None = None) -> np.ndarray:
         """(N,) variance of the luminance of D's estimate (the sources' estimates are independent)."""
-        colours = self.light_colours if light_colours is None else np.asarray(light_colours, np.float64)
+        colours = colours_of(self, light_colours)
         out = dot_rows(self.punctual_var, luminance(colours) ** 2)  # a new array, summed in place
         for term in (self.emission_var, self.sky_var):
             if len(term):

@@ -17,11 +17,16 @@ from baker.punctual import Light
 from baker.rowwise import matmul_rows
 
 
+def colours_of(terms, light_colours: np.ndarray | None) -> np.ndarray:
+    """(L, 3) the light colours × intensities ``light_colours`` as float64, or when None those
+    ``terms`` (a ``Direct`` or ``Power``) were baked with."""
+    return terms.light_colours if light_colours is None else np.asarray(light_colours, np.float64)
+
+
 def all_sources(terms, light_colours: np.ndarray | None) -> np.ndarray:
     """punctual × colours + emission + sky of a ``Direct`` or ``Power``: the per-light terms at
     unit intensity times the light colours × intensities (L, 3), by default the baked ones."""
-    colours = terms.light_colours if light_colours is None else np.asarray(light_colours, np.float64)
-    out = matmul_rows(terms.punctual, colours)  # a new array: the sums go into it in place
+    out = matmul_rows(terms.punctual, colours_of(terms, light_colours))  # a new array: the sums go into it in place
     for term in (terms.emission, terms.sky):  # empty when the scene has no such source
         if len(term):
             out += term
@@ -102,10 +107,9 @@ class Sources:
         """(N, 3) the light of a ``Direct``'s texels from the hard lights alone (no spread, one
         shadow ray: no noise, only the shadow's edge), with ``light_colours`` (L, 3) as
         composed, by default the baked ones: what smoothing leaves as it is (``world_filter``)."""
-        colours = terms.light_colours if light_colours is None else np.asarray(light_colours,
-                                                                                np.float64)
         hard = (self.spread == 0) & (self.samples == 1)
-        return matmul_rows(terms.punctual, np.where(hard[:, None], colours, 0.0))
+        return matmul_rows(terms.punctual,
+                           np.where(hard[:, None], colours_of(terms, light_colours), 0.0))
 
     def unmeasured(self) -> list[str]:
         """What lights the scene with noise that no error estimate sees: the sources cast with

@@ -618,17 +618,16 @@ class _Pages:
                      None if indirect is None else indirect.irradiance,
                      None if indirect is None or not len(indirect.aim) else indirect.aim)
         validity.mark(texels, *self.masks)
-        self.tally.add(terms, direct, validity, effective_r_ave(ambient, rho), indirect,
-                       ambient.intensity)
+        r_ave = effective_r_ave(ambient, rho)
+        self.tally.add(terms, direct, validity, r_ave, indirect, ambient.intensity)
         if indirect is not None:
             self.indirect_variance.append(indirect.variance)
         if baking.settings.smooth:  # what the world-space filter weighs its risk by, and
             # what it leaves as it is
             self.variance.append(light_variance(
-                terms, effective_r_ave(ambient, rho), ambient.intensity, direct, colours,
+                terms, r_ave, ambient.intensity, direct, colours,
                 None if indirect is None else indirect.variance, floor=False))
-            self.exact.append(np.zeros((len(texels), 3)) if direct is None
-                              else baking.sources.exact(direct, colours))
+            self.exact.append(baking.sources.exact(direct, colours))
 
 
 def writes_occlusion(settings: Resolved) -> bool:
