@@ -6,7 +6,10 @@ compiles every kernel into its ``__pycache__`` there, and the wheel carries the 
 the first bake and the first rebake after ``pip install`` compile nothing. The cache is keyed by
 each module's text and the environment (``baker/jit.py``), so it holds wherever the files are
 installed on a machine like this one, and a kernel whose key does not match is compiled as
-before. A warm-up that fails fails the install, saying why; ``BAKER_NO_WARM=1`` skips it (a
+before. Then the kernels are compiled once more, ahead of time, into the package's extension
+module ``baker/_kernels`` (``assets/compile_kernels.py``), which bakes call without importing
+numba; where it cannot be built (no C compiler), the install goes on and the bakes use the
+cache. A warm-up that fails fails the install, saying why; ``BAKER_NO_WARM=1`` skips it (a
 faster install, a slower first bake).
 """
 

@@ -209,7 +209,7 @@ def test_a_state_of_another_build_of_baker_means_a_full_bake(base, tmp_path, mon
 def test_the_code_fingerprint_covers_every_source_file_of_the_package(tmp_path):
     """Every ``.py`` under baker/, in any subpackage, is in the build's fingerprint: an edit, a
     new file or a file moved to another package changes it (states of two builds never mix)."""
-    from baker.rebake.diff import sources_digest
+    from baker.jit import sources_digest
 
     package = Path(baker.__file__).resolve().parent
     copy = tmp_path / "baker"

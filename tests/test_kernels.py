@@ -84,7 +84,7 @@ print(hash4(np.uint64(1), np.uint64(2), np.uint64(3), np.uint64(4)))
 def _run_kernel(cache: Path, *other_environment: str) -> tuple[str, str]:
     """(what the kernel returned, what numba's cache did) in a new process."""
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), NUMBA_DEBUG_CACHE="1",
-               PYTHONPATH=str(PACKAGE.parent))
+               PYTHONPATH=str(PACKAGE.parent), BAKER_JIT="1")  # numba's JIT: its cache
     done = subprocess.run([sys.executable, "-c", KERNEL_RUN, *other_environment], env=env,
                           capture_output=True, text=True, check=True)
     lines = done.stdout.strip().splitlines()

@@ -31,6 +31,7 @@ import numpy as np
 
 from baker.atlas.unwrap import baked_instances, frame_positions
 from baker.geometry.world import World
+from baker.jit import sources_digest
 from baker.gltf.scene import Scene
 from baker.rebake.state import digest
 from baker.settings import CALLER_ONLY, Resolved
@@ -103,15 +104,6 @@ def code_fingerprint() -> str:
         except metadata.PackageNotFoundError:
             versions.append(f"{name} (no metadata)")
     return digest(sources_digest(Path(__file__).resolve().parents[1]), *versions)
-
-
-def sources_digest(package: Path) -> str:
-    """A hash of every ``.py`` file under ``package`` (subpackages included), each by its path
-    relative to ``package`` and its bytes: a file moved, added, removed or edited changes it."""
-    sources = sorted(package.rglob("*.py"), key=lambda path: path.relative_to(package).as_posix())
-    return digest(*[part for path in sources
-                    for part in (path.relative_to(package).as_posix(),
-                                 np.frombuffer(path.read_bytes(), np.uint8))])
 
 
 def _authored_uv(scene: Scene, instance: int, uv: int | None) -> tuple[np.ndarray, ...]:
