@@ -93,7 +93,7 @@ def main() -> None:
         print(compile_ahead(package))
     except Exception as error:  # noqa: BLE001 — any failure leaves numba's cache to the bakes
         print(f"baker's kernels could not be compiled ahead of time ({type(error).__name__}: "
-              f"{error}); bakes will load them with numba, about 0.5 s more a process")
+              f"{error}); bakes will load them with numba, about 0.3 s more a process")
 
 
 if __name__ == "__main__":
