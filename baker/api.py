@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
+import baker.jit as jit
 from baker.errors import BakerError, InputError, OutputError
 from baker.gltf.container import read_document
 from baker.gltf.load import load
@@ -348,7 +349,7 @@ def _report(input_path: Path, output: Path, done, info, pages, times: dict[str, 
         "texels": done.tally.texels, "rays": done.tally.rays,
         "shadow_rays": done.tally.shadow_rays,
         "rays_per_second": done.tally.rays / times["trace"] if times["trace"] > 0 else 0.0,
-        "stage_seconds": times, "seconds": seconds,
+        "stage_seconds": times, "seconds": seconds, "kernels": jit.status(),
         "rmse_estimate": done.rmse_estimate(),
         "rmse_estimate_leaves_out": [] if done.sources is None else done.sources.unmeasured(),
         "validity": done.tally.states,

@@ -146,28 +146,32 @@ def _as_key(item) -> object:
     return tuple(_as_key(part) for part in item) if isinstance(item, list) else item
 
 
-def _ahead_of_time() -> dict[str, dict[tuple, tuple[Callable, int]]] | None:
-    """Kernel name (``module:qualname``) → {argument keys: (compiled function, how many of the
+def _ahead_of_time() -> tuple[dict[str, dict[tuple, tuple[Callable, int]]] | None, str]:
+    """(kernel name (``module:qualname``) → {argument keys: (compiled function, how many of the
     kernel's last arguments it takes their defaults for)} of the ahead-of-time module, or None
-    when there is none this package can use."""
+    when there is none this package can use; why not, when not)."""
     if os.environ.get("BAKER_JIT"):
-        return None
+        return None, "BAKER_JIT is set"
     try:
         index = json.loads(INDEX.read_text())
     except (OSError, ValueError):
-        return None
-    if index.get("built_for") != built_for() or index.get("sources") != sources_digest():
-        return None
+        return None, (f"no compiled module ({INDEX.name} is missing: the install could not build "
+                      "it, maybe for want of a C compiler)")
+    if index.get("sources") != sources_digest():
+        return None, "the compiled module is of other sources: install baker again"
+    if index.get("built_for") != built_for():
+        return None, ("the compiled module is for another Python, numpy or CPU: install baker "
+                      "again")
     try:
         module = importlib.import_module(EXTENSION)
-    except ImportError:
-        return None
+    except ImportError as error:
+        return None, f"the compiled module does not load ({error})"
     return {name: {_as_key(key): (getattr(module, export), defaults)
                    for key, export, defaults in entries}
-            for name, entries in index["kernels"].items()}
+            for name, entries in index["kernels"].items()}, ""
 
 
-_AHEAD = _ahead_of_time()
+_AHEAD, _WHY_NOT = _ahead_of_time()
 _KERNELS: list["Kernel"] = []
 _LOCK = threading.RLock()
 _NUMBA_STARTED: list[Callable[[], None]] = []  # run when numba starts (``on_numba``)
@@ -277,6 +281,16 @@ def _compile(kind: str, func: Callable):
         kernel = Kernel(func, kind, _AHEAD.get(f"{func.__module__}:{func.__qualname__}", {}))
         _KERNELS.append(kernel)
         return kernel
+
+
+def status() -> str:
+    """How this process's kernels are compiled (``baker --version``, a bake's report)."""
+    if _AHEAD is None:
+        return f"numba's JIT: {_WHY_NOT}"
+    if _numba_jit:
+        return ("compiled ahead of time; numba's JIT for argument types the install's "
+                "warm-up did not give")
+    return "compiled ahead of time"
 
 
 def jit(func: Callable):

@@ -61,15 +61,18 @@ def test_code_for_wider_types_takes_narrower_arguments_only():
 
 
 def _bake(folder: Path, scene: Path, name: str, **env) -> tuple[bytes, list[str]]:
-    """(the output's bytes, the heavy modules loaded) of a bake in a new process."""
+    """(the output's bytes, the heavy modules loaded, ``jit.status()``) of a bake in a new
+    process."""
     out = folder / f"{name}.glb"
     code = ("import sys, baker; "
             f"baker.bake({str(scene)!r}, {str(out)!r}, baker.Settings(rays=8, page_size=128, "
             "directional=True, smooth=True)); "
-            "print(sorted(m for m in ('numba', 'llvmlite.binding') if m in sys.modules))")
+            "print(sorted(m for m in ('numba', 'llvmlite.binding') if m in sys.modules)); "
+            "print(baker.jit.status())")
     done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True,
                           text=True, check=True, env=dict(os.environ, **env))
-    return out.read_bytes(), eval(done.stdout.strip().splitlines()[-1])
+    *_, modules, status = done.stdout.strip().splitlines()
+    return out.read_bytes(), eval(modules), status
 
 
 def _index_is_current() -> bool:
@@ -84,14 +87,15 @@ def test_a_bake_ahead_of_time_is_the_jit_s_bake_and_imports_no_numba(tmp_path):
     """The install's module (``pip install``, ``pip install -e .``: ``setup.py``) runs a bake
     of the demo scene with every kernel it needs, bit for bit as numba's JIT does."""
     assert _index_is_current(), (
-        "baker/_kernels.json is missing or older than the sources: `pip install -e .` builds it")
+        "baker/_kernels.json is missing or older than the sources: `python "
+        "assets/warm_kernels.py` (or `pip install -e .`) builds it")
     from assets.light_scenes import normal_mapped_floor
 
     scene = normal_mapped_floor().save(tmp_path / "floor.glb")
-    ahead, loaded = _bake(tmp_path, scene, "ahead")
-    jitted, jit_loaded = _bake(tmp_path, scene, "jitted", BAKER_JIT="1")
-    assert loaded == []
-    assert "numba" in jit_loaded
+    ahead, loaded, status = _bake(tmp_path, scene, "ahead")
+    jitted, jit_loaded, jit_status = _bake(tmp_path, scene, "jitted", BAKER_JIT="1")
+    assert (loaded, status) == ([], "compiled ahead of time")
+    assert "numba" in jit_loaded and jit_status == "numba's JIT: BAKER_JIT is set"
     assert ahead == jitted
 
 
@@ -101,10 +105,13 @@ def test_a_stale_module_is_not_used(tmp_path, monkeypatch):
     index.write_text(json.dumps({"built_for": jit.built_for(), "sources": "another",
                                  "kernels": {}}))
     monkeypatch.setattr(jit, "INDEX", index)
-    assert jit._ahead_of_time() is None
+    assert jit._ahead_of_time() == (None, "the compiled module is of other sources: install "
+                                          "baker again")
+    monkeypatch.setattr(jit, "INDEX", tmp_path / "missing.json")
+    assert jit._ahead_of_time()[0] is None
+    assert "missing" in jit._ahead_of_time()[1]
     monkeypatch.setenv("BAKER_JIT", "1")
-    monkeypatch.setattr(jit, "INDEX", jit.INDEX)
-    assert jit._ahead_of_time() is None
+    assert jit._ahead_of_time() == (None, "BAKER_JIT is set")
 
 
 @pytest.mark.parametrize("defaults", [0, 1])
@@ -124,3 +131,14 @@ def test_a_kernel_calls_its_compiled_function_with_the_defaults_it_was_compiled_
     a = np.zeros(3)
     assert (wrapped(a) if defaults else wrapped(a, 3.0)) == "compiled"
     assert calls[0][1:] == ((2.0,) if defaults else (3.0,))
+
+
+def test_the_version_says_how_the_kernels_are_compiled_and_why():
+    def version(**env) -> str:
+        return subprocess.run([sys.executable, "-m", "baker", "--version"], cwd=ROOT,
+                              capture_output=True, text=True, check=True,
+                              env=dict(os.environ, **env)).stdout
+    assert version(BAKER_JIT="1").splitlines()[1] == "kernels: numba's JIT: BAKER_JIT is set"
+    assert version().splitlines()[1] == (
+        "kernels: compiled ahead of time" if _index_is_current()
+        else "kernels: numba's JIT: the compiled module is of other sources: install baker again")

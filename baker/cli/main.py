@@ -34,12 +34,25 @@ def build_parser() -> argparse.ArgumentParser:
 
     parser = argparse.ArgumentParser(
         prog="baker", description="Bake lightmaps (obscurances with colour bleeding) into glTF scenes.")
-    parser.add_argument("--version", action="version", version=f"baker {baker.__version__}")
+    parser.add_argument("--version", action=_Version, nargs=0,
+                        help="show baker's version and how its kernels are compiled, and exit")
     parser.add_argument("--debug", action="store_true", help="show the traceback of an error")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in SUBCOMMANDS:
         import_module(f"baker.cli.{name}").add_parser(commands)
     return parser
+
+
+class _Version(argparse.Action):
+    """``--version``: baker's version, and whether its kernels run compiled ahead of time or
+    through numba's JIT, and why (``jit.status``: an install without a C compiler, or older
+    than its sources, runs about 0.3 s slower a bake)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        import baker.jit
+
+        print(f"baker {baker.__version__}\nkernels: {baker.jit.status()}")
+        parser.exit()
 
 
 class Terminated(BaseException):
