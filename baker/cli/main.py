@@ -48,7 +48,7 @@ class _Version(argparse.Action):
     through numba's JIT, and why (``jit.status``: an install without a C compiler, or older
     than its sources, runs about 0.3 s slower a bake)."""
 
-    def __call__(self, parser, namespace, values, option_string=None):
+    def __call__(self, parser, *_):  # argparse passes the namespace, values and option
         import baker.jit
 
         print(f"baker {baker.__version__}\nkernels: {baker.jit.status()}")
