@@ -27,9 +27,9 @@ sys.path.append(str(Path(__file__).resolve().parent.parent))  # assets/, after t
 import baker  # noqa: E402
 from assets.compile_kernels import compile_ahead  # noqa: E402
 from assets.foliage_scenes import tree  # noqa: E402
+from assets.light_scenes import normal_mapped_floor  # noqa: E402
 from assets.make_scenes import cornell_box, vase_room  # noqa: E402
 from assets.rebake_scenes import box_room, grid_boxes, moved  # noqa: E402
-from assets.light_scenes import normal_mapped_floor  # noqa: E402
 from assets.sky_images import save_hdr, sun  # noqa: E402
 
 SMALL = dict(rays=16, page_size=128)

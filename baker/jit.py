@@ -65,6 +65,13 @@ def sources_digest(package: Path = _PACKAGE) -> str:
     return sha.hexdigest()
 
 
+@functools.lru_cache(maxsize=1)
+def package_digest() -> str:
+    """``sources_digest`` of this baker package, once a process (the ahead-of-time module's
+    check and the bake state's code fingerprint both ask for it)."""
+    return sources_digest(_PACKAGE)
+
+
 def built_for() -> dict[str, str]:
     """What besides the sources an ahead-of-time module is only good for: Python, numpy, and
     the CPU its code was compiled for (code for another CPU may use instructions this one
@@ -157,7 +164,7 @@ def _ahead_of_time() -> tuple[dict[str, dict[tuple, tuple[Callable, int]]] | Non
     except (OSError, ValueError):
         return None, (f"no compiled module ({INDEX.name} is missing: the install could not build "
                       "it, maybe for want of a C compiler)")
-    if index.get("sources") != sources_digest():
+    if index.get("sources") != package_digest():
         return None, "the compiled module is of other sources: install baker again"
     if index.get("built_for") != built_for():
         return None, ("the compiled module is for another Python, numpy or CPU: install baker "
@@ -197,8 +204,7 @@ class Kernel:
             export = self._exports.get(keys) or self._taking(keys)
         if export is not None:
             compiled, defaults = export
-            return compiled(*args, *self.py_func.__defaults__[len(
-                self.py_func.__defaults__) - defaults:]) if defaults else compiled(*args)
+            return compiled(*args, *self.py_func.__defaults__[-defaults:] if defaults else ())
         if self.dispatcher is None:
             _start_numba()
         return self.dispatcher(*args, **keywords)

@@ -336,7 +336,8 @@ def _rays_kernel(technique, seed, keys, first, rays, dimension, extend, second, 
     directions (``fill_cosine``) and its rays (``_texel_rays``), the same bits as those
     kernels give over all texels at once (``cosine_directions`` then ``world_rays``) without
     their (k·rays,) float64 arrays in between: 45 → 20 ns a ray at 20,000 texels of 64 rays,
-    25 → 20 at a chunk's 4096; one origin a texel where it has one start, 20 → 11."""
+    25 → 20 at a chunk's 4096; one origin a texel where it has one start, the kernel alone on
+    4096 texels 13.8 → 10.6."""
     u, v = np.empty(rays), np.empty(rays)
     x, y, z = np.empty(rays), np.empty(rays), np.empty(rays)
     for i in range(len(keys)):

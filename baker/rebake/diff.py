@@ -31,8 +31,8 @@ import numpy as np
 
 from baker.atlas.unwrap import baked_instances, frame_positions
 from baker.geometry.world import World
-from baker.jit import sources_digest
 from baker.gltf.scene import Scene
+from baker.jit import package_digest
 from baker.rebake.state import digest
 from baker.settings import CALLER_ONLY, Resolved
 
@@ -103,7 +103,7 @@ def code_fingerprint() -> str:
             versions.append(f"{name} {metadata.version(name)}")
         except metadata.PackageNotFoundError:
             versions.append(f"{name} (no metadata)")
-    return digest(sources_digest(Path(__file__).resolve().parents[1]), *versions)
+    return digest(package_digest(), *versions)
 
 
 def _authored_uv(scene: Scene, instance: int, uv: int | None) -> tuple[np.ndarray, ...]:
