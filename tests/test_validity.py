@@ -389,3 +389,38 @@ def test_floor_beside_panels_matches_an_independent_tracer(panels_bake):
             worst = max(worst, abs(escaped[k] - w) / sigma)
     assert checked > 600 and obscurance_checked.sum() > 300
     assert worst < 3.0, worst
+
+
+@pytest.mark.parametrize("which", ["room", "panels"])
+def test_hemisphere_probes_decide_as_twelve_full_probes_would(which, room, panels_bake,
+                                                               tmp_path):
+    """``_back_fraction`` casts its last seven probes to d_max only where one of the first five
+    met a back face: 20,000 points laid at random in the leak room (inside its box and thick
+    walls, behind its thin ones) and among the panels, facing random ways, get the states
+    (invalid, enclosed) and the touching flags that all twelve probes cast to d_max give (an
+    independent count: the probes of ``hemisphere_probes``, Tracer.cast, Faces.back)."""
+    from baker.atlas.validity import (BACKFACE_TOLERANCE, ENCLOSED_FRACTION, HEMISPHERE_RAYS,
+                                      TOUCH, Faces, _back_fraction, hemisphere_probes)
+    from baker.rays.trace import ray_lift
+
+    d_max = 6.0 if which == "room" else PANEL_D_MAX
+    done = (computed(room, tmp_path, texel_density=DENSITY, rays=4, d_max=d_max)
+            if which == "room" else panels_bake[1])
+    world, rng = done.world, np.random.default_rng(5)
+    low, high = world.positions.min(axis=0), world.positions.max(axis=0)
+    position = low + rng.random((20_000, 3)) * (high - low)
+    normal = rng.normal(size=(20_000, 3))
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    size = np.full(20_000, 0.02)
+    tracer, faces = Tracer(world), Faces(done.scene, world)
+    fraction, touching = _back_fraction(tracer, faces, position, normal, size, d_max)
+    origins, directions = hemisphere_probes(position, normal, size, tracer.center)
+    hits = tracer.cast(origins, directions, d_max)
+    full = faces.back(hits.triangle, directions).reshape(-1, HEMISPHERE_RAYS).mean(axis=1)
+    lift = np.repeat(ray_lift(position, size, tracer.center), HEMISPHERE_RAYS)
+    touch = (hits.distance <= TOUCH * lift).reshape(-1, HEMISPHERE_RAYS).any(axis=1)
+    for tolerance in (BACKFACE_TOLERANCE, ENCLOSED_FRACTION):
+        np.testing.assert_array_equal(fraction >= tolerance, full >= tolerance)
+    np.testing.assert_array_equal(touching, touch)
+    assert (fraction <= full).all() and (full >= BACKFACE_TOLERANCE).sum() > 100
+    assert ((full > 0) & (full < BACKFACE_TOLERANCE)).sum() > 100

@@ -16,7 +16,9 @@ What the mature bakers do (Bakery, Godot's LightmapperRD, Unity's backface toler
    d_max; the fraction that meets back faces of single-sided surfaces says whether the point
    is inside geometry (at least ``BACKFACE_TOLERANCE``: under a box, in a thick wall) or in
    the open, maybe behind a single-sided panel (a wall, a pane, a fence, a card standing on a
-   floor: its back faces fill at most half of the hemisphere).
+   floor: its back faces fill at most half of the hemisphere). The last seven go that far only
+   where one of the first ``FIRST_PROBES`` met a back face: else the fraction stays below the
+   tolerance whatever they meet, and they look only for a surface touching the point.
 2. Tangent probes: from the sample point, lifted off the surface by the integrator's offset,
    ``TANGENT_RAYS`` short rays in the texel's plane, ``PROBE_RADIUS`` texel sides long. A ray
    that meets the *back* of a single-sided surface first means the sample is behind it: the
@@ -65,6 +67,10 @@ HEMISPHERE_RAYS = 12
 TOUCH = 2.0  # ray lifts: a probe hit this close to its origin touches (see Validity.touching)
 ENCLOSED_FRACTION = 0.9
 BACKFACE_TOLERANCE = 0.6
+FIRST_PROBES = HEMISPHERE_RAYS + 1 - next(c for c in range(HEMISPHERE_RAYS + 1)
+                                          if c / HEMISPHERE_RAYS >= BACKFACE_TOLERANCE)
+"""Hemisphere probes always cast to d_max (5 of 12): if none of them meets a back face, the
+others cannot make the fraction ``BACKFACE_TOLERANCE`` (``_back_fraction``)."""
 
 VALID, MOVED, INVALID, ENCLOSED = 0, 1, 2, 3
 STATE_NAMES = ("valid", "moved", "invalid", "enclosed")
@@ -80,7 +86,8 @@ class Validity:
     (filled from neighbours later), ENCLOSED (inside a solid: value 0). moved_by: (N,) float64
     world distance each sample point moved past back faces (0 for most; the terminator push is
     not counted). back_fraction: (N,) float64 fraction of
-    the hemisphere probes that met a back face. touching: (N,) bool, some probe met a surface
+    the hemisphere probes that met a back face within their reach (``_back_fraction``: all of
+    them where it could reach ``BACKFACE_TOLERANCE``). touching: (N,) bool, some probe met a surface
     within ``TOUCH`` ray lifts of its origin: the point touches other geometry, where which of
     the triangles meeting there Embree reports first can depend on its whole BVH — so on every
     object in the scene, near or not (an incremental rebake redoes these texels). Rare: sample
@@ -317,14 +324,34 @@ def _fan(position: np.ndarray, normal: np.ndarray, t1: np.ndarray, t2: np.ndarra
 def _back_fraction(tracer: Tracer, faces: Faces, position: np.ndarray, normal: np.ndarray,
                    size: np.ndarray, d_max: float) -> tuple[np.ndarray, np.ndarray]:
     """(k,) fraction of the fixed hemisphere probes from each point that meet a back face, and
-    (k,) bool whether one touches (meets a surface within ``TOUCH`` ray lifts)."""
+    (k,) bool whether one touches (meets a surface within ``TOUCH`` ray lifts).
+
+    The first ``FIRST_PROBES`` of a point's probes reach d_max; the others reach only ``TOUCH``
+    ray lifts (all touching asks of them) unless one of the first met a back face, when they
+    too are cast to d_max. Where none did, the fraction cannot reach ``BACKFACE_TOLERANCE``
+    whatever the others would meet: the texel's state and moves are those of twelve full
+    probes, for 45 % fewer long rays (most texels are in the open). The fraction counts the
+    back faces the probes met within their reach."""
     t1, t2 = probe_frames(normal)
     lift = ray_lift(position, size, tracer.center)
-    directions, hits = _cast_fan(tracer, position, normal, t1, t2, lift,
-                                 hemisphere_directions(HEMISPHERE_RAYS),
-                                 np.full(len(position) * HEMISPHERE_RAYS, d_max))
-    fraction, touching = np.empty(len(position)), np.empty(len(position), np.bool_)
-    _count_backs(directions, hits.triangle, hits.distance, lift, faces.normals, faces.single,
+    k, m, local = len(position), HEMISPHERE_RAYS, hemisphere_directions(HEMISPHERE_RAYS)
+    reach = np.empty((k, m))
+    reach[:, :FIRST_PROBES] = d_max
+    # A hair past TOUCH lifts, so float32 rounding never shortens a ray that must touch.
+    reach[:, FIRST_PROBES:] = np.minimum(d_max, TOUCH * (1 + 1e-6) * lift)[:, None]
+    directions, hits = _cast_fan(tracer, position, normal, t1, t2, lift, local, reach.ravel())
+    triangle, distance = hits.triangle, hits.distance
+    backs = faces.back(triangle, directions).reshape(k, m)
+    further = np.flatnonzero(backs[:, :FIRST_PROBES].any(axis=1) & (reach[:, -1] < d_max))
+    if len(further):  # the rest of their probes to d_max, as they were cast at first
+        _, more = _cast_fan(tracer, position[further], normal[further], t1[further],
+                            t2[further], lift[further], local[FIRST_PROBES:],
+                            np.full(len(further) * (m - FIRST_PROBES), d_max))
+        rows = (further[:, None] * m + np.arange(FIRST_PROBES, m)).ravel()
+        triangle, distance = triangle.copy(), distance.copy()
+        triangle[rows], distance[rows] = more.triangle, more.distance
+    fraction, touching = np.empty(k), np.empty(k, np.bool_)
+    _count_backs(directions, triangle, distance, lift, faces.normals, faces.single,
                  fraction, touching)
     return fraction, touching
 
