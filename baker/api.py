@@ -29,6 +29,7 @@ from baker.pipeline import cluster
 from baker.pipeline.full import Computed, compute, writes_occlusion
 from baker.pipeline.input_warnings import input_warnings
 from baker.pipeline.plan import Plan
+from baker.rays import native
 from baker.rebake.asked import asked_settings
 from baker.rebake.diff import code_fingerprint
 from baker.rebake.fallback import FullBake
@@ -326,6 +327,12 @@ def write_output(done: Computed, pages: list[EncodedPage], output: str | os.Path
     return write(done.scene, done.atlas, pages, Path(output), options, outputs, steps)
 
 
+def build_status() -> dict[str, str]:
+    """How this install runs bakes (``baker --version``, the report): its kernels, compiled
+    ahead of time or by numba (``jit.status``), and what casts its rays (``native.engine``)."""
+    return {"kernels": jit.status(), "rays": native.engine()}
+
+
 def cluster_identity() -> dict[str, str]:
     """What the driver and every worker of a cluster must share (``pipeline.cluster``): baker's
     code (``rebake.diff.code_fingerprint``), Python's and the libraries' versions. Run on each
@@ -349,7 +356,8 @@ def _report(input_path: Path, output: Path, done, info, pages, times: dict[str, 
         "texels": done.tally.texels, "rays": done.tally.rays,
         "shadow_rays": done.tally.shadow_rays,
         "rays_per_second": done.tally.rays / times["trace"] if times["trace"] > 0 else 0.0,
-        "stage_seconds": times, "seconds": seconds, "kernels": jit.status(),
+        "stage_seconds": times, "seconds": seconds, "kernels": build_status()["kernels"],
+        "rays_engine": build_status()["rays"],
         "rmse_estimate": done.rmse_estimate(),
         "rmse_estimate_leaves_out": [] if done.sources is None else done.sources.unmeasured(),
         "validity": done.tally.states,

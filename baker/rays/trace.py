@@ -1,4 +1,4 @@
-"""The only module that talks to Embree (through embreex).
+"""The only module that talks to Embree: through baker's own C calls (``native``), else embreex.
 
 The scene is built once from every world triangle, recentred on the world's centre so that
 float32 keeps its precision far from the origin; callers pass float64 world coordinates and get
@@ -24,6 +24,7 @@ from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
 from baker.geometry.world import World
+from baker.rays import native
 from baker.rays.dimensions import alpha_dimension
 from baker.rays.sampling import hash_u32
 
@@ -177,6 +178,28 @@ class RayCaster(Occluder, Protocol):
                    lengths: np.ndarray) -> LocalHits: ...
 
 
+def embree_mesh(world: World, hidden: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The world's triangles as Embree takes them: (V + 1, 3) float32 vertices − ``center``,
+    (T, 3) int32 triangles. Shared vertices (fewer than 3 per triangle: embreex copies them one
+    by one), the same float32 corners as each triangle's own; ``hidden`` (T,) bool triangles
+    point at one NaN vertex after the others, which Embree leaves out."""
+    vertices = np.vstack([world.positions - world.center, np.full((1, 3), np.nan)])
+    triangles = world.triangles.copy()
+    if hidden is not None:
+        triangles[hidden] = len(world.positions)
+    return vertices.astype(np.float32), triangles.astype(np.int32)
+
+
+def embreex_scene(vertices: np.ndarray, triangles: np.ndarray) -> rtcore_scene.EmbreeScene:
+    """embreex's scene of ``vertices`` (V, 3) float32 and ``triangles`` (T, 3) int32, committed
+    (its first run commits it: done here, not from several threads at once)."""
+    scene = rtcore_scene.EmbreeScene()
+    TriangleMesh(scene, vertices, triangles)
+    scene.run(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32),
+              dists=np.zeros(1, np.float32))
+    return scene
+
+
 class Tracer:
     """Casts rays against all of a ``World``'s triangles, or all but the ``hidden`` ones."""
 
@@ -186,19 +209,10 @@ class Tracer:
         self.center = world.center
         self.triangle_count = len(world.triangles)
         self.alpha = world.alpha  # materials.AlphaTest or None (nothing to let through)
-        self._scene = rtcore_scene.EmbreeScene()
+        self._scene = None
         if self.triangle_count:
-            # Shared vertices (embreex copies them one by one: fewer than 3 per triangle is
-            # faster), the same float32 corners as each triangle's own; hidden triangles
-            # point at one NaN vertex after the others.
-            vertices = np.vstack([world.positions - self.center, np.full((1, 3), np.nan)])
-            triangles = world.triangles.copy()
-            if hidden is not None:
-                triangles[hidden] = len(world.positions)
-            TriangleMesh(self._scene, vertices.astype(np.float32), triangles.astype(np.int32))
-            # The first run commits the scene; do it here, not from several threads at once.
-            self._scene.run(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32),
-                            dists=np.zeros(1, np.float32))
+            mesh = embree_mesh(world, hidden)
+            self._scene = native.scene(*mesh) or embreex_scene(*mesh)
 
     def cast(self, origins: np.ndarray, directions: np.ndarray, length: np.ndarray | float) -> Hits:
         """Nearest hit of each ray within ``length``.

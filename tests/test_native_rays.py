@@ -1,0 +1,124 @@
+"""baker's own Embree calls (``rays.native``) against embreex's, on the same scene and rays."""
+
+import sys
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+import pytest
+
+from assets.make_scenes import cornell_box
+from baker.geometry.world import build_world
+from baker.gltf.load import load
+from baker.rays import native
+from baker.rays.trace import Tracer, embree_mesh, embreex_scene
+
+
+@pytest.fixture(scope="module")
+def world(tmp_path_factory):
+    return build_world(load(cornell_box().save(tmp_path_factory.mktemp("c") / "c.glb")))
+
+
+def _rays(world, n: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """n rays in the tracer's frame, float32: origins anywhere in the room's bounds (some
+    inside its boxes), random directions, lengths up to the room's size."""
+    rng = np.random.default_rng(seed)
+    low, high = world.positions.min(axis=0), world.positions.max(axis=0)
+    origins = low + rng.random((n, 3)) * (high - low) - world.center
+    directions = rng.normal(size=(n, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    lengths = rng.random(n) * np.linalg.norm(high - low)
+    return origins.astype(np.float32), directions.astype(np.float32), lengths.astype(np.float32)
+
+
+def test_the_install_built_the_native_calls():
+    """On Linux the install compiles them (setup.py) and bakes use them."""
+    assert sys.platform.startswith("linux")
+    assert native.engine() == "Embree 4 through baker's native calls", native.engine()
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_native_hits_are_embreexs_to_the_bit(world, seed):
+    """200,000 rays, some from inside the room's boxes, some ending short of any surface: the
+    same triangles, distances and barycentrics as embreex's, bit for bit (the same library,
+    the same scene flags: a bake does not depend on which of the two cast its rays)."""
+    origins, directions, lengths = _rays(world, 200_000, seed)
+    mesh = embree_mesh(world)
+    ours = native.scene(*mesh).run(origins, directions, lengths.copy(), output=1)
+    theirs = embreex_scene(*mesh).run(origins, directions, dists=lengths.copy(), output=1)
+    hit = theirs["primID"] >= 0
+    assert 0.5 < hit.mean() < 1
+    for key in ("primID", "tfar"):
+        assert ours[key].tobytes() == theirs[key].tobytes(), key
+    for key in ("u", "v"):  # embreex leaves a miss's from the ray before
+        assert ours[key][hit].tobytes() == theirs[key][hit].tobytes(), key
+
+
+def test_a_surface_through_a_rays_origin_is_met_as_embreex_meets_it():
+    """A ray that starts on a triangle's plane, inside it, meets it at distance 0, as
+    embreex's robust scene does (the validity probes of texels on another surface's plane, as
+    where a wall meets a floor, rely on it); one that starts a hair off the plane, going away
+    from it, does not."""
+    vertices = np.array([[-1, 0, -1], [1, 0, -1], [0, 0, 1], [np.nan] * 3], np.float32)
+    scene = native.scene(vertices, np.array([[0, 1, 2]], np.int32))
+    origins = np.array([[0, 0, 0], [0, 1e-6, 0], [0, 0, 0]], np.float32)
+    directions = np.array([[0, 1, 0], [0, 1, 0], [0, -1, 0]], np.float32)
+    hits = scene.run(origins, directions, np.full(3, 5, np.float32), output=1)
+    assert list(hits["primID"]) == [0, -1, 0] and list(hits["tfar"]) == [0, 5, 0]
+
+
+def test_occlusion_is_whether_the_nearest_hit_lies_within_the_ray(world):
+    """OCCLUDED says 0 exactly where INTERSECT finds a hit, −1 elsewhere (the same rays and
+    scene, lengths left as they were)."""
+    origins, directions, lengths = _rays(world, 100_000, 2)
+    scene = native.scene(*embree_mesh(world))
+    kept = lengths.copy()
+    blocked = scene.run(origins, directions, lengths, query="OCCLUDED")
+    np.testing.assert_array_equal(lengths, kept)
+    hits = scene.run(origins, directions, lengths.copy(), output=1)["primID"]
+    np.testing.assert_array_equal(blocked == 0, hits >= 0)
+    assert set(np.unique(blocked)) == {0, -1}
+
+
+def test_native_hits_do_not_depend_on_the_scene_build_chunks_or_threads(world):
+    """Two scenes of the same mesh, and one call against 97 chunks cast from 2 threads, give
+    the same bytes."""
+    origins, directions, lengths = _rays(world, 100_000, 3)
+    mesh = embree_mesh(world)
+    one = native.scene(*mesh).run(origins, directions, lengths.copy(), output=1)
+    other = native.scene(*mesh)
+    parts = np.array_split(np.arange(len(lengths)), 97)
+
+    def cast(rows):
+        return other.run(origins[rows], directions[rows], lengths[rows], output=1)
+
+    with ThreadPoolExecutor(2) as pool:
+        chunks = list(pool.map(cast, parts))
+    for key in ("primID", "tfar", "u", "v"):
+        assert np.concatenate([c[key] for c in chunks]).tobytes() == one[key].tobytes()
+
+
+def test_hidden_triangles_are_never_hit(world):
+    """A Tracer with the room's first half of triangles hidden meets only the others, and
+    meets those where the whole room's tracer does when it hits them first."""
+    hidden = np.zeros(len(world.triangles), bool)
+    hidden[: len(hidden) // 2] = True
+    origins, directions, lengths = _rays(world, 100_000, 4)
+    part = Tracer(world, hidden=hidden).cast_local(origins, directions, lengths.copy())
+    whole = Tracer(world).cast_local(origins, directions, lengths.copy())
+    assert (part.triangle >= 0).any() and not hidden[part.triangle[part.triangle >= 0]].any()
+    first = (whole.triangle >= 0) & ~hidden[np.maximum(whole.triangle, 0)]
+    assert first.any()
+    np.testing.assert_array_equal(part.triangle[first], whole.triangle[first])
+
+
+def test_without_the_native_calls_the_tracer_uses_embreex(world, monkeypatch):
+    """Where the library did not build, ``native.scene`` is None and the Tracer casts through
+    embreex: the same hits as embreex's own scene, bit for bit."""
+    monkeypatch.setattr(native, "_NATIVE", None)
+    assert native.scene(*embree_mesh(world)) is None and native.engine().startswith("embreex")
+    origins, directions, lengths = _rays(world, 50_000, 5)
+    got = Tracer(world).cast_local(origins, directions, lengths.copy())
+    theirs = embreex_scene(*embree_mesh(world)).run(origins, directions, dists=lengths.copy(),
+                                                    output=1)
+    np.testing.assert_array_equal(got.triangle, theirs["primID"])
+    np.testing.assert_array_equal(got.distance, theirs["tfar"])
