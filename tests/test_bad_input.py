@@ -32,6 +32,7 @@ import pytest
 import baker
 from assets.gltf_builder import GltfBuilder, box, quad
 from assets.make_scenes import checker, cornell_box
+from baker.gltf.context import MAX_ALBEDO
 from baker.gltf.load import load
 from baker.run.parallel import run_chunks
 from baker.cli.main import main
@@ -609,3 +610,61 @@ def test_killing_a_real_bake_leaves_the_previous_output(tmp_path, how, threads):
     assert snapshot(tmp_path) == before
     assert (tmp_path / "baked.glb").read_bytes() == PREVIOUS
     assert not [p for p in tmp_path.iterdir() if p.name.endswith(".tmp")]
+
+
+@pytest.mark.parametrize("attributes", [0, "POSITION", [1, 2]])
+def test_primitive_attributes_that_are_not_an_object_are_named(tmp_path, capsys, attributes):
+    """A primitive whose attributes are a number, a string or a list (a fuzzed file) is
+    refused naming it, not read as an object."""
+    path, document, _ = gltf_pair(tmp_path)
+    document["meshes"][1]["primitives"][0]["attributes"] = attributes
+    refuses(tmp_path, capsys, rewrite(path, document), "meshes[1].primitives[0].attributes",
+            "not a JSON object")
+
+
+@pytest.mark.parametrize("where", ["emissive strength", "light intensity", "light colour"])
+def test_light_past_any_real_one_is_refused_naming_it(tmp_path, capsys, where):
+    """Emission or a punctual light of 1e300 (finite, but its square is not) is refused,
+    naming the material or light, with the bound; 1e12 still bakes (and reads back)."""
+    b = small_scene()
+    if where == "emissive strength":
+        b.material("lamp", (1, 1, 1), emissive=(1, 1, 1), emissive_strength=1e300)
+        b.node("lamp", b.shape_mesh("lamp", quad(0.2, 0.2), material=2), translation=(0, 1, 0))
+        at = "materials[2].extensions.KHR_materials_emissive_strength.emissiveStrength"
+    else:
+        intensity, colour = (1e300, (1, 1, 1)) if where == "light intensity" else (5, (1e300, 1, 1))
+        light = b.light("point", intensity=intensity, color=colour)
+        b.node("bulb", extensions={"KHR_lights_punctual": {"light": light}}, translation=(0, 1, 0))
+        at = "extensions.KHR_lights_punctual.lights[0].intensity"
+    path, document, _ = gltf_pair(tmp_path, b)
+    refuses(tmp_path, capsys, path, at, "above 1e+30, past any real light")
+    text = path.read_text().replace("1e+300", "1000000000000.0")
+    code, _, err = bake_cli(capsys, "bake", str(rewrite(path, json.loads(text))), "-o",
+                            str(tmp_path / "ok.glb"), *FAST)
+    assert code == 0, err
+    load(tmp_path / "ok.glb")  # its emissive strengths, up to MAX_LIGHT, read back
+
+
+def test_a_base_colour_past_any_albedo_is_baked_at_the_bound_with_a_warning(tmp_path, capsys):
+    """A baseColorFactor of [0.6, 1e308, 0.2] (the spec's are at most 1; baker bakes up to
+    ``MAX_ALBEDO``) bakes the lightmap pages [0.6, MAX_ALBEDO, 0.2] would, byte for byte, and
+    the report's warnings name the clamped factor."""
+    path, document, _ = gltf_pair(tmp_path)
+    box = next(i for i, m in enumerate(document["materials"]) if m["name"] == "box")
+    factor = document["materials"][box]["pbrMetallicRoughness"]["baseColorFactor"]
+    outputs = []
+    for name, value in (("clamped", 1e308), ("bound", MAX_ALBEDO)):
+        factor[1] = value
+        output, report = tmp_path / name / "baked.glb", tmp_path / f"{name}.json"
+        code, _, err = bake_cli(capsys, "bake", str(rewrite(path, document)), "-o", str(output),
+                                "--report", str(report), "--lightmaps", str(tmp_path / name),
+                                "--no-state", *FAST)
+        assert code == 0, err
+        pages = sorted(p for p in (tmp_path / name).iterdir() if p.suffix == ".png")
+        assert pages
+        outputs.append(([p.read_bytes() for p in pages],
+                        json.loads(report.read_text())["warnings"]))
+    (clamped, warned), (one, quiet) = outputs
+    assert clamped == one
+    assert any("1e+308" in text and "outside [0, 1000]" in text for text in warned)
+    assert not any("outside [0, 1000]" in text for text in quiet)

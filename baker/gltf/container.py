@@ -66,6 +66,8 @@ def read_document(path: str | Path, folder: SceneFolder | None = None, contained
     raw = _parse_json(text, file)
     _check_asset(raw, file)
     _check_arrays(raw, file)
+    _check_primitives(raw, file)
+    _check_buffer_views(raw, file)
     budget.check_nodes(raw, file)
     check_references(raw, file)
     _check_required_extensions(raw, file)
@@ -312,6 +314,51 @@ def _check_arrays(raw: dict, file: str) -> None:
         for i, item in enumerate(items):
             if not isinstance(item, dict):
                 raise invalid("is not a JSON object", file, f"{key}[{i}]")
+
+
+def _check_primitives(raw: dict, file: str) -> None:
+    """Require each mesh's primitives, where present, to be an array of objects, and each
+    primitive's attributes to be an object (pygltflib would keep a number as it is, or fail
+    without saying where)."""
+    for i, mesh in enumerate(raw.get("meshes", [])):
+        primitives = mesh.get("primitives", [])
+        if not isinstance(primitives, list):
+            raise invalid("is not an array", file, f"meshes[{i}].primitives")
+        for j, primitive in enumerate(primitives):
+            where = f"meshes[{i}].primitives[{j}]"
+            if not isinstance(primitive, dict):
+                raise invalid("is not a JSON object", file, where)
+            if not isinstance(primitive.get("attributes", {}), dict):
+                raise invalid(f"attributes is {primitive['attributes']!r}, not a JSON object",
+                              file, f"{where}.attributes")
+
+
+def _check_buffer_views(raw: dict, file: str) -> None:
+    """Require each bufferView, read or not, to name its buffer and to lie within it (the
+    spec's required ``buffer`` and ``byteLength``, a ``byteOffset`` ≥ 0): the output keeps
+    every view, re-pointed into one buffer. The buffer's index is checked with every other
+    index (``references.check_references``)."""
+    buffers = raw.get("buffers", [])
+    for i, view in enumerate(raw.get("bufferViews", [])):
+        where = f"bufferViews[{i}]"
+        for key, low in (("buffer", 0), ("byteLength", 1), ("byteOffset", 0)):
+            value = view.get(key, 0 if key == "byteOffset" else None)
+            if value is None:
+                raise invalid(f"has no {key}, which the spec requires", file, where)
+            if not _whole(value) or value < low:
+                raise invalid(f"{key} is {value!r}, not a whole number ≥ {low}", file,
+                              f"{where}.{key}")
+        buffer, end = int(view["buffer"]), int(view.get("byteOffset", 0) + view["byteLength"])
+        size = buffers[buffer].get("byteLength") if buffer < len(buffers) else None
+        if _whole(size) and end > size:
+            raise invalid(f"ends at byte {end:,}, past its buffer's byteLength {int(size):,}",
+                          file, where)
+
+
+def _whole(value: Any) -> bool:
+    """Whether a JSON value is a whole number (an integer, or a float with no fraction)."""
+    return (isinstance(value, int) and not isinstance(value, bool)) or (
+        isinstance(value, float) and value.is_integer())
 
 
 def _check_required_extensions(raw: dict, file: str) -> None:

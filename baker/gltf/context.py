@@ -38,12 +38,35 @@ class Context:
             self.skipped.append(entry)
 
 
+MAX_LIGHT = 1e30
+"""The largest emission (emissiveFactor × emissiveStrength) or light colour × intensity baker
+bakes, and the brightest lightmap page it writes (``image.encode.encode``, so that baker reads
+its own outputs back): far past any real light (the sun's luminance is 1.6·10⁹ cd/m²), yet its
+squares and products with areas stay far from float64's range (10³⁰⁰'s do not)."""
+
+MAX_ALBEDO = 1e3
+"""The largest colour factor or vertex colour baker bakes as given (the spec's are at most 1;
+above 1 a surface reflects more than it receives, which the obscurance's series bounds:
+``light.ambient``); above it, or below 0, one is clamped with a warning (10³⁰⁸ made a page of
+infinite intensity)."""
+
 REEXPORT = "re-export the asset from your DCC tool; the Khronos glTF Validator shows what is wrong"
 
 
 def invalid(message: str, file: str, where: str) -> InputError:
     """An InputError for data that breaks the glTF spec; the fix is always to export again."""
     return InputError(message, file=file, where=where, fix=REEXPORT)
+
+
+def attributes_of(primitive: Any) -> dict[str, Any]:
+    """A mesh primitive's attributes as {name: accessor index}, those the file leaves out (None)
+    dropped (pygltflib gives an ``Attributes`` or, for names it does not know, a dict; the
+    container refused any other JSON: ``container._check_primitives``)."""
+    raw = primitive.attributes
+    if raw is None:
+        return {}
+    return {k: v for k, v in (raw if isinstance(raw, dict) else vars(raw)).items()
+            if v is not None}
 
 
 def or_default(value: Any, default: Any) -> Any:

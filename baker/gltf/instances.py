@@ -12,7 +12,7 @@ import numpy as np
 from baker.errors import InputError
 from baker.gltf import budget
 from baker.gltf.accessors import TYPE_SHAPES
-from baker.gltf.context import Context, checked_item, schema
+from baker.gltf.context import Context, attributes_of, checked_item, schema
 from baker.gltf.read_meshes import read_mesh
 from baker.gltf.read_nodes import animated_nodes, gpu_instances, moving_nodes
 from baker.gltf.scene import Instance, Material, Primitive
@@ -180,10 +180,7 @@ def _read_accessors(ctx: Context, placements: list[tuple[int, np.ndarray]]
 def _accessors_of(primitive: Any) -> list[tuple[str, Any]]:
     """(JSON path within the primitive, accessor index) of every accessor of a primitive baker
     reads: its attributes and its indices."""
-    attributes = primitive.attributes
-    items = {} if attributes is None else (
-        attributes if isinstance(attributes, dict) else vars(attributes))
-    return ([(f"attributes.{k}", v) for k, v in items.items() if v is not None]
+    return ([(f"attributes.{k}", v) for k, v in attributes_of(primitive).items()]
             + [("indices", primitive.indices)])
 
 

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from baker.gltf.context import Context, checked_item, finite, invalid, or_default, schema
+from baker.errors import InputError
+from baker.gltf.context import MAX_LIGHT, Context, checked_item, finite, invalid, or_default, schema
 from baker.punctual import Light
 
 
@@ -53,6 +54,12 @@ def _read_light(ctx: Context, definition: dict, index: int, node: int, world: np
     intensity = finite(ctx, [or_default(definition.get("intensity"), 1.0)], 1, f"{where}.intensity")[0]
     if (colour < 0).any() or intensity < 0:
         raise invalid("light colour and intensity must not be negative", ctx.file, where)
+    if (colour * intensity).max() > MAX_LIGHT:
+        raise InputError(f"light colour {colour.tolist()} × intensity {intensity:g} is above "
+                         f"{MAX_LIGHT:g}, past any real light", file=ctx.file,
+                         where=f"{where}.intensity",
+                         fix="check the light's intensity (candela for point and spot lights, "
+                             "lux for directional ones) and export it again")
     light_range = float("inf")
     if kind != "directional" and definition.get("range") is not None:
         light_range = float(finite(ctx, [definition["range"]], 1, f"{where}.range")[0])

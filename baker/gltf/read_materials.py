@@ -12,7 +12,8 @@ import pygltflib
 
 from baker.errors import InputError
 from baker.gltf import budget, images
-from baker.gltf.context import Context, checked_item, finite, invalid, or_default, referred, schema
+from baker.gltf.context import (MAX_ALBEDO, MAX_LIGHT, Context, checked_item, finite, invalid, or_default,
+                                referred, schema)
 from baker.gltf.extensions import MATERIAL_EXTENSIONS
 from baker.gltf.read_images import decode_image
 from baker.gltf.scene import REPEAT, Material, TextureRef
@@ -44,7 +45,8 @@ def _read_material(ctx: Context, i: int, material: pygltflib.Material) -> Materi
     extensions = material.extensions or {}
     strength = (extensions.get("KHR_materials_emissive_strength") or {}).get("emissiveStrength", 1.0)
     base = _base_terms(ctx, material, extensions, where)
-    emissive = _factor(ctx, material.emissiveFactor, [0.0, 0.0, 0.0], f"{where}.emissiveFactor")
+    emissive = _factor(ctx, material.emissiveFactor, [0.0, 0.0, 0.0], f"{where}.emissiveFactor",
+                       colour=False)  # checked with its strength (``_emission``)
     alpha_mode = material.alphaMode or "OPAQUE"
     if alpha_mode not in ("OPAQUE", "MASK", "BLEND"):
         ctx.skip(f"{where}.alphaMode", f"alphaMode {alpha_mode!r} is not OPAQUE, MASK or BLEND: "
@@ -173,24 +175,38 @@ def _material_number(ctx: Context, values: dict, key: str, default: float, low: 
 
 
 def _emission(ctx: Context, factor: np.ndarray, strength: Any, where: str) -> np.ndarray:
-    """emissiveFactor × KHR_materials_emissive_strength, finite and ≥ 0 (1e-6 to 1e6 and beyond
-    bake; NaN, infinity or a negative value is refused)."""
+    """emissiveFactor × KHR_materials_emissive_strength, finite, ≥ 0 and at most
+    ``MAX_LIGHT`` (1e-6 to 1e6 and beyond bake; NaN, infinity, a negative value or one past
+    the bound is refused)."""
     strength_where = f"{where}.extensions.KHR_materials_emissive_strength.emissiveStrength"
     if isinstance(strength, bool) or not isinstance(strength, (int, float)):
         raise invalid(f"emissiveStrength {strength!r} is not a number", ctx.file, strength_where)
-    emission = factor * float(strength)
+    with np.errstate(over="ignore"):
+        emission = factor * float(strength)
     if not (np.isfinite(emission).all() and (emission >= 0).all() and strength >= 0):
         raise invalid(f"emission {factor.tolist()} × {strength!r} is not a finite number ≥ 0",
                       ctx.file, strength_where if not (factor < 0).any() else f"{where}.emissiveFactor")
+    if emission.max() > MAX_LIGHT:
+        raise InputError(f"emission {factor.tolist()} × {strength!r} is above {MAX_LIGHT:g}, "
+                         "past any real light", file=ctx.file, where=strength_where,
+                         fix="check the emissive strength (it multiplies emissiveFactor) "
+                             "and export the material again")
     return emission
 
 
-def _factor(ctx: Context, value: Any, default: list[float], where: str) -> np.ndarray:
-    """A material factor as a finite float64 vector of the default's length."""
+def _factor(ctx: Context, value: Any, default: list[float], where: str,
+            colour: bool = True) -> np.ndarray:
+    """A material factor as a finite float64 vector of the default's length; a colour
+    (``colour``) clamped to [0, ``MAX_ALBEDO``], with a warning in ``ctx.skipped`` where it is
+    not."""
     vector = np.asarray(or_default(value, default), dtype=np.float64)
     if vector.shape != (len(default),) or not np.isfinite(vector).all():
         raise invalid(f"expected {len(default)} finite numbers, found {value!r}", ctx.file, where)
-    return vector
+    clamped = np.clip(vector, 0.0, MAX_ALBEDO) if colour else vector
+    if not np.array_equal(clamped, vector):
+        ctx.skip(where, f"{vector.tolist()} is outside [0, {MAX_ALBEDO:g}]: {clamped.tolist()} "
+                        "is used")
+    return clamped
 
 
 MAX_TEXCOORD_SETS = 32

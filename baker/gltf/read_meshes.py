@@ -8,7 +8,8 @@ import pygltflib
 
 from baker.errors import InputError
 from baker.gltf.accessors import read_accessor
-from baker.gltf.context import Context, checked_item, invalid, or_default, referred, schema
+from baker.gltf.context import (MAX_ALBEDO, Context, attributes_of, checked_item, invalid, or_default, referred,
+                                schema)
 from baker.gltf.scene import Primitive
 
 
@@ -44,8 +45,7 @@ def _read_primitive(
     if mode not in (_TRIANGLES, _STRIP, _FAN):
         ctx.skip(where, f"mode {_MODE_NAMES.get(mode, mode)}: not triangles")
         return None
-    raw = primitive.attributes
-    attributes = {k: v for k, v in (raw if isinstance(raw, dict) else vars(raw)).items() if v is not None}
+    attributes = attributes_of(primitive)
     if "POSITION" not in attributes:
         ctx.skip(where, "no POSITION attribute: nothing to place")
         return None
@@ -105,6 +105,11 @@ def read_attribute(
         used = " (the triangle's own normal is used)" if name == "NORMAL" else ""
         ctx.skip(attribute_where, f"{int(bad.any(axis=1).sum())} vertices had NaN or infinite "
                                   f"values: set to {fallback:g}{used}")
+    outside = ((values < 0) | (values > MAX_ALBEDO)).any(axis=1)
+    if name.startswith("COLOR_") and outside.any():
+        values = np.clip(values, 0.0, MAX_ALBEDO)
+        ctx.skip(attribute_where, f"{int(outside.sum())} vertices had colours outside "
+                                  f"[0, {MAX_ALBEDO:g}]: clamped")
     return values
 
 

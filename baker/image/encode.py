@@ -27,7 +27,9 @@ from dataclasses import dataclass
 import numpy as np
 from PIL import Image as PILImage
 
+from baker.errors import InputError
 from baker.geometry.surface import luminance
+from baker.gltf.context import MAX_LIGHT
 from baker.image.compose import Lightmaps
 from baker.jit import jit
 from baker.light.directional import page_texels
@@ -212,6 +214,10 @@ def encode(lightmaps: Lightmaps, encoding: str, occlusion: bool,
     pages = []
     for p, (light, covered) in enumerate(zip(lightmaps.light, lightmaps.covered)):
         intensity, peak, clipped = page_scale(light, covered, clip_percentile)
+        if not intensity <= MAX_LIGHT:
+            raise InputError(f"lightmap page {p} is lit up to {intensity:g}, above {MAX_LIGHT:g}, "
+                             "past what baker writes", where=f"lightmap page {p}",
+                             fix="scale the scene's lights and emission down")
         occlusion_png = None
         if occlusion:
             occlusion_png = png_bytes(_page_texels(lightmaps.visibility[p], lambda rows: quantise(
