@@ -17,6 +17,7 @@ from baker.atlas.layout import Atlas, InstanceUV
 from baker.atlas.rasterise import cover
 from baker.atlas.unwrap import baked_instances, frame_area
 from baker.errors import InputError
+from baker.geometry.rows import joined_roots
 from baker.geometry.world import World
 from baker.gltf.scene import Scene
 from baker.jit import jit
@@ -168,30 +169,11 @@ def _islands(atlas: Atlas) -> np.ndarray:
     return _components(corner_key.reshape(-1, 3).astype(np.int64), int(corner_key.max()) + 1)
 
 
-@jit
 def _components(corner_keys: np.ndarray, key_count: int) -> np.ndarray:
     """Connected components (k,) of triangles whose (k, 3) corners carry keys below
-    ``key_count``: two triangles sharing a key are in one (union-find over the keys); each
-    component is named by its smallest key's root."""
-    parent = np.arange(key_count)
-    for t in range(corner_keys.shape[0]):
-        for j in range(1, 3):
-            a, b = corner_keys[t, 0], corner_keys[t, j]
-            while parent[a] != a:
-                parent[a] = parent[parent[a]]
-                a = parent[a]
-            while parent[b] != b:
-                parent[b] = parent[parent[b]]
-                b = parent[b]
-            if a != b:
-                parent[max(a, b)] = min(a, b)
-    label = np.empty(corner_keys.shape[0], np.int64)
-    for t in range(corner_keys.shape[0]):
-        a = corner_keys[t, 0]
-        while parent[a] != a:
-            a = parent[a]
-        label[t] = a
-    return label
+    ``key_count``: two triangles sharing a key are in one (``rows.joined_roots``); each
+    component is named by its smallest key."""
+    return joined_roots(corner_keys, key_count)[corner_keys[:, 0]]
 
 
 def _check_padding(scene: Scene, world: World, atlas: Atlas, n: int) -> None:

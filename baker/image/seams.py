@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from baker.atlas.layout import Atlas
-from baker.geometry.rows import row_groups
+from baker.geometry.rows import joined_roots, row_groups
 from baker.geometry.world import World
 from baker.jit import inline, jit
 from baker.run.parallel import run_chunks
@@ -273,7 +273,7 @@ def stitch(values: np.ndarray, covered: np.ndarray, seams: Seams) -> np.ndarray:
     sides of every seam agree (least squares, see the module's docstring); others unchanged.
     In place when ``values`` is C-contiguous (a copy of a 4096² page pair would be 800 MB).
 
-    The system falls apart into the seams that share no texel (``_components``: a box's own
+    The system falls apart into the seams that share no texel (``rows.joined_roots``: a box's own
     seam, a wall's with the floor): each is solved on its own, to its own tolerance, the
     pieces shared between threads; a piece's solution does not depend on the others or on the
     threads."""
@@ -300,7 +300,7 @@ def _solve_pieces(weight: np.ndarray, local: np.ndarray, lam: np.ndarray,
     """``_solve`` of each connected piece of the seam rows (``weight``, ``local`` (S, K)) apart:
     x (n, C). The pieces are sorted by their first texel, rows and texels by piece (stable),
     and dealt to the threads in runs of about equal rows."""
-    piece = _components(local, len(x0))
+    _, piece = np.unique(joined_roots(local, len(x0)), return_inverse=True)  # by first texel
     nodes = np.argsort(piece, kind="stable")
     node_start = np.searchsorted(piece[nodes], np.arange(piece.max() + 2))
     position = np.empty(len(x0), np.int64)  # a texel's place within its piece
@@ -322,36 +322,6 @@ def _solve_pieces(weight: np.ndarray, local: np.ndarray, lam: np.ndarray,
     x = np.empty_like(out)
     x[nodes] = out
     return x
-
-
-@jit
-def _components(local: np.ndarray, n: int) -> np.ndarray:
-    """(n,) int64 piece of each texel: texels read by one seam row are in one piece (union-find
-    over the rows' ``local`` (S, K) texels); pieces numbered by their first texel."""
-    parent = np.arange(n)
-    for s in range(local.shape[0]):
-        for k in range(local.shape[1]):
-            a, b = local[s, 0], local[s, k]
-            while parent[a] != a:
-                parent[a] = parent[parent[a]]
-                a = parent[a]
-            while parent[b] != b:
-                parent[b] = parent[parent[b]]
-                b = parent[b]
-            if a != b:
-                parent[max(a, b)] = min(a, b)
-    piece = np.empty(n, np.int64)
-    count = 0
-    for i in range(n):  # a root is its piece's first texel: numbered in texel order
-        root = i
-        while parent[root] != root:
-            root = parent[root]
-        if root == i:
-            piece[i] = count
-            count += 1
-        else:
-            piece[i] = piece[root]
-    return piece
 
 
 @jit
