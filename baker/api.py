@@ -344,7 +344,7 @@ def _report(input_path: Path, output: Path, done, info, pages, times: dict[str, 
             seconds: float, rebake: dict) -> dict:
     """The JSON-able report of a bake (``--report``): settings, plan, atlas, texels, rays, times,
     warnings and notes, each page's intensity, and the rebake's ``summary``."""
-    ambient, atlas = done.ambient, done.atlas
+    ambient, atlas, status = done.ambient, done.atlas, build_status()
     return {
         "input": str(input_path), "output": str(output),
         "settings": done.settings.as_dict(),
@@ -356,8 +356,8 @@ def _report(input_path: Path, output: Path, done, info, pages, times: dict[str, 
         "texels": done.tally.texels, "rays": done.tally.rays,
         "shadow_rays": done.tally.shadow_rays,
         "rays_per_second": done.tally.rays / times["trace"] if times["trace"] > 0 else 0.0,
-        "stage_seconds": times, "seconds": seconds, "kernels": build_status()["kernels"],
-        "rays_engine": build_status()["rays"],
+        "stage_seconds": times, "seconds": seconds, "kernels": status["kernels"],
+        "rays_engine": status["rays"],
         "rmse_estimate": done.rmse_estimate(),
         "rmse_estimate_leaves_out": [] if done.sources is None else done.sources.unmeasured(),
         "validity": done.tally.states,

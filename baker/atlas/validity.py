@@ -330,7 +330,8 @@ def _back_fraction(tracer: Tracer, faces: Faces, position: np.ndarray, normal: n
     ray lifts (all touching asks of them) unless one of the first met a back face, when they
     too are cast to d_max. Where none did, the fraction cannot reach ``BACKFACE_TOLERANCE``
     whatever the others would meet: the texel's state and moves are those of twelve full
-    probes, for 45 % fewer long rays (most texels are in the open). The fraction counts the
+    probes, with 7 in 12 of the long rays left out where a texel is in the open (3.8 M of the
+    boxes' 6.5 M at default settings). The fraction counts the
     back faces the probes met within their reach."""
     t1, t2 = probe_frames(normal)
     lift = ray_lift(position, size, tracer.center)

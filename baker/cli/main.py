@@ -46,8 +46,9 @@ def build_parser() -> argparse.ArgumentParser:
 class _Version(argparse.Action):
     """``--version``: baker's version, whether its kernels run compiled ahead of time or
     through numba's JIT, and why (``jit.status``: an install without a C compiler, or older
-    than its sources, runs about 0.3 s slower a bake), and what casts its rays
-    (without a C compiler, embreex, 1.3× slower): ``api.build_status``."""
+    than its sources, runs about 0.3 s slower a bake), and what casts its rays (without a C
+    compiler, embreex: a few per cent slower, its scenes built 5× slower):
+    ``api.build_status``."""
 
     def __call__(self, parser, *_):  # argparse passes the namespace, values and option
         from baker.api import build_status

@@ -8,8 +8,8 @@ import pygltflib
 
 from baker.errors import InputError
 from baker.gltf.accessors import read_accessor
-from baker.gltf.context import (MAX_ALBEDO, Context, attributes_of, checked_item, invalid, or_default, referred,
-                                schema)
+from baker.gltf.context import (MAX_ALBEDO, Context, attributes_of, checked_item, invalid,
+                                or_default, referred, schema)
 from baker.gltf.scene import Primitive
 
 
