@@ -109,6 +109,45 @@ def test_native_occlusion_is_embreexs_whatever_rays_share_a_packet(world, make):
     np.testing.assert_array_equal(np.concatenate(shifted), theirs)
 
 
+def _same_hits(tracer, origins, directions, lengths) -> int:
+    """How many of the rays meet something; asserts ``cast_local_sparse`` finds the hits
+    ``cast_local`` finds, bit for bit (lengths overwritten alike)."""
+    kept, sparse_lengths = lengths.copy(), lengths.copy()
+    whole = tracer.cast_local(origins, directions, kept)
+    sparse = tracer.cast_local_sparse(origins, directions, sparse_lengths)
+    for key in ("triangle", "distance", "u", "v"):
+        assert getattr(sparse, key).tobytes() == getattr(whole, key).tobytes(), key
+    assert sparse_lengths.tobytes() == kept.tobytes()
+    return int((whole.triangle >= 0).sum())
+
+
+def test_sparse_casting_finds_the_nearest_hits_bit_for_bit(world):
+    """Short rays from the room's surfaces (as the validity's probes; those into the surface
+    meet it) and rays across the room: occlusion first, then the nearest hits of the rays that
+    met something, gives ``cast_local``'s hits."""
+    origins, directions, lengths = _surface_rays(world, 100_000, 7)
+    short = (lengths * 1e-2).astype(np.float32)
+    near = _same_hits(Tracer(world), origins, directions, short)
+    far = _same_hits(Tracer(world), origins, directions, lengths)
+    assert 1000 < near < far < 99_000
+
+
+def test_sparse_casting_lets_rays_through_alpha_cut_holes(tmp_path):
+    """Through an alpha-cut quad's hole a ray meets nothing, sparse or not; on its opaque half
+    it meets the quad."""
+    from assets.material_scenes import alpha_cut_quad
+    from bakehelp import loaded
+
+    tracer = Tracer(build_world(loaded(alpha_cut_quad(), tmp_path)))
+    xs = np.linspace(-0.95, 0.95, 400)
+    xs = xs[np.abs(xs) > 0.05]  # the hole is where x < 0
+    origins = np.stack([xs, np.full(len(xs), 0.01), np.zeros(len(xs))], axis=1) - tracer.center
+    directions = np.tile(np.float32([0, 1, 0]), (len(xs), 1))
+    met = _same_hits(tracer, origins.astype(np.float32), directions,
+                     np.full(len(xs), 10, np.float32))
+    assert met == (xs > 0).sum()
+
+
 def test_occlusion_is_whether_the_nearest_hit_lies_within_the_ray(world):
     """OCCLUDED says 0 exactly where INTERSECT finds a hit, −1 elsewhere (the same rays and
     scene, lengths left as they were)."""

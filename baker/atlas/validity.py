@@ -18,7 +18,9 @@ What the mature bakers do (Bakery, Godot's LightmapperRD, Unity's backface toler
    the open, maybe behind a single-sided panel (a wall, a pane, a fence, a card standing on a
    floor: its back faces fill at most half of the hemisphere). The last seven go that far only
    where one of the first ``FIRST_PROBES`` met a back face: else the fraction stays below the
-   tolerance whatever they meet, and they look only for a surface touching the point.
+   tolerance whatever they meet, and they look only for a surface touching the point (short
+   rays, most meeting nothing: ``Tracer.cast_local_sparse`` casts them, and the tangent
+   probes below).
 2. Tangent probes: from the sample point, lifted off the surface by the integrator's offset,
    ``TANGENT_RAYS`` short rays in the texel's plane, ``PROBE_RADIUS`` texel sides long. A ray
    that meets the *back* of a single-sided surface first means the sample is behind it: the
@@ -198,7 +200,7 @@ def _tangent_step(tracer: Tracer, faces: Faces, position: np.ndarray, normal: np
     in_plane = np.stack([np.cos(angle), np.sin(angle), np.zeros(TANGENT_RAYS)], axis=1)
     lift = ray_lift(position, size, tracer.center)
     directions, hits = _cast_fan(tracer, position, normal, t1, t2, lift, in_plane,
-                                 np.repeat(PROBE_RADIUS * size, TANGENT_RAYS))
+                                 np.repeat(PROBE_RADIUS * size, TANGENT_RAYS), sparse=True)
     new, moved, touching = (np.empty_like(position), np.empty(len(position), np.bool_),
                             np.empty(len(position), np.bool_))
     _cross_nearest(position, size, home, origin, np.ascontiguousarray(axes, np.float64),
@@ -292,16 +294,17 @@ def hemisphere_probes(position: np.ndarray, normal: np.ndarray, size: np.ndarray
 
 
 def _cast_fan(tracer: Tracer, position: np.ndarray, normal: np.ndarray, t1: np.ndarray,
-              t2: np.ndarray, lift: np.ndarray, local: np.ndarray, lengths: np.ndarray
-              ) -> tuple[np.ndarray, LocalHits]:
+              t2: np.ndarray, lift: np.ndarray, local: np.ndarray, lengths: np.ndarray,
+              sparse: bool = False) -> tuple[np.ndarray, LocalHits]:
     """Cast ``_fan``'s rays within ``lengths`` (k·m,): their directions (k·m, 3) float64 and
     hits. The rays go to Embree as ``Tracer.cast`` would send them (origins − centre, then
-    float32), made so in the fan's one pass."""
+    float32), made so in the fan's one pass; ``sparse`` for short rays most of which meet
+    nothing (``Tracer.cast_local_sparse``: the same hits, sooner)."""
     origins = np.empty((len(lengths), 3), np.float32)
     directions = np.empty((len(lengths), 3))
     _fan(position, normal, t1, t2, lift, local, tracer.center, origins, directions)
-    return directions, tracer.cast_local(origins, directions.astype(np.float32),
-                                         lengths.astype(np.float32))
+    cast = tracer.cast_local_sparse if sparse else tracer.cast_local
+    return directions, cast(origins, directions.astype(np.float32), lengths.astype(np.float32))
 
 
 @jit
@@ -336,21 +339,27 @@ def _back_fraction(tracer: Tracer, faces: Faces, position: np.ndarray, normal: n
     t1, t2 = probe_frames(normal)
     lift = ray_lift(position, size, tracer.center)
     k, m, local = len(position), HEMISPHERE_RAYS, hemisphere_directions(HEMISPHERE_RAYS)
-    reach = np.empty((k, m))
-    reach[:, :FIRST_PROBES] = d_max
+    first, rest = FIRST_PROBES, HEMISPHERE_RAYS - FIRST_PROBES
     # A hair past TOUCH lifts, so float32 rounding never shortens a ray that must touch.
-    reach[:, FIRST_PROBES:] = np.minimum(d_max, TOUCH * (1 + 1e-6) * lift)[:, None]
-    directions, hits = _cast_fan(tracer, position, normal, t1, t2, lift, local, reach.ravel())
-    triangle, distance = hits.triangle, hits.distance
-    backs = faces.back(triangle, directions).reshape(k, m)
-    further = np.flatnonzero(backs[:, :FIRST_PROBES].any(axis=1) & (reach[:, -1] < d_max))
+    short = np.minimum(d_max, TOUCH * (1 + 1e-6) * lift)
+    far, hits = _cast_fan(tracer, position, normal, t1, t2, lift, local[:first],
+                          np.full(k * first, d_max))
+    close, near = _cast_fan(tracer, position, normal, t1, t2, lift, local[first:],
+                            np.repeat(short, rest), sparse=True)
+    directions = np.concatenate([far.reshape(k, first, 3), close.reshape(k, rest, 3)], axis=1)
+    triangle = np.concatenate([hits.triangle.reshape(k, first), near.triangle.reshape(k, rest)],
+                              axis=1)
+    distance = np.concatenate([hits.distance.reshape(k, first),
+                               near.distance.reshape(k, rest)], axis=1)
+    further = np.flatnonzero(faces.back(hits.triangle, far).reshape(k, first).any(axis=1)
+                             & (short < d_max))
     if len(further):  # the rest of their probes to d_max, as they were cast at first
         _, more = _cast_fan(tracer, position[further], normal[further], t1[further],
-                            t2[further], lift[further], local[FIRST_PROBES:],
-                            np.full(len(further) * (m - FIRST_PROBES), d_max))
-        rows = (further[:, None] * m + np.arange(FIRST_PROBES, m)).ravel()
-        triangle, distance = triangle.copy(), distance.copy()
-        triangle[rows], distance[rows] = more.triangle, more.distance
+                            t2[further], lift[further], local[first:],
+                            np.full(len(further) * rest, d_max))
+        triangle[further, first:] = more.triangle.reshape(-1, rest)
+        distance[further, first:] = more.distance.reshape(-1, rest)
+    directions, triangle, distance = directions.reshape(-1, 3), triangle.ravel(), distance.ravel()
     fraction, touching = np.empty(k), np.empty(k, np.bool_)
     _count_backs(directions, triangle, distance, lift, faces.normals, faces.single,
                  fraction, touching)

@@ -74,6 +74,7 @@ class NativeScene:
 
     def __init__(self, handle: int):
         self._handle = handle
+        self.packets = bool(_NATIVE.baker_packets())  # occlusion cast 16 rays at a time
 
     def run(self, origins: np.ndarray, directions: np.ndarray, dists: np.ndarray,
             query: str = "INTERSECT", **_):

@@ -247,6 +247,26 @@ class Tracer:
             pass_alpha(self._run, self.alpha, origins, directions, limit, result)
         return LocalHits.of_embree(result)
 
+    def cast_local_sparse(self, origins: np.ndarray, directions: np.ndarray,
+                          lengths: np.ndarray) -> LocalHits:
+        """``cast_local``'s hits, the same bits, for rays most of which meet nothing (the
+        validity's short probes): each ray is first asked only whether it meets anything, an
+        occlusion query cast in packets of 16 (``native.py``: about 3× the rate of nearest
+        hits on short rays from one point), and only the rays that do are asked where. Where
+        occlusion is not cast in packets it is no cheaper than the nearest hit, and this is
+        ``cast_local``. Rays as ``cast_local`` takes them; ``lengths`` (n,) float32 overwritten
+        as it overwrites them."""
+        if self.triangle_count == 0 or not getattr(self._scene, "packets", False):
+            return self.cast_local(origins, directions, lengths)
+        met = np.flatnonzero(self._scene.run(origins, directions, dists=lengths,
+                                             query="OCCLUDED") >= 0)
+        hits = LocalHits.missed(lengths)  # its distance is ``lengths`` itself
+        if len(met):
+            found = self.cast_local(origins[met], directions[met], lengths[met])
+            hits.triangle[met], hits.distance[met] = found.triangle, found.distance
+            hits.u[met], hits.v[met] = found.u, found.v
+        return hits
+
     def _run(self, origins: np.ndarray, directions: np.ndarray,
              lengths: np.ndarray) -> dict[str, np.ndarray]:
         """Embree's nearest hits of float32 rays in the recentred frame, no alpha test."""
