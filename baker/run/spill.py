@@ -206,9 +206,18 @@ class Spill:
 
     def __init__(self, folder: str | os.PathLike | None = None):
         remove_stale(folder)
-        self.folder = tempfile.mkdtemp(prefix=f"{_PREFIX}{os.getpid()}-", dir=folder)
+        self.folder = os.path.join(tempfile.gettempdir() if folder is None else os.fspath(folder),
+                                   f"{_PREFIX}{os.getpid()}-{uuid.uuid4().hex[:12]}")
+        # The watcher first: a bake killed before the folder exists leaves nothing behind,
+        # one killed after it has the watcher (mkdtemp, then the watcher, left a gap).
+        watcher = _watched(self.folder)
+        try:
+            os.mkdir(self.folder, 0o700)
+        except OSError:
+            _removed(self.folder, watcher)
+            raise
         self.groups: dict[str, Group] = {}
-        self._cleanup = weakref.finalize(self, _removed, self.folder, _watched(self.folder))
+        self._cleanup = weakref.finalize(self, _removed, self.folder, watcher)
 
     def append(self, name: str, part) -> None:
         """Append the rows of ``part`` (a dataclass of per-texel arrays) to the group ``name``."""
