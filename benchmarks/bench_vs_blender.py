@@ -93,6 +93,7 @@ sys.path.insert(0, str(ROOT))
 
 from assets.make_scenes import cornell_box  # noqa: E402
 from assets.many_objects import boxes_and_sphere  # noqa: E402
+from bench_fixed_cost import compile_bytecode  # noqa: E402
 
 SCENES = {"cornell": ("Cornell room, lamp off", cornell_box),
           "boxes": ("200 boxes + sphere", boxes_and_sphere)}
@@ -393,6 +394,7 @@ def main() -> None:
                                  text=True).stdout.splitlines()[0]
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT,
                             capture_output=True, text=True).stdout.strip()
+    compile_bytecode()  # as Blender's wheel, installed by pip, has its scripts'
     print(f"{version or 'blender'} ({args.blender}); baker at {commit}"
           f"{' with --smooth' if args.smooth else ''}; "
           f"{THREADS} threads each, {os.cpu_count()} cores; "
