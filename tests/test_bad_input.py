@@ -171,6 +171,31 @@ def test_malformed_json(tmp_path, capsys):
     refuses(tmp_path, capsys, source, str(source), "not valid JSON", "line 3", "fix the JSON at that line")
 
 
+def _light_intensity(document: dict, value) -> None:
+    document.setdefault("extensions", {})["KHR_lights_punctual"] = {
+        "lights": [{"type": "point", "intensity": value}]}
+    document.setdefault("extensionsUsed", []).append("KHR_lights_punctual")
+
+
+@pytest.mark.parametrize("token, where, put", [
+    # kept, the output's JSON could not be written
+    ("NaN", "meshes[0].weights[0]", lambda d, v: d["meshes"][0].update(weights=[v])),
+    ("-Infinity", "nodes[1].translation[0]", lambda d, v: d["nodes"][1].update(translation=[v, 0, 0])),
+    ("1e400", "nodes[1].translation[0]", lambda d, v: d["nodes"][1].update(translation=[v, 0, 0])),
+    ("9" * 350, "extensions.KHR_lights_punctual.lights[0].intensity", _light_intensity),
+])
+def test_a_number_past_float64_is_refused_naming_where(tmp_path, capsys, token, where, put):
+    """NaN and Infinity (which Python's JSON parser takes), a float literal past float64's
+    range (valid JSON), an integer of 350 digits: exit 1 naming the number's place, nothing
+    written (a NaN morph weight ended in an internal error when the output was written, a long
+    integer as a light's intensity when it was read)."""
+    source, document, _ = gltf_pair(tmp_path)
+    put(document, "TOKEN")
+    source.write_text(json.dumps(document).replace('"TOKEN"', token))
+    refuses(tmp_path, capsys, source, str(source), where, "not a finite float64",
+            "write a finite number there")
+
+
 @pytest.mark.parametrize("version", ["1.0", "3.0", None])
 def test_wrong_gltf_version(tmp_path, capsys, version):
     source, document, _ = gltf_pair(tmp_path)

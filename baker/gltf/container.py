@@ -6,8 +6,11 @@ files it names, for ``baker watch`` (``used_uris``, ``file_stamps``)."""
 from __future__ import annotations
 
 import json
+import math
 import os
+import re
 import struct
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -210,26 +213,79 @@ def _decode_text(data: bytes, file: str) -> str:
         ) from None
 
 
+_MAYBE_NOT_A_NUMBER = re.compile(r"NaN|Infinity|[eE][+-]?0*[1-9]\d\d")
+"""Text that may parse as a float no float64 holds: NaN, Infinity, an exponent of three digits
+(1e400). Where none is, floats are parsed on the fast path (C's); where one is (perhaps inside
+a string), each is checked (``_NotANumber``)."""
+
+
+class _NotANumber:
+    """A number JSON has no value for, where the parser met it: ``NaN``, ``Infinity`` (which
+    Python's parser takes and JSON does not) or a literal past float64's range (``1e400``, or
+    an integer of 309 digits). Kept, the output's JSON could not be written (a NaN morph weight
+    once ended a bake in an internal error there) or a float could not be made of it (a light's
+    intensity); ``_parse_json`` refuses the file naming where it is."""
+
+    def __init__(self, text: str):
+        digits = len(text.lstrip("-"))
+        self.text = text if digits <= 20 else f"{text[:8]}… (an integer of {digits:,} digits)"
+
+
+def _float(text: str) -> float | _NotANumber:
+    """``float(text)`` for the JSON parser, or ``_NotANumber`` where it is not finite."""
+    value = float(text)
+    return value if math.isfinite(value) else _NotANumber(text)
+
+
 class _LongNumber(Exception):
     """An integer in the JSON with more digits than ``MAX_INTEGER_DIGITS``."""
 
 
-def _bounded_int(text: str) -> int:
+def _bounded_int(text: str) -> int | _NotANumber:
     """``int(text)`` for the JSON parser, refusing integers of more than ``MAX_INTEGER_DIGITS``
-    digits (converting 10^5 digits takes seconds; Python refuses 4300 with a ValueError)."""
+    digits (converting 10^5 digits takes seconds; Python refuses 4300 with a ValueError), and
+    ``_NotANumber`` for one past float64's range."""
     if len(text) > MAX_INTEGER_DIGITS + 1:
         raise _LongNumber(len(text.lstrip("-")))
-    return int(text)
+    value = int(text)
+    return value if abs(value) <= sys.float_info.max else _NotANumber(text)
+
+
+class _Careful(Exception):
+    """The fast path met an integer past float64's range: parse again, checking every number."""
+
+
+def _fast_int(text: str) -> int:
+    """``_bounded_int`` on the fast path: ``_Careful`` where it would give a ``_NotANumber``."""
+    value = _bounded_int(text)
+    if isinstance(value, _NotANumber):
+        raise _Careful
+    return value
+
+
+def _loads(text: str, careful: bool) -> Any:
+    """The parsed JSON: with ``careful``, each number no float64 holds as a ``_NotANumber``;
+    without, floats parsed by C (the text holds no NaN, Infinity or large exponent)."""
+    if careful:
+        return json.loads(text, parse_int=_bounded_int, parse_float=_float,
+                          parse_constant=_NotANumber)
+    return json.loads(text, parse_int=_fast_int)
 
 
 def _parse_json(text: str, file: str) -> dict:
     """The top-level JSON object; a syntax error names its line and column. Integers are at most
-    ``MAX_INTEGER_DIGITS`` digits long and arrays and objects nested at most ``MAX_JSON_DEPTH``
-    deep (extras nested 10^5 deep overflowed Python's stack, in the parser or after it)."""
+    ``MAX_INTEGER_DIGITS`` digits long, every number a finite float64 (``_NotANumber``), and
+    arrays and objects nested at most ``MAX_JSON_DEPTH`` deep (extras nested 10^5 deep
+    overflowed Python's stack, in the parser or after it)."""
     too_deep = InputError(f"the JSON is nested more than {MAX_JSON_DEPTH} arrays or objects deep",
                           file=file, fix="re-export the file; glTF needs a few levels")
+    careful = _MAYBE_NOT_A_NUMBER.search(text) is not None
     try:
-        raw = json.loads(text, parse_int=_bounded_int)
+        try:
+            raw = _loads(text, careful)
+        except _Careful:
+            careful = True
+            raw = _loads(text, careful)
     except _LongNumber as exc:
         raise InputError(f"the JSON holds an integer of {exc.args[0]:,} digits (baker reads at "
                          f"most {MAX_INTEGER_DIGITS})", file=file,
@@ -251,6 +307,12 @@ def _parse_json(text: str, file: str) -> dict:
         )
     if _depth(raw) > MAX_JSON_DEPTH:
         raise too_deep
+    where, number = _first_not_a_number(raw) if careful else ("", None)
+    if number is not None:
+        raise InputError(f"{number.text} is not a finite float64, as glTF's numbers are",
+                         file=file, where=where,
+                         fix="re-export the file; if it was edited by hand, write a finite "
+                             "number there")
     return raw
 
 
@@ -266,6 +328,22 @@ def _depth(value: Any) -> int:
         deepest = max(deepest, depth)
         level.extend((child, depth + 1) for child in children if isinstance(child, (dict, list)))
     return deepest
+
+
+def _first_not_a_number(value: Any) -> tuple[str, _NotANumber | None]:
+    """(where, it): the first ``_NotANumber`` in the parsed JSON ``value`` in document order,
+    its path as the errors name objects (``meshes[0].weights[0]``); ("", None) if none."""
+    level = [(value, "")]
+    while level:
+        item, path = level.pop()
+        if isinstance(item, _NotANumber):
+            return path, item
+        if isinstance(item, dict):
+            level.extend((child, f"{path}.{key}" if path else str(key))
+                         for key, child in reversed(item.items()))
+        elif isinstance(item, list):
+            level.extend((child, f"{path}[{i}]") for i, child in reversed(list(enumerate(item))))
+    return "", None
 
 
 def _check_asset(raw: dict, file: str) -> None:
