@@ -752,3 +752,23 @@ def test_documents_with_odd_values_parse_as_pygltflib_parses_them():
             gltf_document.document(raw_odd)
         text = json.dumps(raw_odd)
         _same_objects(_document_from_json(text, raw_odd), pygltflib.GLTF2.gltf_from_json(text))
+
+
+def test_a_glb_json_chunk_padded_with_nul_bytes_loads(tmp_path):
+    """The spec pads the JSON chunk with spaces; some exporters pad it with NUL bytes, which no
+    JSON parser takes. Read with them stripped, the scene is the one padded with spaces."""
+    from assets.make_scenes import cornell_box
+
+    source = cornell_box().save(tmp_path / "spaces.glb")
+    data = source.read_bytes()
+    length = struct.unpack("<I", data[12:16])[0]
+    text = data[20:20 + length].rstrip(b" ")
+    padded = text + b"\0" * (4 + -len(text) % 4)
+    body = struct.pack("<II", len(padded), 0x4E4F534A) + padded + data[20 + length:]
+    nul = tmp_path / "nul.glb"
+    nul.write_bytes(struct.pack("<III", 0x46546C67, 2, 12 + len(body)) + body)
+    ours, theirs = load(nul), load(source)
+    assert [m.name for m in ours.materials] == [m.name for m in theirs.materials]
+    assert len(ours.instances) == len(theirs.instances) > 0
+    for a, b in zip(ours.primitives, theirs.primitives):
+        np.testing.assert_array_equal(a.positions, b.positions)

@@ -191,8 +191,8 @@ def _split_glb(data: bytes, file: str) -> tuple[str, bytes | None]:
             )
         if chunk == 0 and kind != _CHUNK_JSON:
             raise InputError("GLB's first chunk is not JSON", file=file, where="GLB chunk 0", fix=fix)
-        if chunk == 0:
-            text = _decode_text(data[start:end], file)
+        if chunk == 0:  # padded with spaces, or by some exporters with NUL bytes
+            text = _decode_text(data[start:end].rstrip(b"\0"), file)
         elif chunk == 1 and kind == _CHUNK_BIN:
             blob = data[start:end]
         offset, chunk = end, chunk + 1
