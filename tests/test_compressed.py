@@ -99,3 +99,55 @@ def test_a_missing_decoder_names_the_package_that_installs_it(tmp_path, plain, m
     assert "KHR_draco_mesh_compression" in error.value.message
     assert 'pip install "DracoPy>=2"' in error.value.fix
     assert "meshes[0].primitives[0]" in error.value.where
+
+
+def _meshopt_quad(path, count: int, stride: int = 16):
+    """A .glb of one quad whose positions are a meshopt bufferView (EXT_meshopt_compression,
+    ATTRIBUTES) that declares ``count`` rows of ``stride`` bytes, decoded into a fallback
+    buffer of 64 bytes (the quad's 4 rows of 16)."""
+    import json
+    import struct
+
+    import meshopt
+
+    rows = np.array([[-1, 0, -1, 0], [1, 0, -1, 0], [1, 0, 1, 0], [-1, 0, 1, 0]], np.float32)
+    data = bytes(meshopt.encode_vertex_buffer(rows))
+    blob = data + b"\0" * (-len(data) % 4)
+    name = "EXT_meshopt_compression"
+    document = {
+        "asset": {"version": "2.0"}, "extensionsUsed": [name], "extensionsRequired": [name],
+        "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}], "materials": [{}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1, "material": 0}]}],
+        "accessors": [{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3",
+                       "min": [-1, 0, -1], "max": [1, 0, 1]},
+                      {"bufferView": 1, "componentType": 5125, "count": 6, "type": "SCALAR"}],
+        "bufferViews": [{"buffer": 1, "byteOffset": 0, "byteLength": 64, "byteStride": 16,
+                         "extensions": {name: {"buffer": 0, "byteLength": len(data),
+                                               "byteStride": stride, "count": count,
+                                               "mode": "ATTRIBUTES"}}},
+                        {"buffer": 0, "byteOffset": len(blob), "byteLength": 24}],
+        "buffers": [{"byteLength": len(blob) + 24},
+                    {"byteLength": 64, "extensions": {name: {"fallback": True}}}]}
+    blob += np.array([0, 2, 1, 0, 3, 2], "<u4").tobytes()
+    text = json.dumps(document).encode()
+    text += b" " * (-len(text) % 4)
+    body = (struct.pack("<II", len(text), 0x4E4F534A) + text
+            + struct.pack("<II", len(blob), 0x004E4942) + blob)
+    path.write_bytes(struct.pack("<III", 0x46546C67, 2, 12 + len(body)) + body)
+    return path
+
+
+@pytest.mark.parametrize("count", [2**31, 10**12])
+def test_a_meshopt_count_past_its_bufferview_is_refused_before_decoding(tmp_path, count):
+    """The decoder allocates count × byteStride bytes before it reads a byte (2³¹ rows of 16
+    ended in its std::bad_alloc, an internal error): refused first, naming the bufferView;
+    the same quad declaring its own 4 rows bakes."""
+    good = baker.bake(_meshopt_quad(tmp_path / "good.glb", 4), tmp_path / "out.glb",
+                      baker.Settings(page_size=64, rays=4), state=False)
+    assert good.texels > 0
+    with pytest.raises(InputError) as error:
+        baker.bake(_meshopt_quad(tmp_path / "bad.glb", count), tmp_path / "bad_out.glb",
+                   baker.Settings(page_size=64, rays=4), state=False)
+    assert error.value.where == "bufferViews[0]"
+    assert f"{count * 16:,} decoded bytes do not fit the bufferView" in error.value.message
+    assert not (tmp_path / "bad_out.glb").exists()

@@ -160,20 +160,29 @@ def _decode_meshopt_view(buffers: list[bytearray], index: int, view: pygltflib.B
                   file, where)
     count, stride = extension.get("count"), extension.get("byteStride")
     mode, filter_ = extension.get("mode"), extension.get("filter", "NONE")
+    offset, length = view.byteOffset or 0, view.byteLength
+    target = buffers[view.buffer] if isinstance(view.buffer, int) and 0 <= view.buffer < len(buffers) \
+        else None
+
+    def must_fit(size: int) -> None:
+        """Refuse ``size`` decoded bytes that the bufferView has no room for: checked on the
+        declared count × byteStride before decoding too, which allocates them (a count of 2³¹
+        ended in the decoder's std::bad_alloc)."""
+        if target is None or not isinstance(length, int) or size > length \
+                or offset + size > len(target):
+            raise InputError(f"{size:,} decoded bytes do not fit the bufferView ({length!r} "
+                             f"bytes at {offset} of buffers[{view.buffer}])", file=file,
+                             where=f"bufferViews[{index}]", fix=_REEXPORT)
+
+    if all(isinstance(v, int) and not isinstance(v, bool) and v >= 0 for v in (count, stride)):
+        must_fit(count * stride)
     try:
         decoded = meshopt.decode_gltf_buffer(data, count, stride, mode, filter_)
     except (ValueError, TypeError, RuntimeError) as exc:
         raise InputError(f"cannot decode the meshopt data ({exc})", file=file, where=where,
                          fix=_REEXPORT) from None
     payload = np.ascontiguousarray(decoded).tobytes()
-    offset, length = view.byteOffset or 0, view.byteLength
-    target = buffers[view.buffer] if isinstance(view.buffer, int) and 0 <= view.buffer < len(buffers) \
-        else None
-    if target is None or not isinstance(length, int) or len(payload) > length \
-            or offset + len(payload) > len(target):
-        raise InputError(f"{len(payload)} decoded bytes do not fit the bufferView ({length!r} "
-                         f"bytes at {offset} of buffers[{view.buffer}])", file=file,
-                         where=f"bufferViews[{index}]", fix=_REEXPORT)
+    must_fit(len(payload))
     target[offset:offset + len(payload)] = payload
 
 
