@@ -35,7 +35,7 @@ _OVERLAP = 1e-9  # of a chart's size: triangles closer than this to apart are ap
 _EQUAL = 1e-9  # rectangles' areas this close (relative) are equal (``_turned``)
 # Everything besides a mesh that decides its charts, for the unwrap cache's key; the first
 # entries are bumped when the method changes.
-KEY = ("projection", 3, CONE, LEAST_TRIANGLES, _OVERLAP, _EQUAL)
+KEY = ("projection", 4, CONE, LEAST_TRIANGLES, _OVERLAP, _EQUAL)
 
 
 def project(positions: np.ndarray, triangles: np.ndarray) -> Charts | None:
@@ -164,7 +164,9 @@ def _crumpled(chart: np.ndarray, count: int, neighbours: np.ndarray) -> bool:
     inner = neighbours >= 0
     rows = np.repeat(np.arange(len(chart)), 3)[inner.reshape(-1)]
     cut = np.zeros(count, bool)
-    cut[chart[rows]] |= chart[rows] != chart[neighbours[inner]]
+    # Set, not ``|=``: a chart's many edges repeat its index, and a buffered ``|=`` keeps only
+    # the last edge's answer (a chart was cut only if its last edge was).
+    cut[chart[rows][chart[rows] != chart[neighbours[inner]]]] = True
     cut_triangles = np.count_nonzero(cut[chart])
     return cut_triangles >= 64 and cut_triangles < LEAST_TRIANGLES * np.count_nonzero(cut)
 
