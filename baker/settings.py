@@ -43,6 +43,25 @@ from whoever runs the bake (the command line, the API), never from a file that t
 scene: ``rebake.asked.asked_settings`` drops them from a bake state, which is as
 untrusted as the scene it sits beside."""
 
+MAX_LIGHT = 1e30
+"""The largest emission (emissiveFactor × emissiveStrength), light colour × intensity or sky
+radiance baker bakes, and the brightest lightmap page it writes (``image.encode.encode``, so
+that baker reads its own outputs back): far past any real light (the sun's luminance is 1.6·10⁹
+cd/m²), yet its squares and products with areas stay far from float64's range (10³⁰⁰'s do
+not)."""
+
+MAX_LENGTH = 1e30
+"""The longest ``d_max`` baker takes: Embree's rays are float32 (at most 3.4·10³⁸), and a scene
+is at most 10¹² units across (``gltf.read_nodes``), so a longer reach is the same bake."""
+
+MAX_RAYS_PER_TEXEL = 1 << 16
+"""The most rays of one kind a texel may be asked for (``--rays``, ``--max-rays``,
+``--shadow-rays``, ``--emissive-rays``, ``--sky-rays``): 65,536, 16× the 4,096 of a converged
+reference; 10¹¹ once ended in an allocation no memory holds before the ray budget was checked."""
+
+MAX_SEED = (1 << 63) - 1
+"""The largest ``--seed``: the samplers take it as a 64-bit integer."""
+
 MAX_TOTAL_RAYS = 10 ** 10
 """``Settings.max_total_rays`` by default: 10¹⁰ rays, about half an hour at the 5 M rays/s of
 Embree on 2 cores (an 8192² page at 64 rays a texel is 4.3·10⁹); a scene of 3 KB can otherwise
@@ -246,21 +265,33 @@ class Settings:
             if value is not None and not (math.isfinite(value) and value > 0):
                 raise SettingsError(f"{name} must be a finite number above 0, not {value}",
                                     fix=f"give --{name.replace('_', '-')} a positive value")
+        for name, value, top in (("d_max", self.d_max, MAX_LENGTH),
+                                 ("ambient", self.ambient, MAX_LIGHT)):
+            if value is not None and value > top:
+                raise SettingsError(f"{name} must be at most {top:g}, not {value:g}",
+                                    fix=f"give --{name.replace('_', '-')} a value up to {top:g}")
         if self.ambient is not None and self.ambient < 0:
             raise SettingsError(f"ambient must be 0 or more, not {self.ambient}",
                                 fix="give --ambient a value of 0 or more")
         rays, sky_rays = self.ray_count(self.rays), self.ray_count(self.sky_rays)
-        integers = {"page_size": (self.page_size, 16), "rays": (rays, 1),
-                    "max_rays": (self.max_rays, 1),
-                    "chunk_texels": (self.chunk_texels, 1), "padding": (self.padding, 0),
-                    "threads": (self.threads, 0), "seed": (self.seed, 0),
-                    "shadow_rays": (self.shadow_rays, 1), "emissive_rays": (self.emissive_rays, 1),
-                    "sky_rays": (sky_rays, 1), "supersample": (self.supersample, 1),
-                    "max_total_rays": (self.max_total_rays, 1)}
-        for name, (value, low) in integers.items():
+        most = MAX_RAYS_PER_TEXEL
+        integers = {"page_size": (self.page_size, 16, None), "rays": (rays, 1, most),
+                    "max_rays": (self.max_rays, 1, most),
+                    "chunk_texels": (self.chunk_texels, 1, None),
+                    "padding": (self.padding, 0, None), "threads": (self.threads, 0, None),
+                    "seed": (self.seed, 0, MAX_SEED),
+                    "shadow_rays": (self.shadow_rays, 1, most),
+                    "emissive_rays": (self.emissive_rays, 1, most),
+                    "sky_rays": (sky_rays, 1, most), "supersample": (self.supersample, 1, None),
+                    "max_total_rays": (self.max_total_rays, 1, None)}
+        for name, (value, low, high) in integers.items():
+            option = f"--{name.replace('_', '-')}"
             if int(value) != value or value < low:
                 raise SettingsError(f"{name} must be a whole number of at least {low}, not {value}",
-                                    fix=f"give --{name.replace('_', '-')} a whole number ≥ {low}")
+                                    fix=f"give {option} a whole number ≥ {low}")
+            if high is not None and value > high:
+                raise SettingsError(f"{name} must be at most {high:,}, not {value:,}",
+                                    fix=f"give {option} a whole number up to {high:,}")
         if self.target_error is not None and rays % 2:
             raise SettingsError(f"--target-error needs an even number of rays, not {rays}: "
                                 f"its rounds grow each texel's two nets of rays/2 points",
@@ -382,11 +413,12 @@ class Settings:
             if value is None:
                 continue
             try:
-                ok = len(value) == 3 and all(math.isfinite(float(v)) and float(v) >= 0 for v in value)
+                ok = len(value) == 3 and all(0 <= float(v) <= MAX_LIGHT for v in value)
             except (TypeError, ValueError):
                 ok = False
             if not ok:
-                raise SettingsError(f"{name} must be three finite numbers ≥ 0 (linear RGB), not {value!r}",
+                raise SettingsError(f"{name} must be three numbers from 0 to {MAX_LIGHT:g} "
+                                    f"(linear RGB), not {value!r}",
                                     fix=f"give --{name.replace('_', '-')} R,G,B, e.g. 0.5,0.6,0.8")
         if self.sky_horizon is not None and self.sky is None:
             raise SettingsError("sky_horizon needs sky (the zenith colour) too",
@@ -395,12 +427,14 @@ class Settings:
 
     def _check_sky_image(self) -> None:
         """A sky image alone (no colour sky beside it), its rotation finite and its intensity
-        finite and ≥ 0."""
+        finite and ≥ 0 (both at most ``MAX_LIGHT`` in size)."""
         for name, value, least in (("sky_rotation", self.sky_rotation, -math.inf),
                                    ("sky_intensity", self.sky_intensity, 0.0)):
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= least):
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= least
+                    and abs(value) <= MAX_LIGHT):
                 low = "" if least == -math.inf else " ≥ 0"
-                raise SettingsError(f"{name} must be a finite number{low}, not {value!r}",
+                raise SettingsError(f"{name} must be a finite number{low} up to {MAX_LIGHT:g}, "
+                                    f"not {value!r}",
                                     fix=f"give --{name.replace('_', '-')} a value such as "
                                         f"{'90' if name == 'sky_rotation' else '1'}")
         if self.sky_image is not None and self.sky is not None:
@@ -469,7 +503,7 @@ def resolve(settings: Settings, surface_area: float, diagonal: float,
     if values["texel_density"] is None:
         values["texel_density"] = min(default_texel_density(surface_area, settings.page_size), most)
     elif values["texel_density"] > most:
-        texels = surface_area * values["texel_density"] ** 2
+        texels = surface_area * values["texel_density"] * values["texel_density"]  # may be inf
         raise SettingsError(
             f"texel density {values['texel_density']:g} needs about {texels:.3g} lightmap texels "
             f"for {surface_area:.4g} square units of surface; one bake holds at most "

@@ -301,6 +301,12 @@ def test_image_far_larger_than_memory_allows(tmp_path, capsys, side, says):
     ("--rays", "0", "rays"), ("--rays", "-16", "rays"),
     ("--texel-density", "0", "texel_density"), ("--texel-density", "-4", "texel_density"),
     ("--texel-density", "inf", "texel_density"),
+    # past what the bake can hold: each once an internal error (an allocation no memory holds,
+    # an integer no C long holds, a float overflow), now refused before any work
+    ("--rays", "100000000000", "rays"), ("--shadow-rays", "100000", "shadow_rays"),
+    ("--seed", "9" * 23, "seed"), ("--d-max", "1e300", "d_max"),
+    ("--texel-density", "1e300", "texel density"), ("--sky", "1e300,1,1", "sky"),
+    ("--sky-intensity", "1e40", "sky_intensity"),
 ])
 def test_bad_settings(tmp_path, capsys, option, value, name):
     source = small_scene().save(tmp_path / "scene.glb")

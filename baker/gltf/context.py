@@ -15,6 +15,7 @@ from baker.errors import InputError
 from baker.gltf import images
 from baker.gltf.files import SceneFolder
 from baker.gltf.scene import Skipped
+from baker.settings import MAX_LIGHT  # noqa: F401 (the gltf readers' bound, named here)
 
 
 @dataclass
@@ -37,12 +38,6 @@ class Context:
         if entry not in self.skipped:
             self.skipped.append(entry)
 
-
-MAX_LIGHT = 1e30
-"""The largest emission (emissiveFactor × emissiveStrength) or light colour × intensity baker
-bakes, and the brightest lightmap page it writes (``image.encode.encode``, so that baker reads
-its own outputs back): far past any real light (the sun's luminance is 1.6·10⁹ cd/m²), yet its
-squares and products with areas stay far from float64's range (10³⁰⁰'s do not)."""
 
 MAX_ALBEDO = 1e3
 """The largest colour factor or vertex colour baker bakes as given (the spec's are at most 1;
