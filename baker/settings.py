@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import importlib.util
 import math
+import numbers
 from dataclasses import asdict, dataclass, fields
 
 from baker.errors import SettingsError
@@ -61,6 +62,19 @@ reference; 10¹¹ once ended in an allocation no memory holds before the ray bud
 
 MAX_SEED = (1 << 63) - 1
 """The largest ``--seed``: the samplers take it as a 64-bit integer."""
+
+_WHOLE = frozenset({"page_size", "rays", "max_rays", "chunk_texels", "padding", "threads",
+                    "seed", "shadow_rays", "emissive_rays", "sky_rays", "supersample",
+                    "max_total_rays", "max_depth"})
+"""The settings that count something (``Settings._check_types``)."""
+_REAL = frozenset({"texel_density", "d_max", "d_max_fraction", "target_error", "foliage_density",
+                   "ambient", "clip_percentile", "light_radius", "light_angle", "sky_rotation",
+                   "sky_intensity", "mirror_roughness", "translucent"})
+"""The settings that measure something (``Settings._check_types``)."""
+_OPTIONAL = frozenset({"texel_density", "d_max", "target_error", "ambient", "rays", "sky_rays",
+                       "foliage_density", "uv"})
+"""The settings None leaves to be derived (or off)."""
+_EXAMPLES = {"page_size": 1024, "rays": 64, "threads": 0, "seed": 0, "padding": 2}
 
 MAX_TOTAL_RAYS = 10 ** 10
 """``Settings.max_total_rays`` by default: 10¹⁰ rays, about half an hour at the 5 M rays/s of
@@ -253,6 +267,7 @@ class Settings:
 
     def check(self) -> None:
         """Raise SettingsError for a value that cannot work, saying which values can."""
+        self._check_types()
         positive = {
             "texel_density": self.texel_density,
             "d_max": self.d_max,
@@ -383,6 +398,25 @@ class Settings:
                                 "fix where every texel lies",
                                 fix="leave out --texel-density (--page-size sets the "
                                     "resolution), or leave out --uv")
+
+    def _check_types(self) -> None:
+        """Every number a number: a whole one (an int, numpy's too, not a bool or a float such
+        as 64.0) where a count is asked, a real one where a quantity is; None only where it
+        means "derive it" (``_OPTIONAL``). A string or a float count from a pipeline's code once
+        ended in a TypeError deep in the bake."""
+        for f in fields(Settings):
+            value = getattr(self, f.name)
+            if value is None and f.name in _OPTIONAL:
+                continue
+            if f.name in _WHOLE and not (isinstance(value, numbers.Integral)
+                                         and not isinstance(value, bool)):
+                raise SettingsError(f"{f.name} must be a whole number (an int), not {value!r}",
+                                    fix=f"give {f.name} as an int, e.g. "
+                                        f"{_EXAMPLES.get(f.name, 1)}")
+            if f.name in _REAL and not (isinstance(value, numbers.Real)
+                                        and not isinstance(value, bool)):
+                raise SettingsError(f"{f.name} must be a number, not {value!r}",
+                                    fix=f"give {f.name} as a number (int or float)")
 
     def _check_materials(self) -> None:
         """Material settings (materials.py, integrate.py) within their ranges."""

@@ -699,3 +699,29 @@ def test_a_base_colour_past_any_albedo_is_baked_at_the_bound_with_a_warning(tmp_
     assert clamped == one
     assert any("1e+308" in text and "outside [0, 1000]" in text for text in warned)
     assert not any("outside [0, 1000]" in text for text in quiet)
+
+
+@pytest.mark.parametrize("values", [{"rays": "64"}, {"rays": 64.0}, {"max_depth": 2.0},
+                                    {"texel_density": "5"}, {"threads": None},
+                                    {"supersample": True}, {"target_error": "0.01"}])
+def test_settings_of_the_wrong_type_are_refused_naming_them(tmp_path, values):
+    """From Python, a string, a float count (64.0) or None where a number is asked: a
+    SettingsError naming the setting, nothing written (each once a TypeError or ValueError
+    deep in the bake)."""
+    source = small_scene().save(tmp_path / "scene.glb")
+    with pytest.raises(baker.SettingsError) as error:
+        baker.bake(source, tmp_path / "out.glb",
+                   baker.Settings(**{"rays": 2, "page_size": 64, **values}), state=False)
+    (name, value), = values.items()
+    assert error.value.message.startswith(f"{name} must be a ") and repr(value) in error.value.message
+    assert not (tmp_path / "out.glb").exists()
+
+
+def test_numpy_numbers_are_settings_like_pythons(tmp_path):
+    """numpy's integers and floats (a pipeline's arithmetic) bake as Python's do, to the byte."""
+    source = small_scene().save(tmp_path / "scene.glb")
+    ours = {"rays": np.int64(4), "page_size": np.int32(64), "d_max": np.float32(0.5)}
+    theirs = {"rays": 4, "page_size": 64, "d_max": 0.5}
+    for name, values in (("numpy", ours), ("python", theirs)):
+        baker.bake(source, tmp_path / f"{name}.glb", baker.Settings(**values), state=False)
+    assert (tmp_path / "numpy.glb").read_bytes() == (tmp_path / "python.glb").read_bytes()
