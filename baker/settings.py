@@ -301,7 +301,7 @@ class Settings:
                     "max_total_rays": (self.max_total_rays, 1, None)}
         for name, (value, low, high) in integers.items():
             option = f"--{name.replace('_', '-')}"
-            if int(value) != value or value < low:
+            if value < low:  # a whole number already (``_check_types``)
                 raise SettingsError(f"{name} must be a whole number of at least {low}, not {value}",
                                     fix=f"give {option} a whole number ≥ {low}")
             if high is not None and value > high:

@@ -15,7 +15,6 @@ from baker.errors import InputError
 from baker.gltf import images
 from baker.gltf.files import SceneFolder
 from baker.gltf.scene import Skipped
-from baker.settings import MAX_LIGHT  # noqa: F401 (the gltf readers' bound, named here)
 
 
 @dataclass

@@ -6,8 +6,9 @@ from __future__ import annotations
 import numpy as np
 
 from baker.errors import InputError
-from baker.gltf.context import MAX_LIGHT, Context, checked_item, finite, invalid, or_default, schema
+from baker.gltf.context import Context, checked_item, finite, invalid, or_default, schema
 from baker.punctual import Light
+from baker.settings import MAX_LIGHT
 
 
 _LIGHT_KINDS = ("directional", "point", "spot")

@@ -12,11 +12,12 @@ import pygltflib
 
 from baker.errors import InputError
 from baker.gltf import budget, images
-from baker.gltf.context import (MAX_ALBEDO, MAX_LIGHT, Context, checked_item, finite, invalid,
+from baker.gltf.context import (MAX_ALBEDO, Context, checked_item, finite, invalid,
                                 or_default, referred, schema)
 from baker.gltf.extensions import MATERIAL_EXTENSIONS
 from baker.gltf.read_images import decode_image
 from baker.gltf.scene import REPEAT, Material, TextureRef
+from baker.settings import MAX_LIGHT
 
 
 _SPEC_GLOSS = "KHR_materials_pbrSpecularGlossiness"

@@ -29,11 +29,11 @@ from PIL import Image as PILImage
 
 from baker.errors import InputError
 from baker.geometry.surface import luminance
-from baker.gltf.context import MAX_LIGHT
 from baker.image.compose import Lightmaps
 from baker.jit import jit
 from baker.light.directional import page_texels
 from baker.run.parallel import run_chunks
+from baker.settings import MAX_LIGHT
 
 CLIP_PERCENTILE = 99.9
 """Default percentile of a page's covered texels (brightest channel) that becomes its intensity."""

@@ -6,9 +6,8 @@
  * rtcOccluded1, default arguments) of the same library (the libembree4 that embreex's wheel
  * ships, loaded by native.py before this file): 1.04-1.10x embreex's rate on nearest hits, a
  * scene built 5x faster, and on an AVX-512 CPU occlusion in packets of 16 rays
- * (benchmarks/bench_rays.py). The library is not
- * linked here: its symbols are resolved when native.py loads this file, so that the install
- * needs only a C compiler, no headers.
+ * (benchmarks/bench_rays.py). The library is not linked here: its symbols are resolved when
+ * native.py loads this file, so that the install needs only a C compiler, no headers.
  *
  * The declarations below are those of Embree 4's public headers (include/embree4/, Apache
  * License 2.0, Copyright Intel Corporation), only what is used. A hit is given room past its
