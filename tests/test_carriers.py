@@ -247,3 +247,89 @@ def test_the_transmission_texture_shares_the_page_and_what_shows_through(tmp_pat
     own, behind = _see_through(done.scene, done.world, tris, bary)
     np.testing.assert_allclose(behind, base * clear[:, None], atol=1e-12)
     assert (own == 1).all()
+
+
+def test_a_mixed_material_s_copy_reflects_f0_mixed_texel_by_texel(tmp_path):
+    """A quad whose metallic varies by texture (metallicFactor 0.7, every blue level and base
+    colour level present, ior 1.8, a base colour factor with alpha 0.5): its emissive copy is
+    all metal with a base colour texture of F0 = mix(((ior − 1)/(ior + 1))², base × factor,
+    metallic) per texel, sRGB-encoded, its alpha the base alpha × 0.5, and a metallicRoughness
+    texture of blue 255 with the other channels kept: each of the 65,536 (metallic, base)
+    level pairs checked against the formula evaluated texel by texel here."""
+    import io
+
+    from PIL import Image
+    from assets.gltf_builder import GltfBuilder, quad
+
+    rng = np.random.default_rng(7)
+    levels = np.arange(256, dtype=np.uint8)
+    base = np.zeros((256, 256, 4), np.uint8)
+    base[..., :3] = rng.permuted(np.broadcast_to(levels[None, :, None], (256, 256, 3)), axis=1)
+    base[..., 3] = levels[:, None]
+    metal_rough = rng.integers(0, 256, (256, 256, 3)).astype(np.uint8)
+    metal_rough[..., 2] = levels[:, None]  # row y: metallic level y, against every base level
+    b = GltfBuilder()
+    material = b.material("mixed", (0.9, 0.8, 0.7), metallic=0.7, roughness=1.0,
+                          extensions={"KHR_materials_ior": {"ior": 1.8}})
+    pbr = b._materials[material].pbrMetallicRoughness
+    pbr.baseColorFactor = [0.9, 0.8, 0.7, 0.5]
+    pbr.baseColorTexture = pygltflib.TextureInfo(index=b._image_texture(base, "base"))
+    pbr.metallicRoughnessTexture = pygltflib.TextureInfo(index=b._image_texture(metal_rough, "mr"))
+    b.node("quad", b.shape_mesh("quad", quad(2.0, 2.0), material=material))
+    out = tmp_path / "out.glb"
+    baker.bake(b.save(tmp_path / "mixed.glb"), out, baker.Settings(texel_density=4.0, rays=2),
+               state=False)
+    document = pygltflib.GLTF2().load(str(out))
+    blob = document.binary_blob()
+
+    def pixels(texture_info) -> np.ndarray:
+        view = document.bufferViews[document.images[document.textures[texture_info.index].source]
+                                    .bufferView]
+        data = blob[view.byteOffset or 0:(view.byteOffset or 0) + view.byteLength]
+        return np.asarray(Image.open(io.BytesIO(data)))
+
+    copy = next(m for m in document.materials if m.pbrMetallicRoughness.baseColorTexture
+                and m.pbrMetallicRoughness.baseColorTexture.index != pbr.baseColorTexture.index)
+    assert copy.pbrMetallicRoughness.metallicFactor == 1.0  # all metal: no diffuse left
+    assert copy.pbrMetallicRoughness.baseColorFactor == [1.0, 1.0, 1.0, 1.0]
+    colour = pixels(copy.pbrMetallicRoughness.baseColorTexture)
+    f0 = ((1.8 - 1.0) / (1.8 + 1.0)) ** 2
+    metallic = np.clip(0.7 * metal_rough[..., 2:3] / 255.0, 0.0, 1.0)
+    e = base[..., :3] / 255.0
+    linear = np.where(e <= 0.04045, e / 12.92, ((e + 0.055) / 1.055) ** 2.4) * [0.9, 0.8, 0.7]
+    reflectance = np.clip((1.0 - metallic) * f0 + metallic * linear, 0.0, 1.0)
+    encoded = np.where(reflectance <= 0.0031308, 12.92 * reflectance,
+                       1.055 * reflectance ** (1 / 2.4) - 0.055)
+    np.testing.assert_array_equal(colour[..., :3], np.round(encoded * 255.0))
+    np.testing.assert_array_equal(colour[..., 3], np.round(base[..., 3] * 0.5))
+    rough = pixels(copy.pbrMetallicRoughness.metallicRoughnessTexture)
+    np.testing.assert_array_equal(rough[..., :2], metal_rough[..., :2])
+    assert (rough[..., 2] == 255).all()
+
+
+@pytest.mark.parametrize("extensions, f0", [
+    ({}, 0.04),
+    ({"KHR_materials_ior": {"ior": 1.8}}, (0.8 / 2.8) ** 2),
+    ({"KHR_materials_ior": {"ior": 1.8},
+      "KHR_materials_specular": {"specularFactor": 0.5, "specularColorFactor": [1.0, 0.5, 0.25]}},
+     (0.8 / 2.8) ** 2 * 0.5 * np.array([1.0, 0.5, 0.25]))])
+def test_a_mixed_material_without_textures_reflects_its_own_f0(tmp_path, extensions, f0):
+    """metallicFactor 0.4 and no texture: the emissive copy is all metal with base colour
+    F0 = 0.6 · ((ior − 1)/(ior + 1))² × KHR_materials_specular + 0.4 · base colour, its
+    extensions for the dielectric gone (a metal reads neither); they used to be dropped before
+    they were read, so every such copy reflected as at ior 1.5."""
+    from assets.gltf_builder import GltfBuilder, quad
+
+    b = GltfBuilder()
+    material = b.material("mixed", (0.9, 0.6, 0.3), metallic=0.4, roughness=1.0,
+                          extensions=extensions or None)
+    b.node("quad", b.shape_mesh("quad", quad(2.0, 2.0), material=material))
+    out = tmp_path / "out.glb"
+    baker.bake(b.save(tmp_path / "mixed.glb"), out, baker.Settings(texel_density=4.0, rays=2),
+               state=False)
+    copy = next(m for m in pygltflib.GLTF2().load(str(out)).materials
+                if m.name.startswith("mixed ("))
+    pbr = copy.pbrMetallicRoughness
+    assert pbr.metallicFactor == 1.0 and not (copy.extensions or {}).keys() & set(extensions)
+    np.testing.assert_allclose(pbr.baseColorFactor[:3],
+                               0.6 * np.asarray(f0) + 0.4 * np.array([0.9, 0.6, 0.3]), rtol=1e-12)

@@ -48,7 +48,7 @@ from baker.gltf.document import COMPONENT_DTYPES
 from baker.gltf.accessors import read_accessor
 from baker.gltf.scene import Material, Scene
 from baker.image.encode import PNG_SIGNATURE, EncodedPage
-from baker.output.specular import dielectric_f0, mixed_pair, without_diffuse
+from baker.output.specular import mixed_pair, without_diffuse
 from baker.run.atomic import Outputs
 from baker.run.progress import Steps
 from baker.settings import BAKED_LIGHTS, CARRIERS, ENCODINGS, OCCLUSION_MODES
@@ -452,7 +452,8 @@ class _Builder:
                     "index": self.direction_textures[page], "texCoord": texcoord}
         elif self.options.carrier == "emissive":
             self._note_once(without_diffuse(copied, self._material(material), self.scene,
-                                            lambda: self._mixed_textures(material, copied)))
+                                            lambda f0: self._mixed_textures(material, copied,
+                                                                            f0)))
             _carry_as_emission(copied, self.lightmap_textures[page], texcoord,
                                self.intensities[page])
         if self._writes_occlusion():
@@ -475,9 +476,11 @@ class _Builder:
         """The scene's Material of glTF material ``material`` (None: glTF's default one)."""
         return next(m for m in self.scene.materials if m.index == material)
 
-    def _mixed_textures(self, material: int | None, copied: dict) -> tuple[int, int | None] | None:
-        """``specular.mixed_pair`` of ``material``, made once for all its copies, each texture
-        with the sampler of the texture it replaces."""
+    def _mixed_textures(self, material: int | None, copied: dict,
+                        f0: np.ndarray) -> tuple[int, int | None] | None:
+        """``specular.mixed_pair`` of ``material`` whose dielectric part reflects ``f0`` (3,),
+        made once for all its copies, each texture with the sampler of the texture it
+        replaces."""
         if material not in self.mixed:
             pbr = copied.get("pbrMetallicRoughness") or {}
             replaced = pbr.get("metallicRoughnessTexture") or pbr.get("baseColorTexture")
@@ -487,8 +490,7 @@ class _Builder:
                 return self._add_texture(png, sampler, name)
 
             scene_material = self._material(material)
-            self.mixed[material] = mixed_pair(scene_material, self.scene,
-                                              dielectric_f0(copied), add_image)
+            self.mixed[material] = mixed_pair(scene_material, self.scene, f0, add_image)
         return self.mixed[material]
 
     def _note_once(self, note: str | None) -> None:
