@@ -333,3 +333,32 @@ def test_a_mixed_material_without_textures_reflects_its_own_f0(tmp_path, extensi
     assert pbr.metallicFactor == 1.0 and not (copy.extensions or {}).keys() & set(extensions)
     np.testing.assert_allclose(pbr.baseColorFactor[:3],
                                0.6 * np.asarray(f0) + 0.4 * np.array([0.9, 0.6, 0.3]), rtol=1e-12)
+
+
+@pytest.mark.parametrize("alpha_mode", ["OPAQUE", "BLEND"])
+def test_a_specular_glossiness_copy_loses_its_diffuse_where_viewers_read_it(tmp_path, alpha_mode):
+    """KHR_materials_pbrSpecularGlossiness replaces the core terms in the viewers that read it
+    (Babylon.js, Blender, glTFast): the emissive copy's diffuseFactor is black with its alpha
+    kept, its diffuseTexture gone when opaque (kept for its alpha when blended), its specular
+    and glossiness as they were. It used to keep the diffuse, which those viewers lit a second
+    time on top of the baked emission."""
+    from assets.gltf_builder import GltfBuilder, quad
+
+    b = GltfBuilder()
+    texture = b._image_texture(np.full((4, 4, 4), 255, np.uint8), "diffuse")
+    spec_gloss = {"diffuseFactor": [0.2, 0.8, 0.2, 0.5], "diffuseTexture": {"index": texture},
+                  "specularFactor": [0.3, 0.2, 0.1], "glossinessFactor": 0.25}
+    material = b.material("sg", (0.9, 0.9, 0.9), alpha_mode=alpha_mode,
+                          extensions={"KHR_materials_pbrSpecularGlossiness": dict(spec_gloss)})
+    b.node("quad", b.shape_mesh("quad", quad(2.0, 2.0), material=material))
+    out = tmp_path / "out.glb"
+    done = baker.bake(b.save(tmp_path / "sg.glb"), out,
+                      baker.Settings(texel_density=4.0, rays=4, sky=(1.0, 1.0, 1.0)), state=False)
+    copy = next(m for m in pygltflib.GLTF2().load(str(out)).materials if m.name.startswith("sg ("))
+    kept = copy.extensions["KHR_materials_pbrSpecularGlossiness"]
+    assert kept["diffuseFactor"] == [0.0, 0.0, 0.0, 0.5]
+    assert ("diffuseTexture" in kept) == (alpha_mode == "BLEND")
+    assert {k: kept[k] for k in ("specularFactor", "glossinessFactor")} == {
+        k: spec_gloss[k] for k in ("specularFactor", "glossinessFactor")}
+    assert copy.pbrMetallicRoughness.baseColorFactor[:3] == [0.0, 0.0, 0.0]
+    assert done.report["settings"]["carrier"] == "emissive"

@@ -20,7 +20,7 @@ from baker.gltf.scene import REPEAT, Material, TextureRef
 from baker.settings import MAX_LIGHT
 
 
-_SPEC_GLOSS = "KHR_materials_pbrSpecularGlossiness"
+SPEC_GLOSS = "KHR_materials_pbrSpecularGlossiness"
 
 
 def read_materials(ctx: Context) -> list[Material]:
@@ -106,9 +106,9 @@ def _base_terms(ctx: Context, material: pygltflib.Material, extensions: dict,
     KHR_materials_pbrSpecularGlossiness when the material has it (the extension replaces the
     core terms): its diffuseFactor/diffuseTexture are the diffuse albedo a lightmap needs, as a
     dielectric (metallic 0) of roughness 1 − glossinessFactor."""
-    spec_gloss = extensions.get(_SPEC_GLOSS)
+    spec_gloss = extensions.get(SPEC_GLOSS)
     if isinstance(spec_gloss, dict):
-        at = f"{where}.extensions.{_SPEC_GLOSS}"
+        at = f"{where}.extensions.{SPEC_GLOSS}"
         info = _texture_info(spec_gloss.get("diffuseTexture"))
         glossiness = _material_number(ctx, spec_gloss, "glossinessFactor", 1.0, 0.0, 1.0,
                                       f"{at}.glossinessFactor")

@@ -16,6 +16,10 @@ specular lobe of reflectance F0 = ((ior − 1)/(ior + 1))², 0.04 at ior 1.5) wi
 - a material whose metallic varies (a metallicRoughnessTexture, or a factor between 0 and 1) is
   made metal everywhere with base colour F0 = mix(F0_dielectric, base colour, metallic) per texel
   of new textures: the same specular reflectance, no diffuse;
+- a ``KHR_materials_pbrSpecularGlossiness`` material (read as a dielectric whose diffuse is its
+  diffuseFactor × diffuseTexture) gets a black diffuseFactor and loses its diffuseTexture the
+  same way, its specular colour and glossiness kept: the viewers that read the extension
+  (Babylon.js, Blender, glTFast) read it in place of the core terms;
 - a transmissive material keeps its base colour, which tints what it lets through: its
   (1 − transmission) diffuse share is lit by the viewer as well (noted in the report).
 
@@ -31,6 +35,7 @@ from collections.abc import Callable
 import numpy as np
 from PIL import Image as PILImage
 
+from baker.gltf.read_materials import SPEC_GLOSS
 from baker.gltf.scene import Material, Scene
 from baker.image.encode import linear_to_srgb
 
@@ -75,13 +80,15 @@ def without_diffuse(copied: dict, material: Material, scene: Scene,
     extensions = copied.get("extensions") or {}
     for name in DROPPED:
         extensions.pop(name, None)
+    if isinstance(extensions.get(SPEC_GLOSS), dict):  # replaces the core terms where a viewer
+        # reads it (Babylon.js, Blender, glTFast): a dielectric whose diffuse goes black too
+        _black_diffuse(extensions[SPEC_GLOSS], "diffuseFactor", "diffuseTexture",
+                       copied.get("alphaMode", "OPAQUE") == "OPAQUE")
     pbr = copied.setdefault("pbrMetallicRoughness", {})
     how = kind(material)
     if how == "dielectric":
-        alpha = float((pbr.get("baseColorFactor") or [1.0, 1.0, 1.0, 1.0])[3])
-        pbr["baseColorFactor"] = [0.0, 0.0, 0.0, alpha]
-        if copied.get("alphaMode", "OPAQUE") == "OPAQUE":
-            pbr.pop("baseColorTexture", None)  # kept only for its alpha
+        _black_diffuse(pbr, "baseColorFactor", "baseColorTexture",
+                       copied.get("alphaMode", "OPAQUE") == "OPAQUE")
         return None
     if how == "mixed":
         alpha = float((pbr.get("baseColorFactor") or [1.0, 1.0, 1.0, 1.0])[3])
@@ -110,6 +117,16 @@ def without_diffuse(copied: dict, material: Material, scene: Scene,
                 "base colour, which tints what it lets through: viewers light its "
                 f"{1 - material.transmission:.0%} diffuse share themselves as well as the bake")
     return None
+
+
+def _black_diffuse(terms: dict, factor: str, texture: str, opaque: bool) -> None:
+    """Make the colour ``factor`` of ``terms`` (a material's JSON object, changed in place)
+    black, its alpha kept, and drop its ``texture`` where the material is ``opaque`` (else the
+    texture stays for its alpha)."""
+    alpha = float((terms.get(factor) or [1.0, 1.0, 1.0, 1.0])[3])
+    terms[factor] = [0.0, 0.0, 0.0, alpha]
+    if opaque:
+        terms.pop(texture, None)
 
 
 def mixed_pair(material: Material, scene: Scene, f0: np.ndarray,
