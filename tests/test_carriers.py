@@ -362,3 +362,5 @@ def test_a_specular_glossiness_copy_loses_its_diffuse_where_viewers_read_it(tmp_
         k: spec_gloss[k] for k in ("specularFactor", "glossinessFactor")}
     assert copy.pbrMetallicRoughness.baseColorFactor[:3] == [0.0, 0.0, 0.0]
     assert done.report["settings"]["carrier"] == "emissive"
+    report = gltf_validator.validate(out)
+    assert not gltf_validator.issue_codes(report, 0), gltf_validator.describe(report, 0)
