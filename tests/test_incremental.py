@@ -23,6 +23,7 @@ from baker.gltf.load import load
 from baker.settings import resolve
 from baker.rebake.state import default_path
 from baker.atlas.unwrap import frame_area, stretch, unwrap
+from baker.cli.common import OUTPUTS_CHANGED
 from baker.cli.main import main
 from tests.bakehelp import rasterised
 
@@ -259,14 +260,30 @@ def test_cli_bakes_incrementally_rebakes_and_watches(base, tmp_path, capsys):
     assert "baked" in capsys.readouterr().out
 
 
-def test_pre_commit_hook_bakes_each_scene_beside_it(tmp_path, capsys):
+@pytest.mark.parametrize("suffix", [".glb", ".gltf"])
+def test_pre_commit_hook_bakes_each_scene_beside_it(tmp_path, capsys, suffix):
+    """The hook bakes each scene into <stem>_baked beside it and stops the commit (exit 5,
+    naming the files) whenever it wrote an output anew or with other bytes (a .gltf's .bin
+    included): new outputs are files git does not track, which pre-commit would let through.
+    Run again on the same scene, its rebake writes the same bytes: exit 0, the commit goes on;
+    after an edit, exit 5 again."""
     hooks = (Path(__file__).resolve().parents[1] / ".pre-commit-hooks.yaml").read_text()
     assert "entry: baker hook" in hooks and "id: baker-bake" in hooks
-    scene = box_room(BOXES[:1], room=ROOM).save(tmp_path / "crate.glb")
-    assert main(["hook", str(scene), str(tmp_path / "crate_baked.glb"), "--rays", "4",
-                 "--page-size", "64"]) == 0
-    assert (tmp_path / "crate_baked.glb").exists() and default_path(tmp_path / "crate_baked.glb").exists()
-    assert not (tmp_path / "crate_baked_baked.glb").exists()  # outputs are not baked again
+    scene = box_room(BOXES[:1], room=ROOM).save(tmp_path / f"crate{suffix}")
+    out = tmp_path / f"crate_baked{suffix}"
+    written = [out, *([out.with_suffix(".bin")] if suffix == ".gltf" else [])]
+    argv = ["hook", str(scene), str(out), "--rays", "4", "--page-size", "64"]
+    assert main(argv) == OUTPUTS_CHANGED
+    said = capsys.readouterr().err
+    assert all(str(path) in said for path in written) and "commit again" in said, said
+    assert out.exists() and default_path(out).exists()
+    assert not (tmp_path / f"crate_baked_baked{suffix}").exists()  # outputs are not baked again
+    assert main(argv) == 0
+    assert "commit again" not in capsys.readouterr().err
+    box_room(moved(BOXES[:1], BOXES[0]["name"], at=(0.5, -0.5)), room=ROOM).save(scene)
+    assert main(argv) == OUTPUTS_CHANGED
+    said = capsys.readouterr().err
+    assert all(str(path) in said for path in written), said
     assert main(["hook", str(tmp_path / "missing.glb")]) == 1
 
 
@@ -279,8 +296,8 @@ def test_the_hook_has_git_ignore_the_bake_states(tmp_path, capsys):
     subprocess.run(["git", "init", "-q", str(tmp_path)], check=True)
     (tmp_path / ".gitignore").write_text("*.tmp")  # no final newline
     scene = box_room(BOXES[:1], room=ROOM).save(tmp_path / "crate.glb")
-    for _ in range(2):
-        assert main(["hook", str(scene), "--rays", "4", "--page-size", "64"]) == 0
+    for code in (OUTPUTS_CHANGED, 0):  # its output and .gitignore new, then as they were
+        assert main(["hook", str(scene), "--rays", "4", "--page-size", "64"]) == code
     assert capsys.readouterr().out.count("to " + str(tmp_path / ".gitignore")) == 1
     lines = (tmp_path / ".gitignore").read_text().splitlines()
     assert lines[0] == "*.tmp" and lines.count("*_baked.gl*.bake*") == 1

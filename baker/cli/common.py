@@ -12,6 +12,7 @@ from typing import Callable
 import baker
 
 NOTHING_BAKED = 4  # exit code: the bake ran and wrote its output, but no surface got a lightmap
+OUTPUTS_CHANGED = 5  # exit code of ``baker hook``: it wrote files to add to the commit
 
 
 def positive_float(text: str) -> float:

@@ -2,8 +2,11 @@
 
 Used by ``.pre-commit-hooks.yaml``: pre-commit passes the staged .glb/.gltf files; each is baked
 incrementally from its output's bake state (``<stem>_baked.glb.bake``) when there is one. Files
-that are themselves bake outputs (``*_baked.*``) are skipped. Exit code 0 when every file baked,
-1 when any failed (each failure printed as one line).
+that are themselves bake outputs (``*_baked.*``) are skipped. Exit code 0 when every file baked
+to the bytes its output already held; ``OUTPUTS_CHANGED`` when an output (or its ``.bin``, or
+the ``.gitignore``) was written anew or changed: the commit must stop so that they are added
+(pre-commit itself stops a commit only when a hook changes a file git tracks, and a scene's
+first bake makes new ones); 1 when any failed (each failure printed as one line).
 
 The bake states beside the outputs (``<stem>_baked.glb.bake`` and its ``.json``: tens of MB, and
 rebuilt by any full bake) do not belong in the asset repository: the hook adds the line
@@ -21,10 +24,12 @@ from __future__ import annotations
 
 import argparse
 import os
+import stat
 import sys
 from pathlib import Path
 
 import baker
+from baker.cli.common import OUTPUTS_CHANGED
 from baker.cli.state import print_rebake, settings_for
 
 SUFFIX = "_baked"
@@ -56,11 +61,14 @@ def output_for(scene: Path) -> Path:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Bake each scene; exit code 0 when all baked, 1 otherwise."""
-    failed, folders = 0, set()
+    """Bake each scene; exit code 0 when all baked and no file changed, ``OUTPUTS_CHANGED``
+    when one did (the module's docstring), 1 when any failed."""
+    failed, folders, changed = 0, set(), []
     for scene in args.scenes:
         if scene.stem.endswith(SUFFIX) or scene.suffix.lower() not in (".glb", ".gltf"):
             continue
+        written = _written_files(output_for(scene))
+        before = {path: _opened(path) for path in written}  # the bytes as they were
         try:
             settings = settings_for(output_for(scene), rays=args.rays, page_size=args.page_size)
             result = baker.bake(scene, output_for(scene), settings, incremental=True,
@@ -68,9 +76,66 @@ def run(args: argparse.Namespace) -> int:
             print_rebake(result)
             print(f"baked {result.output}")
             folders.add(result.output.parent)
+            changed += [path for path in written if path.exists() and not _same(before[path], path)]
         except baker.BakerError as error:
             print(f"baker: error: {error}", file=sys.stderr)
             failed += 1
+        finally:
+            for descriptor in before.values():
+                if descriptor is not None:
+                    os.close(descriptor)
+    changed += _ignored_states(folders)
+    if failed:
+        return 1
+    if changed:
+        print(f"baker hook: wrote {', '.join(map(str, changed))}: add "
+              f"{'it' if len(changed) == 1 else 'them'} and commit again", file=sys.stderr)
+        return OUTPUTS_CHANGED
+    return 0
+
+
+def _written_files(output: Path) -> list[Path]:
+    """The files a bake of the hook writes for ``output`` that belong in the repository: the
+    output, and beside a .gltf its .bin (the hook bakes into the scene's own folder, so the
+    images stay the scene's own)."""
+    return [output, *([output.with_suffix(".bin")] if output.suffix.lower() == ".gltf" else [])]
+
+
+def _opened(path: Path) -> int | None:
+    """A descriptor of the regular file ``path`` as it is before the bake (which renames a new
+    file into its place: this one keeps reading the old bytes), or None when there is none
+    (missing, a link, a FIFO, anything else: never followed, never read)."""
+    try:
+        descriptor = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK)
+    except OSError:
+        return None
+    if not stat.S_ISREG(os.fstat(descriptor).st_mode):
+        os.close(descriptor)
+        return None
+    return descriptor
+
+
+def _same(descriptor: int | None, path: Path) -> bool:
+    """Whether the file at ``path`` (just written by the bake) holds what ``descriptor``
+    (``_opened`` before it) held; no more of the old file is read than the new one's size."""
+    if descriptor is None:
+        return False
+    new = path.read_bytes()
+    if os.fstat(descriptor).st_size != len(new):
+        return False
+    old, offset = bytearray(), 0
+    while offset < len(new):
+        chunk = os.pread(descriptor, min(len(new) - offset, 1 << 24), offset)
+        if not chunk:
+            return False
+        old += chunk
+        offset += len(chunk)
+    return old == new
+
+
+def _ignored_states(folders: set[Path]) -> list[Path]:
+    """``ignore_states`` for each folder baked into, said; the .gitignore files it changed."""
+    changed = []
     for folder in sorted(folders):
         try:
             added = ignore_states(folder)
@@ -84,7 +149,8 @@ def run(args: argparse.Namespace) -> int:
         elif added:
             print(f"baker hook: added {IGNORE} to {folder / '.gitignore'} (the bake states "
                   "beside the outputs: large, and rebuilt by any full bake)")
-    return 1 if failed else 0
+            changed.append(folder / ".gitignore")
+    return changed
 
 
 def ignore_states(folder: Path) -> bool | None:

@@ -4,8 +4,8 @@ Each subcommand is a module of this package with ``add_parser(commands)``, which
 options and sets ``run``; ``main`` parses, runs it, and renders ``baker.BakerError`` as a short
 message (the traceback only with ``--debug``). Exit codes: 0 done, 1 bad input or settings
 (message printed), 2 bad command line (argparse), 3 internal error (a bug: please report it),
-4 nothing baked (``common.exit_code``), 130 interrupted (Ctrl-C), 143 terminated (SIGTERM:
-cleaned up as after Ctrl-C).
+4 nothing baked (``common.exit_code``), 5 ``baker hook`` wrote files to add to the commit,
+130 interrupted (Ctrl-C), 143 terminated (SIGTERM: cleaned up as after Ctrl-C).
 """
 
 from __future__ import annotations
