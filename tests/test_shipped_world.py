@@ -115,3 +115,28 @@ def test_a_node_whose_world_differs_is_an_error_not_other_bytes(tmp_path, monkey
     tampered = type(shipped)(shipped.part, shipped.baking, shipped.owns, shipped.crc ^ 1)
     with pytest.raises(RuntimeError, match="built another world .* than the driver's"):
         cluster._node_bake(tampered)
+
+
+def test_an_instance_s_cofactor_is_np_cross_to_the_bit():
+    """``world._cofactor`` crosses the matrix's columns in Python floats (30× sooner than
+    ``np.cross`` on 3-vectors): every row and det(M) are the bits ``np.cross`` gives, on
+    20,000 matrices of magnitudes 10⁻³⁰ to 10³⁰, with zero rows, float32 values, an inf and a
+    NaN (a world built either way is the same bits, so rebakes and states are unchanged)."""
+    import warnings
+
+    from baker.geometry.world import _cofactor
+
+    rng = np.random.default_rng(5)
+    matrices = rng.normal(size=(20_000, 3, 3)) * 10.0 ** rng.integers(-30, 31, (20_000, 3, 3))
+    matrices[::4, 1] = 0.0
+    matrices[1::4] = matrices[1::4].astype(np.float32)
+    matrices[2, 0, 0], matrices[3, 1, 2] = np.inf, np.nan
+    for linear in matrices:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # np.cross's overflows
+            rows = np.stack([np.cross(linear[:, 1], linear[:, 2]),
+                             np.cross(linear[:, 2], linear[:, 0]),
+                             np.cross(linear[:, 0], linear[:, 1])])
+            det = (rows[0, 0] * linear[0, 0] + rows[0, 1] * linear[1, 0]) + rows[0, 2] * linear[2, 0]
+        cofactor, found = _cofactor(linear)
+        assert cofactor.tobytes() == rows.tobytes() and np.float64(found).tobytes() == det.tobytes()

@@ -187,11 +187,17 @@ def rows_times(rows: np.ndarray, matrix: np.ndarray) -> np.ndarray:
 def _cofactor(linear: np.ndarray) -> tuple[np.ndarray, float]:
     """The cofactor matrix det(M)·M⁻¹ (3, 3) of the linear part ``linear`` (3, 3) of an
     instance's matrix, as rows, and det(M) from it (elementwise arithmetic, no LAPACK): both
-    exist for a singular M too."""
-    cofactor = np.stack([np.cross(linear[:, 1], linear[:, 2]), np.cross(linear[:, 2], linear[:, 0]),
-                         np.cross(linear[:, 0], linear[:, 1])])
-    det = (cofactor[0, 0] * linear[0, 0] + cofactor[0, 1] * linear[1, 0]) \
-        + cofactor[0, 2] * linear[2, 0]
+    exist for a singular M too. Row k is the cross product of columns k + 1 and k + 2, each
+    component a·b − c·d as ``np.cross`` rounds it, in Python floats: numpy's call costs
+    about 30 µs on 3-vectors, and a level places every instance through here."""
+    (a, b, c), (d, e, f), (g, h, i) = linear.tolist()  # M's rows; its columns are (a, d, g)…
+
+    def cross(x0, x1, x2, y0, y1, y2) -> list[float]:
+        return [x1 * y2 - x2 * y1, x2 * y0 - x0 * y2, x0 * y1 - x1 * y0]
+
+    cofactor = np.array([cross(b, e, h, c, f, i), cross(c, f, i, a, d, g),
+                         cross(a, d, g, b, e, h)])
+    det = (cofactor[0, 0] * a + cofactor[0, 1] * d) + cofactor[0, 2] * g
     return cofactor, float(det)
 
 
