@@ -364,3 +364,51 @@ def test_a_specular_glossiness_copy_loses_its_diffuse_where_viewers_read_it(tmp_
     assert done.report["settings"]["carrier"] == "emissive"
     report = gltf_validator.validate(out)
     assert not gltf_validator.issue_codes(report, 0), gltf_validator.describe(report, 0)
+
+
+@pytest.mark.parametrize("carrier", ["moz", "occlusion", "emissive"])
+def test_material_variants_keep_the_bake_where_the_carrier_allows(tmp_path, carrier):
+    """A quad with KHR_materials_variants (red by default and as variant 0, blue as variant
+    1): under moz and occlusion, whose page is the same for every material, each variant maps
+    to a lightmap copy of its own material on the primitive's page and UV set (a viewer that
+    switches variants, as <model-viewer> does, keeps the bake); under the emissive carrier,
+    whose page holds the default material's colour, the variants keep their own materials and
+    the report says so. The variants used to map to the input's materials under every
+    carrier, which show no bake."""
+    from assets.gltf_builder import GltfBuilder, quad
+
+    b = GltfBuilder()
+    red, blue = b.material("red", (0.8, 0.1, 0.1)), b.material("blue", (0.1, 0.1, 0.8))
+    mesh = b.shape_mesh("card", quad(2.0, 2.0), material=red)
+    b.node("card", mesh)
+    b._meshes[mesh].primitives[0].extensions = {"KHR_materials_variants": {"mappings": [
+        {"material": blue, "variants": [1]}, {"material": red, "variants": [0]}]}}
+    b._extensions_used.add("KHR_materials_variants")
+    source = b.save(tmp_path / "variants.glb")
+    document = pygltflib.GLTF2().load(str(source))
+    document.extensions = {"KHR_materials_variants": {"variants": [{"name": "red"},
+                                                                   {"name": "blue"}]}}
+    document.save(str(source))
+    out = tmp_path / "out.glb"
+    done = baker.bake(source, out, baker.Settings(texel_density=4.0, rays=4, carrier=carrier),
+                      state=False)
+    baked = pygltflib.GLTF2().load(str(out))
+    primitive = baked.meshes[0].primitives[0]
+    mappings = primitive.extensions["KHR_materials_variants"]["mappings"]
+    by_variant = {mapping["variants"][0]: baked.materials[mapping["material"]]
+                  for mapping in mappings}
+    default = baked.materials[primitive.material]
+    assert default.name == "red (lightmap page 0)"
+    if carrier == "emissive":
+        assert [m.name for m in by_variant.values()] == ["blue", "red"]
+        assert any("KHR_materials_variants" in note for note in done.report["notes"])
+        return
+    assert by_variant[0] is default and by_variant[1].name == "blue (lightmap page 0)"
+    assert by_variant[1].pbrMetallicRoughness.baseColorFactor[:3] == [0.1, 0.1, 0.8]
+    slot = {"moz": lambda m: m.extensions["MOZ_lightmap"],
+            "occlusion": lambda m: {"index": m.occlusionTexture.index,
+                                    "texCoord": m.occlusionTexture.texCoord}}[carrier]
+    assert slot(by_variant[1])["index"] == slot(default)["index"]
+    assert slot(by_variant[1])["texCoord"] == slot(default)["texCoord"] == 1
+    report = gltf_validator.validate(out)
+    assert not gltf_validator.issue_codes(report, 0), gltf_validator.describe(report, 0)

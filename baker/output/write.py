@@ -587,8 +587,31 @@ class _Builder:
             new["mode"] = _TRIANGLES
             new["material"] = self._lightmap_material(primitive.get("material"), int(page),
                                                        texcoord, shifted, transform)
+            self._variant_copies(new, where, int(page), texcoord, shifted, transform)
             result.append(new)
         return result
+
+    def _variant_copies(self, primitive: dict, where: str, page: int, texcoord: int,
+                        shifted: bool, transform: dict | None) -> None:
+        """Point the ``KHR_materials_variants`` mappings of a baked ``primitive`` (its JSON, a
+        copy: changed in place) at lightmap copies of their materials, on the primitive's page,
+        UV set and texture transform, where the carrier's page is the same for every material
+        (moz: irradiance, occlusion: visibility); else, under the emissive carrier, whose page
+        holds the default material's colour, each variant keeps its own material (noted)."""
+        mappings = ((primitive.get("extensions") or {}).get(VARIANTS_EXTENSION) or {}).get(
+            "mappings")
+        if not isinstance(mappings, list):
+            return
+        if self.options.carrier == "emissive":
+            self._note(f"{where} has {VARIANTS_EXTENSION}: under the emissive carrier its "
+                       "variants keep their own materials, which show no bake (its page holds "
+                       "the default material's colour); --carrier moz carries the bake to "
+                       "every variant")
+            return
+        for mapping in mappings:
+            if isinstance(mapping, dict) and isinstance(mapping.get("material"), int):
+                mapping["material"] = self._lightmap_material(mapping["material"], page,
+                                                              texcoord, shifted, transform)
 
     def _page_geometry(self, primitive: dict, where: str, rows: np.ndarray, indices: np.ndarray,
                        uv: np.ndarray, texcoord: int, shifted: bool) -> tuple[dict, int, dict | None]:
