@@ -54,6 +54,11 @@ EDITS = {
                         or f"textures[{len(d['textures']) - 1}].source", "images"),
     "sampler": lambda d: (d["textures"].append({"source": 0, "sampler": 6})
                           or f"textures[{len(d['textures']) - 1}].sampler", "samplers"),
+    "variant material": lambda d: (d["meshes"][0]["primitives"][0].setdefault(
+        "extensions", {}).update(KHR_materials_variants={"mappings": [
+            {"material": 0, "variants": [0]}, {"material": 99, "variants": [1]}]})
+        or "meshes[0].primitives[0].extensions.KHR_materials_variants.mappings[1].material",
+        "materials"),
     "mesh": lambda d: (d["nodes"].append({"mesh": 8})
                        or f"nodes[{len(d['nodes']) - 1}].mesh", "meshes"),
     "node": lambda d: (d["nodes"].append({"children": [0, 30]})
