@@ -496,3 +496,32 @@ def test_hubs_reads_the_moz_texels_as_linear(browser, baked, hubs, tmp_path):
         server.shutdown()
         server.server_close()
     _assert_same(shown, preview, "three.js + plugin cornell moz srgb", tmp_path)
+
+
+def test_babylon_shows_a_specular_glossiness_scene_as_the_preview(browser, babylon, tmp_path):
+    """The demo room with every material in KHR_materials_pbrSpecularGlossiness, which
+    Babylon.js reads in place of the core terms: its emissive copies (the diffuse black in the
+    extension too, KHR_materials_emissive_strength beside it) show as the preview shows them;
+    lit by an app's own light as well (white, from every side), they gain only its specular
+    reflection (F0 0.04, rough: 6 % measured), not a second diffuse. With the copies' diffuse
+    left in the extension, Babylon's picture was off the preview by more than 5 % unlit and
+    clipped white lit."""
+    b = cornell_box()
+    for material in b._materials:
+        material.extensions = {**(material.extensions or {}),
+                               "KHR_materials_pbrSpecularGlossiness": {
+                                   "diffuseFactor": list(material.pbrMetallicRoughness
+                                                         .baseColorFactor),
+                                   "specularFactor": [0.04] * 3, "glossinessFactor": 0.0}}
+    b._extensions_used.add("KHR_materials_pbrSpecularGlossiness")
+    out = tmp_path / "spec_gloss_emissive.glb"
+    baker.bake(saved(b, tmp_path, "spec_gloss.glb"), out,
+               baker.Settings(texel_density=8.0, rays=16), state=False)
+    view, preview = _view_and_preview(out)
+    shown = _viewer_picture(browser, babylon, out, view, preview.exposure)
+    _assert_same(shown, preview, "Babylon specular-glossiness emissive", tmp_path)
+    lit = _viewer_picture(browser, babylon, out, view, preview.exposure, "&light=1")
+    found = _compare(lit, dataclasses.replace(preview, rgb=shown), "Babylon specular-glossiness"
+                     " emissive, lit by the app", tmp_path)
+    assert found["black"] == 0 and 1.0 <= found["ratio"] <= 1.15, found
+    assert found["correlation"] >= 0.98, found
