@@ -43,7 +43,10 @@ def add_parser(commands) -> None:
     parser = commands.add_parser(
         "hook", help="bake each given glTF file into <stem>_baked (for pre-commit)",
         description="Bake every given .glb/.gltf into <stem>_baked.<ext> beside it, "
-                    "incrementally when its bake state is there. For .pre-commit-hooks.yaml.")
+                    "incrementally when its bake state is there. For .pre-commit-hooks.yaml: "
+                    f"exits {OUTPUTS_CHANGED} when it wrote an output (or .gitignore) anew or "
+                    "changed, so that the commit stops until they are added; 0 when every "
+                    "output was already as baked.")
     parser.set_defaults(run=run)
     parser.add_argument("scenes", type=Path, nargs="*", help="the scenes to bake")
     parser.add_argument("--rays", type=int, default=baker.Settings().rays,
