@@ -27,6 +27,7 @@ import zlib
 from pathlib import Path
 
 import numpy as np
+import pygltflib
 import pytest
 
 import baker
@@ -151,6 +152,31 @@ def test_debug_raises_the_typed_error_with_its_traceback(tmp_path):
     with pytest.raises(baker.InputError, match="not a glTF file"):
         main(["bake", str(source), "-o", str(tmp_path / "out.glb"), "--debug", *FAST])
     assert sorted(p.name for p in tmp_path.iterdir()) == ["holiday.glb"]
+
+
+@pytest.mark.parametrize("carrier", ["emissive", "moz"])
+def test_a_bake_given_again_as_input_is_refused_naming_it(tmp_path, capsys, carrier):
+    """A file baker wrote (asset.extras.baker), e.g. the scene after ``--overwrite`` replaced
+    it with its bake, baked again: exit 1 naming asset.extras.baker and the carrier, the fix
+    saying to bake its source (before: under the emissive carrier "nothing baked: black base
+    colour", exit 4; under moz, copies of the copies). The library refuses it too, in memory.
+    With asset.extras.baker removed, the file is baked as it is: the moz copies keep their
+    base colours and bake; the emissive ones are black, and nothing is baked (exit 4)."""
+    source = small_scene().save(tmp_path / "scene.glb")
+    baked = tmp_path / "scene_baked.glb"
+    assert main(["bake", str(source), "-o", str(baked), "--carrier", carrier, "--no-state",
+                 *FAST]) == 0
+    capsys.readouterr()
+    err = refuses(tmp_path, capsys, baked, "asset.extras.baker", f"carrier {carrier}",
+                  "bake the scene it was made from")
+    assert str(baked) in err
+    with pytest.raises(baker.InputError, match="a bake baker wrote"):
+        baker.compute(baker.load(baked), baker.Settings(rays=2, page_size=32))
+    document = pygltflib.GLTF2().load(str(baked))
+    del document.asset.extras["baker"]
+    document.save(str(baked))
+    assert main(["bake", str(baked), "-o", str(tmp_path / "again.glb"), "--no-state",
+                 *FAST]) == (0 if carrier == "moz" else 4)
 
 
 def test_missing_input_file(tmp_path, capsys):

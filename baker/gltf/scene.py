@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pygltflib
 
+from baker.errors import InputError
 from baker.punctual import Light
 
 # glTF sampler wrap modes (OpenGL enums), as glTF stores them.
@@ -159,6 +160,26 @@ class Scene:
     # (device, inode) → how the scene reads it, of every file the load opened (the scene file,
     # its buffers and images): no file a bake writes may replace one (run/atomic.py).
     inputs: dict[tuple[int, int], str] = field(default_factory=dict)
+
+    def check_not_a_bake(self) -> None:
+        """Refuse a file baker wrote (``asset.extras.baker``, as ``output.write`` marks every
+        bake): its materials are lightmap copies (under the emissive carrier black, their light
+        in their emission, which a second bake would take for emitters), and baking them again
+        copies the copies. The first bake's output given again as input, e.g. after
+        ``--overwrite`` replaced the scene with its bake, ended in "nothing baked: black base
+        colour", which named neither the file's kind nor what to do."""
+        extras = getattr(self.document.asset, "extras", None)
+        made = extras.get("baker") if isinstance(extras, dict) else None
+        if not isinstance(made, dict):
+            return
+        carrier = made.get("carrier")
+        raise InputError(
+            f"this file is a bake baker wrote (asset.extras.baker"
+            f"{f', carrier {carrier}' if isinstance(carrier, str) else ''}): its materials "
+            "are the lightmap copies of the scene it was made from, which a bake would copy "
+            "again", file=str(self.path), where="asset.extras.baker",
+            fix="bake the scene it was made from; to bake this file as it is, remove "
+                "asset.extras.baker from it")
 
     def lights_needed(self) -> bool:
         """Whether the punctual lights light a surface that no lightmap will hold: an instance

@@ -398,6 +398,7 @@ def compute(scene: Scene, settings: Settings, quiet: bool = True,
     and ``Lighting`` with these settings, already made (by a rebake that fell back to this
     bake, ``rebake.fallback.FullBake``): the same objects this bake would make.
     """
+    scene.check_not_a_bake()
     underway = Underway(scene, settings, quiet, spill_folder, staging, prepared, times={})
     return run_stages(STAGES, underway, StageLines(not quiet)).computed
 
