@@ -467,9 +467,9 @@ def bake_or_rebake(scene: Scene, settings: Settings, state_path, incremental: bo
     relight casts no ray, so the last bakes' times never price it out (``rebake.cost``).
     ``spill_folder``: where a full bake keeps its texels' results until the state is written
     (``pipeline.full.compute``); ``staging``: where the bake state is written (``rebake.staging.StateStaging``)."""
-    scene.check_not_a_bake()
     if not incremental and not relight:
         return compute(scene, settings, quiet, spill_folder, staging), None
+    scene.check_not_a_bake()  # as compute does, before the state is read
     prepared = None
     if state_path is None:
         reason = "no bake state (state=False)"

@@ -35,6 +35,7 @@ from collections.abc import Callable
 import numpy as np
 from PIL import Image as PILImage
 
+from baker.geometry.surface import SRGB_TO_LINEAR
 from baker.gltf.read_materials import SPEC_GLOSS
 from baker.gltf.scene import Material, Scene
 from baker.image.encode import linear_to_srgb
@@ -80,15 +81,14 @@ def without_diffuse(copied: dict, material: Material, scene: Scene,
     extensions = copied.get("extensions") or {}
     for name in DROPPED:
         extensions.pop(name, None)
+    opaque = copied.get("alphaMode", "OPAQUE") == "OPAQUE"
     if isinstance(extensions.get(SPEC_GLOSS), dict):  # replaces the core terms where a viewer
         # reads it (Babylon.js, Blender, glTFast): a dielectric whose diffuse goes black too
-        _black_diffuse(extensions[SPEC_GLOSS], "diffuseFactor", "diffuseTexture",
-                       copied.get("alphaMode", "OPAQUE") == "OPAQUE")
+        _black_diffuse(extensions[SPEC_GLOSS], "diffuseFactor", "diffuseTexture", opaque)
     pbr = copied.setdefault("pbrMetallicRoughness", {})
     how = kind(material)
     if how == "dielectric":
-        _black_diffuse(pbr, "baseColorFactor", "baseColorTexture",
-                       copied.get("alphaMode", "OPAQUE") == "OPAQUE")
+        _black_diffuse(pbr, "baseColorFactor", "baseColorTexture", opaque)
         return None
     if how == "mixed":
         alpha = float((pbr.get("baseColorFactor") or [1.0, 1.0, 1.0, 1.0])[3])
@@ -171,11 +171,8 @@ def _reflectance_levels(material: Material, f0: np.ndarray) -> np.ndarray:
     level (last axis), the material's factors applied. A texel's level depends on those two
     levels alone, so the 196,608 entries are computed once for the texture's millions of texels
     (a 2048² texture: 1.8 s elementwise, of a 7.8 s bake of LightsPunctualLamp)."""
-    levels = np.arange(256.0)
-    metallic = np.clip(material.metallic * levels / 255.0, 0.0, 1.0)[:, None, None]
-    e = levels / 255.0
-    linear = np.where(e <= 0.04045, e / 12.92, ((e + 0.055) / 1.055) ** 2.4)
-    colour = linear[None, None, :] * np.asarray(material.base_color[:3])[None, :, None]
+    metallic = np.clip(material.metallic * np.arange(256.0) / 255.0, 0.0, 1.0)[:, None, None]
+    colour = SRGB_TO_LINEAR[None, None, :] * np.asarray(material.base_color[:3])[None, :, None]
     reflectance = (1.0 - metallic) * np.asarray(f0)[None, :, None] + metallic * colour
     return np.round(linear_to_srgb(reflectance) * 255.0).astype(np.uint8)
 
