@@ -96,7 +96,13 @@ def test_added_or_removed_node_names_the_reason(base, tmp_path):
     edited = _room(BOXES[:3]).save(tmp_path / "edited.glb")
     result = baker.bake(edited, tmp_path / "out.glb", density, incremental="always")
     assert result.rebake["incremental"] is False
-    assert "removed" in result.rebake["full_bake_reason"]
+    reason = result.rebake["full_bake_reason"]
+    assert f"removed node {BOXES[3]['name']!r}" in reason and "None" not in reason, reason
+    added = _room(BOXES + [dict(BOXES[1], name="box9", at=(0.0, 1.5))])
+    result = baker.bake(added.save(tmp_path / "added.glb"), tmp_path / "out.glb", density,
+                        incremental="always")
+    assert "instances added " in (reason := result.rebake["full_bake_reason"])
+    assert "node 'box9' (nodes[5]), mesh 2, primitive 0" in reason, reason
 
 
 def test_no_false_negatives_next_to_a_wall(tmp_path):

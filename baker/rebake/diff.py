@@ -181,6 +181,22 @@ class Diff:
     lights_placed: list[int] = field(default_factory=list)
 
 
+def _named(instance: dict) -> str:
+    """How a report names one of ``fingerprints``' instances: its node's name and the primitive
+    (and GPU instance) its key holds — "node 'crate' (nodes[12]), mesh 3, primitive 0"."""
+    node, mesh, primitive, gpu = instance["key"].split("/")
+    name = instance["name"]
+    said = f"node {name!r}" + (f" (nodes[{node}])" if name != f"nodes[{node}]" else "")
+    return said + f", mesh {mesh}, primitive {primitive}" + (
+        f", GPU instance {gpu}" if gpu != "None" else "")
+
+
+def _listed(instances: list[dict], most: int = 3) -> str:
+    """The first ``most`` of ``instances`` named (``_named``), then how many more there are."""
+    said = "; ".join(_named(x) for x in instances[:most])
+    return said + (f" and {len(instances) - most} more" if len(instances) > most else "")
+
+
 def _setting_changes(old: dict, new: dict) -> list[str]:
     return [f"{k} {old.get(k)!r} → {new.get(k)!r}" for k in sorted(set(old) | set(new))
             if old.get(k) != new.get(k)]
@@ -207,15 +223,14 @@ def diff(old: dict, new: dict) -> Diff:
     oi, ni = old["instances"], new["instances"]
     old_keys, new_keys = [x["key"] for x in oi], [x["key"] for x in ni]
     if old_keys != new_keys:
-        added = sorted(set(new_keys) - set(old_keys))
-        removed = sorted(set(old_keys) - set(new_keys))
-        what = "; ".join(p for p in (f"added {', '.join(added)}" if added else "",
-                                     f"removed {', '.join(removed)}" if removed else "") if p)
-        return full(f"instances (node/mesh/primitive) {what or 'reordered'}: the atlas is "
-                    "packed anew")
+        added = [x for x in ni if x["key"] not in set(old_keys)]
+        removed = [x for x in oi if x["key"] not in set(new_keys)]
+        what = "; ".join(f"{verb} {_listed(group)}" for verb, group in
+                         (("added", added), ("removed", removed)) if group)
+        return full(f"instances {what or 'reordered'}: the atlas is packed anew")
     for i, (a, b) in enumerate(zip(oi, ni)):
         if a["mesh"] != b["mesh"] or a["material"] != b["material"] or a["baked"] != b["baked"]:
-            return full(f"the mesh, material slot or baking of instance {b['key']} changed")
+            return full(f"the mesh, material slot or baking of {_named(b)} changed")
     if old["unwrap"] != new["unwrap"]:
         return full("the unwrap input changed (a node was scaled, or the texel density moved): "
                     "the atlas is laid out anew")
