@@ -4,12 +4,13 @@ and the atlas it makes (texels used, stretch, seams), against another checkout's
 Scenes: the room of 200 boxes and a sphere (``assets/many_objects.py``, 98,732 triangles in
 202 meshes, a 512² page as ``bench_fixed_cost.py``); with ``--level`` the level of 400 distinct
 meshes (``many_objects.level``, 1,024,812 triangles) at a 4096² page; with ``--million`` the
-1M-triangle terrain of ``bench_million.py`` (default settings). For each, ``unwrap.unwrap`` at
-the derived density (fitted to one page, as a default bake) is timed cold (empty cache), after
-an edit (the mesh of (lower) median triangle count stretched 10 % along x, which changes the
-derived density: the cache holds the scene before the edit), from the cache, and at 0.8 of the
-density (the cache holding the charts: ``--texel-density`` changed), medians of ``--repeat``,
-with the atlas's:
+1M-triangle terrain of ``bench_million.py`` (default settings); with ``--rock`` a crumpled
+rock of 327,680 triangles on a floor (default settings: xatlas charts the rock). For each,
+``unwrap.unwrap`` at the derived density (fitted to one page, as a default bake) is timed cold
+(empty cache), after an edit (the mesh of (lower) median triangle count stretched 10 % along
+x, which changes the derived density: the cache holds the scene before the edit), from the
+cache, and at 0.8 of the density (the cache holding the charts: ``--texel-density`` changed),
+medians of ``--repeat``, with the atlas's:
 
 - pages and utilisation (texels the charts cover over the pages');
 - stretch: triangles' texel area over world area × density², area-weighted mean and 5–95 %;
@@ -19,7 +20,7 @@ with the atlas's:
 ``--against DIR`` first runs the same in a child with DIR's baker (e.g. /work/main), scene by
 scene, interleaved: an A/B in one run.
 
-    python benchmarks/bench_unwrap.py [--level] [--million] [--repeat 3] [--against DIR]
+    python benchmarks/bench_unwrap.py [--level] [--million] [--rock] [--repeat 3] [--against DIR]
 """
 
 from __future__ import annotations
@@ -41,16 +42,27 @@ ROOT = Path(__file__).resolve().parent.parent
 CODE = os.environ.get("BENCH_UNWRAP_CODE", str(ROOT))  # whose baker (``--against``)
 sys.path.insert(0, str(ROOT))
 
-from assets.many_objects import boxes_and_sphere, level  # noqa: E402  (this checkout's scenes)
-from benchmarks.bench_million import terrain  # noqa: E402
+from assets.gltf_builder import GltfBuilder, quad, rock  # noqa: E402  (this checkout's scenes)
+from assets.many_objects import boxes_and_sphere, level  # noqa: E402
 
-sys.path.insert(0, CODE)
+sys.path.insert(0, CODE)  # before anything imports baker (bench_million does)
 
 from baker.atlas import unwrap  # noqa: E402
 from baker.geometry.world import build_world  # noqa: E402
 from baker.gltf.load import load  # noqa: E402
 from baker.pipeline.full import bounds_of_baked  # noqa: E402
 from baker.settings import Settings, resolve  # noqa: E402
+from benchmarks.bench_million import terrain  # noqa: E402
+
+
+def rock_on_a_floor() -> GltfBuilder:
+    """A crumpled rock of 327,680 triangles (``gltf_builder.rock``, 1 m) on an 8 m floor: a mesh
+    projection leaves to xatlas, whose time per triangle grows with its size."""
+    b = GltfBuilder()
+    stone, grey = b.material("rock", (0.5, 0.45, 0.4)), b.material("floor", (0.7, 0.7, 0.7))
+    b.node("rock", b.shape_mesh("rock", rock(1.0, 7), material=stone), translation=(0.0, 1.0, 0.0))
+    b.node("floor", b.shape_mesh("floor", quad(8.0, 8.0), material=grey))
+    return b
 
 
 def edited(scene):
@@ -153,7 +165,7 @@ def times(title: str, builder, settings: Settings, repeat: int) -> None:
     def median(runs, k):
         return statistics.median(run[k] for run in runs)
 
-    print(f"  {title} [{CODE}]: unwrap cold {median(cold, 0):.2f} s (children's CPU "
+    print(f"  {title} [{Path(unwrap.__file__).parents[2]}]: unwrap cold {median(cold, 0):.2f} s (children's CPU "
           f"{median(cold, 1):.2f} s), one mesh edited {median(edit, 0):.2f} s (CPU "
           f"{median(edit, 1):.2f} s), cached {median(cached, 0):.3f} s, density × 0.8 "
           f"{median(density, 0):.2f} s (CPU {median(density, 1):.2f} s) (medians of {repeat}, "
@@ -163,19 +175,21 @@ def times(title: str, builder, settings: Settings, repeat: int) -> None:
 SCENES = {"boxes": ("200 boxes + sphere", boxes_and_sphere,
                     Settings(page_size=512, rays=4, rho="step", d_max=1.0)),
           "level": ("400 distinct meshes", level, Settings(page_size=4096)),
-          "million": ("1M-triangle terrain", terrain, Settings())}
+          "million": ("1M-triangle terrain", terrain, Settings()),
+          "rock": ("a rock of 327,680 triangles", rock_on_a_floor, Settings())}
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--level", action="store_true", help="also the 400-mesh level")
     parser.add_argument("--million", action="store_true", help="also the 1M-triangle terrain")
+    parser.add_argument("--rock", action="store_true", help="also a crumpled rock (xatlas)")
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--against", help="a checkout whose baker is timed first (A/B)")
     parser.add_argument("--scene", choices=sorted(SCENES), help=argparse.SUPPRESS)
     args = parser.parse_args()
     names = [args.scene] if args.scene else (
-        ["boxes"] + (["level"] if args.level else []) + (["million"] if args.million else []))
+        ["boxes"] + [name for name in ("level", "million", "rock") if getattr(args, name)])
     for name in names:
         title, builder, settings = SCENES[name]
         if args.against:

@@ -14,8 +14,9 @@ import numpy as np
 import pytest
 
 from assets.foliage_scenes import leaves, tree
-from assets.gltf_builder import rotation_matrix, uv_sphere
+from assets.gltf_builder import rock, rotation_matrix, uv_sphere
 from assets.many_objects import grid_box
+from baker.atlas import charts as charting
 from baker.atlas import packing, planar
 from baker.atlas.rasterise import _cover_kernel, _edge_terms
 from baker.atlas.unwrap import _MARGIN, _packed, unwrap
@@ -59,9 +60,10 @@ def _check_charts(charts, positions, triangles):
         _assert_apart(corner[(chart_of == c) & (uv_area > 0)])
 
 
-def _assert_apart(corners):
+def _assert_apart(corners, tolerance: float = 1e-9):
     """No two triangles (t, 3, 2) share an inner point: for every pair, some edge of one has
-    the whole other on its outer side (every pair tested, no grid)."""
+    the whole other on its outer side, within ``tolerance`` of their extent (every pair
+    tested, no grid)."""
     if len(corners) < 2:
         return
     apart = np.zeros((len(corners), len(corners)), bool)
@@ -69,7 +71,7 @@ def _assert_apart(corners):
     for k in range(3):  # triangles counter-clockwise: (dy, -dx) points out of edge a → b
         a, b = corners[:, k], corners[:, (k + 1) % 3]
         normal = np.stack([b[:, 1] - a[:, 1], a[:, 0] - b[:, 0]], axis=1)
-        reach = 1e-9 * size * np.linalg.norm(normal, axis=1)
+        reach = tolerance * size * np.linalg.norm(normal, axis=1)
         edge = np.einsum("ij,ij->i", a, normal)
         nearest = np.einsum("pkj,ij->ipk", corners, normal).min(axis=2)  # (i, p)
         apart |= nearest >= edge[:, None] - reach[:, None]
@@ -203,6 +205,51 @@ def test_a_wavy_sheet_of_many_triangles_a_chart_is_projected():
     assert charts is not None
     _check_charts(charts, positions, triangles)
     assert len(triangles) / len(charts.sides) >= planar.LEAST_TRIANGLES
+
+
+@pytest.mark.parametrize("seed", range(2))
+def test_a_crumpled_mesh_is_charted_by_xatlas_in_compact_pieces(seed, monkeypatch):
+    """A rock of 5,120 triangles, charted by xatlas in pieces of at most 700 (issue 46: its
+    time per triangle grows with a mesh's size, 68 s for a rock of 327,680 triangles whole):
+    every triangle in one piece, the pieces halves of halves (700 ≥ size > 350) and compact
+    (each spans at most 0.75 of the rock's widest extent); the charts keep every triangle
+    once in order, none turned over in its chart (xatlas mirrors some) or overlapping another
+    of it (by more than xatlas's own), none spanning two
+    pieces, the surface's area within xatlas's stretch; charted again, the same arrays."""
+    positions, triangles = rock(1.0, 4, seed)[:2]
+    assert planar.project(positions, triangles) is None
+    monkeypatch.setattr(charting, "_PIECE_TRIANGLES", 700)
+    centroids = positions[triangles].mean(axis=1)
+    pieces = charting._pieces(centroids, 700)
+    piece_of = np.full(len(triangles), -1)
+    for k, part in enumerate(pieces):
+        assert (piece_of[part] == -1).all() and 350 < len(part) <= 700
+        piece_of[part] = k
+        assert np.ptp(centroids[part], axis=0).max() <= 0.75 * np.ptp(centroids, axis=0).max()
+    assert (piece_of >= 0).all() and len(pieces) == 8
+    charts = charting.chart(positions, triangles)
+    np.testing.assert_array_equal(charts.vertices[charts.triangles], triangles)
+    chart_of = charts.chart[charts.triangles]
+    assert (chart_of == chart_of[:, :1]).all(), "a triangle's corners in two charts"
+    pairs = np.unique(np.stack([chart_of[:, 0], piece_of], axis=1), axis=0)
+    assert len(pairs) == len(charts.sides) == len(np.unique(chart_of)), "a chart in two pieces"
+    assert (charts.uv >= -1e-9).all() and (charts.uv <= charts.sides[charts.chart] + 1e-9).all()
+    corner = charts.uv[charts.triangles]
+    e, f = corner[:, 1] - corner[:, 0], corner[:, 2] - corner[:, 0]
+    uv_area = 0.5 * (e[:, 0] * f[:, 1] - e[:, 1] * f[:, 0])
+    corners = positions[triangles]
+    surface = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0],
+                                            corners[:, 2] - corners[:, 0]), axis=1)
+    sign = np.where(np.bincount(chart_of[:, 0], uv_area) < 0, -1.0, 1.0)  # a chart mirrored
+    uv_area = uv_area * sign[chart_of[:, 0]]
+    assert (uv_area > -1e-12).all(), "a triangle turned over in its chart"
+    assert 0.9 < uv_area.sum() / surface.sum() < 1.2
+    for c in range(len(charts.sides)):  # about 1 chart in 400 of xatlas's overlaps itself,
+        # by up to 0.003 (whole) or 0.03 (in pieces) of its size (eight rocks)
+        _assert_apart(corner[(chart_of[:, 0] == c) & (uv_area > 0)] * [sign[c], 1.0], 0.05)
+    again = charting.chart(positions, triangles)
+    for name in ("vertices", "triangles", "uv", "chart", "sides"):
+        np.testing.assert_array_equal(getattr(again, name), getattr(charts, name))
 
 
 @pytest.mark.parametrize("seed", range(3))

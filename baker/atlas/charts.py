@@ -2,14 +2,15 @@
 
 A mesh is charted in its instance's rigid-free frame in world units (``unwrap.frame_positions``):
 by projection (``planar.project``), or, where that declines (a chart would overlap itself, or
-the surface is too crumpled), by xatlas (``_xatlas_charts``). The charts hold no texel density,
-so a bake at another density packs the same charts again. Each distinct mesh is charted once,
-in forked children beside each other (one per core; ``forked.py``: xatlas's threads can crash
-a process), the meshes dealt by triangles; each result is cached by the mesh's content
-(``unwrap_cache.py``): instances of one mesh stretched alike share one charting, and a bake
-with one mesh edited charts only that one again; the charts of all of a scene's meshes are kept
-as one entry too, which the next bake of the same meshes reads in one go. Both ways are pure functions of the mesh, so
-the charts do not depend on the cores, the order the children end in, or the cache.
+the surface is too crumpled), by xatlas (``_xatlas_charts``, a big mesh in pieces). The charts
+hold no texel density, so a bake at another density packs the same charts again. Each distinct
+mesh is charted once, in forked children beside each other (one per core; ``forked.py``:
+xatlas's threads can crash a process), the meshes dealt by triangles; each result is cached by
+the mesh's content (``unwrap_cache.py``): instances of one mesh stretched alike share one
+charting, and a bake with one mesh edited charts only that one again; the charts of all of a
+scene's meshes are kept as one entry too, which the next bake of the same meshes reads in one
+go. Both ways are pure functions of the mesh, so the charts do not depend on the cores, the
+order the children end in, or the cache.
 """
 
 from __future__ import annotations
@@ -33,6 +34,11 @@ _NO_PAGE = np.uint32(0xFFFFFFFF)  # xatlas's page index for vertices of faces it
 # wide, so that its own packing (a unit a texel, a unit of padding) moves charts, never shapes
 # them; the scale is undone after.
 _XATLAS_AREA = 1e5
+# xatlas charts a mesh in pieces of at most this many triangles (``_pieces``), each an xatlas
+# mesh of its own, side by side on xatlas's threads: its time per triangle grows with a mesh's
+# size (a crumpled rock of 81,920 triangles 6.8 s whole, 3.2–4.1 s in 8,000–32,000-triangle
+# pieces; of 327,680, 68 s whole), while the pieces add few charts (1,008 → 1,128 at 16,000).
+_PIECE_TRIANGLES = 16_000
 # The CPU time (all its threads) a charting child may use before it is taken for hung
 # (``forked.call_forked_together``: CPU time, so a loaded machine never makes a genuine run
 # look hung):
@@ -117,7 +123,7 @@ def _read_together(name: str, first: dict[str, int], meshes: list[Mesh]
 def _charting() -> tuple[object, ...]:
     """What besides a mesh decides its charts: the projection's constants, xatlas's version
     and options (made once: every mesh's cache name asks for it)."""
-    return (*planar.KEY, xatlas.__version__, _XATLAS_AREA,
+    return (*planar.KEY, xatlas.__version__, _XATLAS_AREA, _PIECE_TRIANGLES,
             *map(_options_of, _xatlas_options()))
 
 
@@ -188,18 +194,66 @@ def _options_of(options: xatlas.ChartOptions | xatlas.PackOptions) -> dict[str, 
 
 
 def _xatlas_charts(positions: np.ndarray, triangles: np.ndarray) -> Charts:
-    """One mesh charted by xatlas (scaled to ``_XATLAS_AREA`` units², see there), its charts
-    each moved to start at (0, 0) and scaled back to world units. Vertices of faces xatlas
-    leaves out (degenerate ones) take the chart and place of the nearest placed vertex."""
+    """One mesh charted by xatlas (scaled to ``_XATLAS_AREA`` units², see there) in
+    ``_pieces``, one xatlas mesh each, its charts each moved to start at (0, 0) and scaled back
+    to world units; the triangles keep their order. Vertices of faces xatlas leaves out
+    (degenerate ones) take the chart and place of the nearest placed vertex of their piece."""
     p = np.asarray(positions, np.float64)
     t = np.asarray(triangles, np.int64)
     area = 0.5 * float(np.linalg.norm(triangle_cross(p, t), axis=1).sum())
     scale = np.sqrt(_XATLAS_AREA / area) if area > 0 else 1.0
+    parts = _pieces(p[t].mean(axis=1), _PIECE_TRIANGLES)
     atlas = xatlas.Atlas()
-    atlas.add_mesh((p * scale).astype(np.float32), t.astype(np.uint32))
+    corners = []  # each piece's vertices of the mesh
+    for part in parts:
+        used, local = np.unique(t[part], return_inverse=True)
+        corners.append(used)
+        atlas.add_mesh((p[used] * scale).astype(np.float32), local.reshape(-1, 3).astype(np.uint32))
     atlas.generate(*_xatlas_options())
-    vertices, faces, uv = atlas[0]
-    page, owner = atlas.get_mesh_vertex_assignment(0)
+    vertices, faces, uv, owner = [], np.empty_like(t), [], []
+    count = 0  # vertices so far
+    charts = 0  # charts so far
+    for i, (part, used) in enumerate(zip(parts, corners)):
+        piece = _piece_charts(atlas, i, p[used], scale)
+        vertices.append(used[piece[0]])
+        faces[part] = piece[1] + count
+        uv.append(piece[2])
+        owner.append(piece[3] + charts)
+        count += len(piece[0])
+        charts += int(piece[3].max()) + 1 if len(piece[3]) else 0
+    uv_all, owner_all = np.concatenate(uv), np.concatenate(owner)
+    sides = np.zeros((charts, 2))
+    np.maximum.at(sides, owner_all, uv_all)
+    return Charts(vertices=np.concatenate(vertices), triangles=faces, uv=uv_all,
+                  chart=owner_all, sides=sides)
+
+
+def _pieces(centroids: np.ndarray, most: int) -> list[np.ndarray]:
+    """The triangles of a mesh, by their ``centroids`` (m, 3), in pieces of at most ``most``:
+    halved at the median along the longest side of their bounds until they fit (compact
+    pieces, cut across the surface as few times as halving allows). Indices (k,) int64,
+    ascending in each piece; the pieces in a fixed order."""
+    out, todo = [], [np.arange(len(centroids))]
+    while todo:
+        part = todo.pop()
+        if len(part) <= most:
+            out.append(part)
+            continue
+        c = centroids[part]
+        axis = int(np.argmax(c.max(axis=0) - c.min(axis=0)))
+        order = np.argsort(c[:, axis], kind="stable")
+        half = len(part) // 2
+        todo += [np.sort(part[order[half:]]), np.sort(part[order[:half]])]
+    return out
+
+
+def _piece_charts(atlas: xatlas.Atlas, i: int, where: np.ndarray, scale: float
+                  ) -> tuple[np.ndarray, ...]:
+    """xatlas's charting of piece ``i`` (``where``: its vertices' positions): (its vertices
+    (k,) into the piece's, faces (f, 3) into those, uv (k, 2) world units from each chart's
+    corner, chart (k,) from 0)."""
+    vertices, faces, uv = atlas[i]
+    page, owner = atlas.get_mesh_vertex_assignment(i)
     vertices, faces = vertices.astype(np.int64), faces.astype(np.int64)
     uv = uv.astype(np.float64) * [atlas.width, atlas.height] / scale
     placed = page != _NO_PAGE
@@ -207,18 +261,14 @@ def _xatlas_charts(positions: np.ndarray, triangles: np.ndarray) -> Charts:
         placed[:] = True  # nothing placed: every vertex one point of one chart
         uv[:], owner = 0.0, np.zeros(len(vertices), np.int64)
     lost = np.flatnonzero(~placed)
+    owner = owner.astype(np.int64)
     if len(lost):
-        nearest = _nearest(p[vertices], np.flatnonzero(placed), lost)
-        uv[lost], owner = uv[nearest], owner.astype(np.int64)
-        owner[lost] = owner[nearest]
-    labels, owner = np.unique(owner.astype(np.int64), return_inverse=True)
-    count = len(labels)
-    low = np.full((count, 2), np.inf)
+        nearest = _nearest(where[vertices], np.flatnonzero(placed), lost)
+        uv[lost], owner[lost] = uv[nearest], owner[nearest]
+    _, owner = np.unique(owner, return_inverse=True)
+    low = np.full((int(owner.max()) + 1 if len(owner) else 0, 2), np.inf)
     np.minimum.at(low, owner, uv)
-    uv = uv - low[owner]
-    sides = np.zeros((count, 2))
-    np.maximum.at(sides, owner, uv)
-    return Charts(vertices=vertices, triangles=faces, uv=uv, chart=owner, sides=sides)
+    return vertices, faces, uv - low[owner], owner
 
 
 def _nearest(where: np.ndarray, placed: np.ndarray, lost: np.ndarray) -> np.ndarray:
