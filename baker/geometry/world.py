@@ -137,9 +137,9 @@ def triangle_cross(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:
 
 
 def _texcoord_sets(scene: Scene) -> int:
-    """How many UV sets material textures use (at least 1)."""
-    used = [ref.texcoord for m in scene.materials
-            for ref in (m.base_color_texture, m.emissive_texture) if ref is not None]
+    """How many UV sets material textures use (at least 1): a primitive without one of them
+    gets zeros there, the UV a viewer reads for an attribute a primitive does not have."""
+    used = [ref.texcoord for m in scene.materials for ref in m.textures()]
     return max(used, default=0) + 1
 
 

@@ -89,6 +89,12 @@ class Material:
     # baker preview), its UV set and transform as the other textures'; None when absent.
     occlusion_texture: TextureRef | None = None
 
+    def textures(self) -> tuple[TextureRef, ...]:
+        """Every texture the material reads (each ``TextureRef`` field that is set)."""
+        return tuple(ref for ref in (self.base_color_texture, self.emissive_texture,
+                                     self.metallic_roughness_texture, self.transmission_texture,
+                                     self.occlusion_texture) if ref is not None)
+
 
 @dataclass(frozen=True)
 class Primitive:

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from baker.geometry.world import World
-from baker.gltf.scene import Scene
+from baker.gltf.scene import Primitive, Scene
 
 
 def input_warnings(scene: Scene, world: World) -> dict[str, int]:
@@ -26,6 +26,9 @@ def input_warnings(scene: Scene, world: World) -> dict[str, int]:
              if inst.baked and scene.primitives[inst.primitive].normals is None}),
         "vertices with a zero-length (or NaN) normal: their triangles' own normal used": _zero_normals(
             world, baked),
+        "primitives without a UV set their material's textures read: sampled at UV (0, 0) there, "
+        "as viewers do": len({inst.primitive for inst in scene.instances
+                              if _lacks_uv(scene, scene.primitives[inst.primitive])}),
     }
     out.update({text: n for text, n in counts.items() if n})
     for skipped in scene.skipped:
@@ -40,3 +43,8 @@ def _zero_normals(world: World, baked: np.ndarray) -> int:
     vertex_instance = np.repeat(np.arange(len(baked)), np.diff(world.vertex_start))
     zero = world.smooth & ~np.any(world.normals, axis=1)
     return int(np.count_nonzero(zero & baked[vertex_instance]))
+
+
+def _lacks_uv(scene: Scene, prim: Primitive) -> bool:
+    """Whether a texture of ``prim``'s material reads a TEXCOORD set ``prim`` does not have."""
+    return any(ref.texcoord >= len(prim.texcoords) for ref in scene.materials[prim.material].textures())
