@@ -258,6 +258,98 @@ def test_accessor_out_of_bounds_names_the_attribute_and_the_accessor(tmp_path, c
             "export the asset again")
 
 
+@pytest.mark.parametrize("where", ["attributes._WIND", "targets[0].POSITION"])
+def test_an_attribute_shorter_than_position_is_refused_naming_it(tmp_path, capsys, where):
+    """A custom attribute or a morph target's POSITION of one element where POSITION has four
+    (glTF forbids it): refused at load, naming it. The writer, which copies every vertex's row
+    of each attribute, ended in an internal error."""
+    source, document, _ = gltf_pair(tmp_path)
+    primitive = document["meshes"][0]["primitives"][0]
+    position = primitive["attributes"]["POSITION"]
+    document["accessors"].append(dict(document["accessors"][position], count=1))
+    short = len(document["accessors"]) - 1
+    if where.startswith("targets"):
+        primitive["targets"] = [{"POSITION": short}]
+    else:
+        primitive["attributes"]["_WIND"] = short
+    refuses(tmp_path, capsys, rewrite(source, document), f"meshes[0].primitives[0].{where}",
+            f"accessors[{short}] has a count of 1, POSITION 4")
+
+
+def test_a_morph_target_position_with_nan_is_refused_naming_its_accessor(tmp_path, capsys):
+    """A morph target whose POSITION holds a NaN: its min and max cannot be written (the JSON
+    writer raised ValueError); refused, naming the accessor, no output written."""
+    source, document, bin_path = gltf_pair(tmp_path)
+    primitive = document["meshes"][0]["primitives"][0]
+    data = bin_path.read_bytes()
+    shifts = np.zeros((4, 3), np.float32)
+    shifts[2, 1] = np.nan
+    document["bufferViews"].append({"buffer": 0, "byteOffset": len(data), "byteLength": 48})
+    document["buffers"][0]["byteLength"] = len(data) + 48
+    bin_path.write_bytes(data + shifts.tobytes())
+    document["accessors"].append({"bufferView": len(document["bufferViews"]) - 1, "count": 4,
+                                  "componentType": 5126, "type": "VEC3",
+                                  "min": [0, 0, 0], "max": [0, 0, 0]})
+    primitive["targets"] = [{"POSITION": len(document["accessors"]) - 1}]
+    refuses(tmp_path, capsys, rewrite(source, document),
+            f"accessors[{len(document['accessors']) - 1}]", "NaN or infinite")
+
+
+def test_an_extension_name_that_is_not_a_string_is_refused(tmp_path, capsys):
+    source, document, _ = gltf_pair(tmp_path)
+    document["extensionsRequired"] = [["KHR_lights_punctual"]]
+    refuses(tmp_path, capsys, rewrite(source, document), "extensionsRequired[0]",
+            "is list, not an extension's name")
+
+
+def test_a_texture_reading_a_uv_set_a_primitive_lacks_reads_zeros(tmp_path):
+    """A metallicRoughnessTexture, transmissionTexture or occlusionTexture on TEXCOORD_1 of a
+    floor that has TEXCOORD_0 only: baked, and the warning counted, as the same floor with a
+    TEXCOORD_1 of zeros (what a viewer reads for an attribute a primitive lacks) bakes it.
+    Reading them ended in an IndexError."""
+    source, document, bin_path = gltf_pair(tmp_path, small_scene(textured=True))
+    floor = document["meshes"][0]["primitives"][0]
+    material = document["materials"][floor["material"]]
+    material["pbrMetallicRoughness"]["metallicRoughnessTexture"] = {"index": 0, "texCoord": 1}
+    material["occlusionTexture"] = {"index": 0, "texCoord": 1}
+    material["extensions"] = {"KHR_materials_transmission": {
+        "transmissionFactor": 0.5, "transmissionTexture": {"index": 0, "texCoord": 1}}}
+    document["extensionsUsed"] = ["KHR_materials_transmission"]
+    lacking = rewrite(tmp_path / "lacking.gltf", document)
+    data = bin_path.read_bytes()
+    count = document["accessors"][floor["attributes"]["POSITION"]]["count"]
+    document["bufferViews"].append({"buffer": 0, "byteOffset": len(data),
+                                    "byteLength": 8 * count})
+    document["buffers"][0]["byteLength"] = len(data) + 8 * count
+    document["accessors"].append({"bufferView": len(document["bufferViews"]) - 1,
+                                  "count": count, "componentType": 5126, "type": "VEC2"})
+    floor["attributes"]["TEXCOORD_1"] = len(document["accessors"]) - 1
+    zeros = tmp_path / "zeros"
+    zeros.mkdir()
+    (zeros / bin_path.name).write_bytes(data + bytes(8 * count))
+    pages = {}
+    for name, scene in (("lacking", lacking), ("zeros", rewrite(zeros / "scene.gltf", document))):
+        result = baker.bake(scene, tmp_path / f"{name}.glb", baker.Settings(rays=2, page_size=64),
+                            lightmaps_dir=tmp_path / f"{name}_pages", lightmaps_format="exr")
+        pages[name] = [f.read_bytes() for f in sorted((tmp_path / f"{name}_pages").iterdir())]
+        warned = [text for text in result.report["warnings"] if "UV set" in text]
+        assert len(warned) == (name == "lacking"), result.report["warnings"]
+    assert pages["lacking"] == pages["zeros"] and pages["lacking"]
+
+
+def test_a_primitive_with_empty_attributes_stays_readable_in_the_output(tmp_path):
+    """A primitive with ``attributes: {}`` (nothing to place: left out, counted) keeps the
+    required key in the output, which reads back; the output once dropped it as an empty
+    property, and reading it failed inside pygltflib."""
+    source, document, _ = gltf_pair(tmp_path)
+    document["meshes"][1]["primitives"][0]["attributes"] = {}
+    result = baker.bake(rewrite(source, document), tmp_path / "out.glb",
+                        baker.Settings(rays=2, page_size=64))
+    assert result.report["warnings"].get("no POSITION attribute: nothing to place") == 1
+    written = load(tmp_path / "out.glb")
+    assert written.document.meshes[1].primitives[0].attributes is not None
+
+
 def test_accessor_with_an_absurd_count_is_refused_without_allocating(tmp_path, capsys):
     source, document, _ = gltf_pair(tmp_path)
     position = document["meshes"][0]["primitives"][0]["attributes"]["POSITION"]

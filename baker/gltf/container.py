@@ -444,6 +444,10 @@ def _check_required_extensions(raw: dict, file: str) -> None:
     required = raw.get("extensionsRequired") or []
     if not isinstance(required, list):
         raise invalid("extensionsRequired is not a list", file, "extensionsRequired")
+    for k, name in enumerate(required):
+        if not isinstance(name, str):
+            raise invalid(f"is {type(name).__name__}, not an extension's name", file,
+                          f"extensionsRequired[{k}]")
     missing = [str(name) for name in required if name not in SUPPORTED_EXTENSIONS]
     if missing:
         names = ", ".join(missing)

@@ -67,17 +67,38 @@ def _read_primitive(
     if not len(triangles):
         ctx.skip(where, "no whole triangle: nothing to bake or to occlude")
         return None
+    texcoords = _texcoords(ctx, attributes, n, where)
+    _check_counts(ctx, primitive, attributes, n, where)
     return Primitive(
         mesh=mesh,
         index=j,
         positions=positions,
         normals=normals,
-        texcoords=_texcoords(ctx, attributes, n, where),
+        texcoords=texcoords,
         colors=colors,
         triangles=triangles,
         material=_material_index(ctx, primitive.material, material_count, where),
         has_morph_targets=bool(primitive.targets),
     )
+
+
+def _check_counts(ctx: Context, primitive: pygltflib.Primitive, attributes: dict, n: int,
+                  where: str) -> None:
+    """Require every attribute of the primitive and of its morph targets to hold ``n``
+    elements, POSITION's count (the spec's rule; those read here check theirs as they are
+    read): the output copies each vertex's row of each of them, and a shorter one would
+    leave vertices without theirs. Their indices are checked already (``references``)."""
+    targets = primitive.targets or []
+    named = [(f"attributes.{name}", index) for name, index in attributes.items()] + [
+        (f"targets[{k}].{name}", index) for k, target in enumerate(targets)
+        for name, index in (target if isinstance(target, dict) else vars(target)).items()
+        if index is not None]
+    for name, index in named:
+        count = ctx.document.accessors[index].count
+        if count != n:
+            said = f"{count:,}" if isinstance(count, int) else repr(count)
+            raise invalid(f"accessors[{index}] has a count of {said}, POSITION {n:,}: an "
+                          "attribute has one element a vertex", ctx.file, f"{where}.{name}")
 
 
 def read_attribute(

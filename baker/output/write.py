@@ -200,6 +200,9 @@ def _document_data(document: pygltflib.GLTF2) -> dict:
             sparse_part = accessor.get("sparse", {}).get(part, {})
             if sparse_part.get("byteOffset") == 0:
                 del sparse_part["byteOffset"]
+    for mesh in data.get("meshes", []):  # required, if empty (a primitive left unbaked)
+        for primitive in mesh.get("primitives", []):
+            primitive.setdefault("attributes", {})
     return data
 
 
@@ -378,6 +381,12 @@ class _Builder:
             self.source_cache[index] = _as_stored(values, accessor["componentType"],
                                                   bool(accessor.get("normalized", False)))
         source = self.source_cache[index]
+        if bounds and source.dtype.kind == "f" and not np.isfinite(source[rows]).all():
+            raise InputError("a POSITION (of a mesh or a morph target) has NaN or infinite "
+                             "values: its min and max cannot be written",
+                             file=str(self.scene.path), where=f"accessors[{index}]",
+                             fix="clean up the mesh in your DCC tool (e.g. Blender: Mesh > "
+                                 "Clean Up) and export again")
         if len(rows) and rows.max() >= len(source):
             raise ValueError(f"unwrap vertex {int(rows.max())} past accessors[{index}] "
                              f"({len(source)} elements)")
