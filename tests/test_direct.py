@@ -49,6 +49,23 @@ def test_point_light_gives_i_cos_theta_over_r_squared(tmp_path):
     assert expected.max() / expected.min() > 3  # the floor really spans a range of r and θ
 
 
+@pytest.mark.parametrize("radius", [1e-200, 1e-9, 1e-5])
+def test_a_sphere_light_far_smaller_than_its_distance_lights_as_a_point(tmp_path, radius):
+    """A point light of radius 1e-200, 1e-9 or 1e-5 m (``extras.radius``) 1.5 m over a floor:
+    I·cos θ / r² within the radius (relative; the cone's directions tilt cos θ that much), the
+    cone's solid angle taken without cancellation: 1 − cos α of so small a cone was 0 in
+    float64, and 0/0 at 1e-200: a black or NaN floor."""
+    light = np.array([0.3, 1.5, -0.2])
+    done = computed(lit_floor("point", position=light, intensity=5.0,
+                              extras={"radius": radius}), tmp_path, **FAST)
+    rows, p = _floor(done)
+    offset = light - p
+    r = np.linalg.norm(offset, axis=1)
+    assert done.direct.rays > len(done.texels)  # a soft light: several shadow rays a texel
+    np.testing.assert_allclose(done.direct.irradiance()[rows, 0],
+                               5.0 * (offset[:, 1] / r) / r ** 2, rtol=max(radius, 1e-12))
+
+
 def test_point_light_range_window(tmp_path):
     light = np.array([0.0, 0.5, 0.0])
     done = computed(lit_floor("point", position=light, intensity=2.0, range=1.2), tmp_path, **FAST)

@@ -186,8 +186,11 @@ def punctual_samples(light: Light, spread: float, n: int, receivers: Receivers, 
             cos_max = np.sqrt(1.0 - sin_max * sin_max)
             directions = cone_directions(axis.reshape(-1, 3), cos_max.reshape(-1),
                                          u.reshape(-1, 1, 2)).reshape(k, n, 3)
-            # Radiance I / (πR²) times the cone's solid angle 2π(1 − cos α).
-            scale = factor * 2.0 * (1.0 - cos_max) / (spread * spread)
+            # Radiance I / (πR²) times the cone's solid angle 2π(1 − cos α), with 1 − cos α =
+            # sin²α / (1 + cos α) and sin α / R = min(1/r, 1/R): no cancellation nor 0/0 for
+            # a sphere far smaller than its distance (a radius of 1e-200 is a point light).
+            per_radius = np.minimum(1.0 / r, 1.0 / spread)
+            scale = factor * 2.0 * per_radius * per_radius / (1.0 + cos_max)
             b = np.einsum("knc,knc->kn", directions, offset)
             to_sphere = b - np.sqrt(np.maximum(b * b - (r * r - spread * spread), 0.0))
             lengths = (np.maximum(to_sphere, 0.0) * (1.0 - SHADOW_SHORTEN)).reshape(-1)
