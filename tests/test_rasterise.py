@@ -4,7 +4,7 @@ import numpy as np
 
 from assets.make_scenes import open_plane, slivers_and_tiny, three_instances
 from baker.geometry.world import build_world, triangle_cross
-from baker.atlas.rasterise import INSET, _baked_triangles
+from baker.atlas.rasterise import INSET, _baked_triangles, _texel_barycentrics
 from baker.settings import Settings, resolve
 from baker.atlas.unwrap import unwrap
 from tests.bakehelp import loaded, rasterised
@@ -75,6 +75,22 @@ def test_sample_points_keep_inside_their_triangles_edges(tmp_path):
     at_corner = np.sort(distance[clamped], axis=1)[:, :2]  # a corner's two nearest edges
     corner = at_corner[:, 1] < 2 * INSET
     assert corner.any() and (at_corner[corner, 1] - at_corner[corner, 0] > 1e-4).all()
+
+
+def test_collinear_uv_triangles_give_weights_not_an_error():
+    """UV triangles whose corners lie on one line at scales from 10⁻³ to 10⁹ texels (a
+    mutated file's UVs): every texel centre gets finite weights ≥ 0 summing to 1. The Gram
+    determinant that decides "degenerate" can round above 0 where the corners' cross product
+    rounds to 0, and the inset then divided by that 0 (a ZeroDivisionError out of a bake)."""
+    rng = np.random.default_rng(5)
+    count = 20_000
+    a = rng.uniform(0, 64, (count, 2))
+    d = rng.normal(size=(count, 2)) * 10.0 ** rng.uniform(-3, 9, (count, 1))
+    uv = np.stack([a, a + d, a + rng.integers(2, 5, (count, 1)) * d], axis=1)
+    key = rng.integers(0, 64 * 64, count)
+    bary = _texel_barycentrics(key, np.arange(count), uv, 64, 64)
+    assert np.isfinite(bary).all() and (bary >= 0).all()
+    np.testing.assert_allclose(bary.sum(axis=1), 1.0, rtol=1e-12)
 
 
 def test_keys_are_unique_sorted_and_match_page_positions(tmp_path):

@@ -312,7 +312,11 @@ def _inset(b0, b1, b2, area2, e0x, e0y, e1x, e1y, e2x, e2y):
     must be at least f_j = inset_j · |edge_j| / area2, with inset_j = ``INSET`` ·
     (1 + 0.7·θ_j/π) and θ_j ∈ [0, π) the edge's direction. Where a weight is below its f, the
     weights become f + (1 − Σf) · weights (still summing to 1, each at least its f). A triangle
-    too small for the insets (Σf over ½) scales them down to Σf = ½."""
+    too small for the insets (Σf over ½) scales them down to Σf = ½; one whose corners' cross
+    product rounds to 0 (``_barycentric``'s Gram determinant, rounded otherwise, may not) is
+    left as it is."""
+    if not area2 > 0:
+        return b0, b1, b2
     reach = 1.7 * INSET  # first the cheap test against the largest inset (no arctan)
     if not (b0 * area2 < reach * (e0x * e0x + e0y * e0y) ** 0.5
             or b1 * area2 < reach * (e1x * e1x + e1y * e1y) ** 0.5
