@@ -499,8 +499,10 @@ def test_leaves_and_wax_survive_the_bake_state(tmp_path):
 
 def test_triangle_means_are_each_triangles_own_to_the_bit(tmp_path):
     """``surface.triangle_means`` evaluates untextured triangles once per distinct material and
-    corner colours: every triangle still gets the bits of its own evaluation at its points —
-    textured or not, with varying, uniform or no vertex colours, emissive or not."""
+    corner colours, textured ones once per triangle of their primitive (three more instances
+    of the textured quad, turned and scaled, are never looked up): every triangle still gets
+    the bits of its own evaluation at its points — textured or not, with varying, uniform or
+    no vertex colours, emissive or not."""
     from assets.gltf_builder import GltfBuilder, quad
     from assets.make_scenes import checker
     from baker.geometry.surface import MEAN_POINTS, albedo, emission, triangle_means
@@ -516,15 +518,27 @@ def test_triangle_means_are_each_triangles_own_to_the_bit(tmp_path):
         mesh = b.mesh(f"m{k}", positions, triangles, normals=normals, uv0=uv0, colors=colors,
                       material=textured if k == 5 else plain)
         b.node(f"n{k}", mesh, translation=(2.0 * k, 0.0, 0.0))
+    for j in range(3):  # the textured quad (the last mesh) again, elsewhere
+        b.node(f"copy{j}", mesh, translation=(0.0, 1.0 + j, 0.0), scale=(1.0 + j, 1.0, 0.5),
+               rotation=(0.0, np.sin(0.3 * j), 0.0, np.cos(0.3 * j)))
     plain_mesh = b.mesh("bare", positions, triangles, normals=normals, material=plain)
     b.node("bare", plain_mesh, translation=(0.0, 0.0, 3.0))
     scene = load(b.save(tmp_path / "means.glb"))
     world = build_world(scene)
     t = len(world.triangles)
     tris, bary = np.repeat(np.arange(t), len(MEAN_POINTS)), np.tile(MEAN_POINTS, (t, 1))
+    copies = np.concatenate([world.instance_triangles(i) for i, inst in enumerate(scene.instances)
+                             if scene.document.nodes[inst.node].name.startswith("copy")])
     for lookup, texture_of in ((albedo, lambda m: m.base_color_texture),
                                (emission, lambda m: m.emissive_texture)):
         own = lookup(scene, world, tris, bary).reshape(t, len(MEAN_POINTS), 3).mean(axis=1)
-        assert np.array_equal(triangle_means(scene, world, lookup, texture_of), own)
+        asked = []
+
+        def counted(*args, lookup=lookup):
+            asked.append(args[2])
+            return lookup(*args)
+
+        assert np.array_equal(triangle_means(scene, world, counted, texture_of), own)
+        assert not np.isin(copies, np.concatenate(asked)).any()
         distinct = len(np.unique(own, axis=0))
         assert distinct > 8 if lookup is albedo else distinct == 2  # colours, texture: apart

@@ -198,13 +198,16 @@ def triangle_means(scene: Scene, world: World, lookup, texture_of) -> np.ndarray
     Where a material has no texture for it (``texture_of(material)`` None), the lookup depends
     only on the material and the corner colours (alike everywhere without COLOR_0): it is made
     at the first triangle of each distinct pair and those bits given to the others (a scene of
-    many objects has few pairs)."""
+    many objects has few pairs). Where it has one, the lookup depends on the triangle of its
+    primitive, not on where an instance places it: it is made at the triangle of the
+    primitive's first instance (1,714 GPU instances of a textured flower: 6.5 M triangles, 29 s
+    and 10 GB, looked up as 3,818)."""
     t = len(world.triangles)
     if t == 0:
         return np.zeros((0, 3))
     textured = np.array([texture_of(m) is not None for m in scene.materials], bool)
-    own = np.where(textured[world.tri_material], np.arange(t), -1)  # textured: each its own
-    key = [world.tri_material[:, None], own[:, None]]
+    key = [world.tri_material[:, None], _first_instance_triangle(scene, world)[:, None]]
+    key[1][~textured[world.tri_material]] = -1  # untextured: alike by material and colours
     if not (world.colors == world.colors[0]).all():
         corners = np.ascontiguousarray(world.colors[world.triangles])  # (T, 3, 4)
         key.append(corners.reshape(t, -1).view(np.int64))
@@ -213,6 +216,17 @@ def triangle_means(scene: Scene, world: World, lookup, texture_of) -> np.ndarray
     bary = np.tile(MEAN_POINTS, (len(first), 1))
     means = lookup(scene, world, tris, bary).reshape(len(first), len(MEAN_POINTS), 3).mean(axis=1)
     return means[group]
+
+
+def _first_instance_triangle(scene: Scene, world: World) -> np.ndarray:
+    """(T,) for each world triangle the same triangle of its primitive in the primitive's first
+    instance (itself there)."""
+    primitive = np.array([inst.primitive for inst in scene.instances], np.int64)
+    _, first = np.unique(primitive, return_index=True)  # each primitive's first instance
+    first_of = np.zeros(int(primitive.max()) + 1, np.int64)
+    first_of[primitive[first]] = first
+    own = world.tri_instance
+    return world.tri_start[first_of[primitive[own]]] + np.arange(len(own)) - world.tri_start[own]
 
 
 def albedo_means(scene: Scene, world: World) -> np.ndarray:
