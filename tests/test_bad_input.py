@@ -350,6 +350,36 @@ def test_a_primitive_with_empty_attributes_stays_readable_in_the_output(tmp_path
     assert written.document.meshes[1].primitives[0].attributes is not None
 
 
+def test_gpu_instances_past_the_placed_triangles_budget_are_refused_at_once(tmp_path, capsys):
+    """A 4 kB file whose box is placed 100,000 times by EXT_mesh_gpu_instancing (translations
+    without a bufferView: zeros), 1.2 M triangles: past what an input of its size may place
+    (``budget.check_placed``), refused before any instance is made, naming the node. 300,000
+    instances of a ball (384 M triangles) were killed at 21 GB."""
+    source, document, _ = gltf_pair(tmp_path)
+    document["accessors"].append({"componentType": 5126, "count": 100_000, "type": "VEC3"})
+    document["nodes"][1]["extensions"] = {"EXT_mesh_gpu_instancing": {
+        "attributes": {"TRANSLATION": len(document["accessors"]) - 1}}}
+    document["extensionsUsed"] = ["EXT_mesh_gpu_instancing"]
+    err = refuses(tmp_path, capsys, rewrite(source, document), "nodes[1]",
+                  "the nodes place 1,200,002 triangles in all", "places the most, 1,200,000",
+                  "place fewer instances")
+    size = source.stat().st_size + source.with_suffix(".bin").stat().st_size
+    assert f"an input of {size:,} bytes" in err  # the scene file counted with its buffer
+
+
+def test_a_scene_file_reached_through_a_link_bakes_as_the_file(tmp_path):
+    """``baker bake link.glb`` where link.glb is a symbolic link to a scene elsewhere: the same
+    bytes as baking the scene itself (only ``baker hook`` reads its scene file as contained;
+    a bake read every scene file so, its budget passed where the flag belongs)."""
+    real = small_scene().save(tmp_path / "assets" / "room.glb")
+    (tmp_path / "work").mkdir()
+    (tmp_path / "work" / "link.glb").symlink_to(real)
+    settings = baker.Settings(rays=2, page_size=64)
+    baker.bake(real, tmp_path / "real_baked.glb", settings, state=False)
+    baker.bake(tmp_path / "work" / "link.glb", tmp_path / "link_baked.glb", settings, state=False)
+    assert (tmp_path / "link_baked.glb").read_bytes() == (tmp_path / "real_baked.glb").read_bytes()
+
+
 def test_accessor_with_an_absurd_count_is_refused_without_allocating(tmp_path, capsys):
     source, document, _ = gltf_pair(tmp_path)
     position = document["meshes"][0]["primitives"][0]["attributes"]["POSITION"]

@@ -52,12 +52,14 @@ _MORPH_REASON = "morph-animated (animated weights): occluder only (rest pose)"
 
 def instantiate(
     ctx: Context, placements: list[tuple[int, np.ndarray]], materials: list[Material],
-    unbaked: list[str], animated: str = "bake",
+    unbaked: list[str], animated: str, input_bytes: int,
 ) -> tuple[list[Primitive], list[Instance]]:
     """Read the meshes the placed nodes use (in mesh order) and make their instances (in walk order).
 
     ``unbaked``: per material, why its primitives get no lightmap ("" when they do);
-    ``animated``: what becomes of node-animated instances (``load``)."""
+    ``animated``: what becomes of node-animated instances (``load``); ``input_bytes``: the
+    input's size, which bounds the triangles the nodes may place (``budget.check_placed``,
+    checked once the meshes are read, before any GPU instance's transform is)."""
     document = ctx.document
     used = _used_meshes(ctx, placements)
     primitives: list[Primitive] = []
@@ -68,6 +70,12 @@ def instantiate(
             slots[mesh].append(None if primitive is None else len(primitives))
             if primitive is not None:
                 primitives.append(primitive)
+    budget.check_placed(
+        [(index, _copies(ctx, document.nodes[index]) * sum(
+            len(primitives[slot].triangles) for slot in slots[document.nodes[index].mesh]
+            if slot is not None))
+         for index, _ in placements if document.nodes[index].mesh is not None],
+        input_bytes, ctx.file)
     instances = []
     morphed = animated_nodes(document, ("weights",))
     moving = moving_nodes(document)
@@ -106,6 +114,18 @@ def instantiate(
                     )
                 )
     return primitives, instances
+
+
+def _copies(ctx: Context, node: Any) -> int:
+    """How many times a node places its mesh: the count its EXT_mesh_gpu_instancing transforms'
+    accessors declare (the largest; ``gpu_instances`` checks that they agree), else 1."""
+    extension = (node.extensions or {}).get("EXT_mesh_gpu_instancing")
+    attributes = extension.get("attributes") if isinstance(extension, dict) else None
+    accessors = ctx.document.accessors or []
+    counts = [accessors[index].count for index in (attributes or {}).values()
+              if isinstance(index, int) and 0 <= index < len(accessors)
+              and isinstance(accessors[index].count, int)] if isinstance(attributes, dict) else []
+    return max(counts, default=1)
 
 
 def _used_meshes(ctx: Context, placements: list[tuple[int, np.ndarray]]) -> list[int]:

@@ -82,7 +82,8 @@ def load(path: str | Path, mirror_roughness: float = MIRROR_ROUGHNESS,
     path = Path(path)
     with SceneFolder(path.parent, str(path), hard_links) as folder:
         spent = budget.Budget(str(path))
-        document = read_document(path, folder if contained else None, spent)
+        document = read_document(path, folder if contained else None, contained=contained,
+                                 spent=spent)
         ctx = Context(document, [], str(path), folder)
         placements = walk_nodes(ctx)
         check_declared_sizes(ctx, placements)
@@ -95,7 +96,8 @@ def load(path: str | Path, mirror_roughness: float = MIRROR_ROUGHNESS,
         check_images(ctx)
         images = scene_images(ctx)
         unbaked = [no_lightmap_reason(classify(m, images, mirror_roughness)) for m in materials]
-        primitives, instances = instantiate(ctx, placements, materials, unbaked, animated)
+        primitives, instances = instantiate(ctx, placements, materials, unbaked, animated,
+                                            spent.spent)
         lights = read_lights(ctx, placements)
     return Scene(
         path=path,
