@@ -16,6 +16,9 @@ its error names the figures and the largest item:
 - the accessors baker reads, against the data backing them (``instances.check_declared_sizes``):
   ``instances.MAX_SCENE_COMPONENTS`` numbers in all, of which ``MAX_UNBACKED_NUMBERS`` at most in
   accessors without a bufferView (zeros: nothing in the file bounds their count);
+- ``MAX_PLACED_TRIANGLES``: the triangles the nodes place, each instance counted, at most
+  ``PLACED_FLOOR`` + ``PLACED_PER_BYTE`` per byte of the input (``check_placed``, once the
+  meshes are read: GPU instancing multiplies a small file's triangles);
 - ``MAX_SCENE_PIXELS``: the pixels of all images together (every level of a KTX 2), from their
   headers, all read before the first image is decoded (``images.header``; one image at most
   ``images.MAX_IMAGE_PIXELS``): every image is decoded once, to check it;
