@@ -66,6 +66,29 @@ def test_a_sphere_light_far_smaller_than_its_distance_lights_as_a_point(tmp_path
                                5.0 * (offset[:, 1] / r) / r ** 2, rtol=max(radius, 1e-12))
 
 
+def test_lights_whose_terms_pass_the_memory_budget_are_refused_before_any_ray(
+        tmp_path, monkeypatch):
+    """Each punctual light's irradiance and variance are kept at every texel (16 bytes): with
+    the budget at 3 lights' worth of this floor's texels, 3 lights bake and 4 are refused
+    before any ray, the message saying how many lights the texels allow. (A 520 kB file of
+    5,000 point lights asked for 28 GB; refused now.)"""
+    from assets.light_scenes import _add_light
+    from baker.pipeline import full
+
+    texels = len(computed(lit_floor("point"), tmp_path / "one", **FAST).texels)
+    monkeypatch.setattr(full, "LIGHT_TERM_BYTES", 16 * texels * 3)
+    for count in (3, 4):
+        scene = lit_floor("point")
+        for k in range(count - 1):
+            _add_light(scene, "point", (0.5 * k, 2.0, 0.0), (0.0, -1.0, 0.0))
+        if count == 3:
+            assert computed(scene, tmp_path / "three", **FAST).direct.punctual.shape[1] == 3
+        else:
+            with pytest.raises(baker.SettingsError, match="4 punctual lights at .* texels .* "
+                                                          "3 lights at these texels"):
+                computed(scene, tmp_path / "four", **FAST)
+
+
 def test_point_light_range_window(tmp_path):
     light = np.array([0.0, 0.5, 0.0])
     done = computed(lit_floor("point", position=light, intensity=2.0, range=1.2), tmp_path, **FAST)

@@ -339,6 +339,7 @@ def _parts(w: Underway) -> Underway:
     baking = Baking(scene, world, resolved, w.lit, w.atlas, w.coverage, w.owned,
                     Faces(scene, world), surfaces_of(w.lit.context))
     check_ray_budget(baking, count)
+    check_light_terms(baking, count)
     spill = Spill(w.spill_folder) if len(slices) > 1 else None
     return replace(w, baking=baking, slices=tuple(slices), spill=spill)
 
@@ -461,6 +462,30 @@ def check_ray_budget(baking: Baking, texels: int) -> None:
         f"{s.max_total_rays:.3g}: {texels:,} texels × {per_texel:,.0f} rays each ({shown}"
         f"{lights})", fix=f"use --max-total-rays {math.ceil(total):d} if the time is yours to "
                           "spend, or fewer --rays, a lower --texel-density or fewer lights")
+
+
+LIGHT_TERM_BYTES = 1 << 31
+"""Most bytes of per-light terms a bake keeps (2 GiB): each punctual light's irradiance and
+its variance at every texel, 16 bytes (48 with --directional's aims), held for composing and
+relighting and written to the bake state: 134 lights over 1,000,000 texels. A 520 kB file of
+5,000 point lights over a 1024² page's texels asked for 28 GB and hours."""
+
+
+def check_light_terms(baking: Baking, texels: int) -> None:
+    """SettingsError, before any ray is cast, when the scene's punctual lights' terms at
+    ``texels`` would take more than ``LIGHT_TERM_BYTES``; the message gives the figures and
+    how many lights these texels allow."""
+    lights = len(baking.sources.lights)
+    per_pair = 48 if baking.settings.directional_pages else 16
+    if texels * lights * per_pair <= LIGHT_TERM_BYTES:
+        return
+    raise SettingsError(
+        f"the scene's {lights:,} punctual lights at {texels:,} texels would keep "
+        f"{texels * lights * per_pair / 2 ** 30:.1f} GiB of terms (each light's irradiance at "
+        f"each texel, for relighting), more than baker keeps ({LIGHT_TERM_BYTES >> 30} GiB: "
+        f"{LIGHT_TERM_BYTES // (per_pair * max(texels, 1)):,} lights at these texels)",
+        fix="merge small lights into fewer, or bake at a lower --texel-density or a smaller "
+            "--page-size")
 
 
 @dataclass(frozen=True)
