@@ -772,3 +772,31 @@ def test_a_glb_json_chunk_padded_with_nul_bytes_loads(tmp_path):
     assert len(ours.instances) == len(theirs.instances) > 0
     for a, b in zip(ours.primitives, theirs.primitives):
         np.testing.assert_array_equal(a.positions, b.positions)
+
+
+def test_extras_of_any_json_type_are_read_and_kept(tmp_path):
+    """glTF lets ``extras`` hold any JSON value (an object is advised, not required): a list on
+    the root and a material, a string on the asset, a number on a node, true on an accessor.
+    pygltflib types extras as an object and failed on them ("not a glTF 2.0 document pygltflib
+    can read"); the file now loads and bakes, the values kept in the output (asset.extras's
+    under asset.extras.value, beside baker's record)."""
+    import baker
+    from assets.gltf_builder import GltfBuilder, box, quad
+
+    b = GltfBuilder()
+    grey = b.material("grey", (0.6, 0.6, 0.6))
+    b.node("floor", b.shape_mesh("floor", quad(4.0, 4.0), material=grey))
+    b.node("box", b.shape_mesh("box", box((0.5, 0.5, 0.5)), material=grey),
+           translation=(0.0, 0.25, 0.0))
+    document = json.loads(b.save(tmp_path / "scene.gltf").read_text())
+    document["extras"], document["asset"]["extras"] = [1, 2, 3], "made by hand"
+    document["nodes"][0]["extras"], document["materials"][0]["extras"] = 5, ["a"]
+    document["accessors"][0]["extras"] = True
+    (tmp_path / "scene.gltf").write_text(json.dumps(document))
+    scene = load(tmp_path / "scene.gltf")
+    assert scene.document.extras == [1, 2, 3] and scene.document.nodes[0].extras == 5
+    baker.bake(tmp_path / "scene.gltf", tmp_path / "out.glb", baker.Settings(rays=2, page_size=64))
+    written = load(tmp_path / "out.glb").document
+    assert written.extras == [1, 2, 3] and written.nodes[0].extras == 5
+    assert written.materials[0].extras == ["a"] and written.accessors[0].extras is True
+    assert written.asset.extras["value"] == "made by hand" and "baker" in written.asset.extras

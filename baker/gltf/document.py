@@ -72,7 +72,10 @@ def _plan(cls) -> tuple[dict, tuple]:
     for f in dataclasses.fields(cls):
         if not f.init:
             continue
-        plan[f.name] = (f.name, *_kind(hints[f.name]))
+        # extras may hold any JSON value (the spec's "SHOULD be an object" is advice):
+        # pygltflib types it as a dict and fails on a list or a string, so it is taken as is.
+        plan[f.name] = (f.name, _ANY, None) if f.name == "extras" else (
+            f.name, *_kind(hints[f.name]))
         if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
             required.append(f.name)
     return plan, tuple(required)
