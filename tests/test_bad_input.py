@@ -380,6 +380,27 @@ def test_a_scene_file_reached_through_a_link_bakes_as_the_file(tmp_path):
     assert (tmp_path / "link_baked.glb").read_bytes() == (tmp_path / "real_baked.glb").read_bytes()
 
 
+@pytest.mark.parametrize("kind", ["VEC2", "SCALAR"])
+def test_a_uv_set_after_a_gap_is_checked_as_the_output_will_read_it(tmp_path, capsys, kind):
+    """TEXCOORD_2 without TEXCOORD_1 is left out of the bake, but the output fills the gap with
+    the lightmap's set, and reading the output then reads TEXCOORD_2 too: a VEC2 bakes to an
+    output that reads back; a SCALAR is refused at load, naming it (it made an output baker
+    could not read again)."""
+    source, document, _ = gltf_pair(tmp_path)
+    floor = document["meshes"][0]["primitives"][0]
+    uv = document["accessors"][floor["attributes"]["TEXCOORD_0"]]
+    document["accessors"].append(dict(uv, type=kind, count=uv["count"] * (2 if kind == "SCALAR"
+                                                                          else 1)))
+    floor["attributes"]["TEXCOORD_2"] = len(document["accessors"]) - 1
+    rewrite(source, document)
+    if kind == "SCALAR":
+        refuses(tmp_path, capsys, source, "meshes[0].primitives[0].attributes.TEXCOORD_2",
+                "1 components per vertex")
+        return
+    baker.bake(source, tmp_path / "out.glb", baker.Settings(rays=2, page_size=64))
+    assert len(load(tmp_path / "out.glb").primitives[0].texcoords) == 3  # 0, the lightmap's, 2
+
+
 def test_accessor_with_an_absurd_count_is_refused_without_allocating(tmp_path, capsys):
     source, document, _ = gltf_pair(tmp_path)
     position = document["meshes"][0]["primitives"][0]["attributes"]["POSITION"]

@@ -142,6 +142,9 @@ def _texcoords(ctx: Context, attributes: dict, n: int, where: str) -> tuple[np.n
     for name in sorted(k for k in attributes if k.startswith("TEXCOORD_")):
         suffix = name[len("TEXCOORD_") :]
         if suffix.isdigit() and int(suffix) > len(sets):
+            # Checked as the sets before the gap are: the output may fill the gap with the
+            # lightmap's set, and this one is then read with them.
+            read_attribute(ctx, attributes, name, (2,), n, where)
             reason = f"TEXCOORD_{len(sets)} is missing: UV sets after the gap are not used"
             ctx.skip(f"{where}.attributes.{name}", reason)
     return tuple(sets)
