@@ -2,11 +2,13 @@
 
 Hypothesis mutates small valid scenes — a JSON field anywhere in the document, an accessor or
 bufferView field, bytes of the binary buffer (vertex data, indices, the embedded PNG), the GLB
-container itself — and bakes each one through ``baker.bake``. Every run must end in one of two
-ways:
+container itself — or adds a structure that refers to what the file has (``injection``: a
+texture on another UV set, an attribute or morph target on any accessor, GPU instances, a light
+of extreme size, extension names and extras of any type), and bakes each one through
+``baker.bake``. Every run must end in one of two ways:
 - a BakerError (InputError, SettingsError, OutputError) with a message and a fix, and no output
   file nor temporary file left behind;
-- a bake whose output baker reads back, with finite lightmap texels.
+- a bake whose output baker reads back, with finite lightmap texels and error estimate.
 Anything else — another exception, a run longer than ``HANG_SECONDS``, a partial file — fails
 the test, and hypothesis shrinks it to the smallest mutation that does it.
 
@@ -167,6 +169,79 @@ def bytes_mutation(draw, blob: bytearray):
     return at
 
 
+TEXTURE_SLOTS = (("pbrMetallicRoughness", "baseColorTexture"),
+                 ("pbrMetallicRoughness", "metallicRoughnessTexture"), (None, "emissiveTexture"),
+                 (None, "occlusionTexture"), (None, "normalTexture"))
+ATTRIBUTE_NAMES = ("TANGENT", "COLOR_0", "COLOR_1", "JOINTS_0", "WEIGHTS_0", "TEXCOORD_1",
+                   "TEXCOORD_2", "TEXCOORD_4", "_CUSTOM")
+
+
+def _index(draw, items) -> int:
+    """An index into ``items`` (a JSON list, or not), or a number past it."""
+    count = len(items) if isinstance(items, list) else 0
+    return draw(st.one_of(st.integers(0, max(count - 1, 0)), st.sampled_from([count, -1])))
+
+
+def _each_dict(items) -> list[dict]:
+    return [item for item in (items if isinstance(items, list) else []) if isinstance(item, dict)]
+
+
+@st.composite
+def injection(draw, document: dict) -> str:
+    """Add a whole valid-looking structure (in place) that refers to what the file has — the
+    kinds that found traces the value mutations did not (issue 46's fuzzing of the shared
+    scenes): a texture on another UV set, an attribute or morph target on any accessor, GPU
+    instances, a light of extreme size, extension names and extras of any JSON type."""
+    kind = draw(st.sampled_from(["texcoord", "attribute", "target", "instancing", "light",
+                                 "required", "extras"]))
+    materials, meshes = _each_dict(document.get("materials")), _each_dict(document.get("meshes"))
+    primitives = [p for mesh in meshes for p in _each_dict(mesh.get("primitives"))]
+    if kind == "texcoord" and materials:
+        outer, slot = draw(st.sampled_from(TEXTURE_SLOTS))
+        holder = draw(st.sampled_from(materials))
+        if outer is not None:
+            holder = holder.setdefault(outer, {}) if isinstance(holder.get(outer, {}), dict) else {}
+        holder[slot] = {"index": _index(draw, document.get("textures")),
+                        "texCoord": draw(st.sampled_from([1, 2, 3, 31, 32, 1.0, 1.5]))}
+    elif kind in ("attribute", "target") and primitives:
+        primitive = draw(st.sampled_from(primitives))
+        entry = {draw(st.sampled_from(ATTRIBUTE_NAMES + ("POSITION", "NORMAL"))):
+                 _index(draw, document.get("accessors"))}
+        if kind == "target":
+            primitive["targets"] = [entry]
+        elif isinstance(primitive.get("attributes"), dict):
+            primitive["attributes"].update(entry)
+    elif kind == "instancing" and isinstance(document.get("nodes"), list):
+        accessors = document.setdefault("accessors", [])
+        if isinstance(accessors, list):
+            accessors.append({"componentType": 5126, "type": "VEC3",
+                              "count": draw(st.sampled_from([1, 2, 1000, 100_000, 10 ** 6]))})
+            node = draw(st.sampled_from(_each_dict(document["nodes"]) or [{}]))
+            node["extensions"] = {"EXT_mesh_gpu_instancing": {
+                "attributes": {"TRANSLATION": len(accessors) - 1}}}
+    elif kind == "light" and isinstance(document.get("nodes"), list):
+        light = {"type": draw(st.sampled_from(["point", "spot", "directional", "area"])),
+                 "intensity": draw(st.sampled_from(INTERESTING_FLOATS)),
+                 "spot": {"outerConeAngle": draw(st.sampled_from(INTERESTING_FLOATS))},
+                 "extras": {"radius": draw(st.sampled_from(INTERESTING_FLOATS)),
+                            "angular_diameter": draw(st.sampled_from(INTERESTING_FLOATS))}}
+        document.setdefault("extensions", {})["KHR_lights_punctual"] = {"lights": [light]}
+        document["nodes"].append({"extensions": {"KHR_lights_punctual": {"light": 0}},
+                                  "translation": [0.0, 1.0, 0.0]})
+        scenes = _each_dict(document.get("scenes"))
+        if scenes and isinstance(scenes[0].get("nodes"), list):
+            scenes[0]["nodes"].append(len(document["nodes"]) - 1)
+    elif kind == "required":
+        document["extensionsRequired"] = draw(st.lists(st.one_of(
+            st.sampled_from(["KHR_lights_punctual", "EXT_mesh_gpu_instancing", "X_unknown"]),
+            values), max_size=3))
+    elif kind == "extras":
+        paths = [p for p in _paths(document) if isinstance(_parent(document, p + ("x",)), dict)]
+        holder = _parent(document, draw(st.sampled_from(paths)) + ("x",)) if paths else document
+        holder["extras"] = draw(values)
+    return kind
+
+
 def _glb(document: dict, blob: bytes) -> bytes:
     text = json.dumps(document).encode()
     text += b" " * (-len(text) % 4)
@@ -182,9 +257,12 @@ def mutated_files(draw):
     document, blob = copy.deepcopy(draw(st.sampled_from(BASES)))
     blob = bytearray(blob)
     for _ in range(draw(st.integers(1, 3))):
-        kind = draw(st.sampled_from(["json", "accessor", "accessor", "bytes", "bytes"]))
+        kind = draw(st.sampled_from(["json", "accessor", "accessor", "bytes", "bytes",
+                                     "inject", "inject"]))
         if kind == "json":
             draw(json_mutation(document))
+        elif kind == "inject":
+            draw(injection(document))
         elif kind == "accessor":
             draw(json_mutation(document, ("accessors", "bufferViews")))
         else:
@@ -234,7 +312,7 @@ def bake_ends_cleanly(name: str, files: dict[str, bytes]) -> str:
         previous = signal.signal(signal.SIGALRM, _alarm)
         signal.setitimer(signal.ITIMER_REAL, HANG_SECONDS)
         try:
-            baker.bake(folder / name, output, SETTINGS)
+            result = baker.bake(folder / name, output, SETTINGS)
         except baker.BakerError as error:
             assert error.message and error.fix, f"an error without message or fix: {error!r}"
             assert "Traceback" not in str(error)
@@ -248,6 +326,8 @@ def bake_ends_cleanly(name: str, files: dict[str, bytes]) -> str:
         assert output.name in left and not [n for n in left if n.endswith(".tmp")], left
         scene = load(output)  # the output reads back: a whole, valid glTF
         assert all(np.isfinite(p.positions).all() for p in scene.primitives)
+        estimate = result.report["rmse_estimate"]
+        assert estimate is None or math.isfinite(estimate), f"error estimate {estimate}"
         lightmaps = [m for m in scene.document.materials if carried(m) is not None]
         assert lightmaps or not any(i.baked for i in load(folder / name).instances)
         return "baked"
