@@ -68,7 +68,8 @@ PAGES = Path(__file__).resolve().parent  # tests/<viewer>/page.html and its pinn
 DEFAULT_SCENES = ["cornell", "metal_glass", "MultiUVTest", "LightsPunctualLamp",
                   "NegativeScaleTest"]
 CASES = [*((name, "emissive") for name in DEFAULT_SCENES), ("cornell", "moz"),
-         ("cornell", "occlusion"), ("MultiUVTest", "moz"), ("LightsPunctualLamp", "moz")]
+         ("cornell", "occlusion"), ("MultiUVTest", "moz"),
+         pytest.param("LightsPunctualLamp", "moz", marks=pytest.mark.long)]
 BY_TERM = {("MultiUVTest", "moz"), ("LightsPunctualLamp", "moz")}
 
 
@@ -386,7 +387,8 @@ def test_viewers_without_moz_lightmap_show_nothing_of_it(browser, baked, viewer,
     _assert_shows_nothing(shown, preview, f"{viewer} cornell moz", tmp_path)
 
 
-@pytest.mark.parametrize("name", ["cornell", "MultiUVTest", "LightsPunctualLamp"])
+@pytest.mark.parametrize("name", ["cornell", "MultiUVTest",
+                                  pytest.param("LightsPunctualLamp", marks=pytest.mark.long)])
 def test_hubs_shows_the_moz_carrier(browser, baked, hubs, name, tmp_path):
     """three.js r141 with Hubs' MOZ_lightmap loader extension (TEXCOORD_1, linear texels) shows
     the moz carrier as the preview does (on the shared scenes: what the lightmap adds alone)."""

@@ -431,6 +431,7 @@ def test_without_ray_the_cluster_asks_for_the_extra(tmp_path, monkeypatch):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["cornell.glb"]
 
 
+@pytest.mark.long
 def test_a_worker_with_another_baker_is_named_before_any_work(ray_cluster, tmp_path,
                                                                 monkeypatch):
     """A third node whose Python finds a copy of baker with one line added: the bake stops

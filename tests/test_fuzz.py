@@ -12,7 +12,7 @@ of extreme size, extension names and extras of any type), and bakes each one thr
 Anything else — another exception, a run longer than ``HANG_SECONDS``, a partial file — fails
 the test, and hypothesis shrinks it to the smallest mutation that does it.
 
-The CI budget is ``BAKER_FUZZ_EXAMPLES`` mutated inputs (default 300, 5000 with ``BAKER_LONG=1``);
+The CI budget is ``BAKER_FUZZ_EXAMPLES`` mutated inputs (default 200, 5000 with ``BAKER_LONG=1``);
 the scenes are tiny and the bake settings minimal (2 rays, 32-texel pages) so that 1000 take
 about 30 s. ``BAKER_FUZZ_EXAMPLES=20000 python -m pytest tests/test_fuzz.py`` runs a longer
 campaign.
@@ -41,7 +41,7 @@ from baker.gltf.load import load
 from tests.bakehelp import carried
 
 EXAMPLES = int(os.environ.get("BAKER_FUZZ_EXAMPLES",
-                              "5000" if os.environ.get("BAKER_LONG") else "300"))
+                              "5000" if os.environ.get("BAKER_LONG") else "200"))
 HANG_SECONDS = 20
 SCRATCH = "/dev/shm" if os.access("/dev/shm", os.W_OK) else None  # memory: thousands of folders
 SETTINGS = baker.Settings(rays=2, page_size=32, padding=1, threads=1, shadow_rays=1,
