@@ -83,6 +83,7 @@ def test_the_demo_scene_baked_on_the_cluster_is_the_local_bake(ray_cluster, smal
     assert report["bytes_from_workers"] > report["bytes_to_workers"] > 0
 
 
+@pytest.mark.long
 def test_a_bake_is_cut_into_four_parts_a_worker_whatever_its_size(ray_cluster, tmp_path,
                                                                   monkeypatch):
     """At the parts' default size the demo at a 128² page is one part locally; on a cluster

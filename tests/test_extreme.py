@@ -233,10 +233,11 @@ def test_a_mesh_instanced_many_times(tmp_path, count):
     assert (np.abs(means - means.mean()) <= 5 * se + 1e-12).all()
 
 
-@pytest.mark.parametrize("side", [8192])
+@pytest.mark.parametrize("side", [4096, pytest.param(8192, marks=pytest.mark.long)])
 def test_a_sparse_page_of_8192_squared(tmp_path, side):
     """An L-shaped strip two texels wide whose chart only fits a ``side``² page (8192: 48.6k
-    texels on an 8101² page: 7.9 s and 3.9 GB peak on 2 cores, most of it the float pages): every texel baked, open sky (W = R_ave)."""
+    texels on an 8101² page: 7.9 s and 3.9 GB peak on 2 cores, most of it the float pages;
+    4096 in the default suite): every texel baked, open sky (W = R_ave)."""
     length = (side - 92) / 8.0
     done = computed(l_strip(length, 0.25), tmp_path, texel_density=8.0, rays=4, d_max=1.0,
                     page_size=side)

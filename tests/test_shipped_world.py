@@ -57,7 +57,8 @@ def _baking(path: Path, monkeypatch) -> full.Baking:
     return stopped.value.args[0]
 
 
-@pytest.fixture(params=["turned, scaled and mirrored", "LightsPunctualLamp"])
+@pytest.fixture(params=["turned, scaled and mirrored",
+                        pytest.param("LightsPunctualLamp", marks=pytest.mark.long)])
 def scene(request, tmp_path) -> Path:
     """A scene of instances turned and scaled (boxes of 19,200 triangles each, one mirrored),
     or the real scene whose cluster bake once differed from the local one."""
