@@ -307,6 +307,11 @@ class Settings:
             if high is not None and value > high:
                 raise SettingsError(f"{name} must be at most {high:,}, not {value:,}",
                                     fix=f"give {option} a whole number up to {high:,}")
+        if self.page_size - 2 * self.padding - 2 < 1:  # ``unwrap``'s room for a chart
+            raise SettingsError(f"padding {self.padding} leaves no room for a chart on a page of "
+                                f"{self.page_size} texels (2 × padding + 3 at least)",
+                                fix=f"give --padding {(self.page_size - 3) // 2} or less, or a "
+                                    "larger --page-size")
         if self.target_error is not None and rays % 2:
             raise SettingsError(f"--target-error needs an even number of rays, not {rays}: "
                                 f"its rounds grow each texel's two nets of rays/2 points",

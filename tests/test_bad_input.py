@@ -476,6 +476,9 @@ def test_image_far_larger_than_memory_allows(tmp_path, capsys, side, says):
     ("--seed", "9" * 23, "seed"), ("--d-max", "1e300", "d_max"),
     ("--texel-density", "1e300", "texel density"), ("--sky", "1e300,1,1", "sky"),
     ("--sky-intensity", "1e40", "sky_intensity"),
+    # padding that leaves a 64-texel page no room for a chart: once "at texel density -682.57
+    # a triangle is -1.93e+03 texels long"
+    ("--padding", "31", "leaves no room for a chart"),
 ])
 def test_bad_settings(tmp_path, capsys, option, value, name):
     source = small_scene().save(tmp_path / "scene.glb")
