@@ -121,10 +121,12 @@ def _copies(ctx: Context, node: Any) -> int:
     accessors declare (the largest; ``gpu_instances`` checks that they agree), else 1."""
     extension = (node.extensions or {}).get("EXT_mesh_gpu_instancing")
     attributes = extension.get("attributes") if isinstance(extension, dict) else None
+    if not isinstance(attributes, dict):
+        return 1
     accessors = ctx.document.accessors or []
-    counts = [accessors[index].count for index in (attributes or {}).values()
+    counts = [accessors[index].count for index in attributes.values()
               if isinstance(index, int) and 0 <= index < len(accessors)
-              and isinstance(accessors[index].count, int)] if isinstance(attributes, dict) else []
+              and isinstance(accessors[index].count, int)]
     return max(counts, default=1)
 
 

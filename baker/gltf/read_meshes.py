@@ -85,9 +85,11 @@ def _read_primitive(
 def _check_counts(ctx: Context, primitive: pygltflib.Primitive, attributes: dict, n: int,
                   where: str) -> None:
     """Require every attribute of the primitive and of its morph targets to hold ``n``
-    elements, POSITION's count (the spec's rule; those read here check theirs as they are
-    read): the output copies each vertex's row of each of them, and a shorter one would
-    leave vertices without theirs. Their indices are checked already (``references``)."""
+    elements, POSITION's count (the spec's rule; the ones read here checked theirs as they
+    were read, the others — TANGENT, JOINTS_0, custom ones, morph targets — only here, from
+    their accessors' counts): the output copies each vertex's row of each of them, and a
+    shorter one would leave vertices without theirs. Indices are checked already
+    (``references``)."""
     targets = primitive.targets or []
     named = [(f"attributes.{name}", index) for name, index in attributes.items()] + [
         (f"targets[{k}].{name}", index) for k, target in enumerate(targets)
