@@ -64,7 +64,7 @@ def test_a_surface_through_a_rays_origin_is_met_as_embreex_meets_it():
     directions = np.array([[0, 1, 0], [0, 1, 0], [0, -1, 0]], np.float32)
     hits = scene.run(origins, directions, np.full(3, 5, np.float32), output=1)
     assert list(hits["primID"]) == [0, -1, 0] and list(hits["tfar"]) == [0, 5, 0]
-    many = np.arange(48) % 3  # occlusion in whole packets of 16, and alone
+    many = np.arange(48) % 3  # occlusion in whole packets (of 8 or 16), and alone
     for rows in (many, many[:2]):
         blocked = scene.run(origins[rows], directions[rows], np.full(len(rows), 5, np.float32),
                             query="OCCLUDED")
@@ -92,7 +92,7 @@ def _surface_rays(world, n: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.
 
 @pytest.mark.parametrize("make", [_rays, _surface_rays])
 def test_native_occlusion_is_embreexs_whatever_rays_share_a_packet(world, make):
-    """200,000 rays, cast in packets of 16 where the CPU has AVX-512: the same answer for each
+    """200,000 rays, cast in packets of 16 (AVX-512) or 8 (AVX2): the same answer for each
     as embreex's single rays give, and the same again when every packet holds other rays (the
     rays cast from the 7th on, the first 7 alone): a ray's answer does not depend on the rays
     beside it, so neither does a bake's on its chunks."""

@@ -5,8 +5,8 @@
  * reads and writes plain float32/int32 rows and asks Embree the same questions (rtcIntersect1,
  * rtcOccluded1, default arguments) of the same library (the libembree4 that embreex's wheel
  * ships, loaded by native.py before this file): 1.04-1.10x embreex's rate on nearest hits, a
- * scene built 5x faster, and on an AVX-512 CPU occlusion in packets of 16 rays
- * (benchmarks/bench_rays.py). The library is not linked here: its symbols are resolved when
+ * scene built 5x faster, and occlusion in packets of 16 rays on an AVX-512 CPU, of 8 with
+ * AVX2 (benchmarks/bench_rays.py). The library is not linked here: its symbols are resolved when
  * native.py loads this file, so that the install needs only a C compiler, no headers.
  *
  * The declarations below are those of Embree 4's public headers (include/embree4/, Apache
@@ -63,15 +63,17 @@ void rtcReleaseGeometry(RTCGeometry geometry);
 void rtcIntersect1(RTCScene scene, struct RTCRayHit *rayhit, void *args);
 void rtcOccluded1(RTCScene scene, struct RTCRay *ray, void *args);
 
-/* Sixteen rays, a row each (Embree's RTCRay16), for rtcOccluded16. */
-struct __attribute__((aligned(64))) RTCRay16 {
-    float org_x[16], org_y[16], org_z[16], tnear[16];
-    float dir_x[16], dir_y[16], dir_z[16], time[16];
-    float tfar[16];
-    unsigned int mask[16], id[16], flags[16];
-};
-
-void rtcOccluded16(const int *valid, RTCScene scene, struct RTCRay16 *ray, void *args);
+/* N rays, a row each (Embree's RTCRay8, RTCRay16), for rtcOccluded8 and rtcOccluded16. */
+#define RAY_PACKET(N)                                                                          \
+    struct __attribute__((aligned(4 * N))) RTCRay##N {                                         \
+        float org_x[N], org_y[N], org_z[N], tnear[N];                                          \
+        float dir_x[N], dir_y[N], dir_z[N], time[N];                                           \
+        float tfar[N];                                                                         \
+        unsigned int mask[N], id[N], flags[N];                                                 \
+    };                                                                                         \
+    void rtcOccluded##N(const int *valid, RTCScene scene, struct RTCRay##N *ray, void *args);
+RAY_PACKET(8)
+RAY_PACKET(16)
 
 /* A device and its one scene. */
 typedef struct {
@@ -176,42 +178,61 @@ void baker_intersect(const Traced *traced, const float *origins, const float *di
     }
 }
 
+/* Every lane of a packet live (Embree's valid mask), for packets of up to 16 rays. */
+static const int __attribute__((aligned(64))) LIVE[16] = {
+    -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1};
+
+/* baker_occluded's answers for the first whole packets of N of its n rays, each packet cast
+ * by rtcOccluded8 or rtcOccluded16 with every lane live; returns how many rays were cast. */
+#define OCCLUDED_PACKETS(N)                                                                    \
+    static long occluded_packets##N(const Traced *traced, const float *origins,                \
+                                    const float *directions, const float *lengths, long n,     \
+                                    int *blocked)                                              \
+    {                                                                                          \
+        struct RTCRay##N packet;                                                               \
+        long i, j;                                                                             \
+        for (i = 0; i + N <= n; i += N) {                                                      \
+            for (j = 0; j < N; j++) {                                                          \
+                packet.org_x[j] = origins[3 * (i + j)];                                        \
+                packet.org_y[j] = origins[3 * (i + j) + 1];                                    \
+                packet.org_z[j] = origins[3 * (i + j) + 2];                                    \
+                packet.tnear[j] = 0.0f;                                                        \
+                packet.dir_x[j] = directions[3 * (i + j)];                                     \
+                packet.dir_y[j] = directions[3 * (i + j) + 1];                                 \
+                packet.dir_z[j] = directions[3 * (i + j) + 2];                                 \
+                packet.time[j] = 0.0f;                                                         \
+                packet.tfar[j] = lengths[i + j];                                               \
+                packet.mask[j] = 0xFFFFFFFFu;                                                  \
+                packet.id[j] = 0;                                                              \
+                packet.flags[j] = 0;                                                           \
+            }                                                                                  \
+            rtcOccluded##N(LIVE, traced->scene, &packet, NULL);                                \
+            for (j = 0; j < N; j++)                                                            \
+                blocked[i + j] = packet.tfar[j] < 0.0f ? 0 : -1;                               \
+        }                                                                                      \
+        return i;                                                                              \
+    }
+OCCLUDED_PACKETS(8)
+OCCLUDED_PACKETS(16)
+
 /* Whether anything lies along each of n rays (as baker_intersect takes them; lengths kept):
  * blocked (n,) int32 0 where something does, -1 where nothing does, as embreex's OCCLUDED.
  *
- * On a CPU with AVX-512, whole runs of 16 consecutive rays go to Embree as one packet
- * (rtcOccluded16), the rest one by one: 1.3-1.5x the rate of single rays on a bake's
- * obscurance rays (benchmarks/bench_rays.py), where packets of 8, or of 16 with lanes left
- * empty, were slower than single rays. Each ray's answer is its own, whatever rays share its
- * packet: the same as rtcOccluded1's (tests/test_native_rays.py). */
+ * Whole runs of consecutive rays go to Embree as one packet where the CPU traces a packet's
+ * lanes at once (baker_packets: 16 with AVX-512, 8 with AVX2), the rest one by one. A
+ * packet's rays share the traversal of the nodes they all enter: on a bake's obscurance rays
+ * (64 consecutive rays are one texel's, from one point) 1.3-1.5x the rate of single rays with
+ * 16 on AVX-512, 1.3-1.4x with 8 on an AVX2 EPYC (benchmarks/bench_rays.py). Each ray's answer
+ * is its own, whatever rays share its packet: the same as rtcOccluded1's
+ * (tests/test_native_rays.py). */
 void baker_occluded(const Traced *traced, const float *origins, const float *directions,
                     const float *lengths, long n, int *blocked)
 {
-    static const int __attribute__((aligned(64))) all[16] = {
-        -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1};
-    struct RTCRay16 packet;
     struct RTCRay ray;
-    long i = 0, j;
-    if (baker_packets())
-        for (; i + 16 <= n; i += 16) {
-            for (j = 0; j < 16; j++) {
-                packet.org_x[j] = origins[3 * (i + j)];
-                packet.org_y[j] = origins[3 * (i + j) + 1];
-                packet.org_z[j] = origins[3 * (i + j) + 2];
-                packet.tnear[j] = 0.0f;
-                packet.dir_x[j] = directions[3 * (i + j)];
-                packet.dir_y[j] = directions[3 * (i + j) + 1];
-                packet.dir_z[j] = directions[3 * (i + j) + 2];
-                packet.time[j] = 0.0f;
-                packet.tfar[j] = lengths[i + j];
-                packet.mask[j] = 0xFFFFFFFFu;
-                packet.id[j] = 0;
-                packet.flags[j] = 0;
-            }
-            rtcOccluded16(all, traced->scene, &packet, NULL);
-            for (j = 0; j < 16; j++)
-                blocked[i + j] = packet.tfar[j] < 0.0f ? 0 : -1;
-        }
+    int width = baker_packets();
+    long i = width == 16 ? occluded_packets16(traced, origins, directions, lengths, n, blocked)
+           : width == 8  ? occluded_packets8(traced, origins, directions, lengths, n, blocked)
+                         : 0;
     for (; i < n; i++) {
         ray.org_x = origins[3 * i];
         ray.org_y = origins[3 * i + 1];
@@ -230,9 +251,11 @@ void baker_occluded(const Traced *traced, const float *origins, const float *dir
     }
 }
 
-/* 1 where baker_occluded casts packets of 16 (the CPU has AVX-512, where Embree traces them
- * sixteen lanes at once), 0 where it casts every ray alone. */
+/* The rays baker_occluded casts in a packet: 16 on a CPU with AVX-512, 8 with AVX2 (where
+ * Embree traces that many lanes at once), else 1 (every ray alone). */
 int baker_packets(void)
 {
-    return __builtin_cpu_supports("avx512f") ? 1 : 0;
+    if (__builtin_cpu_supports("avx512f"))
+        return 16;
+    return __builtin_cpu_supports("avx2") ? 8 : 1;
 }

@@ -3,7 +3,8 @@
 ``baker/native/rays.c`` asks the libembree4 that embreex's wheel ships the questions embreex
 asks (nearest hit, occlusion, default arguments), from a plain C loop over float32 rows instead
 of embreex's item-by-item Cython loop: 1.04–1.10× embreex's rate on nearest hits, 1.3–1.5× on
-occlusion (cast in packets of 16 rays on a CPU with AVX-512; ``benchmarks/bench_rays.py``), and
+occlusion (cast in packets of 16 rays on a CPU with AVX-512, of 8 with AVX2;
+``benchmarks/bench_rays.py``), and
 a scene built 5× faster (0.012 against 0.06 s for the boxes' 98,732 triangles: embreex copies
 the vertices one by one through Python).
 The install compiles it into ``baker/_rays.so`` (setup.py) with no Embree headers: its Embree
@@ -64,7 +65,8 @@ def engine() -> str:
     """What casts this process's rays, for ``baker --version`` and the report."""
     if not _NATIVE:
         return f"embreex ({_WHY_NOT})"
-    packets = ", occlusion in packets of 16" if _NATIVE.baker_packets() else ""
+    width = _NATIVE.baker_packets()
+    packets = f", occlusion in packets of {width}" if width > 1 else ""
     return f"Embree 4 through baker's native calls{packets}"
 
 
@@ -74,7 +76,7 @@ class NativeScene:
 
     def __init__(self, handle: int):
         self._handle = handle
-        self.packets = bool(_NATIVE.baker_packets())  # occlusion cast 16 rays at a time
+        self.packets = _NATIVE.baker_packets() > 1  # occlusion cast 8 or 16 rays at a time
 
     def run(self, origins: np.ndarray, directions: np.ndarray, dists: np.ndarray,
             query: str = "INTERSECT", **_):

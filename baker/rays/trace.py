@@ -251,7 +251,7 @@ class Tracer:
                           lengths: np.ndarray) -> LocalHits:
         """``cast_local``'s hits, the same bits, for rays most of which meet nothing (the
         validity's short probes): each ray is first asked only whether it meets anything, an
-        occlusion query cast in packets of 16 (``native.py``: about 3× the rate of nearest
+        occlusion query cast in packets of 8 or 16 (``native.py``: about 3× the rate of nearest
         hits on short rays from one point), and only the rays that do are asked where. Where
         occlusion is not cast in packets it is no cheaper than the nearest hit, and this is
         ``cast_local``. Rays as ``cast_local`` takes them; ``lengths`` (n,) float32 overwritten
