@@ -345,10 +345,10 @@ def alpha_test(scene, world) -> AlphaTest | None:
     by_material = np.array([{"MASK": MASK, "BLEND": BLEND}.get(c.alpha_mode, 0) for c in classes],
                            np.uint8)
     tested = np.array([c.alpha_tested for c in classes], bool)
-    if not len(world.triangles) or not len(classes):
+    if not len(world.triangles) or not by_material.any():
         return None
     mode = by_material[world.tri_material]
-    vertex_alpha = world.colors[world.triangles][..., 3].min(axis=1) < 1.0  # (T,)
+    vertex_alpha = (world.colors[:, 3] < 1.0)[world.triangles].any(axis=1)  # (T,)
     mode = np.where(tested[world.tri_material] | vertex_alpha, mode, 0).astype(np.uint8)
     if not mode.any():
         return None
