@@ -408,7 +408,7 @@ def carried(done) -> Lightmaps:
     surfaces send out (emissive, ``image/carriers.py``)."""
     if done.settings.carrier != "emissive":
         return done.lightmaps
-    return emissive_lightmaps(done.scene, done.world, done.atlas, done.texels, done.lightmaps,
+    return emissive_lightmaps(done.scene, done.world, done.atlas, done.coverage, done.lightmaps,
                               done.settings.padding,
                               done.direct if done.settings.baked_lights == "keep" else None)
 

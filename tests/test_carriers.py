@@ -55,7 +55,7 @@ def test_emissive_pages_are_albedo_times_irradiance_over_pi(tmp_path):
     """The Cornell room, all dielectric: each front texel's radiance is its base colour ×
     irradiance / π plus its own emission (the lamp's texels)."""
     done = computed(cornell_box(), tmp_path, texel_density=6, rays=16)
-    out = emissive_lightmaps(done.scene, done.world, done.atlas, done.texels, done.lightmaps,
+    out = emissive_lightmaps(done.scene, done.world, done.atlas, done.coverage, done.lightmaps,
                              done.settings.padding, None)
     texels = done.texels
     rows = np.flatnonzero((texels.key & OTHER_SIDE) == 0)
@@ -93,7 +93,7 @@ def test_a_metal_sends_its_surroundings_and_a_kept_light_only_its_highlight(tmp_
     assert (direct > 0.3 * irradiance).all()  # the light gives much of the floor's light
 
     def page(kept):
-        out = emissive_lightmaps(done.scene, done.world, done.atlas, done.texels,
+        out = emissive_lightmaps(done.scene, done.world, done.atlas, done.coverage,
                                  done.lightmaps, done.settings.padding, kept)
         return flat_pages(out.light)[index]
 
@@ -239,7 +239,7 @@ def test_the_transmission_texture_shares_the_page_and_what_shows_through(tmp_pat
     clear = transmission_at(done.scene, done.world, tris, bary)
     assert (abs(clear - 0.5) < 0.01).mean() > 0.3 and (clear < 0.01).mean() > 0.3
     base = base_colour(done.scene, done.world, tris, bary)
-    out = emissive_lightmaps(done.scene, done.world, done.atlas, done.texels, done.lightmaps,
+    out = emissive_lightmaps(done.scene, done.world, done.atlas, done.coverage, done.lightmaps,
                              done.settings.padding, None)
     irradiance = flat_pages(done.lightmaps.light)[index]
     np.testing.assert_allclose(flat_pages(out.light)[index],

@@ -111,7 +111,7 @@ class Texels:
         run of P·H·W pixels — the key itself, (page·H + y)·W + x, less the other-side bit:
         ``pages.reshape(P * H * W, …)[index]`` reads them, without the divisions of
         ``pixels`` or numpy's work on three index arrays (2-3× faster)."""
-        return (self.key[rows] & _KEY_BITS).astype(np.int64)
+        return pixel_index(self.key[rows])
 
     def instance(self, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
         """(k,) int64 instance of the texels ``rows`` (their triangles')."""
@@ -237,11 +237,18 @@ def _cover_kernel(corners: np.ndarray, normals: np.ndarray, offsets: np.ndarray,
                     best_owner[texel] = t
 
 
-def texel_barycentrics(atlas: Atlas, world: World, texels: Texels) -> np.ndarray:
+def pixel_index(key: np.ndarray) -> np.ndarray:
+    """(k,) int64 index of the pixels of texel keys ``key`` (k,) in pages (P, H, W, …) seen as
+    one run of P·H·W pixels: (page·H + y)·W + x, the key less the other-side bit."""
+    return (key & _KEY_BITS).astype(np.int64)
+
+
+def texel_barycentrics(atlas: Atlas, world: World, coverage: "Coverage | Texels") -> np.ndarray:
     """(N, 3) barycentric coordinates of the texels' centres in their owning world triangles:
     the points ``texels_of`` maps to world (before validity moves any), for what the texel's
-    surface looks like there (its albedo and emission, ``image/carriers.py``)."""
-    return _texel_barycentrics(texels.key & _KEY_BITS, texels.triangle,
+    surface looks like there (its albedo and emission, ``image/carriers.py``). ``coverage``:
+    the texels' keys and owning triangles (a ``Coverage``, or the ``Texels`` made from it)."""
+    return _texel_barycentrics(coverage.key & _KEY_BITS, coverage.triangle,
                                owners_uv(atlas, world), atlas.width, atlas.height)
 
 

@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 from baker.atlas.layout import Atlas
-from baker.atlas.rasterise import Texels, flat_pages, texel_barycentrics
+from baker.atlas.rasterise import Coverage, flat_pages, pixel_index, texel_barycentrics
 from baker.geometry.surface import (base_colour, emission, metallic_at, transmission_at,
                                     viewer_diffuse_weight_at)
 from baker.geometry.world import World
@@ -38,28 +38,29 @@ from baker.rowwise import matmul_rows
 _DARK_WEIGHT = 0.5  # a viewer shows less than half the bake's diffuse light: worth a warning
 
 
-def emissive_lightmaps(scene: Scene, world: World, atlas: Atlas, texels: Texels,
+def emissive_lightmaps(scene: Scene, world: World, atlas: Atlas, coverage: Coverage,
                        lightmaps: Lightmaps, padding: int, kept: Direct | None) -> Lightmaps:
     """The post-processed ``lightmaps`` turned into pages of outgoing radiance (the module's
     formula), ``kept`` the texels' direct light when the output keeps the punctual lights
     (None: it drops them).
 
-    Every front texel (``texels`` without the other-side bit of ``inner.py``) gets its owning
-    surface's base colour, metallic, transmission and emission at its centre, multiplied into
-    the page's (denoised, filled, stitched) irradiance there; the padding around charts is grown
-    from those texels by ``padding`` rings, as the lightmap's was. The visibility pages are kept
-    as they are.
+    Every front texel (the keys of ``coverage``, the bake's texels, without the other-side bit
+    of ``inner.py``) gets its owning surface's base colour, metallic, transmission and emission
+    at its centre, multiplied into the page's (denoised, filled, stitched) irradiance there;
+    the padding around charts is grown from those texels by ``padding`` rings, as the
+    lightmap's was. The visibility pages are kept as they are. Only the texels' keys and
+    triangles are read: a bake whose texels went to disk in parts does not make them again.
     """
-    front = np.flatnonzero((texels.key & OTHER_SIDE) == 0)
-    tris = texels.triangle[front]
-    bary = texel_barycentrics(atlas, world, texels)[front]
-    index = texels.pixel_index(front)
+    front = np.flatnonzero((coverage.key & OTHER_SIDE) == 0)
+    tris = coverage.triangle[front]
+    bary = texel_barycentrics(atlas, world, coverage)[front]
+    index = pixel_index(coverage.key[front])
     irradiance = flat_pages(lightmaps.light)[index]
     metal = metallic_at(scene, world, tris, bary)[:, None]
     clear = transmission_at(scene, world, tris, bary)[:, None]
     diffuse = (1.0 - metal) * (1.0 - clear) * irradiance
     if metal.any():
-        punctual = _punctual_irradiance(kept, front, len(texels.key))
+        punctual = _punctual_irradiance(kept, front, len(coverage.key))
         diffuse += metal * np.maximum(irradiance - punctual, 0.0)
     radiance = np.zeros_like(lightmaps.light)
     flat_pages(radiance)[index] = (base_colour(scene, world, tris, bary) * diffuse / np.pi

@@ -121,6 +121,11 @@ class Computed:
     def texels(self) -> Texels:
         return self.per_texel.texels
 
+    @property
+    def coverage(self) -> Coverage:
+        """The texels' keys and owning triangles (``PerTexel.coverage``)."""
+        return self.per_texel.coverage
+
     def context(self, settings: Resolved | None = None) -> Context:
         """What every estimator needs of this bake (its ``Context``), Embree's scene made anew,
         with its settings or ``settings``: for studies and tests that trace its texels again."""

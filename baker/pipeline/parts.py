@@ -216,6 +216,13 @@ class PerTexel:
         return replace(made, position=points.positions(made.position))
 
     @cached_property
+    def coverage(self) -> Coverage:
+        """The texels' keys and owning triangles, without making the texels again where
+        they went to disk (what the carriers read of them)."""
+        texels = self._texels if self._texels is not None else self._group("texels")
+        return Coverage(texels.key, texels.triangle, texels.triangle_texels)
+
+    @cached_property
     def validity(self) -> Validity:
         return self._group("validity")
 
