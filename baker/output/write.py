@@ -250,6 +250,16 @@ def _baked_by_node(scene: Scene, atlas: Atlas) -> dict[int, dict[int, InstanceUV
     return dict(sorted(nodes.items()))
 
 
+def _compacted(triangles: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """The vertices (k,) that ``triangles`` (m, 3) use, of ``count``, in ascending order, and
+    the triangles (m, 3) as rows into them: ``np.unique(..., return_inverse=True)``'s result,
+    by a mark and a running count instead of a sort."""
+    used = np.zeros(count, bool)
+    used[triangles] = True
+    row = np.cumsum(used) - 1
+    return np.flatnonzero(used), row[triangles]
+
+
 def _file_winding(scene: Scene, unwrap: InstanceUV) -> np.ndarray:
     """``unwrap.triangles`` with each triangle's corners in the file's order (winding kept).
 
@@ -583,10 +593,9 @@ class _Builder:
         page_of = np.where(pages < 0, on_pages[0], pages)
         result = []
         for page in on_pages:
-            used, inverse = np.unique(triangles[page_of == page], return_inverse=True)
+            used, indices = _compacted(triangles[page_of == page], len(vertices))
             geometry, uv_accessor, transform = self._page_geometry(
-                primitive, where, vertices[used], inverse.reshape(-1, 3), uv[used], texcoord,
-                shifted)
+                primitive, where, vertices[used], indices, uv[used], texcoord, shifted)
             new = {key: _json_copy(value) for key, value in primitive.items()
                    if key not in ("attributes", "indices", "mode", "targets", "material")}
             new.update(_json_copy(geometry))

@@ -87,7 +87,9 @@ def bounds_of_baked(world, scene) -> tuple[float, float]:
                           [np.zeros(0, np.int64)])
     if len(tris) == 0:
         return 0.0, 0.0
-    points = world.positions[world.triangles[tris].reshape(-1)]
+    corner = np.zeros(len(world.positions), bool)
+    corner[world.triangles[tris]] = True  # each vertex once: the bounds are those of the corners
+    points = world.positions[corner]
     return frame_area(scene, world), float(np.linalg.norm(points.max(0) - points.min(0)))
 
 
