@@ -61,3 +61,66 @@ def test_the_occlusion_query_blocks_the_rays_that_have_a_nearest_hit(tmp_path):
         assert blocked.dtype == np.int32 and set(np.unique(blocked)) <= {-1, 0}
         assert np.array_equal(blocked >= 0, hits.triangle >= 0)
         assert 0.1 < (blocked >= 0).mean() < 0.9  # both answers are asked about
+
+
+def _copies(count: int, flipped: bool = False):
+    """A 2 m floor quad placed ``count`` times at one place (each its own node), one more
+    turned upside down (its winding, so its front face, reversed) when ``flipped``, and a
+    0.4 m box standing on it."""
+    from assets.gltf_builder import GltfBuilder, box, quad, quat_axis_angle
+
+    b = GltfBuilder()
+    grey = b.material("grey", (0.5, 0.5, 0.5))
+    floor = b.shape_mesh("floor", quad(2.0, 2.0), material=grey)
+    nodes = [b.node(f"floor{k}", floor) for k in range(count)]
+    if flipped:
+        nodes.append(b.node("under", floor, rotation=quat_axis_angle((1, 0, 0), 180)))
+    nodes.append(b.node("box", b.shape_mesh("box", box((0.4, 0.4, 0.4)), material=grey),
+                        translation=(0.0, 0.2, 0.0)))
+    b.roots(nodes)
+    return b
+
+
+def test_exact_copies_of_a_surface_are_traced_once(tmp_path):
+    """A floor placed 40 times at one place: the world keeps every copy, the tracer the first
+    alone (a ray would test them all: 100,000 such copies made a 4 kB file bake for hours), and
+    a ray meets it where one floor is met, at the same distance and point; a copy turned upside
+    down (the other face) and the box are no copies."""
+    from baker.geometry.repeats import repeated_triangles
+
+    world = build_world(loaded(_copies(40, flipped=True), tmp_path))
+    alone = build_world(loaded(_copies(1), tmp_path))
+    floor = len(alone.triangles) - (alone.tri_start[2] - alone.tri_start[1])  # one floor's
+    repeated = world.repeated
+    assert repeated.sum() == 39 * floor
+    assert not repeated[:floor].any() and repeated[floor:40 * floor].all()
+    assert not repeated[40 * floor:].any()  # the flipped floor and the box
+    rng = np.random.default_rng(1)
+    origins = np.column_stack([rng.uniform(-0.9, 0.9, 500), np.full(500, 1.0),
+                               rng.uniform(-0.9, 0.9, 500)])
+    down = np.tile([0.0, -1.0, 0.0], (500, 1))
+    hits, once = Tracer(world).cast(origins, down, 5.0), Tracer(alone).cast(origins, down, 5.0)
+    on_floor = once.triangle < floor
+    assert on_floor.mean() > 0.5 and (hits.triangle[on_floor] < floor).all()
+    for key in ("triangle", "distance", "u", "v"):
+        assert np.array_equal(getattr(hits, key)[on_floor], getattr(once, key)[on_floor]), key
+    # the same corners in another cyclic order are a copy; reversed, or one corner moved, not
+    positions = np.array([[0, 0, 0], [1, 0, 0], [0, 0, 1], [0, 0, np.nextafter(1.0, 2.0)]])
+    triangles = np.array([[0, 1, 2], [1, 2, 0], [2, 0, 1], [0, 2, 1], [1, 3, 0]])
+    assert repeated_triangles(positions, triangles, np.ones(5, bool)).tolist() == [
+        False, True, True, False, False]
+    assert not repeated_triangles(positions, triangles, np.array([0, 1, 0, 1, 1], bool))[1]
+
+
+def test_a_copy_the_alpha_test_may_pass_is_traced(tmp_path):
+    """A surface alpha-cut in places is never left out as a copy (a ray through its cut-out
+    part would miss the surface it copies)."""
+    from assets.material_scenes import alpha_cut_quad
+
+    b = alpha_cut_quad()
+    b.node("leaf again", b._nodes[b.info["leaf"]].mesh)  # the leaf's mesh, placed as it is
+    world = build_world(loaded(b, tmp_path))
+    assert world.alpha is not None and not world.repeated.any()
+    from baker.geometry.repeats import repeated_triangles  # the copy is there, exact
+
+    assert repeated_triangles(world.positions, world.triangles, ~world.degenerate).any()

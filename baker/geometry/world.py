@@ -21,6 +21,7 @@ from functools import cached_property
 import numpy as np
 
 from baker.frozen import read_only
+from baker.geometry.repeats import repeated_triangles
 from baker.geometry.surface import alpha_test
 from baker.gltf.materials import material_table
 from baker.gltf.scene import Scene
@@ -95,6 +96,19 @@ class World:
         longest = np.max([np.sum((b - a) ** 2, 1), np.sum((c - b) ** 2, 1),
                           np.sum((a - c) ** 2, 1)], 0)
         out = self.areas() <= 1e-12 * longest
+        out.flags.writeable = False
+        return out
+
+    @cached_property
+    def repeated(self) -> np.ndarray:
+        """(T,) bool: triangles whose corners are those of a lower-numbered one, bit for bit
+        and in the same winding — copies of one surface at one place, which the tracer leaves
+        out (``repeats.py``); never a triangle without area or one the alpha test may let rays
+        through."""
+        eligible = ~self.degenerate
+        if self.alpha is not None:
+            eligible &= self.alpha.mode == 0
+        out = repeated_triangles(self.positions, self.triangles, eligible)
         out.flags.writeable = False
         return out
 

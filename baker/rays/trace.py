@@ -182,11 +182,13 @@ def embree_mesh(world: World, hidden: np.ndarray | None = None) -> tuple[np.ndar
     """The world's triangles as Embree takes them: (V + 1, 3) float32 vertices − ``center``,
     (T, 3) int32 triangles. Shared vertices (fewer than 3 per triangle: embreex copies them one
     by one), the same float32 corners as each triangle's own; ``hidden`` (T,) bool triangles
-    point at one NaN vertex after the others, which Embree leaves out."""
+    and the exact copies of others (``World.repeated``: a ray would test every copy) point at
+    one NaN vertex after the others, which Embree leaves out."""
     vertices = np.vstack([world.positions - world.center, np.full((1, 3), np.nan)])
     triangles = world.triangles.copy()
-    if hidden is not None:
-        triangles[hidden] = len(world.positions)
+    left_out = world.repeated if hidden is None else hidden | world.repeated
+    if left_out.any():
+        triangles[left_out] = len(world.positions)
     return vertices.astype(np.float32), triangles.astype(np.int32)
 
 
