@@ -184,57 +184,70 @@ def bounds_scale(positions: np.ndarray) -> float:
 
 
 @jit
-def rows_times(rows: np.ndarray, matrix: np.ndarray) -> np.ndarray:
-    """(n, 3) the row vectors ``rows`` (n, 3) times ``matrix`` (3, 3): out[i, j] =
-    (r_i0·m_0j + r_i1·m_1j) + r_i2·m_2j, each product rounded, summed in that order, in one
-    compiled pass. ``rows @ matrix`` would hand the product to BLAS, whose kernels (fused
+def rows_times(rows: np.ndarray, matrices: np.ndarray) -> np.ndarray:
+    """(k, n, 3) the row vectors ``rows`` (n, 3) times each of ``matrices`` (k, 3, 3): out[m,
+    i, j] = (r_i0·M_0j + r_i1·M_1j) + r_i2·M_2j, each product rounded, summed in that order, in
+    one compiled pass. ``rows @ matrix`` would hand the product to BLAS, whose kernels (fused
     multiply-adds, row blocks cut by its thread count) change the last bit with the number of
     threads: a cluster's nodes must build the driver's world to the bit."""
-    out = np.empty((len(rows), 3))
-    for i in range(len(rows)):
-        x, y, z = rows[i, 0], rows[i, 1], rows[i, 2]
-        for j in range(3):
-            out[i, j] = (x * matrix[0, j] + y * matrix[1, j]) + z * matrix[2, j]
+    out = np.empty((len(matrices), len(rows), 3))
+    for m in range(len(matrices)):
+        for i in range(len(rows)):
+            x, y, z = rows[i, 0], rows[i, 1], rows[i, 2]
+            for j in range(3):
+                out[m, i, j] = (x * matrices[m, 0, j] + y * matrices[m, 1, j]) + z * matrices[m, 2, j]
     return out
 
 
-def _cofactor(linear: np.ndarray) -> tuple[np.ndarray, float]:
-    """The cofactor matrix det(M)·M⁻¹ (3, 3) of the linear part ``linear`` (3, 3) of an
-    instance's matrix, as rows, and det(M) from it (elementwise arithmetic, no LAPACK): both
-    exist for a singular M too. Row k is the cross product of columns k + 1 and k + 2, each
-    component a·b − c·d as ``np.cross`` rounds it, in Python floats: numpy's call costs
-    about 30 µs on 3-vectors, and a level places every instance through here."""
-    (a, b, c), (d, e, f), (g, h, i) = linear.tolist()  # M's rows; its columns are (a, d, g)…
+def _cofactors(linear: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The cofactor matrices det(M)·M⁻¹ (k, 3, 3) of the linear parts ``linear`` (k, 3, 3) of
+    instances' matrices, as rows, and det(M) (k,) from them (elementwise arithmetic, no
+    LAPACK): both exist for a singular M too. Row r is the cross product of columns r + 1 and
+    r + 2, each component a·b − c·d as ``np.cross`` rounds it."""
+    (a, b, c), (d, e, f), (g, h, i) = np.moveaxis(linear, (1, 2), (0, 1))  # M's rows, (k,) each
 
-    def cross(x0, x1, x2, y0, y1, y2) -> list[float]:
-        return [x1 * y2 - x2 * y1, x2 * y0 - x0 * y2, x0 * y1 - x1 * y0]
+    def cross(x0, x1, x2, y0, y1, y2) -> np.ndarray:
+        return np.stack([x1 * y2 - x2 * y1, x2 * y0 - x0 * y2, x0 * y1 - x1 * y0], axis=-1)
 
-    cofactor = np.array([cross(b, e, h, c, f, i), cross(c, f, i, a, d, g),
-                         cross(a, d, g, b, e, h)])
-    det = (cofactor[0, 0] * a + cofactor[0, 1] * d) + cofactor[0, 2] * g
-    return cofactor, float(det)
+    cofactor = np.stack([cross(b, e, h, c, f, i), cross(c, f, i, a, d, g),
+                         cross(a, d, g, b, e, h)], axis=1)
+    det = (cofactor[:, 0, 0] * a + cofactor[:, 0, 1] * d) + cofactor[:, 0, 2] * g
+    return cofactor, det
 
 
 def placed_positions(positions: np.ndarray, matrix: np.ndarray) -> np.ndarray:
     """(n, 3) world positions of mesh ``positions`` (n, 3) placed by the world ``matrix``
     (4, 4): M·p + t, through ``rows_times`` (every world position baker makes: the same bits
     on every machine and thread count)."""
-    return rows_times(positions, np.ascontiguousarray(matrix[:3, :3].T)) + matrix[:3, 3]
+    return _placed_positions(positions, matrix[None])[0]
 
 
-def placed(prim, matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """One instance of the primitive ``prim`` (``gltf.scene.Primitive``) placed by its world
-    ``matrix`` (4, 4): world positions (n, 3), unit world normals (n, 3) and triangles (m, 3),
-    two corners swapped where the matrix mirrors (see the module notes). Normals go through
-    det(M)·M⁻ᵀ with det's sign (a zero scale flattens them, never NaNs them); a primitive
-    without normals gets flat ones (``_flat_normals``). Elementwise arithmetic and
-    ``rows_times`` only: the same bits on every machine and thread count."""
-    positions = placed_positions(prim.positions, matrix)
-    cofactor, det = _cofactor(matrix[:3, :3])
-    triangles = prim.triangles[:, [0, 2, 1]] if det < 0 else prim.triangles
+def _placed_positions(positions: np.ndarray, matrices: np.ndarray) -> np.ndarray:
+    """(k, n, 3) ``placed_positions`` of ``positions`` (n, 3) by each of ``matrices`` (k, 4, 4)."""
+    return (rows_times(positions, np.ascontiguousarray(np.swapaxes(matrices[:, :3, :3], 1, 2)))
+            + matrices[:, None, :3, 3])
+
+
+def placed(prim, matrices: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The instances of the primitive ``prim`` (``gltf.scene.Primitive``) placed by their world
+    ``matrices`` (k, 4, 4), all at once: world positions (k, n, 3), unit world normals
+    (k, n, 3) and triangles (k, m, 3) into each instance's own rows, two corners swapped where
+    a matrix mirrors (see the module notes). Normals go through det(M)·M⁻ᵀ with det's sign (a
+    zero scale flattens them, never NaNs them); a primitive without normals gets flat ones
+    (``_flat_normals``). Elementwise arithmetic and ``rows_times`` only: the same bits on every
+    machine and thread count, however many instances are placed together."""
+    positions = _placed_positions(prim.positions, matrices)
+    cofactor, det = _cofactors(matrices[:, :3, :3])
+    mirrored = det < 0
+    triangles = np.where(mirrored[:, None, None], prim.triangles[:, [0, 2, 1]], prim.triangles)
+    k, n = positions.shape[:2]
     if prim.normals is None:
-        return positions, _unit(_flat_normals(positions, triangles)), triangles
-    return positions, _unit(rows_times(prim.normals, cofactor if det >= 0 else -cofactor)), triangles
+        rows = (triangles + n * np.arange(k)[:, None, None]).reshape(-1, 3)
+        flat = _flat_normals(positions.reshape(-1, 3), rows)
+        return positions, _unit(flat).reshape(k, n, 3), triangles
+    turned = np.where((det >= 0)[:, None, None], cofactor, -cofactor)
+    normals = rows_times(prim.normals, turned).reshape(-1, 3)
+    return positions, _unit(normals).reshape(k, n, 3), triangles
 
 
 def build_world(scene: Scene) -> World:
@@ -243,50 +256,49 @@ def build_world(scene: Scene) -> World:
     whose bits depend on no thread count: a cluster's nodes build the driver's world from the
     shipped scene (``pipeline.cluster``)."""
     sets = _texcoord_sets(scene)
-    parts: dict[str, list[np.ndarray]] = {k: [] for k in (
-        "positions", "normals", "smooth", "colors", "triangles", "tri_instance", "tri_material")}
-    uv_parts: list[list[np.ndarray]] = [[] for _ in range(sets)]
-    vertex_start, tri_start = [0], [0]
-    for i, inst in enumerate(scene.instances):
-        prim = scene.primitives[inst.primitive]
-        positions, normals, triangles = placed(prim, inst.world)
-        smooth = np.full(len(positions), prim.normals is not None)
-        n = len(positions)
-        parts["positions"].append(positions)
-        parts["normals"].append(normals)
-        parts["smooth"].append(smooth)
-        parts["colors"].append(prim.colors if prim.colors is not None else np.ones((n, 4)))
-        parts["triangles"].append(triangles + vertex_start[-1])
-        parts["tri_instance"].append(np.full(len(triangles), i, np.int64))
-        parts["tri_material"].append(np.full(len(triangles), prim.material, np.int64))
-        for k in range(sets):
-            has = k < len(prim.texcoords)
-            uv_parts[k].append(prim.texcoords[k] if has else np.zeros((n, 2)))
-        vertex_start.append(vertex_start[-1] + n)
-        tri_start.append(tri_start[-1] + len(triangles))
-
-    def cat(name: str, shape: tuple[int, ...], dtype) -> np.ndarray:
-        return np.concatenate(parts[name]) if parts[name] else np.zeros(shape, dtype)
-
-    positions = cat("positions", (0, 3), np.float64)
+    instances = scene.instances
+    primitives = [scene.primitives[inst.primitive] for inst in instances]
+    vertex_start = np.r_[0, np.cumsum([len(p.positions) for p in primitives], dtype=np.int64)]
+    tri_start = np.r_[0, np.cumsum([len(p.triangles) for p in primitives], dtype=np.int64)]
+    positions, normals = np.empty((vertex_start[-1], 3)), np.empty((vertex_start[-1], 3))
+    smooth, colors = np.empty(vertex_start[-1], bool), np.ones((vertex_start[-1], 4))
+    texcoords = tuple(np.zeros((vertex_start[-1], 2)) for _ in range(sets))
+    triangles = np.empty((tri_start[-1], 3), np.int64)
+    tri_instance, tri_material = np.empty(tri_start[-1], np.int64), np.empty(tri_start[-1], np.int64)
+    by_primitive: dict[int, list[int]] = {}
+    for i, inst in enumerate(instances):
+        by_primitive.setdefault(inst.primitive, []).append(i)
+    for index, placed_here in by_primitive.items():  # every instance of a primitive at once
+        prim, ids = scene.primitives[index], np.asarray(placed_here, np.int64)
+        at, normal_at, tris = placed(prim, np.stack([instances[i].world for i in placed_here]))
+        vrows = (vertex_start[ids][:, None] + np.arange(len(prim.positions))).reshape(-1)
+        trows = (tri_start[ids][:, None] + np.arange(len(prim.triangles))).reshape(-1)
+        positions[vrows], normals[vrows] = at.reshape(-1, 3), normal_at.reshape(-1, 3)
+        smooth[vrows] = prim.normals is not None
+        if prim.colors is not None:
+            colors[vrows] = np.tile(prim.colors, (len(ids), 1))
+        for k in range(min(sets, len(prim.texcoords))):
+            texcoords[k][vrows] = np.tile(prim.texcoords[k], (len(ids), 1))
+        triangles[trows] = (tris + vertex_start[ids][:, None, None]).reshape(-1, 3)
+        tri_instance[trows] = np.repeat(ids, len(prim.triangles))
+        tri_material[trows] = prim.material
     center = np.zeros(3)
     if len(positions):
         grid = bounds_scale(positions) / 16
         center = np.round((positions.min(0) + positions.max(0)) / 2 / grid) * grid
     world = World(
         positions=positions,
-        normals=cat("normals", (0, 3), np.float64),
-        smooth=cat("smooth", (0,), bool),
-        texcoords=tuple(np.concatenate(p) if p else np.zeros((0, 2)) for p in uv_parts),
-        colors=cat("colors", (0, 4), np.float64),
-        triangles=cat("triangles", (0, 3), np.int64).astype(np.int64),
-        tri_instance=cat("tri_instance", (0,), np.int64),
-        tri_material=cat("tri_material", (0,), np.int64),
-        vertex_start=np.asarray(vertex_start, np.int64),
-        tri_start=np.asarray(tri_start, np.int64),
+        normals=normals,
+        smooth=smooth,
+        texcoords=texcoords,
+        colors=colors,
+        triangles=triangles,
+        tri_instance=tri_instance,
+        tri_material=tri_material,
+        vertex_start=vertex_start,
+        tri_start=tri_start,
         center=center,
-        coloured=any(scene.primitives[inst.primitive].colors is not None
-                     for inst in scene.instances),
+        coloured=any(p.colors is not None for p in primitives),
         materials=material_table(scene),
     )
     return replace(world, alpha=alpha_test(scene, world))
