@@ -367,6 +367,35 @@ def test_gpu_instances_past_the_placed_triangles_budget_are_refused_at_once(tmp_
     assert f"an input of {size:,} bytes" in err  # the scene file counted with its buffer
 
 
+def test_gpu_instances_at_one_place_bake_as_one_surface(tmp_path):
+    """A 4 kB file whose floor is placed 100,000 times at the origin by EXT_mesh_gpu_instancing
+    (translations without a bufferView: zeros), 200,002 triangles, within the budget: every
+    ray that reached the floor tested every copy, and the bake ran past 7 minutes (the
+    fuzzer's find). The copies are traced once (``geometry/repeats.py``) and the instances
+    placed a primitive at a time: it bakes (here under a 60 s guard, in about 2 s)."""
+    source, document, _ = gltf_pair(tmp_path)
+    document["accessors"].append({"componentType": 5126, "count": 100_000, "type": "VEC3"})
+    document["nodes"][0]["extensions"] = {"EXT_mesh_gpu_instancing": {
+        "attributes": {"TRANSLATION": len(document["accessors"]) - 1}}}
+    document["extensionsUsed"] = ["EXT_mesh_gpu_instancing"]
+
+    def hang(signum, frame):
+        raise TimeoutError("the bake of 100,000 copies ran past 60 s")
+
+    previous = signal.signal(signal.SIGALRM, hang)
+    signal.setitimer(signal.ITIMER_REAL, 60)
+    try:
+        result = baker.bake(rewrite(source, document), tmp_path / "out.glb",
+                            baker.Settings(rays=2, page_size=32, shadow_rays=1))
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+    assert (tmp_path / "out.glb").exists()
+    assert result.report["plan"]["left_out"] == [{  # one entry for the node's 100,000
+        "where": "nodes[0] (floor) meshes[0].primitives[0]",
+        "reason": "GPU-instanced (EXT_mesh_gpu_instancing): occluder only", "count": 100_000}]
+
+
 def test_a_scene_file_reached_through_a_link_bakes_as_the_file(tmp_path):
     """``baker bake link.glb`` where link.glb is a symbolic link to a scene elsewhere: the same
     bytes as baking the scene itself (only ``baker hook`` reads its scene file as contained;
