@@ -391,26 +391,34 @@ def test_something_else_at_the_address_is_a_clear_error_within_30_s(tmp_path, re
 @pytest.mark.long
 def test_the_head_lost_mid_bake_is_exit_1_with_a_word_and_no_rows_left(tmp_path):
     """The head of a cluster of its own killed mid-bake (its session: GCS and all): Ray ends
-    the driver at once (exit 1); the spill's watcher removes the rows it left and says why;
-    nothing is written. (Measured: exit 1.6 s after the kill.)"""
+    the driver (exit 1); the spill's watcher removes the rows it left and says why; nothing is
+    written. (Measured: exit 1.1–2.5 s after the kill.) The driver's standard error goes to a
+    file, read at the end: a pipe nobody reads while the test waits would stop the driver
+    once Ray's log lines filled it."""
     source = cornell_box().save(tmp_path / "cornell.glb")
     out = tmp_path / "out"
     out.mkdir()
-    with LocalCluster(workers=1) as cluster:
+    said = tmp_path / "stderr.txt"
+    with LocalCluster(workers=1) as cluster, open(said, "wb") as stderr:
         bake = subprocess.Popen([sys.executable, "-m", "baker.cli.main", "bake", str(source),
                                  "-o", str(out / "baked.glb"), "--cluster", cluster.address,
                                  "--rays", "512", "--page-size", "256"],
-                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, cwd=ROOT)
+                                stdout=subprocess.DEVNULL, stderr=stderr, cwd=ROOT)
         deadline = time.monotonic() + 120
-        while not list(out.glob(".baker-spill-*")) and time.monotonic() < deadline:
+        while (not list(out.glob(".baker-spill-*")) and bake.poll() is None
+               and time.monotonic() < deadline):
             time.sleep(0.05)
-        assert list(out.glob(".baker-spill-*")), "the bake made no spill"
+        assert list(out.glob(".baker-spill-*")), f"the bake made no spill: {said.read_text()}"
         time.sleep(1.0)  # parts running
         os.killpg(cluster._head.pid, signal.SIGKILL)
         cluster._head.wait()
         cluster._head = None
-        said = bake.communicate(timeout=60)[1].decode()
-    assert bake.returncode == 1
+        try:
+            bake.wait(timeout=90)
+        finally:
+            bake.kill()
+    said = said.read_text()
+    assert bake.returncode == 1, said
     assert "the bake ended abruptly" in said and "cluster's head was lost" in said
     assert list(out.iterdir()) == []
 
