@@ -27,18 +27,31 @@ _PACKAGE = "chromium"
 
 
 def find_chromium() -> str | None:
-    """The path of a Chromium, installing Debian's package when missing and possible."""
-    for name in ("chromium", "chromium-browser"):
-        if path := shutil.which(name):
-            return path
+    """The path of a Chromium, installing Debian's package when missing and possible.
+
+    The suite's workers (``pytest -n``) may all want it at once: one installs while the others
+    wait on a lock file, then find it installed; apt-get itself waits up to 10 minutes for
+    dpkg's lock, which any other apt run may hold."""
+    if path := _installed():
+        return path
     if os.geteuid() != 0 or shutil.which("apt-get") is None:
         return None
-    env = dict(os.environ, DEBIAN_FRONTEND="noninteractive")
-    install = ["apt-get", "install", "-y", "--no-install-recommends", _PACKAGE]
-    if subprocess.run(install, env=env, capture_output=True).returncode != 0:
-        subprocess.run(["apt-get", "update"], env=env, capture_output=True)
-        subprocess.run(install, env=env, capture_output=True)
-    return shutil.which("chromium")
+    with open(os.path.join(tempfile.gettempdir(), "baker-tests-chromium.lock"), "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if path := _installed():  # another worker installed it while this one waited
+            return path
+        env = dict(os.environ, DEBIAN_FRONTEND="noninteractive")
+        apt = ["apt-get", "-o", "DPkg::Lock::Timeout=600"]
+        install = [*apt, "install", "-y", "--no-install-recommends", _PACKAGE]
+        if subprocess.run(install, env=env, capture_output=True).returncode != 0:
+            subprocess.run([*apt, "update"], env=env, capture_output=True)
+            subprocess.run(install, env=env, capture_output=True)
+        return _installed()
+
+
+def _installed() -> str | None:
+    """The path of the Chromium on PATH, None when there is none."""
+    return next(filter(None, map(shutil.which, ("chromium", "chromium-browser"))), None)
 
 
 class Browser:
