@@ -6,6 +6,11 @@
   triangle levels, installs into new virtual environments) runs only when ``BAKER_LONG=1`` is
   set; the default run leaves it out (deselected, counted on pytest's summary line), so that the
   default suite stays within its time budget on 2 cores. ``BAKER_LONG=1 bash .ci/run`` runs all.
+- Side by side: the README runs the suite on every core (pytest-xdist), each worker a process
+  of its own taking whichever test is next. So a test writes only in its own temporary folder,
+  never in the checkout (``test_warm_kernels.py`` warms a copy of the package), takes a port
+  from the system (``ray_cluster.free_port``), and takes a lock for what the machine has once
+  (``chromium.find_chromium``'s install).
 """
 
 import os

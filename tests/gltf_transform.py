@@ -14,24 +14,20 @@ from __future__ import annotations
 
 import shutil
 import subprocess
-import threading
 from pathlib import Path
+
+from npm_packages import installed
 
 TRANSFORM_DIR = Path(__file__).resolve().parent / "transform"
 SCRIPT = TRANSFORM_DIR / "transform.js"
 KINDS = ("draco", "meshopt", "quantize", "texture-transform", "ktx2", "animated", "emissive")
-_install = threading.Lock()
 
 
 def _node() -> str:
     """node, with the pinned packages installed (``npm ci`` once, when they are missing)."""
-    node, npm = shutil.which("node"), shutil.which("npm")
-    if node is None or npm is None:
+    node = shutil.which("node")
+    if node is None or not installed(TRANSFORM_DIR, [Path("@gltf-transform/functions")]):
         raise RuntimeError("node and npm are not on PATH: install Node.js (v18 or later)")
-    with _install:
-        if not (TRANSFORM_DIR / "node_modules" / "@gltf-transform" / "functions").is_dir():
-            subprocess.run([npm, "ci", "--prefix", str(TRANSFORM_DIR), "--no-audit", "--no-fund"],
-                           check=True, capture_output=True, timeout=600)
     return node
 
 

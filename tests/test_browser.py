@@ -30,7 +30,6 @@ import dataclasses
 import io
 import json
 import shutil
-import subprocess
 import threading
 from functools import partial
 from http.server import SimpleHTTPRequestHandler, ThreadingHTTPServer
@@ -52,6 +51,7 @@ from tests.bakehelp import REAL_SCENES, saved
 
 import gltf_validator
 from chromium import Browser, find_chromium
+from npm_packages import installed
 
 SIZE = (200, 150)
 PAGES = Path(__file__).resolve().parent  # tests/<viewer>/page.html and its pinned npm packages
@@ -275,13 +275,9 @@ def _served_page(tmp_path_factory, viewer: str, skies: bool = False):
     generator: the fixture's body."""
     source = PAGES / viewer
     wanted = json.loads((source / "package.json").read_text())["dependencies"]
-    if not all((source / "node_modules" / name).is_dir() for name in wanted):
-        npm = shutil.which("npm")
-        if npm is None:
-            pytest.skip(f"no npm: {', '.join(wanted)} cannot be installed (the README's test "
-                        "command needs Node.js and npm)")
-        subprocess.run([npm, "ci", "--prefix", str(source), "--no-audit", "--no-fund"],
-                       check=True, capture_output=True, timeout=600)
+    if not installed(source, [Path(name) for name in wanted]):
+        pytest.skip(f"no npm: {', '.join(wanted)} cannot be installed (the README's test "
+                    "command needs Node.js and npm)")
     folder = tmp_path_factory.mktemp(viewer)
     for script in [source / "page.html", *source.glob("*.js")]:
         shutil.copy(script, folder)

@@ -30,6 +30,7 @@ from baker.preview import render
 from tests.bakehelp import REAL_SCENES, saved
 
 import gltf_transform
+from npm_packages import installed
 
 SIZE = (160, 120)
 GLTFPACK = Path(__file__).resolve().parent / "gltfpack"  # the pinned npm package
@@ -37,14 +38,10 @@ GLTFPACK = Path(__file__).resolve().parent / "gltfpack"  # the pinned npm packag
 
 def _gltfpack() -> list[str]:
     """The command that runs the pinned gltfpack (``npm ci`` once, when it is missing)."""
-    node, npm = shutil.which("node"), shutil.which("npm")
-    if node is None or npm is None:
+    node = shutil.which("node")
+    if node is None or not installed(GLTFPACK, [Path("gltfpack/cli.js")]):
         pytest.skip("no Node.js: gltfpack cannot run (the README's test command needs it)")
-    script = GLTFPACK / "node_modules" / "gltfpack" / "cli.js"
-    if not script.is_file():
-        subprocess.run([npm, "ci", "--prefix", str(GLTFPACK), "--no-audit", "--no-fund"],
-                       check=True, capture_output=True, timeout=600)
-    return [node, str(script)]
+    return [node, str(GLTFPACK / "node_modules" / "gltfpack" / "cli.js")]
 
 
 def _optimized(source, folder, name, carrier, tool="gltf-transform"):
