@@ -102,14 +102,15 @@ def rays_meet(changed: Changed, texels: Texels, rows: np.ndarray, settings,
             return
         # One ray per "texel" (rays=1): the same bits as the texel's own ray in a bake.
         origins, directions = world_rays(texels, chosen[texel], 1, x, y, z, changed.center)
-        met = changed.cast_local(origins, directions,
-                                 np.full(len(origins), settings.d_max, np.float32))
-        hit = np.flatnonzero(met.triangle >= 0)
+        lengths = np.full(len(origins), settings.d_max, np.float32)
         if judge is not None and judge.every_ray:  # the bake's path may bend at alpha cuts
-            hit = np.arange(len(origins))
+            hit, distance = np.arange(len(origins)), lengths
+        else:
+            met = changed.cast_local(origins, directions, lengths)
+            hit, distance = np.flatnonzero(met.triangle >= 0), met.distance
         if judge is not None and len(hit):
             hit = hit[judge(chosen[texel[hit]], sample[hit], origins[hit], directions[hit],
-                            met.distance[hit])]
+                            distance[hit])]
         found = meets[part]
         found[texel[hit]] = True
         meets[part] = found
