@@ -20,6 +20,8 @@ import subprocess
 import tempfile
 import time
 
+from machine_lock import machine_lock
+
 FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
          "--disable-background-networking", "--disable-component-update", "--disable-sync",
          "--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--remote-debugging-pipe")
@@ -36,8 +38,7 @@ def find_chromium() -> str | None:
         return path
     if os.geteuid() != 0 or shutil.which("apt-get") is None:
         return None
-    with open(os.path.join(tempfile.gettempdir(), "baker-tests-chromium.lock"), "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
+    with machine_lock("chromium"):
         if path := _installed():  # another worker installed it while this one waited
             return path
         env = dict(os.environ, DEBIAN_FRONTEND="noninteractive")

@@ -9,8 +9,8 @@
 - Side by side: the README runs the suite on every core (pytest-xdist), each worker a process
   of its own taking whichever test is next. So a test writes only in its own temporary folder,
   never in the checkout (``test_warm_kernels.py`` warms a copy of the package), takes a port
-  from the system (``ray_cluster.free_port``), and takes a lock for what the machine has once
-  (``chromium.find_chromium``'s install).
+  from the system (``ray_cluster.free_port``), and holds ``machine_lock`` while it makes what
+  the machine has once (Chromium's install, a folder's npm packages).
 """
 
 import os

@@ -10,27 +10,24 @@ installs, the others wait and find the packages there.
 
 from __future__ import annotations
 
-import fcntl
 import hashlib
-import os
 import shutil
 import subprocess
-import tempfile
 from pathlib import Path
+
+from machine_lock import machine_lock
 
 
 def installed(folder: Path, wanted: list[Path]) -> bool:
     """Whether the files or folders ``wanted`` (paths under ``folder``/node_modules) are
-    there, after ``npm ci --prefix folder`` when one was missing; False where there is no npm."""
-    if all((folder / "node_modules" / path).exists() for path in wanted):
-        return True
+    there, after ``npm ci --prefix folder`` when one was missing; False where they are not and
+    there is no npm."""
     npm = shutil.which("npm")
-    if npm is None:
-        return False
-    name = hashlib.sha256(str(folder.resolve()).encode()).hexdigest()[:16]
-    with open(os.path.join(tempfile.gettempdir(), f"baker-tests-npm-{name}.lock"), "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        if not all((folder / "node_modules" / path).exists() for path in wanted):
-            subprocess.run([npm, "ci", "--prefix", str(folder), "--no-audit", "--no-fund"],
-                           check=True, capture_output=True, timeout=600)
+    with machine_lock("npm-" + hashlib.sha256(str(folder.resolve()).encode()).hexdigest()[:16]):
+        if all((folder / "node_modules" / path).exists() for path in wanted):
+            return True
+        if npm is None:
+            return False
+        subprocess.run([npm, "ci", "--prefix", str(folder), "--no-audit", "--no-fund"],
+                       check=True, capture_output=True, timeout=600)
     return True
