@@ -1,9 +1,11 @@
 """The tracer's declared interface (``rays.trace``): what every caster answers, and its records."""
 
 import numpy as np
+import pytest
 
 from assets.make_scenes import cornell_box
 from baker.geometry.world import build_world
+from baker.rays import native
 from baker.rays.trace import LocalHits, Occluder, RayCaster, Tracer
 from baker.rebake.changed import Changed
 from baker.rebake.shadows import Recorder
@@ -124,3 +126,58 @@ def test_a_copy_the_alpha_test_may_pass_is_traced(tmp_path):
     from baker.geometry.repeats import repeated_triangles  # the copy is there, exact
 
     assert repeated_triangles(world.positions, world.triangles, ~world.degenerate).any()
+
+
+@pytest.mark.parametrize("engine", ["native", "embreex"])
+def test_a_ray_through_cut_outs_goes_on_along_its_own_line(tmp_path, monkeypatch, engine):
+    """A ray let through the cut-out halves of two crossed alpha-tested leaves meets what the
+    same straight ray meets with the leaves taken away: the same triangle at the same float32
+    distance, whatever the leaves' planes (``pass_alpha`` searches on from past the hit along
+    the ray, not from a point stepped off the leaf). The rebake's searches test the straight
+    ray; a path that bent at a cut-out met a recoloured prop its line misses (room 525 of
+    ``tests/test_rebake_property.py``'s crowded rooms). Through embreex (no tnear: the ray
+    starts again past the hit) the same line to float32 rounding."""
+    if engine == "embreex":
+        monkeypatch.setattr(native, "_NATIVE", None)
+    from assets.gltf_builder import box, quat_axis_angle
+    from assets.material_scenes import alpha_cut_quad
+
+    b = alpha_cut_quad(height=0.5)
+    leaf = b._nodes[b.info["leaf"]].mesh
+    b.node("leaf crossed", leaf, translation=(0.1, 0.45, -0.05),
+           rotation=quat_axis_angle((0.3, 1.0, 0.2), 70))  # tilted, its open half across
+    grey = b.material("prop", (0.5, 0.5, 0.5))
+    rng = np.random.default_rng(5)
+    for k in range(40):  # props under the leaves, their edges everywhere
+        b.node(f"prop{k}", b.shape_mesh(f"prop{k}", box(tuple(rng.uniform(0.05, 0.3, 3))),
+                                        material=grey),
+               translation=(rng.uniform(-1.8, 1.8), rng.uniform(0.0, 0.3),
+                            rng.uniform(-1.8, 1.8)),
+               rotation=quat_axis_angle(tuple(rng.normal(size=3)), rng.uniform(0, 180)))
+    world = build_world(loaded(b, tmp_path))
+    assert world.alpha is not None
+    leaves = world.alpha.mode > 0  # (T,) the alpha-tested triangles
+    n = 40000
+    origins = np.column_stack([rng.uniform(-1.5, 1.5, n), np.full(n, 1.6),
+                               rng.uniform(-1.5, 1.5, n)])
+    directions = np.column_stack([rng.normal(0, 0.6, n), -np.ones(n), rng.normal(0, 0.6, n)])
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    local = (origins - world.center).astype(np.float32)
+    directions = directions.astype(np.float32)
+    lengths = np.full(n, 4.0, np.float32)
+    tracer = Tracer(world)
+    through = tracer.cast_local(local, directions, lengths.copy())
+    blocked = tracer.blocked_local(local, directions, lengths.copy())  # shadow rays, the same
+    assert np.array_equal(blocked >= 0, through.triangle >= 0)
+    bare = Tracer(world, hidden=leaves).cast_local(local, directions, lengths.copy())
+    past = (through.triangle < 0) | ~leaves[np.maximum(through.triangle, 0)]
+    assert 0.2 < past.mean() < 0.9  # both stopped by a leaf and let through are asked about
+    if engine == "native":
+        assert np.array_equal(through.triangle[past], bare.triangle[past])
+        assert np.array_equal(through.distance[past], bare.distance[past])
+    else:
+        assert (through.triangle[past] == bare.triangle[past]).mean() > 0.999
+        same = past & (through.triangle == bare.triangle)
+        np.testing.assert_allclose(through.distance[same], bare.distance[same], rtol=1e-5)
+    stopped = ~past
+    assert (through.distance[stopped] <= bare.distance[stopped]).all()

@@ -145,9 +145,12 @@ void baker_release(Traced *traced)
 
 /* Nearest hits of n rays: origins and directions (n, 3) float32, lengths (n,) float32,
  * overwritten with the hit distance (kept for a miss); triangle (n,) int32 the hit's triangle
- * (-1 for a miss), u, v (n,) float32 its barycentric weights, as embreex's run(output=1). */
-void baker_intersect(const Traced *traced, const float *origins, const float *directions,
-                     float *lengths, long n, int *triangle, float *u, float *v)
+ * (-1 for a miss), u, v (n,) float32 its barycentric weights, as embreex's run(output=1).
+ * near: NULL, or (n,) float32 where along each ray its search starts (Embree's tnear): a ray
+ * let through a see-through hit goes on along its own line from just past it, so the path a
+ * bake traces is the straight ray the rebake's searches test (embreex sets no tnear). */
+void baker_nearest(const Traced *traced, const float *origins, const float *directions,
+                   const float *near, float *lengths, long n, int *triangle, float *u, float *v)
 {
     struct RTCRayHit rh;
     long i;
@@ -155,7 +158,7 @@ void baker_intersect(const Traced *traced, const float *origins, const float *di
         rh.ray.org_x = origins[3 * i];
         rh.ray.org_y = origins[3 * i + 1];
         rh.ray.org_z = origins[3 * i + 2];
-        rh.ray.tnear = 0.0f;
+        rh.ray.tnear = near == NULL ? 0.0f : near[i];
         rh.ray.dir_x = directions[3 * i];
         rh.ray.dir_y = directions[3 * i + 1];
         rh.ray.dir_z = directions[3 * i + 2];
@@ -215,7 +218,7 @@ static const int __attribute__((aligned(64))) LIVE[16] = {
 OCCLUDED_PACKETS(8)
 OCCLUDED_PACKETS(16)
 
-/* Whether anything lies along each of n rays (as baker_intersect takes them; lengths kept):
+/* Whether anything lies along each of n rays (as baker_nearest takes them; lengths kept):
  * blocked (n,) int32 0 where something does, -1 where nothing does, as embreex's OCCLUDED.
  *
  * Whole runs of consecutive rays go to Embree as one packet where the CPU traces a packet's

@@ -49,12 +49,16 @@ def _load() -> tuple[ctypes.CDLL | None, str]:
         library = ctypes.CDLL(str(_LIBRARY))
     except OSError as error:
         return None, f"{_LIBRARY.name} does not load: {error}"
-    library.baker_scene.restype = _void
-    library.baker_scene.argtypes = [_void, _long, _void, _long]
-    library.baker_release.argtypes = [_void]
-    library.baker_intersect.argtypes = [_void, _void, _void, _void, _long, _void, _void, _void]
-    library.baker_occluded.argtypes = [_void, _void, _void, _void, _long, _void]
-    library.baker_packets.argtypes = []
+    try:
+        library.baker_scene.restype = _void
+        library.baker_scene.argtypes = [_void, _long, _void, _long]
+        library.baker_release.argtypes = [_void]
+        library.baker_nearest.argtypes = [_void, _void, _void, _void, _void, _long, _void, _void,
+                                          _void]
+        library.baker_occluded.argtypes = [_void, _void, _void, _void, _long, _void]
+        library.baker_packets.argtypes = []
+    except AttributeError as error:  # an older baker's build: ``pip install`` builds it anew
+        return None, f"{_LIBRARY.name} is from another version of baker ({error}): reinstall"
     return library, ""
 
 
@@ -79,11 +83,12 @@ class NativeScene:
         self.packets = _NATIVE.baker_packets() > 1  # occlusion cast 8 or 16 rays at a time
 
     def run(self, origins: np.ndarray, directions: np.ndarray, dists: np.ndarray,
-            query: str = "INTERSECT", **_):
+            query: str = "INTERSECT", near: np.ndarray | None = None, **_):
         """Rays (n, 3) float32 origins and directions, ``dists`` (n,) float32 lengths: for
         INTERSECT (which ``Tracer`` always asks with embreex's ``output=1``), embreex's dict
-        (``primID``, ``tfar``: ``dists`` overwritten with the hit distances, ``u``, ``v``); for
-        OCCLUDED, (n,) int32 0 where something lies along the ray, −1 where nothing does."""
+        (``primID``, ``tfar``: ``dists`` overwritten with the hit distances, ``u``, ``v``),
+        searched from ``near`` (n,) float32 along each ray where given (else from its origin);
+        for OCCLUDED, (n,) int32 0 where something lies along the ray, −1 where nothing does."""
         origins = np.ascontiguousarray(origins, np.float32)
         directions = np.ascontiguousarray(directions, np.float32)
         n = len(dists)
@@ -95,9 +100,11 @@ class NativeScene:
             return blocked
         tfar = np.require(dists, np.float32, ["C", "W"])  # dists itself where it can be
         triangle, u, v = np.empty(n, np.int32), np.empty(n, np.float32), np.empty(n, np.float32)
-        _NATIVE.baker_intersect(self._handle, origins.ctypes.data, directions.ctypes.data,
-                                tfar.ctypes.data, n, triangle.ctypes.data, u.ctypes.data,
-                                v.ctypes.data)
+        if near is not None:
+            near = np.ascontiguousarray(near, np.float32)
+        _NATIVE.baker_nearest(self._handle, origins.ctypes.data, directions.ctypes.data,
+                              None if near is None else near.ctypes.data, tfar.ctypes.data, n,
+                              triangle.ctypes.data, u.ctypes.data, v.ctypes.data)
         return {"primID": triangle, "tfar": tfar, "u": u, "v": v}
 
     def __del__(self):

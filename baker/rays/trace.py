@@ -8,10 +8,10 @@ calls at once from a thread pool.
 Alpha: when the world has alpha-tested triangles (``World.alpha``, materials.py), every query
 lets rays through the hits whose alpha is below the cutoff (MASK) or, with probability
 1 − alpha, through BLEND surfaces: the rays that hit such triangles — and only those — are cast
-again from just past the hit, up to ``MAX_CONTINUATIONS`` times, and their hits merged back
-(distances measured from the first origin). The BLEND coin is a hash of the ray's own float32
-bits and the continuation number: a pure function of what made the ray (seed, texel key,
-sample), so the result does not depend on chunking or threads.
+again along their own line from just past the hit (Embree's tnear), up to ``MAX_CONTINUATIONS``
+times, and their hits merged back. The BLEND coin is a hash of the ray's own float32 bits and
+the continuation number: a pure function of what made the ray (seed, texel key, sample), so
+the result does not depend on chunking or threads.
 """
 
 from __future__ import annotations
@@ -51,11 +51,13 @@ def pass_alpha(run, alpha, origins: np.ndarray, directions: np.ndarray, limit: n
                result: dict[str, np.ndarray]) -> int:
     """Let the rays of ``result`` (embreex arrays, changed in place) through alpha-tested hits.
 
-    run(origins, directions, lengths) casts float32 rays in the tracer's frame; origins and
-    directions: (n, 3) float32 the rays as first cast; limit: (n,) float64 their lengths. Only
-    rays whose hit is on a triangle of ``alpha.mode`` are looked at; those that pass are cast
-    again from just past the hit (stepped off the plane along the geometric normal, on the far
-    side) for what length remains. Returns how many continuation rays were cast.
+    run(origins, directions, near, lengths) casts float32 rays in the tracer's frame, searched
+    from ``near`` (n,) float32 along each; origins and directions: (n, 3) float32 the rays as
+    first cast; limit: (n,) float64 their lengths. Only rays whose hit is on a triangle of
+    ``alpha.mode`` are looked at; those that pass are cast again along their own line from just
+    past the hit (``_past``) to their end. So a ray's path through cut-outs is its straight
+    line, which is what the rebake's searches test (``rebake/reach.py``). Returns how many
+    continuation rays were cast.
     """
     primitive, tfar, u, v = result["primID"], result["tfar"], result["u"], result["v"]
     live = np.flatnonzero(primitive >= 0)
@@ -71,23 +73,32 @@ def pass_alpha(run, alpha, origins: np.ndarray, directions: np.ndarray, limit: n
         live, tris = live[through], tris[through]
         if not len(live):
             break
-        d = directions[live].astype(np.float64)
-        t = tfar[live].astype(np.float64)
-        point = origins[live].astype(np.float64) + t[:, None] * d
-        normal = alpha.normals[tris]
-        side = np.where(np.einsum("ij,ij->i", d, normal) >= 0.0, 1.0, -1.0)
-        lift = np.maximum(alpha.step, 64 * 2.0 ** -23 * np.abs(point).max(axis=1))
-        start = point + (side * lift)[:, None] * normal
-        remaining = np.maximum(limit[live] - t, 0.0)
-        sub = run(start.astype(np.float32), directions[live], remaining.astype(np.float32))
+        near = _past(alpha, origins[live], directions[live], tfar[live], tris)
+        sub = run(origins[live], directions[live], near, limit[live].astype(np.float32))
         cast += len(live)
         hit = sub["primID"] >= 0
         primitive[live] = sub["primID"]
-        tfar[live] = np.where(hit, t + sub["tfar"], limit[live])
+        tfar[live] = np.where(hit, sub["tfar"], limit[live])
         u[live], v[live] = sub["u"], sub["v"]
         live = live[hit]
         live = live[alpha.mode[primitive[live]] > 0]
     return cast
+
+
+def _past(alpha, origins: np.ndarray, directions: np.ndarray, distance: np.ndarray,
+          triangles: np.ndarray) -> np.ndarray:
+    """(n,) float32: where along rays (origins, directions (n, 3) float32) that pass
+    ``triangles`` (n,) at ``distance`` (n,) float32 their search goes on: clear of that surface
+    by the larger of ``alpha.step`` and 64 float32 ulps of the hit point measured off its plane
+    (so along the ray that over the cosine, at most 64 times it), and at least one float32 step
+    past the hit."""
+    d = directions.astype(np.float64)
+    t = distance.astype(np.float64)
+    point = origins.astype(np.float64) + t[:, None] * d
+    cosine = np.abs(np.einsum("ij,ij->i", d, alpha.normals[triangles]))
+    lift = np.maximum(alpha.step, _OFFSET_ULPS * np.abs(point).max(axis=1))
+    near = (t + lift / np.maximum(cosine, 1.0 / 64)).astype(np.float32)
+    return np.maximum(near, np.nextafter(distance.astype(np.float32), np.float32(np.inf)))
 
 
 def ray_lift(position: np.ndarray, size: np.ndarray, center: np.ndarray) -> np.ndarray:
@@ -269,11 +280,22 @@ class Tracer:
             hits.u[met], hits.v[met] = found.u, found.v
         return hits
 
-    def _run(self, origins: np.ndarray, directions: np.ndarray,
+    def _run(self, origins: np.ndarray, directions: np.ndarray, near: np.ndarray | None,
              lengths: np.ndarray) -> dict[str, np.ndarray]:
-        """Embree's nearest hits of float32 rays in the recentred frame, no alpha test."""
-        return self._scene.run(np.ascontiguousarray(origins), np.ascontiguousarray(directions),
-                               dists=lengths, output=1)
+        """Embree's nearest hits of float32 rays in the recentred frame, no alpha test, searched
+        from ``near`` (n,) float32 along each ray (None: from the origin). embreex takes no
+        ``near``: its rays start there instead (the same line to float32 rounding), their hit
+        distances measured from the given origins still."""
+        origins, directions = np.ascontiguousarray(origins), np.ascontiguousarray(directions)
+        if near is None:
+            return self._scene.run(origins, directions, dists=lengths, output=1)
+        if isinstance(self._scene, native.NativeScene):
+            return self._scene.run(origins, directions, dists=lengths, output=1, near=near)
+        start = (origins + near[:, None].astype(np.float64) * directions).astype(np.float32)
+        result = self._scene.run(start, directions, output=1,
+                                 dists=np.maximum(lengths - near, 0).astype(np.float32))
+        result["tfar"] = np.where(result["primID"] >= 0, near + result["tfar"], lengths)
+        return result
 
     def occluded(self, origins: np.ndarray, directions: np.ndarray,
                  length: np.ndarray | float) -> np.ndarray:
@@ -299,7 +321,7 @@ class Tracer:
             rows = np.flatnonzero(result >= 0)
             if len(rows):
                 limit = lengths[rows].astype(np.float64)
-                again = self._run(origins[rows], directions[rows], lengths[rows])
+                again = self._run(origins[rows], directions[rows], None, lengths[rows])
                 pass_alpha(self._run, self.alpha, origins[rows], directions[rows], limit, again)
                 result[rows] = np.where(again["primID"] >= 0, 0, -1)
         return result

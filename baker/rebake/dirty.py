@@ -104,8 +104,7 @@ def dirty_search(scene: Scene, start: Compared, lit: Lighting, stored: Stored,
                                        search.texels, search.reason, REASONS.index("colour"),
                                        resolved, NotStopped(_obscurance_tracer(lit, foliage),
                                                             np.isin(world.tri_material,
-                                                                    change.recoloured),
-                                                            resolved.d_max))
+                                                                    change.recoloured)))
         chains = chain_corners(world)
         if (len(moved) or change.recoloured) and len(chains):
             # A ray that meets a mirror or glass goes on where the searches above do not follow:

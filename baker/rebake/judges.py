@@ -15,23 +15,13 @@ from baker.rays.trace import LocalHits, Tracer
 class NotStopped:
     """Judges a ray that meets a recoloured material's triangles (``changed_triangles`` (T,)
     bool) changed unless, in the whole scene (``tracer``), a surface that did not change stops
-    it before (``_stopped_before``). In a scene with alpha-tested surfaces (``every_ray``) it
-    judges every ray drawn by the bake's own trace instead (``Tracer.cast_local``, within
-    ``d_max``, through the cut-outs as a bake goes): changed when that trace ends on a
-    recoloured triangle. A ray through a cut-out goes on from a point stepped off the surface,
-    so its path can meet a recoloured triangle its straight line misses (room 525 of 60, edit
-    525002 in ``tests/test_rebake_property.py``'s crowded rooms: one texel's terms differed)."""
+    it before (``_stopped_before``)."""
 
-    def __init__(self, tracer: Tracer, changed_triangles: np.ndarray, d_max: float):
-        self._tracer, self._changed, self._d_max = tracer, changed_triangles, d_max
-        self.every_ray = tracer.alpha is not None
+    def __init__(self, tracer: Tracer, changed_triangles: np.ndarray):
+        self._tracer, self._changed = tracer, changed_triangles
 
     def __call__(self, rows, samples, origins, directions, distance) -> np.ndarray:
-        if not self.every_ray:
-            return ~_stopped_before(self._tracer, self._changed, origins, directions, distance)
-        ends = self._tracer.cast_local(origins, directions,
-                                       np.full(len(origins), self._d_max, np.float32)).triangle
-        return (ends >= 0) & self._changed[np.maximum(ends, 0)]
+        return ~_stopped_before(self._tracer, self._changed, origins, directions, distance)
 
 
 class HitsCompared:
@@ -40,8 +30,6 @@ class HitsCompared:
     last bake (``before``, of ``changed.world_before``), which gave the stored terms. With
     ``keep``, the changed rays are kept: ``changed`` gives them for ``exact_sums.ray_changes``.
     Called from several threads at once (each call's rays are its own)."""
-
-    every_ray = False  # only the rays that meet the moved node straight (``reach.rays_meet``)
 
     def __init__(self, after: Tracer, before: Tracer, d_max: float, keep: bool):
         self._after, self._before, self._d_max, self._keep = after, before, d_max, keep

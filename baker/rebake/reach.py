@@ -82,10 +82,8 @@ def rays_meet(changed: Changed, texels: Texels, rows: np.ndarray, settings,
               judge: Callable | None = None) -> tuple[np.ndarray, int]:
     """(k,) bool: whether any of each texel's own obscurance rays meets the ``changed``
     triangles within d_max — and, with a ``judge`` (``NotStopped``, ``HitsCompared``), is
-    judged to have changed; and the number of rays drawn. A judge whose ``every_ray`` is set
-    judges every ray drawn, not only those whose straight line meets the changed triangles: in
-    a scene with alpha-tested surfaces a bake's ray goes on past a cut-out from a point stepped
-    off the surface (``trace.pass_alpha``), and so may meet what its straight line misses."""
+    judged to have changed; and the number of rays drawn. A bake's ray let through alpha
+    cut-outs goes on along its own line (``trace.pass_alpha``): its straight line is its path."""
     n = settings.rays
     meets = np.zeros(len(rows), bool)
 
@@ -102,15 +100,12 @@ def rays_meet(changed: Changed, texels: Texels, rows: np.ndarray, settings,
             return
         # One ray per "texel" (rays=1): the same bits as the texel's own ray in a bake.
         origins, directions = world_rays(texels, chosen[texel], 1, x, y, z, changed.center)
-        lengths = np.full(len(origins), settings.d_max, np.float32)
-        if judge is not None and judge.every_ray:  # the bake's path may bend at alpha cuts
-            hit, distance = np.arange(len(origins)), lengths
-        else:
-            met = changed.cast_local(origins, directions, lengths)
-            hit, distance = np.flatnonzero(met.triangle >= 0), met.distance
+        met = changed.cast_local(origins, directions,
+                                 np.full(len(origins), settings.d_max, np.float32))
+        hit = np.flatnonzero(met.triangle >= 0)
         if judge is not None and len(hit):
             hit = hit[judge(chosen[texel[hit]], sample[hit], origins[hit], directions[hit],
-                            distance[hit])]
+                            met.distance[hit])]
         found = meets[part]
         found[texel[hit]] = True
         meets[part] = found
