@@ -92,10 +92,7 @@ class World:
         """(T,) bool: triangles without a usable area — collinear or collapsed corners, area at
         most 1e-12 of their longest edge squared (a sliver of aspect 10⁶ has 10⁻⁶). They have no
         front face to cast rays from, so they own no texel (the report counts them)."""
-        a, b, c = self.corners(np.arange(len(self.triangles)))
-        longest = np.max([np.sum((b - a) ** 2, 1), np.sum((c - b) ** 2, 1),
-                          np.sum((a - c) ** 2, 1)], 0)
-        out = self.areas() <= 1e-12 * longest
+        out = self.areas() <= 1e-12 * longest_edges(self.positions, self.triangles)
         out.flags.writeable = False
         return out
 
@@ -130,6 +127,24 @@ class World:
     def instance_triangles(self, instance: int) -> np.ndarray:
         """The world triangle indices (k,) of one instance, in the primitive's order."""
         return np.arange(self.tri_start[instance], self.tri_start[instance + 1])
+
+
+@jit
+def longest_edges(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """(m,) the longest edge squared of each triangle (m, 3) of ``positions`` (n, 3), in one
+    pass: each edge's dx² + dy² + dz², the bits of numpy's sum over its squared differences
+    (a million triangles' corners gathered by numpy took a tenth of a second)."""
+    out = np.empty(len(triangles))
+    for i in range(len(triangles)):
+        longest = 0.0
+        for k in range(3):
+            a, b = triangles[i, k], triangles[i, (k + 1) % 3]
+            dx = positions[b, 0] - positions[a, 0]
+            dy = positions[b, 1] - positions[a, 1]
+            dz = positions[b, 2] - positions[a, 2]
+            longest = max(longest, dx * dx + dy * dy + dz * dz)
+        out[i] = longest
+    return out
 
 
 @jit

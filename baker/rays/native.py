@@ -12,7 +12,9 @@ symbols are resolved when it is loaded here, after embreex's libembree4 is loade
 (``RTLD_GLOBAL``). Its scenes are built as embreex builds them (the same vertex layout and
 scene flags), so its hits are embreex's, bit for bit (``tests/test_native_rays.py``): where it
 is missing or cannot load (no C compiler at install, a platform other than Linux, an embreex
-without its own libembree4), ``Tracer`` uses embreex, more slowly, for the same bake.
+without its own libembree4), ``Tracer`` uses embreex, more slowly, for the same bake — but
+where rays pass alpha cut-outs: embreex sets no tnear, so a ray let through one starts again
+past the hit (``Tracer._run``), on its line to float32 rounding.
 """
 
 from __future__ import annotations
