@@ -68,8 +68,10 @@ def net_values(done, tracer, surfaces, rows: np.ndarray, rays: int, seed: int, l
         points = sample_2d(seed, done.texels.key[part][:, None], np.arange(rays)[None, :],
                            OBSCURANCE)
         local = cosine_hemisphere(points).reshape(-1, 3)
-        origins, directions = world_rays(done.texels, part, rays, local[:, 0].copy(),
-                                         local[:, 1].copy(), local[:, 2].copy(), tracer.center)
+        origins, directions = world_rays(done.texels, part, np.repeat(np.arange(len(part)), rays),
+                                         local[:, 0].copy(), local[:, 1].copy(),
+                                         local[:, 2].copy(), tracer.center,
+                                         np.tile(np.arange(rays), len(part)))
         hits = tracer.cast_local(origins, directions,
                                  np.full(len(origins), settings.d_max, np.float32))
         kind, albedo = hit_shading(surfaces, settings, hits)

@@ -290,6 +290,30 @@ def test_a_target_the_rays_cannot_reach_is_said(tmp_path):
     assert not any(note.startswith("--target-error") for note in loose["notes"])
 
 
+def test_rays_asked_a_few_of_a_texel_at_a_time_are_the_bits_of_its_rays(tmp_path):
+    """A rebake's candidate rays (``reach.rays_meet``: some of each texel's, in any order,
+    made from each texel's normals and lift gathered once, ``world_rays``) are the bits of
+    those rays made texel by texel (``hemisphere_rays``), on smooth and flat texels alike."""
+    from assets.artifact_scenes import sphere_on_floor
+    from baker.light.hemisphere import hemisphere_rays, world_rays
+    from baker.rays.trace import Tracer
+    from tests.bakehelp import computed
+
+    done = computed(sphere_on_floor(), tmp_path, page_size=64, rays=4)
+    texels, center, rays = done.texels, Tracer(done.world).center, 8
+    rng = np.random.default_rng(5)
+    rows = rng.choice(len(texels), 300, replace=False)
+    texel, sample = rng.integers(0, len(rows), 5000), rng.integers(0, rays, 5000)
+    x, y, z = (axis.reshape(len(rows), rays)[texel, sample]
+               for axis in cosine_directions(texels.key[rows], rays, 3))
+    asked = world_rays(texels, rows, texel, x, y, z, center, sample)
+    whole = hemisphere_rays(texels, rows, rays, 3, center)
+    ray = texel * rays + sample
+    assert np.array_equal(asked[0], whole[0][ray]) and np.array_equal(asked[1], whole[1][ray])
+    tilted = ~np.isclose(texels.hemisphere_normal(rows), texels.geometric_normal(rows)).all(axis=1)
+    assert tilted.any() and (~tilted).any()  # both kinds of frame were made
+
+
 def test_rays_made_texel_by_texel_are_the_bits_of_the_directions_drawn_at_once(tmp_path):
     """``hemisphere_rays`` makes each texel's points, directions and rays in one pass
     (``_rays_kernel``); they are the bits of ``cosine_directions`` then ``world_rays`` over all
@@ -312,5 +336,7 @@ def test_rays_made_texel_by_texel_are_the_bits_of_the_directions_drawn_at_once(t
         fused = hemisphere_rays(texels, rows, rays, 3, tracer.center, technique, first, moved,
                                 start)
         x, y, z = cosine_directions(texels.key[rows], rays, 3, technique, first, start)
-        apart = world_rays(texels, rows, rays, x, y, z, tracer.center, first=first, sub=moved)
+        texel = np.repeat(np.arange(len(rows)), rays)
+        sample = first + np.tile(np.arange(rays), len(rows))
+        apart = world_rays(texels, rows, texel, x, y, z, tracer.center, sample, moved)
         assert np.array_equal(fused[0], apart[0]) and np.array_equal(fused[1], apart[1])

@@ -248,43 +248,6 @@ def _obscurance_kernel(w_hit, escaped, escaped_tint, through_hit, through_ave, r
                                                         through_hit, through_ave, r_ave, i)
 
 
-@jit
-def _to_world_kernel(rays, first, starts, normals, geometric, offsets, center, x, y, z, keep,
-                     origins, directions):
-    """Turn local cosine directions (x, y, z) (k·rays,) into Embree's float32 rays.
-
-    Each texel's directions go into the frame of its hemisphere normal ``normals`` (k, 3)
-    (``Texels.hemisphere_normal``); where that is not its front-face normal ``geometric`` (k, 3)
-    itself, a direction below the front face's plane is folded above it (``sampling.fold``).
-    Ray s of texel i (its sample ``first`` + s) starts from ``starts[i, (first + s) mod S]``
-    (starts: (k, S, 3) world points on the texel's plane, S = 1 without supersampling), lifted
-    off the surface by the texel's offset along the front-face normal and recentred on
-    ``center``. keep: (k·rays,) bool, the rays to write, in order, to consecutive rows of
-    ``origins`` and ``directions``; empty: all of them (``_texel_rays``).
-    """
-    if len(keep) == 0:
-        for i in range(len(starts)):
-            _texel_rays(i, rays, first, starts, normals, geometric, offsets, center, x, y, z,
-                        i * rays, origins, directions, i * rays)
-        return
-    count = starts.shape[1]
-    q = 0
-    for i in range(len(starts)):
-        nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
-        gx, gy, gz = geometric[i, 0], geometric[i, 1], geometric[i, 2]
-        tilted = nx != gx or ny != gy or nz != gz
-        f = frame(nx, ny, nz)
-        for r in range(i * rays, (i + 1) * rays):
-            if not keep[r]:
-                continue
-            j = 0 if count == 1 else (first + r - i * rays) % count  # no division per ray
-            origins[q, 0], origins[q, 1], origins[q, 2] = _lifted(starts, i, j, offsets, center,
-                                                                  gx, gy, gz)
-            directions[q, 0], directions[q, 1], directions[q, 2] = _world_direction(
-                x[r], y[r], z[r], f, nx, ny, nz, tilted, gx, gy, gz)
-            q += 1
-
-
 def cosine_directions(keys: np.ndarray, rays: int, seed: int, technique: str = "sobol",
                       first: int = 0, start: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The local cosine-distributed directions x, y, z (k·rays,) float64 of samples ``first`` …
@@ -354,7 +317,7 @@ def _rays_kernel(technique, seed, keys, first, rays, dimension, extend, second, 
 def _texel_rays(i, rays, first, starts, normals, geometric, offsets, center, x, y, z, r0,
                 origins, directions, q0):
     """Write texel i's ``rays`` rays, from local directions x, y, z [r0, r0 + rays), to rows
-    q0 … q0 + rays − 1 of ``origins`` and ``directions`` (``_to_world_kernel``, all kept)."""
+    q0 … q0 + rays − 1 of ``origins`` and ``directions``."""
     count = starts.shape[1]
     gx, gy, gz = geometric[i, 0], geometric[i, 1], geometric[i, 2]
     nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
@@ -392,23 +355,35 @@ def _world_direction(x, y, z, f, nx, ny, nz, tilted, gx, gy, gz):
     return dx, dy, dz
 
 
-def world_rays(texels: Texels, rows: np.ndarray | slice, rays: int, x: np.ndarray,
-               y: np.ndarray, z: np.ndarray, center: np.ndarray, keep: np.ndarray | None = None,
-               first: int = 0, sub: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """``hemisphere_rays`` from the texels' local directions x, y, z (k·rays,) already drawn
-    (``cosine_directions``); keep: None, or (k·rays,) bool, the rays wanted (the others are
-    left out of the returned (m, 3) arrays, which keep their order). The same bits as
-    ``hemisphere_rays`` for the rays kept."""
-    k = len(x) // rays
-    m = k * rays if keep is None else int(np.count_nonzero(keep))
-    origins = np.empty((m, 3), np.float32)
-    directions = np.empty((m, 3), np.float32)
-    starts = texels.position[rows][:, None, :] if sub is None else sub
-    _to_world_kernel(rays, first, starts, texels.hemisphere_normal(rows),
-                     texels.geometric_normal(rows),
-                     ray_lift(texels.position[rows], texels.size(rows), center), center, x, y, z,
-                     np.zeros(0, np.bool_) if keep is None else keep, origins, directions)
+def world_rays(texels: Texels, rows: np.ndarray, texel: np.ndarray, x: np.ndarray,
+               y: np.ndarray, z: np.ndarray, center: np.ndarray, sample: np.ndarray | None = None,
+               sub: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Embree's float32 rays, one per entry of ``texel`` (m,) (an index into ``rows``, texels
+    of ``texels``), along the local cosine directions x, y, z (m,) (``cosine_directions``), each
+    texel's sample ``sample`` (m,) (None: 0), in any order: the bits of those rays in
+    ``hemisphere_rays``, each texel's normals, lift and starts gathered once however many of
+    its rays are asked (a rebake's candidate rays, ``reach.rays_meet``). ``sub``: (k, S, 3)
+    sub-texel starts of the texels ``rows`` (``supersample.sub_positions``), sample s from
+    start s mod S; None: their sample points. (m, 3) float32 origins and directions."""
+    origins = np.empty((len(texel), 3), np.float32)
+    directions = np.empty((len(texel), 3), np.float32)
+    position = texels.position[rows]
+    _scattered_kernel(texel, np.zeros(len(texel), np.int64) if sample is None else sample,
+                      position[:, None, :] if sub is None else sub,
+                      texels.hemisphere_normal(rows), texels.geometric_normal(rows),
+                      ray_lift(position, texels.size(rows), center), center, x, y, z, origins,
+                      directions)
     return origins, directions
+
+
+@jit
+def _scattered_kernel(texel, sample, starts, normals, geometric, offsets, center, x, y, z,
+                      origins, directions):
+    """``_texel_rays`` of one ray per entry q of ``texel``: texel ``texel[q]``'s sample
+    ``sample[q]``, along local direction q, to row q (``world_rays``)."""
+    for q in range(len(texel)):
+        _texel_rays(texel[q], 1, sample[q], starts, normals, geometric, offsets, center, x, y,
+                    z, q, origins, directions, q)
 
 
 # Columns of the per-texel sums the kernel accumulates.

@@ -1,5 +1,5 @@
 """The changed geometry the dirty search casts against: an Embree scene of just the changed
-triangles with the boxes that hold them (``Changed``), a moved node's triangles at its new or
+triangles with the spheres that hold them (``Changed``), a moved node's triangles at its new or
 its last bake's place (``placed_corners``, ``world_before``), and the mirrors and glass whose
 rays go on (``chain_corners``)."""
 
@@ -11,7 +11,6 @@ import numpy as np
 
 from baker.geometry.world import World, placed_positions
 from baker.gltf.scene import Scene
-from baker.jit import jit
 from baker.materials import SPECULAR, TRANSPARENT
 from baker.rays.trace import Hits, LocalHits, Tracer
 
@@ -27,38 +26,17 @@ def _small_world(corners: np.ndarray, center: np.ndarray) -> World:
                  tri_material=empty, vertex_start=empty, tri_start=empty, center=center)
 
 
-@jit
-def _crossing(origins: np.ndarray, directions: np.ndarray, lengths: np.ndarray,
-              low: np.ndarray, high: np.ndarray) -> np.ndarray:
-    """(n,) bool: whether each ray (origins, directions (n, 3) in the tracer's frame, lengths
-    (n,)) passes through any of the boxes [low, high] (b, 3) within its length (slab test)."""
-    n, boxes = len(origins), len(low)
-    out = np.zeros(n, np.bool_)
-    for i in range(n):
-        for b in range(boxes):
-            near, far = 0.0, float(lengths[i])
-            for c in range(3):
-                o, d = float(origins[i, c]), float(directions[i, c])
-                if d == 0.0:
-                    if o < low[b, c] or o > high[b, c]:
-                        near, far = 1.0, 0.0
-                else:
-                    t0, t1 = (low[b, c] - o) / d, (high[b, c] - o) / d
-                    near, far = max(near, min(t0, t1)), min(far, max(t0, t1))
-            if near <= far:
-                out[i] = True
-                break
-    return out
-
-
 class Changed:
-    """An Embree scene of just the changed triangles, for the dirty search, with the boxes that
-    hold each group of them: a ray that crosses no box cannot meet them and is not cast, so the
-    search costs little more than generating each candidate texel's rays.
+    """An Embree scene of just the changed triangles, for the dirty search, with the bounding
+    spheres of each group of them (``sphere_centres``, ``sphere_radii``: the cheap test on a
+    texel's local directions, ``near_rays``). Rays are cast straight into Embree, whose tree
+    finds the few a group can meet faster than a test of every ray against every group's box
+    (60 moved boxes: 0.18 s against 1.9 s for 2 M rays).
 
-    ``parts``: list of (t, 3, 3) world corners, one box each (a moved node's old and new
-    place). The boxes, in the tracer's float32 frame, are padded far beyond float32 rounding.
-    A ``rays.trace.RayCaster``, as ``Tracer`` is: the searches cast through either.
+    ``parts``: list of (t, 3, 3) world corners, one group each (a moved node's old and new
+    place). The boxes round the spheres, in the tracer's float32 frame, are padded far beyond
+    float32 rounding. A ``rays.trace.RayCaster``, as ``Tracer`` is: the searches cast through
+    either.
     """
 
     def __init__(self, parts: list[np.ndarray], center: np.ndarray):
@@ -68,27 +46,15 @@ class Changed:
         self._tracer = Tracer(_small_world(corners, center))
         local = [p.reshape(-1, 3) - center for p in parts]
         pad = [1e-4 * (np.abs(p).max() + np.ptp(p, axis=0).max()) + 1e-12 for p in local]
-        self._low = np.array([p.min(0) - e for p, e in zip(local, pad)]).reshape(-1, 3)
-        self._high = np.array([p.max(0) + e for p, e in zip(local, pad)]).reshape(-1, 3)
-        # The boxes' bounding spheres, for the cheaper test on local directions (``near_rays``).
-        self.sphere_centres = (self._low + self._high) / 2
-        self.sphere_radii = np.linalg.norm(self._high - self._low, axis=1) / 2
-
-    def _maybe(self, local: np.ndarray, directions: np.ndarray, lengths: np.ndarray) -> np.ndarray:
-        return np.flatnonzero(_crossing(local, directions, lengths * (1 + 1e-6),
-                                        self._low, self._high))
+        low = np.array([p.min(0) - e for p, e in zip(local, pad)]).reshape(-1, 3)
+        high = np.array([p.max(0) + e for p, e in zip(local, pad)]).reshape(-1, 3)
+        self.sphere_centres = (low + high) / 2
+        self.sphere_radii = np.linalg.norm(high - low, axis=1) / 2
 
     def cast_local(self, origins, directions, lengths) -> LocalHits:
-        """As ``Tracer.cast_local``: −1 and the ray's length for rays that cross no box; the
-        barycentrics are not computed (0)."""
-        primitive = np.full(len(origins), -1, np.int32)
-        distance = np.array(lengths, np.float32)
-        rows = self._maybe(origins, directions, lengths)
-        if len(rows):
-            met = self._tracer.cast_local(origins[rows], directions[rows], lengths[rows].copy())
-            primitive[rows], distance[rows] = met.triangle, met.distance
-        return LocalHits(primitive, distance, np.zeros(len(origins), np.float32),
-                         np.zeros(len(origins), np.float32))
+        """As ``Tracer.cast_local``, ``lengths`` left as they are; most rays meet nothing
+        (``Tracer.cast_local_sparse``)."""
+        return self._tracer.cast_local_sparse(origins, directions, np.array(lengths, np.float32))
 
     def _local(self, origins, directions, length):
         lengths = np.empty(len(origins), np.float32)
@@ -104,12 +70,7 @@ class Changed:
 
     def occluded(self, origins, directions, length) -> np.ndarray:
         """As ``Tracer.occluded``."""
-        blocked = np.zeros(len(origins), bool)
-        rows = self._maybe(*self._local(origins, directions, length))
-        if len(rows):
-            lengths = np.broadcast_to(np.asarray(length, np.float64), (len(origins),))[rows]
-            blocked[rows] = self._tracer.occluded(origins[rows], directions[rows], lengths)
-        return blocked
+        return self._tracer.occluded(origins, directions, length)
 
 
 def _placed_positions(scene: Scene, instance: int, matrix: np.ndarray) -> np.ndarray:

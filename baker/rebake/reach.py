@@ -99,7 +99,7 @@ def rays_meet(changed: Changed, texels: Texels, rows: np.ndarray, settings,
         if not len(texel):
             return
         # One ray per "texel" (rays=1): the same bits as the texel's own ray in a bake.
-        origins, directions = world_rays(texels, chosen[texel], 1, x, y, z, changed.center)
+        origins, directions = world_rays(texels, chosen, texel, x, y, z, changed.center)
         met = changed.cast_local(origins, directions,
                                  np.full(len(origins), settings.d_max, np.float32))
         hit = np.flatnonzero(met.triangle >= 0)
