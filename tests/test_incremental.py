@@ -919,6 +919,29 @@ def test_rebake_cost_prices_the_texels_by_the_stages_of_a_full_bake():
     assert cost.rebake_cost(stages, 0.0, 0.0)[0] == 0.0
 
 
+def test_a_rebake_asked_for_whatever_it_costs_still_prices_and_measures_itself(tmp_path):
+    """``incremental="always"`` rebakes however dear the model finds it (told the last rebake
+    took 8× the model, a priced rebake of this move bakes fully), yet it still reports the
+    model's figure for its search and rays and records what they took over it: how
+    bench_rebake_cost.py measures the model, and what the next priced rebake goes by."""
+    before = _room().save(tmp_path / "before.glb")
+    after = EDITS["box moved across the room"]().save(tmp_path / "after.glb")
+    baker.bake(before, tmp_path / "out.glb", SETTINGS)
+    state = default_path(tmp_path / "out.glb")
+    first = baker.rebake.state.last_full_bake(state)
+    baker.rebake.state.save_full_bake_seconds(state, first["full_bake_seconds"],
+                                              stages=first["stage_seconds"],
+                                              rebake_correction=1e6)
+    result = baker.bake(after, tmp_path / "out.glb", SETTINGS, incremental="always")
+    assert result.rebake["incremental"], result.rebake.get("full_bake_reason")
+    modelled = result.rebake["modelled_seconds"]
+    assert modelled is not None and modelled > 0
+    stages = result.report["stage_seconds"]
+    spent = stages["dirty"] + stages["trace"] + stages["direct"]
+    record = baker.rebake.state.last_full_bake(state)
+    assert record["rebake_correction"] == pytest.approx(spent / modelled, rel=1e-3)
+
+
 def test_a_rebake_measures_itself_and_the_next_one_of_the_state_goes_by_it(tmp_path):
     """A rebake records beside the state what its search and rays took over the cost model's
     figure (``rebake_measured``); the next rebake of that state scales the model by it: told

@@ -72,12 +72,15 @@ class Search:
     judge: "HitsCompared | None" = None
     tested: int = 0
     modelled: float | None = None  # the seconds ``afford`` gave the search and the rays
+    priced: bool = True  # ``afford`` may choose a full bake (else it only prices the rebake)
 
 
 def dirty_search(scene: Scene, start: Compared, lit: Lighting, stored: Stored,
-                 times: dict[str, float], foliage: Foliage | None = None) -> Search:
+                 times: dict[str, float], foliage: Foliage | None = None,
+                 priced: bool = True) -> Search:
     """Which texels the change can reach, and why (``REASONS``). With ``foliage``, obscurance
-    rays are judged in the scene without the crowns' leaves, as they were traced."""
+    rays are judged in the scene without the crowns' leaves, as they were traced; ``priced``:
+    a move whose rebake would cost more than a full bake is a FullBake (``cost.afford``)."""
     hidden = None if foliage is None else foliage.hidden()
     world, resolved, change, moved = start.world, start.resolved, start.change, start.moved
     surfaces = surfaces_of(lit.context)
@@ -90,7 +93,8 @@ def dirty_search(scene: Scene, start: Compared, lit: Lighting, stored: Stored,
               and not resolved.directional_pages)
     raw = stored.raw
     texels = replace(raw, position=stored.texels.positions(raw.position))  # changed in place
-    search = Search(np.full(len(raw), -1, np.int8), texels, stored.validity, surfaces, by_ray)
+    search = Search(np.full(len(raw), -1, np.int8), texels, stored.validity, surfaces, by_ray,
+                    priced=priced)
     with timed(times, "dirty"):
         if len(moved):
             moved_reach(scene, start, lit, stored, search, hidden)
@@ -140,7 +144,8 @@ def moved_reach(scene: Scene, start: Compared, lit: Lighting, stored: Stored,
     # Validity: tangent probes reach a few texel sides; hemisphere probes d_max.
     close = own | near_boxes(raw, boxes, 0.0)
     far = np.flatnonzero(near & ~close)
-    search.modelled = afford(start.full_bake, int(close.sum()), len(far), len(raw))
+    search.modelled = afford(start.full_bake, int(close.sum()), len(far), len(raw),
+                             search.priced)
     small = Changed(old_corners + new_corners, world.center)
     before = world_before(scene, world, moved, instance_world)
     tracer_before, faces = Tracer(before), Faces(scene, world)

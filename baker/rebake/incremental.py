@@ -97,8 +97,6 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
         worth_reading(path)
     with log.stage("state, lights and changes"):
         start = compared(scene, settings, path, relight, times)
-    if not priced:  # no record of the last bakes' times: the rebake goes on (``cost.afford``)
-        start = replace(start, full_bake=None)
     lit = start.lit
     try:
         with log.stage("changed texels"):
@@ -107,7 +105,7 @@ def rebake(scene: Scene, settings: Settings, path, quiet: bool = True,
             if start.resolved.foliage == "approx":
                 with timed(times, "foliage fit"):
                     foliage = _foliage_again(scene, start, lit, stored)
-            search = dirty_search(scene, start, lit, stored, times, foliage)
+            search = dirty_search(scene, start, lit, stored, times, foliage, priced)
     except FullBake as why:  # the full bake keeps what this one kept and made, and says so
         raise FullBake(str(why) + (f"; {start.kept}" if start.kept else ""), start.asked,
                        (start.world, start.lit)) from None
