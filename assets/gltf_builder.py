@@ -632,7 +632,8 @@ def icosphere(radius: float = 0.5, subdivisions: int = 1) -> Shape:
 def rock(radius: float = 1.0, subdivisions: int = 4, seed: int = 0) -> Shape:
     """A crumpled rock: an ``icosphere`` whose radius forty random waves crumple (2–60 per
     radian, the shorter the lower: relief of about 0.15 ``radius``), normals averaged from its
-    faces: a surface projection cannot chart (baker leaves it to xatlas). 20·4^s faces;
+    faces: projected charts fold over at its relief (at 5,120 faces it is so crumpled that
+    baker leaves it to xatlas; from 20,480 the folded charts are split). 20·4^s faces;
     deterministic in ``seed``."""
     points, triangles, _, uv = icosphere(1.0, subdivisions)
     rng = np.random.default_rng(seed)

@@ -5,7 +5,7 @@ Scenes: the room of 200 boxes and a sphere (``assets/many_objects.py``, 98,732 t
 202 meshes, a 512² page as ``bench_fixed_cost.py``); with ``--level`` the level of 400 distinct
 meshes (``many_objects.level``, 1,024,812 triangles) at a 4096² page; with ``--million`` the
 1M-triangle terrain of ``bench_million.py`` (default settings); with ``--rock`` a crumpled
-rock of 327,680 triangles on a floor (default settings: xatlas charts the rock). For each,
+rock of 327,680 triangles on a floor (default settings), with ``--small-rock`` one of 20,480. For each,
 ``unwrap.unwrap`` at the derived density (fitted to one page, as a default bake) is timed cold
 (empty cache), after an edit (the mesh of (lower) median triangle count stretched 10 % along
 x, which changes the derived density: the cache holds the scene before the edit), from the
@@ -55,12 +55,14 @@ from baker.settings import Settings, resolve  # noqa: E402
 from benchmarks.bench_million import terrain  # noqa: E402
 
 
-def rock_on_a_floor() -> GltfBuilder:
-    """A crumpled rock of 327,680 triangles (``gltf_builder.rock``, 1 m) on an 8 m floor: a mesh
-    projection leaves to xatlas, whose time per triangle grows with its size."""
+def rock_on_a_floor(subdivisions: int = 7) -> GltfBuilder:
+    """A crumpled rock of 20·4^subdivisions triangles (``gltf_builder.rock``, 1 m; 327,680 by
+    default) on an 8 m floor: charts of its projection fold over (``planar``: split until they
+    do not), where xatlas's time per triangle grows with a mesh's size."""
     b = GltfBuilder()
     stone, grey = b.material("rock", (0.5, 0.45, 0.4)), b.material("floor", (0.7, 0.7, 0.7))
-    b.node("rock", b.shape_mesh("rock", rock(1.0, 7), material=stone), translation=(0.0, 1.0, 0.0))
+    b.node("rock", b.shape_mesh("rock", rock(1.0, subdivisions), material=stone),
+           translation=(0.0, 1.0, 0.0))
     b.node("floor", b.shape_mesh("floor", quad(8.0, 8.0), material=grey))
     return b
 
@@ -176,20 +178,22 @@ SCENES = {"boxes": ("200 boxes + sphere", boxes_and_sphere,
                     Settings(page_size=512, rays=4, rho="step", d_max=1.0)),
           "level": ("400 distinct meshes", level, Settings(page_size=4096)),
           "million": ("1M-triangle terrain", terrain, Settings()),
-          "rock": ("a rock of 327,680 triangles", rock_on_a_floor, Settings())}
+          "rock": ("a rock of 327,680 triangles", rock_on_a_floor, Settings()),
+          "small_rock": ("a rock of 20,480 triangles", lambda: rock_on_a_floor(5), Settings())}
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--level", action="store_true", help="also the 400-mesh level")
     parser.add_argument("--million", action="store_true", help="also the 1M-triangle terrain")
-    parser.add_argument("--rock", action="store_true", help="also a crumpled rock (xatlas)")
+    parser.add_argument("--rock", action="store_true", help="also a crumpled rock")
+    parser.add_argument("--small-rock", action="store_true", help="also a rock of 20,480")
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--against", help="a checkout whose baker is timed first (A/B)")
     parser.add_argument("--scene", choices=sorted(SCENES), help=argparse.SUPPRESS)
     args = parser.parse_args()
     names = [args.scene] if args.scene else (
-        ["boxes"] + [name for name in ("level", "million", "rock") if getattr(args, name)])
+        ["boxes"] + [name for name in ("level", "million", "rock", "small_rock") if getattr(args, name)])
     for name in names:
         title, builder, settings = SCENES[name]
         if args.against:

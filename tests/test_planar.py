@@ -164,18 +164,30 @@ def test_a_sphere_is_charted_in_caps_within_the_cone(rings):
         assert (n @ n.T).min() >= np.cos(np.radians(2 * planar.CONE)) - 1e-9
 
 
-def test_a_helical_ramp_and_a_crumpled_surface_are_left_to_xatlas():
-    """A ramp winding twice round (its normals all near up: one chart, overlapping itself once
-    projected) and a grid of random heights (charts of a triangle or two): None."""
-    turns, steps = 2, 160
+def _ramp(turns: int, steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """A ramp winding ``turns`` times round, 1 to 2 m from its axis, rising 0.05 m a radian:
+    (positions, triangles) of 2 · ``steps`` triangles, its normals all near up."""
     angle = np.linspace(0, 2 * np.pi * turns, steps + 1)
     inner = np.stack([np.cos(angle), angle * 0.05, np.sin(angle)], axis=1)
-    positions = np.concatenate([inner, inner * [2.0, 1.0, 2.0]])
     k = np.arange(steps)
-    triangles = np.concatenate([np.stack([k, k + 1, k + steps + 1], 1),
-                                np.stack([k + 1, k + steps + 2, k + steps + 1], 1)])
-    assert planar.project(positions, triangles) is None
-    assert planar.project(positions[:, [0, 1, 2]], triangles[: steps // 3]) is not None  # a third
+    return (np.concatenate([inner, inner * [2.0, 1.0, 2.0]]),
+            np.concatenate([np.stack([k, k + 1, k + steps + 1], 1),
+                            np.stack([k + 1, k + steps + 2, k + steps + 1], 1)]))
+
+
+def test_a_helical_ramp_is_charted_in_pieces_and_a_crumpled_surface_left_to_xatlas():
+    """A ramp winding twice round (one chart, overlapping itself once projected) is grown
+    again in narrower cones until no chart overlaps itself, none turned over, each keeping
+    its area (it went to xatlas whole before); a grid of random heights (charts of a triangle
+    or two): None."""
+    steps = 160
+    positions, triangles = _ramp(2, steps)
+    charts = planar.project(positions, triangles)
+    assert charts is not None and len(charts.sides) > 2  # two turns: no chart a whole turn
+    _check_charts(charts, positions, triangles)
+    part = np.concatenate([triangles[: steps // 3], triangles[steps: steps + steps // 3]])
+    two_thirds = planar.project(positions, part)  # two thirds of a turn: flat, whole
+    assert two_thirds is not None and len(two_thirds.sides) == 1
     rng = np.random.default_rng(0)
     side = 20
     x, z = np.meshgrid(np.arange(side + 1.0), np.arange(side + 1.0), indexing="ij")
@@ -186,6 +198,24 @@ def test_a_helical_ramp_and_a_crumpled_surface_are_left_to_xatlas():
                             np.stack([a, a + side + 2, a + side + 1], 1)])
     assert planar.project(grid, cells) is None
     assert planar.project(grid * [1.0, 0.01, 1.0], cells) is not None  # flattened: one chart
+
+
+def test_an_overlapping_mesh_goes_to_xatlas_only_while_it_fits_one_xatlas_piece(monkeypatch):
+    """``charts.chart``: a ramp of 320 triangles whose one chart overlaps itself goes to xatlas
+    (fast at that size, fewer seams); one of 16,002 triangles (more than an xatlas piece,
+    whose time per triangle grows with the mesh) is split by projection instead, its charts
+    those of ``planar.project`` and apart."""
+    asked = []
+    monkeypatch.setattr(charting, "_xatlas_charts", lambda p, t: asked.append(len(t)))
+    small = _ramp(2, 160)
+    assert planar.project(*small, split=False) is None
+    charting.chart(*small)
+    assert asked == [320]
+    big = _ramp(2, charting._PIECE_TRIANGLES // 2 + 1)
+    charts = charting.chart(*big)
+    assert asked == [320] and charts is not None
+    np.testing.assert_array_equal(charts.uv, planar.project(*big).uv)
+    _check_charts(charts, *big)
 
 
 def test_a_wavy_sheet_of_many_triangles_a_chart_is_projected():

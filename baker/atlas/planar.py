@@ -12,10 +12,13 @@ vertices split for normals or UVs do not cut a chart), and charts grown from the
 triangle not yet charted across edges while each triangle's normal stays within ``CONE`` of
 the seed's. A chart is projected along its area-weighted normal (every normal within 2·CONE <
 90° of it, so no triangle turns over), scaled so that its area is its surface's, and turned so that
-its bounding rectangle is the least one a side of its convex hull gives. A mesh is left to
-xatlas (None) when a chart overlaps itself once projected (a helical ramp), or when its
-surface is so crumpled that the charts average fewer than ``LEAST_TRIANGLES`` triangles (a
-rock's noise: xatlas's charts follow it with less seam).
+its bounding rectangle is the least one a side of its convex hull gives. A chart that
+overlaps itself once projected (a helical ramp, a fold of a crumpled rock) is grown again from
+its own triangles in half the cone, up to ``SPLITS`` times, if ``split`` (``charts.chart``:
+for a mesh bigger than one of xatlas's pieces, whose time per triangle grows with its size); a
+mesh is left to xatlas (None) when a chart still overlaps itself, or when its surface is so
+crumpled that the charts average fewer than ``LEAST_TRIANGLES`` triangles (a rock's noise:
+xatlas's charts follow it with less seam).
 
 Everything is a pure function of the mesh (positions in its rigid-free frame, world units), so
 the charts are the same bits however the meshes are dealt to cores, and after a rigid move.
@@ -30,19 +33,22 @@ from baker.geometry.world import triangle_cross
 from baker.jit import inline, jit
 
 CONE = 40.0  # degrees: every normal of a chart within this of its seed's (under 45°)
+SPLITS = 6  # a chart that overlaps itself is grown again in half the cone, at most this often
 LEAST_TRIANGLES = 6.0  # a mesh whose cut charts average fewer triangles is left to xatlas
 _OVERLAP = 1e-9  # of a chart's size: triangles closer than this to apart are apart
 _EQUAL = 1e-9  # rectangles' areas this close (relative) are equal (``_turned``)
 # Everything besides a mesh that decides its charts, for the unwrap cache's key; the first
 # entries are bumped when the method changes.
-KEY = ("projection", 4, CONE, LEAST_TRIANGLES, _OVERLAP, _EQUAL)
+KEY = ("projection", 5, CONE, SPLITS, LEAST_TRIANGLES, _OVERLAP, _EQUAL)
 
 
-def project(positions: np.ndarray, triangles: np.ndarray) -> Charts | None:
+def project(positions: np.ndarray, triangles: np.ndarray, split: bool = True
+            ) -> Charts | None:
     """The charts of a mesh by projection (``Charts``), or None where xatlas should chart it.
 
     positions (n, 3) float64 world units (the instance's rigid-free frame), triangles (m, 3)
-    int64."""
+    int64. ``split``: a chart that overlaps itself is grown again in narrower cones (else the
+    mesh is left to xatlas)."""
     p = np.asarray(positions, np.float64)
     t = np.asarray(triangles, np.int64)
     if not len(t):
@@ -54,9 +60,36 @@ def project(positions: np.ndarray, triangles: np.ndarray) -> Charts | None:
                         where=valid[:, None])
     neighbours = _neighbours(_welded(p)[t])
     seeds = np.lexsort((np.arange(len(t)), -np.where(valid, double_area, 0.0)))
-    chart, count = _grow(normals, valid, neighbours, seeds, np.cos(np.radians(CONE)))
+    chart = np.full(len(t), -1, np.int64)
+    count = _grow(normals, valid, neighbours, seeds, np.cos(np.radians(CONE)), chart, 0)
     if _crumpled(chart, count, neighbours):
         return None
+    cone = CONE
+    while True:
+        vertex, owner, corners, flat = _flattened(p, t, cross, valid, double_area, chart, count)
+        by_chart = np.argsort(chart, kind="stable")
+        start = np.searchsorted(chart[by_chart], np.arange(count + 1))
+        overlapping = _overlapping(flat, corners, by_chart, start, _OVERLAP)
+        if not overlapping.any():
+            break
+        cone /= 2
+        if not split or cone < CONE / 2 ** SPLITS:
+            return None
+        chart, count = _regrown(chart, count, overlapping, normals, valid, neighbours, seeds,
+                                np.cos(np.radians(cone)))
+    hull_order = np.lexsort((flat[:, 1], flat[:, 0], owner))
+    vertex_start = np.searchsorted(owner, np.arange(count + 1))
+    uv, sides = _turned(flat, hull_order, vertex_start)
+    return Charts(vertices=vertex, triangles=corners, uv=uv, chart=owner, sides=sides)
+
+
+def _flattened(p: np.ndarray, t: np.ndarray, cross: np.ndarray, valid: np.ndarray,
+               double_area: np.ndarray, chart: np.ndarray, count: int
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Each chart projected along its area-weighted normal (``cross``: (m, 3) the triangles'
+    edge cross products), scaled to its surface's area: (k,) the mesh vertex and (k,) the
+    chart of each chart vertex (by chart, then vertex), (m, 3) each triangle's chart
+    vertices, (k, 2) their projected points."""
     axis = np.stack([np.bincount(chart, np.where(valid, cross[:, k], 0.0), count)
                      for k in range(3)], axis=1)
     u, v = _bases(axis)
@@ -67,14 +100,19 @@ def project(positions: np.ndarray, triangles: np.ndarray) -> Charts | None:
                      np.einsum("ij,ij->i", p[vertex], v[owner])], axis=1)
     flat *= _area_scale(flat, corners, chart, double_area, count)[owner, None]
     flat[_no_area(chart, valid, count)[owner]] = 0.0
-    by_chart = np.argsort(chart, kind="stable")
-    start = np.searchsorted(chart[by_chart], np.arange(count + 1))
-    if _overlapping(flat, corners, by_chart, start, _OVERLAP):
-        return None
-    hull_order = np.lexsort((flat[:, 1], flat[:, 0], owner))
-    vertex_start = np.searchsorted(owner, np.arange(count + 1))
-    uv, sides = _turned(flat, hull_order, vertex_start)
-    return Charts(vertices=vertex, triangles=corners, uv=uv, chart=owner, sides=sides)
+    return vertex, owner, corners, flat
+
+
+def _regrown(chart: np.ndarray, count: int, overlapping: np.ndarray, normals: np.ndarray,
+             valid: np.ndarray, neighbours: np.ndarray, seeds: np.ndarray, cone_cos: float
+             ) -> tuple[np.ndarray, int]:
+    """The charts with the ``overlapping`` ones (c,) bool grown again from their own triangles
+    within the narrower cone (``_grow``; the others keep theirs), numbered 0 … count − 1 in
+    order of their old numbers, the new ones last; and their count."""
+    chart = np.where(overlapping[chart], -1, chart)
+    _grow(normals, valid, neighbours, seeds[chart[seeds] < 0], cone_cos, chart, count)
+    _, chart = np.unique(chart, return_inverse=True)
+    return chart, int(chart.max(initial=-1)) + 1
 
 
 def _no_area(chart: np.ndarray, valid: np.ndarray, count: int) -> np.ndarray:
@@ -126,14 +164,12 @@ def _pair_edges(keys, order, count):
 
 
 @jit
-def _grow(normals, valid, neighbours, seeds, cone_cos):
+def _grow(normals, valid, neighbours, seeds, cone_cos, chart, count):
     """Charts grown breadth-first from each seed (``seeds``: triangles, largest first) not yet
-    charted, across edges, to triangles whose normal is within the cone of the seed's
-    (degenerate ones, ``valid`` False, join any chart that reaches them). Returns (m,) the
-    chart of each triangle and the chart count."""
-    chart = np.full(len(normals), -1, np.int64)
+    charted (``chart`` (m,) −1), across edges, to uncharted triangles whose normal is within
+    the cone of the seed's (degenerate ones, ``valid`` False, join any chart that reaches
+    them), numbered from ``count`` on, into ``chart``. Returns the chart count."""
     queue = np.empty(len(normals), np.int64)
-    count = 0
     for s in seeds:
         if chart[s] >= 0:
             continue
@@ -154,7 +190,7 @@ def _grow(normals, valid, neighbours, seeds, cone_cos):
                 queue[tail] = w
                 tail += 1
         count += 1
-    return chart, count
+    return count
 
 
 def _crumpled(chart: np.ndarray, count: int, neighbours: np.ndarray) -> bool:
@@ -196,9 +232,10 @@ def _area_scale(flat: np.ndarray, corners: np.ndarray, chart: np.ndarray,
 
 @jit
 def _overlapping(flat, corners, by_chart, start, tolerance):
-    """Whether two triangles of one chart overlap in ``flat`` (k, 2): each chart's triangles
-    (``by_chart[start[c]:start[c + 1]]``) binned on a grid of about one triangle a cell, the
-    pairs sharing a cell tested by their separating axes."""
+    """(c,) bool: whether two triangles of each chart overlap in ``flat`` (k, 2): each chart's
+    triangles (``by_chart[start[c]:start[c + 1]]``) binned on a grid of about one triangle a
+    cell, the pairs sharing a cell tested by their separating axes."""
+    overlapping = np.zeros(len(start) - 1, np.bool_)
     for c in range(len(start) - 1):
         first, last = start[c], start[c + 1]
         if last - first < 2:
@@ -244,14 +281,15 @@ def _overlapping(flat, corners, by_chart, start, tolerance):
             for i in range(fill[g], fill[g + 1]):
                 for j in range(i + 1, fill[g + 1]):
                     a, b = members[i] - first, members[j] - first
-                    if _tested_elsewhere(box, members, by_chart, first, i, j, g, side):
+                    if overlapping[c] or _tested_elsewhere(box, members, by_chart, first, i, j,
+                                                           g, side):
                         continue
                     if _share_an_edge(corners[by_chart[first + a]], corners[by_chart[first + b]]):
                         continue
                     if not _apart(flat, corners[by_chart[first + a]],
                                   corners[by_chart[first + b]], tolerance * size):
-                        return True
-    return False
+                        overlapping[c] = True
+    return overlapping
 
 
 @inline
