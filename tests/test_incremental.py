@@ -919,6 +919,27 @@ def test_rebake_cost_prices_the_texels_by_the_stages_of_a_full_bake():
     assert cost.rebake_cost(stages, 0.0, 0.0)[0] == 0.0
 
 
+@pytest.mark.parametrize("material, priced_out", [("wall", True), ("accent", False)])
+def test_a_recolour_is_priced_before_its_search(tmp_path, material, priced_out):
+    """A recolour was never priced: recolouring what every texel sees (the room's walls)
+    redid nearly all of them after a search about as long as a trace (2.3× a full bake in a
+    room of 60 crates). Its search is now tried on a sample of the texels first: the walls
+    bake fully and say why, the accent box (a few texels see it) still rebakes; both give the
+    full bake's bytes."""
+    before = _room().save(tmp_path / "before.glb")
+    after = _room(colours={material: (0.1, 0.5, 0.9)}).save(tmp_path / "after.glb")
+    baker.bake(before, tmp_path / "out.glb", SETTINGS)
+    result = baker.bake(after, tmp_path / "out.glb", SETTINGS, incremental=True)
+    reason = result.rebake.get("full_bake_reason", "")
+    assert result.rebake["incremental"] is not priced_out, reason
+    if priced_out:
+        assert reason.startswith("a rebake would cost more than a full bake: the edit reaches")
+    else:
+        assert 0 < result.rebake["dirty_fraction"] < 0.5
+    baker.bake(after, tmp_path / "full.glb", SETTINGS)
+    assert (tmp_path / "out.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()
+
+
 def test_a_rebake_asked_for_whatever_it_costs_still_prices_and_measures_itself(tmp_path):
     """``incremental="always"`` rebakes however dear the model finds it (told the last rebake
     took 8× the model, a priced rebake of this move bakes fully), yet it still reports the

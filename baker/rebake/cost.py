@@ -71,7 +71,7 @@ def afford(full_bake: dict | None, redone: int, reached: int, texels: int,
         measured = (f", × {correction:.2f} as the last rebake of this state measured"
                     if "rebake_correction" in full_bake else "")
         raise FullBake(
-            f"a rebake would cost more than a full bake: the move reaches "
+            f"a rebake would cost more than a full bake: the edit reaches "
             f"{(redone + reached) / texels:.0%} of the texels ({redone / texels:.0%} redone "
             f"whole), about {cost * seconds:.2f} s by the last full bake's stages"
             f"{measured}, against {full * seconds:.2f} s for a full one (the last took "

@@ -34,6 +34,7 @@ from baker.run.stages import timed
 
 
 REASONS = ("own", "validity", "obscurance", "shadow", "colour", "chain")
+PRICE_SAMPLE = 4096  # about this many texels tried first to price a recolour (``_colour_sampled``)
 
 
 @dataclass(frozen=True)
@@ -96,19 +97,18 @@ def dirty_search(scene: Scene, start: Compared, lit: Lighting, stored: Stored,
     search = Search(np.full(len(raw), -1, np.int8), texels, stored.validity, surfaces, by_ray,
                     priced=priced)
     with timed(times, "dirty"):
+        colour = (_colour_search(world, lit, foliage, change.recoloured) if change.recoloured
+                  else None)
+        dirty, tested = (_colour_sampled(lit.context, colour, search.texels, resolved)
+                         if colour else (0, 0))
         if len(moved):
-            moved_reach(scene, start, lit, stored, search, hidden)
-        if change.recoloured:
-            tris = np.flatnonzero(np.isin(world.tri_material, change.recoloured))
-            a, b, c = world.corners(tris)
-            corners = np.stack([a, b, c], axis=1)
-            box = ([(corners.reshape(-1, 3).min(0), corners.reshape(-1, 3).max(0))]
-                   if len(tris) else [])
-            search.tested += mark_seen(lit.context, Changed([corners], world.center), box,
-                                       search.texels, search.reason, REASONS.index("colour"),
-                                       resolved, NotStopped(_obscurance_tracer(lit, foliage),
-                                                            np.isin(world.tri_material,
-                                                                    change.recoloured)))
+            moved_reach(scene, start, lit, stored, search, hidden, dirty)
+        elif colour:
+            search.modelled = afford(start.full_bake, dirty, tested - dirty, len(raw),
+                                     search.priced)
+        if colour:
+            search.tested += mark_seen(lit.context, *colour[:2], search.texels, search.reason,
+                                       REASONS.index("colour"), resolved, colour[2])
         chains = chain_corners(world)
         if (len(moved) or change.recoloured) and len(chains):
             # A ray that meets a mirror or glass goes on where the searches above do not follow:
@@ -120,6 +120,39 @@ def dirty_search(scene: Scene, start: Compared, lit: Lighting, stored: Stored,
     return search
 
 
+def _colour_search(world, lit: Lighting, foliage: Foliage | None, recoloured: list[int]
+                   ) -> tuple[Changed, list, NotStopped]:
+    """What the search for a recolour casts against (the ``recoloured`` materials' triangles
+    of ``world``), the box holding them (none without triangles) and its judge
+    (``NotStopped``), as ``reach.mark_seen`` takes them."""
+    changed = np.isin(world.tri_material, recoloured)
+    a, b, c = world.corners(np.flatnonzero(changed))
+    corners = np.stack([a, b, c], axis=1)
+    box = ([(corners.reshape(-1, 3).min(0), corners.reshape(-1, 3).max(0))]
+           if len(corners) else [])
+    return (Changed([corners], world.center), box,
+            NotStopped(_obscurance_tracer(lit, foliage), changed))
+
+
+def _colour_sampled(context, colour: tuple[Changed, list, NotStopped], texels,
+                    resolved) -> tuple[int, int]:
+    """How many of ``texels`` the recolour's search would find dirty and how many it would
+    test, from the search run on every k-th texel (about ``PRICE_SAMPLE``): what
+    ``cost.afford`` prices a recolour by, before the whole search. A recolour of what most
+    texels see (a room's walls, every crate) redoes most texels after a search that costs
+    about a trace: 2–2.3× a full bake, unpriced."""
+    count = len(texels)
+    if not count:
+        return 0, 0
+    rows = np.arange(0, count, max(1, count // PRICE_SAMPLE))
+    sample = take(texels, rows)
+    reason = np.full(len(rows), -1, np.int8)
+    mark_seen(context, *colour[:2], sample, reason, 0, resolved, colour[2])
+    tested = np.count_nonzero(near_boxes(sample, colour[1], resolved.d_max))
+    scale = count / len(rows)
+    return int(round(np.count_nonzero(reason >= 0) * scale)), int(round(tested * scale))
+
+
 def _obscurance_tracer(lit: Lighting, foliage: Foliage | None) -> Tracer:
     """Embree's scene obscurance rays are traced in: without the crowns' leaves with
     ``foliage`` (``foliage.Foliage.tracer``), else the whole scene."""
@@ -127,10 +160,12 @@ def _obscurance_tracer(lit: Lighting, foliage: Foliage | None) -> Tracer:
 
 
 def moved_reach(scene: Scene, start: Compared, lit: Lighting, stored: Stored,
-                search: Search, hidden: np.ndarray | None = None) -> None:
+                search: Search, hidden: np.ndarray | None = None, recoloured: int = 0) -> None:
     """Mark in ``search`` the texels moved nodes can reach: their own, those whose validity
     probes, obscurance rays or shadow rays meet them at their old or new place (obscurance
-    rays with the triangles ``hidden`` (T,) bool left out, as --foliage approx traced them)."""
+    rays with the triangles ``hidden`` (T,) bool left out, as --foliage approx traced them).
+    ``recoloured``: the texels a recolour in the same edit will redo, priced with the move's
+    (``_colour_sampled``)."""
     world, resolved, moved, tracer = start.world, start.resolved, start.moved, lit.tracer
     raw, texels, reason, old_validity = stored.raw, search.texels, search.reason, stored.validity
     own = np.isin(raw.instance(), moved)
@@ -144,8 +179,8 @@ def moved_reach(scene: Scene, start: Compared, lit: Lighting, stored: Stored,
     # Validity: tangent probes reach a few texel sides; hemisphere probes d_max.
     close = own | near_boxes(raw, boxes, 0.0)
     far = np.flatnonzero(near & ~close)
-    search.modelled = afford(start.full_bake, int(close.sum()), len(far), len(raw),
-                             search.priced)
+    search.modelled = afford(start.full_bake, int(close.sum()) + recoloured, len(far),
+                             len(raw), search.priced)
     small = Changed(old_corners + new_corners, world.center)
     before = world_before(scene, world, moved, instance_world)
     tracer_before, faces = Tracer(before), Faces(scene, world)
