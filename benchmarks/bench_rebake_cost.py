@@ -1,6 +1,7 @@
 """Benchmark: the rebake's cost model (``baker/rebake/cost.py``) against what rebakes take.
 
-For each edit — 1, 6, 20 or all 60 crates of a 12 × 3 × 12 m room moved 0.1 m, 1 or 4 of 9
+For each edit — 1, 6, 20 or all 60 crates of a 12 × 3 × 12 m room moved 0.1 m, one crate's
+material or the others' recoloured (priced by a sample of the colour search), 1 or 4 of 9
 big boxes moved, a tree's crown and trunk or the box beside it moved (``--foliage approx``),
 and, given ``--vase``, a flower of the Khronos GlassVaseFlowers moved 4 mm — the scene before
 is baked fully (default settings, its stage times recorded beside the state), then the edit is
@@ -47,6 +48,10 @@ def edits(folder: Path, vase: Path | None):
         yield (f"{count} of 60 crates moved", before,
                box_room(_shifted(crates, count), room=ROOM).save(folder / f"crates{count}.glb"),
                baker.Settings())
+    for material in ("accent", "crate"):  # one crate's colour, then every other crate's
+        yield (f"the {material} material recoloured", before,
+               box_room(crates, room=ROOM, colours={material: (0.2, 0.6, 0.3)}).save(
+                   folder / f"{material}.glb"), baker.Settings())
     big = grid_boxes(9, room=BIG_ROOM, size=1.2)
     before = box_room(big, room=BIG_ROOM).save(folder / "big.glb")
     for count in (1, 4):
