@@ -20,8 +20,10 @@ reach (its probes, and its rays that may meet the node, cast in the scene now an
 Fitted (least squares of the relative error) to what the search and rays of nine rebakes took
 at default settings on 2 shared cores (bench_rebake_cost.py: 1 to 60 of 60 crates moved, 1 or
 4 of 9 big boxes, a tree or the box beside it, a flower of GlassVaseFlowers, 0.3–70 % of the
-texels redone whole): within 0.69–1.32 of the time taken (3.5 and 1.0 before: 0.77–2.0, the
-vase's flower priced at twice its time). A rebake of a state measures what its own search and
+texels redone whole): the model 0.64–1.40 of the time taken over two runs (3.5 and 1.0
+before: 0.77–2.0, the vase's flower priced at twice its time). A recolour's texels found dirty
+by a sample of its search count as redone (``dirty._colour_sampled``): 1.28 and 1.73 of the
+time taken there. A rebake of a state measures what its own search and
 rays took against this model and records it (``rebake_measured``): the next rebake of that
 state scales the model by it (``afford``)."""
 
@@ -53,7 +55,7 @@ def rebake_cost(stages: dict[str, float], redone: float, reached: float
 
 def afford(full_bake: dict | None, redone: int, reached: int, texels: int,
            priced: bool = True) -> float | None:
-    """FullBake when a rebake of a move (``redone``, ``reached``: texel counts, as
+    """FullBake when a rebake of an edit (``redone``, ``reached``: texel counts, as
     ``rebake_cost`` takes their fractions of ``texels``) would cost more than a full bake
     from here, by the last full bake's stage times (no record of them: the rebake goes on),
     its search and rays scaled by what the last rebake of this state measured of them against

@@ -10,6 +10,7 @@ the move's cost is weighed on the way (``cost.afford``)."""
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import NamedTuple
 
 import numpy as np
 
@@ -81,7 +82,8 @@ def dirty_search(scene: Scene, start: Compared, lit: Lighting, stored: Stored,
                  priced: bool = True) -> Search:
     """Which texels the change can reach, and why (``REASONS``). With ``foliage``, obscurance
     rays are judged in the scene without the crowns' leaves, as they were traced; ``priced``:
-    a move whose rebake would cost more than a full bake is a FullBake (``cost.afford``)."""
+    an edit (a move, a recolour) whose rebake would cost more than a full bake is a FullBake
+    (``cost.afford``)."""
     hidden = None if foliage is None else foliage.hidden()
     world, resolved, change, moved = start.world, start.resolved, start.change, start.moved
     surfaces = surfaces_of(lit.context)
@@ -107,8 +109,9 @@ def dirty_search(scene: Scene, start: Compared, lit: Lighting, stored: Stored,
             search.modelled = afford(start.full_bake, dirty, tested - dirty, len(raw),
                                      search.priced)
         if colour:
-            search.tested += mark_seen(lit.context, *colour[:2], search.texels, search.reason,
-                                       REASONS.index("colour"), resolved, colour[2])
+            search.tested += mark_seen(lit.context, colour.changed, colour.boxes, search.texels,
+                                       search.reason, REASONS.index("colour"), resolved,
+                                       colour.judge)
         chains = chain_corners(world)
         if (len(moved) or change.recoloured) and len(chains):
             # A ray that meets a mirror or glass goes on where the searches above do not follow:
@@ -120,22 +123,29 @@ def dirty_search(scene: Scene, start: Compared, lit: Lighting, stored: Stored,
     return search
 
 
+class ColourSearch(NamedTuple):
+    """What the search for a recolour casts against (the recoloured materials' triangles),
+    the box holding them (none without triangles) and its judge, as ``reach.mark_seen`` takes
+    them."""
+
+    changed: Changed
+    boxes: list
+    judge: NotStopped
+
+
 def _colour_search(world, lit: Lighting, foliage: Foliage | None, recoloured: list[int]
-                   ) -> tuple[Changed, list, NotStopped]:
-    """What the search for a recolour casts against (the ``recoloured`` materials' triangles
-    of ``world``), the box holding them (none without triangles) and its judge
-    (``NotStopped``), as ``reach.mark_seen`` takes them."""
+                   ) -> ColourSearch:
+    """The ``ColourSearch`` of the ``recoloured`` materials of ``world``."""
     changed = np.isin(world.tri_material, recoloured)
     a, b, c = world.corners(np.flatnonzero(changed))
     corners = np.stack([a, b, c], axis=1)
     box = ([(corners.reshape(-1, 3).min(0), corners.reshape(-1, 3).max(0))]
            if len(corners) else [])
-    return (Changed([corners], world.center), box,
-            NotStopped(_obscurance_tracer(lit, foliage), changed))
+    return ColourSearch(Changed([corners], world.center), box,
+                        NotStopped(_obscurance_tracer(lit, foliage), changed))
 
 
-def _colour_sampled(context, colour: tuple[Changed, list, NotStopped], texels,
-                    resolved) -> tuple[int, int]:
+def _colour_sampled(context, colour: ColourSearch, texels, resolved) -> tuple[int, int]:
     """How many of ``texels`` the recolour's search would find dirty and how many it would
     test, from the search run on every k-th texel (about ``PRICE_SAMPLE``): what
     ``cost.afford`` prices a recolour by, before the whole search. A recolour of what most
@@ -147,8 +157,8 @@ def _colour_sampled(context, colour: tuple[Changed, list, NotStopped], texels,
     rows = np.arange(0, count, max(1, count // PRICE_SAMPLE))
     sample = take(texels, rows)
     reason = np.full(len(rows), -1, np.int8)
-    mark_seen(context, *colour[:2], sample, reason, 0, resolved, colour[2])
-    tested = np.count_nonzero(near_boxes(sample, colour[1], resolved.d_max))
+    mark_seen(context, colour.changed, colour.boxes, sample, reason, 0, resolved, colour.judge)
+    tested = np.count_nonzero(near_boxes(sample, colour.boxes, resolved.d_max))
     scale = count / len(rows)
     return int(round(np.count_nonzero(reason >= 0) * scale)), int(round(tested * scale))
 

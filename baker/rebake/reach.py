@@ -98,7 +98,7 @@ def rays_meet(changed: Changed, texels: Texels, rows: np.ndarray, settings,
             settings.d_max)
         if not len(texel):
             return
-        # One ray per "texel" (rays=1): the same bits as the texel's own ray in a bake.
+        # Each drawn ray from its texel's sample point: the bits of that ray in a bake.
         origins, directions = world_rays(texels, chosen, texel, x, y, z, changed.center)
         met = changed.cast_local(origins, directions,
                                  np.full(len(origins), settings.d_max, np.float32))
