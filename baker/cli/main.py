@@ -20,6 +20,7 @@ from typing import Iterator
 
 import baker
 from baker.cli import INTERRUPTED, started
+from baker.run.allocator import keep_freed_memory
 from baker.run.interruptible import raise_interrupt
 
 SUBCOMMANDS = ("bake", "rebake", "relight", "watch", "hook", "preview", "view", "plugin", "study")
@@ -144,8 +145,10 @@ def entry() -> int:
     interpreter's shutdown. Every object the command made is then frozen out of the cyclic
     garbage collector (``gc.freeze``): the shutdown's collections do not walk them (numba's
     types and kernels: 0.1 s of a bake's exit, more than its compose stage), and memory goes
-    back to the system with the process."""
+    back to the system with the process. The C allocator keeps what the stages free for the
+    next stage's arrays (``run.allocator``)."""
     started()
+    keep_freed_memory()
     try:
         return main()
     except KeyboardInterrupt:
