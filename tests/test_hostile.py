@@ -674,7 +674,10 @@ def _started_as(tmp_path, name: str, ignore_sigint: bool = False):
     done = subprocess.run(
         [sys.executable, str(script), "--version"], cwd=root, capture_output=True, text=True,
         env=dict(os.environ, PYTHONPATH=str(root)),
-        preexec_fn=(lambda: signal.signal(signal.SIGINT, signal.SIG_IGN)) if ignore_sigint else None)
+        # ignored as a background job's, or at its default as a terminal's foreground job's,
+        # whatever the suite was started with
+        preexec_fn=lambda: signal.signal(signal.SIGINT,
+                                         signal.SIG_IGN if ignore_sigint else signal.SIG_DFL))
     return done.returncode, done.stderr
 
 

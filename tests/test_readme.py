@@ -135,8 +135,11 @@ def run(kind: str, command: str, folder: Path, env: dict) -> subprocess.Complete
     if ready is None:
         return subprocess.run(argv, cwd=folder, env=env, capture_output=True, text=True,
                               timeout=600)
+    # SIGINT at its default, as a terminal's foreground job has it, even where the suite was
+    # started with it ignored (a background job of a shell script)
     process = subprocess.Popen(argv, cwd=folder, env=env, stdout=subprocess.PIPE,
-                               stderr=subprocess.PIPE, text=True, start_new_session=True)
+                               stderr=subprocess.PIPE, text=True, start_new_session=True,
+                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     lines, served = [], True
     for line in process.stdout:
         lines.append(line)
