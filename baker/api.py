@@ -189,8 +189,8 @@ def bake(input: str | os.PathLike, output: str | os.PathLike, settings: Settings
             times["load"] += load_seconds
             # closing(): the rows the state is written from (parts.py), if on disk, are
             # removed once the state is written.
-            with closing(done.per_texel), timed(times, "write"), \
-                    log.stage("write", "steps") as steps:
+            clock = timed(times, "write")
+            with closing(done.per_texel), log.stage("write", "steps", clock) as steps, clock:
                 pages, info = _written(done, output, files, outputs, steps)
                 if staging is not None:
                     staging.stage_into(outputs)

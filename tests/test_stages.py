@@ -56,3 +56,24 @@ def test_a_failing_stage_abandons_the_work_and_runs_nothing_after(capsys):
         run_stages(stages, _Work(abandoned=abandoned), StageLines(True))
     assert abandoned == ["first"]  # the work as the failing stage was given it
     assert [line.split(" ")[1] for line in capsys.readouterr().err.splitlines()] == ["first"]
+
+
+def test_a_stage_line_prints_the_seconds_its_report_key_gets(capsys, monkeypatch):
+    """One clock for both: a stage's line and its key of ``stage_seconds`` agree to the line's
+    two decimals even when the machine stalls between the stage's end and its line's (here
+    a slow stderr: each write takes 0.05 s), as it did when each had its own clock."""
+    import time
+
+    write = StageLines._write
+
+    def slow(text):
+        time.sleep(0.05)
+        write(text)
+
+    monkeypatch.setattr(StageLines, "_write", staticmethod(slow))
+    stages = (Stage("first", _did("first"), "one"), Stage("second", _did("second"), "two"))
+    work = run_stages(stages, _Work(), StageLines(True))
+    printed = [float(re.search(r" (\d+\.\d\d) s$", line).group(1))
+               for line in capsys.readouterr().err.splitlines()]
+    assert printed == [round(work.times["one"], 2), round(work.times["two"], 2)]
+    assert work.times["one"] < 0.04  # the stage's own time, no line's write in it

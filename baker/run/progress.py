@@ -256,11 +256,13 @@ class StageLines:
         self._live = show and wanted(False)  # a terminal: the line shows while the stage runs
 
     @contextmanager
-    def stage(self, name: str, unit: str = "") -> Iterator[Steps]:
-        """Print ``baker: NAME S s`` when the block ends (S: its wall seconds); on a terminal
-        ``baker: NAME …`` from its start, and the bar of the ``Steps`` yielded (counted in
-        ``unit``) once it has run ``Steps.DELAY``. A block ended by an error prints no time
-        (on a terminal its line is ended, so that the error starts a line of its own)."""
+    def stage(self, name: str, unit: str = "", clock=None) -> Iterator[Steps]:
+        """Print ``baker: NAME S s`` when the block ends (S: its wall seconds, or the
+        ``seconds`` of ``clock``, the block's own timer, ended inside it: the report's figure,
+        not a second clock's that a busy machine can set apart); on a terminal ``baker: NAME
+        …`` from its start, and the bar of the ``Steps`` yielded (counted in ``unit``) once it
+        has run ``Steps.DELAY``. A block ended by an error prints no time (on a terminal its
+        line is ended, so that the error starts a line of its own)."""
         if not self.show:
             yield Steps()
             return
@@ -276,7 +278,7 @@ class StageLines:
                 self._write("\n")
             raise
         steps.close()
-        seconds = time.perf_counter() - started
+        seconds = time.perf_counter() - started if clock is None else clock.seconds
         self._write(("\r\x1b[K" if self._live else "") + f"baker: {name} {seconds:.2f} s\n")
 
     @staticmethod

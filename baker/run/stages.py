@@ -12,23 +12,34 @@ list reads as the bake's outline; the plumbing is here once, not around every st
 from __future__ import annotations
 
 import time
-from contextlib import contextmanager, nullcontext
+from contextlib import nullcontext
 from dataclasses import dataclass
-from typing import Callable, Generic, Iterator, Protocol, Sequence, TypeVar
+from typing import Callable, Generic, Protocol, Sequence, TypeVar
 
 from baker.run.interruptible import check_interrupted
 from baker.run.progress import StageLines, Steps
 
 
-@contextmanager
-def timed(times: dict[str, float], name: str) -> Iterator[None]:
-    """Add the wall time of the block to ``times[name]``, in seconds. An interrupt some code
-    swallowed is raised again as the block starts and ends (``run.interruptible``)."""
-    check_interrupted()
-    start = time.perf_counter()
-    yield
-    times[name] = times.get(name, 0.0) + time.perf_counter() - start
-    check_interrupted()
+class timed:
+    """Adds the wall time of a ``with`` block to ``times[name]``, in seconds, and keeps it as
+    ``seconds`` (a stage's line prints it: one clock for the line and the report). A block
+    ended by an error adds nothing. An interrupt some code swallowed is raised again as the
+    block starts and ends (``run.interruptible``)."""
+
+    def __init__(self, times: dict[str, float], name: str):
+        self._times, self._name = times, name
+        self.seconds = 0.0
+
+    def __enter__(self) -> "timed":
+        check_interrupted()
+        self._start = time.perf_counter()
+        return self
+
+    def __exit__(self, kind, *_) -> None:
+        if kind is None:
+            self.seconds = time.perf_counter() - self._start
+            self._times[self._name] = self._times.get(self._name, 0.0) + self.seconds
+            check_interrupted()
 
 
 class Work(Protocol):
@@ -73,10 +84,10 @@ def run_stages(stages: Sequence[Stage[W]], work: W, lines: StageLines) -> W:
         if stage.when is not None and not stage.when(work):
             continue
         line = f"{stage.name} ({stage.detail(work)})" if stage.detail else stage.name
-        clock = nullcontext() if stage.seconds is None else timed(work.times, stage.seconds)
+        clock = None if stage.seconds is None else timed(work.times, stage.seconds)
         try:
-            with clock, (lines.stage(line, stage.unit) if stage.shown
-                         else nullcontext(Steps())) as steps:
+            with (lines.stage(line, stage.unit, clock) if stage.shown
+                  else nullcontext(Steps())) as steps, clock or nullcontext():
                 work = stage.run(work, steps) if stage.unit else stage.run(work)
         except BaseException:
             work.abandon()
