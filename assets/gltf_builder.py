@@ -21,22 +21,27 @@ from __future__ import annotations
 
 import copy
 import io
+import json
 import math
 import os
-import struct
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
-import pygltflib
+
+from baker.gltf import document as gltf_document
+from baker.gltf import objects
+from baker.gltf.container import read_document
+from baker.output.write import glb_file
 
 GENERATOR = "baker assets"
 
-_FLOAT = pygltflib.FLOAT
-_UINT = pygltflib.UNSIGNED_INT
-_ARRAY_BUFFER = pygltflib.ARRAY_BUFFER
-_ELEMENT_ARRAY_BUFFER = pygltflib.ELEMENT_ARRAY_BUFFER
-_TYPES = {1: pygltflib.SCALAR, 2: pygltflib.VEC2, 3: pygltflib.VEC3, 4: pygltflib.VEC4}
+_FLOAT = 5126  # accessor componentType (glTF §3.6.2.2)
+_UINT = 5125
+_ARRAY_BUFFER = 34962  # buffer view targets
+_ELEMENT_ARRAY_BUFFER = 34963
+_TYPES = {1: "SCALAR", 2: "VEC2", 3: "VEC3", 4: "VEC4"}
+_LINEAR, _LINEAR_MIPMAP_LINEAR = 9729, 9987  # sampler filters
 
 Shape = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
@@ -52,14 +57,14 @@ class GltfBuilder:
 
     def __init__(self) -> None:
         self._blob = bytearray()
-        self._buffer_views: list[pygltflib.BufferView] = []
-        self._accessors: list[pygltflib.Accessor] = []
-        self._materials: list[pygltflib.Material] = []
-        self._meshes: list[pygltflib.Mesh] = []
-        self._nodes: list[pygltflib.Node] = []
-        self._images: list[pygltflib.Image] = []
-        self._textures: list[pygltflib.Texture] = []
-        self._samplers: list[pygltflib.Sampler] = []
+        self._buffer_views: list[objects.BufferView] = []
+        self._accessors: list[objects.Accessor] = []
+        self._materials: list[objects.Material] = []
+        self._meshes: list[objects.Mesh] = []
+        self._nodes: list[objects.Node] = []
+        self._images: list[objects.Image] = []
+        self._textures: list[objects.Texture] = []
+        self._samplers: list[objects.Sampler] = []
         self._extensions_used: set[str] = set()
         self._child_nodes: set[int] = set()
         self._roots: list[int] | None = None
@@ -71,7 +76,7 @@ class GltfBuilder:
     def _view(self, data: bytes, target: int | None) -> int:
         """Append ``data`` to the buffer (4-byte aligned) as a new bufferView; return its index."""
         self._blob.extend(b"\0" * (-len(self._blob) % 4))
-        view = pygltflib.BufferView(buffer=0, byteOffset=len(self._blob), byteLength=len(data))
+        view = objects.BufferView(buffer=0, byteOffset=len(self._blob), byteLength=len(data))
         if target is not None:
             view.target = target
         self._blob.extend(data)
@@ -82,7 +87,7 @@ class GltfBuilder:
         """A float32 vertex-attribute accessor for ``values`` (n, k); min/max when ``bounds``."""
         array = np.ascontiguousarray(values, dtype="<f4")
         count, width = array.shape
-        accessor = pygltflib.Accessor(
+        accessor = objects.Accessor(
             bufferView=self._view(array.tobytes(), _ARRAY_BUFFER),
             componentType=_FLOAT,
             count=count,
@@ -98,11 +103,11 @@ class GltfBuilder:
     def _index_accessor(self, triangles: np.ndarray) -> int:
         flat = np.ascontiguousarray(triangles, dtype="<u4").reshape(-1)
         self._accessors.append(
-            pygltflib.Accessor(
+            objects.Accessor(
                 bufferView=self._view(flat.tobytes(), _ELEMENT_ARRAY_BUFFER),
                 componentType=_UINT,
                 count=int(flat.size),
-                type=pygltflib.SCALAR,
+                type=_TYPES[1],
             )
         )
         return len(self._accessors) - 1
@@ -119,17 +124,17 @@ class GltfBuilder:
         png = io.BytesIO()
         PILImage.fromarray(np.ascontiguousarray(pixels), "RGBA" if pixels.shape[2] == 4 else "RGB").save(png, "PNG")
         view = self._view(png.getvalue(), None)
-        self._images.append(pygltflib.Image(bufferView=view, mimeType="image/png", name=name))
+        self._images.append(objects.Image(bufferView=view, mimeType="image/png", name=name))
         if not self._samplers:
             self._samplers.append(
-                pygltflib.Sampler(
-                    magFilter=pygltflib.LINEAR,
-                    minFilter=pygltflib.LINEAR_MIPMAP_LINEAR,
-                    wrapS=pygltflib.REPEAT,
-                    wrapT=pygltflib.REPEAT,
+                objects.Sampler(
+                    magFilter=_LINEAR,
+                    minFilter=_LINEAR_MIPMAP_LINEAR,
+                    wrapS=objects.REPEAT,
+                    wrapT=objects.REPEAT,
                 )
             )
-        self._textures.append(pygltflib.Texture(sampler=0, source=len(self._images) - 1, name=name))
+        self._textures.append(objects.Texture(sampler=0, source=len(self._images) - 1, name=name))
         return len(self._textures) - 1
 
     def material(
@@ -166,12 +171,12 @@ class GltfBuilder:
             raise ValueError(f"base_color must have 3 or 4 components, got {len(color)}")
         if alpha_mode not in ("OPAQUE", "MASK", "BLEND"):
             raise ValueError(f"alpha_mode must be OPAQUE, MASK or BLEND, got {alpha_mode!r}")
-        pbr = pygltflib.PbrMetallicRoughness(
+        pbr = objects.PbrMetallicRoughness(
             baseColorFactor=color, metallicFactor=float(metallic), roughnessFactor=float(roughness)
         )
         if base_color_image is not None:
-            pbr.baseColorTexture = pygltflib.TextureInfo(index=self._image_texture(base_color_image, name))
-        mat = pygltflib.Material(
+            pbr.baseColorTexture = objects.TextureInfo(index=self._image_texture(base_color_image, name))
+        mat = objects.Material(
             name=name,
             pbrMetallicRoughness=pbr,
             emissiveFactor=[float(c) for c in emissive],
@@ -181,7 +186,7 @@ class GltfBuilder:
         if alpha_cutoff is not None:
             mat.alphaCutoff = float(alpha_cutoff)
         if normal_image is not None:
-            mat.normalTexture = pygltflib.NormalMaterialTexture(
+            mat.normalTexture = objects.NormalMaterialTexture(
                 index=self._image_texture(normal_image, f"{name} normals"),
                 scale=None if normal_scale is None else float(normal_scale))
         exts: dict[str, Any] = {}
@@ -226,7 +231,7 @@ class GltfBuilder:
             raise ValueError(f"{name}: triangles must be (m, 3) integers, got {triangles.dtype} {triangles.shape}")
         if triangles.size and (triangles.min() < 0 or triangles.max() >= n):
             raise ValueError(f"{name}: triangle indices must lie in [0, {n})")
-        attributes = pygltflib.Attributes(POSITION=self._float_accessor(positions, bounds=True))
+        attributes = objects.Attributes(POSITION=self._float_accessor(positions, bounds=True))
         for key, values, widths in (
             ("NORMAL", normals, (3,)),
             ("TEXCOORD_0", uv0, (2,)),
@@ -240,14 +245,14 @@ class GltfBuilder:
             if values.ndim != 2 or values.shape[0] != n or values.shape[1] not in widths:
                 raise ValueError(f"{name}: {key} must be ({n}, {'|'.join(map(str, widths))}), got {values.shape}")
             setattr(attributes, key, self._float_accessor(values))
-        primitive = pygltflib.Primitive(
-            attributes=attributes, indices=self._index_accessor(triangles), mode=pygltflib.TRIANGLES
+        primitive = objects.Primitive(
+            attributes=attributes, indices=self._index_accessor(triangles), mode=objects.TRIANGLES
         )
         if material is not None:
             if not 0 <= material < len(self._materials):
                 raise ValueError(f"{name}: no material {material}")
             primitive.material = material
-        self._meshes.append(pygltflib.Mesh(name=name, primitives=[primitive]))
+        self._meshes.append(objects.Mesh(name=name, primitives=[primitive]))
         return len(self._meshes) - 1
 
     def shape_mesh(self, name: str, shape: Shape, **kwargs: Any) -> int:
@@ -279,7 +284,7 @@ class GltfBuilder:
             raise ValueError(f"{name}: give either matrix or translation/rotation/scale, not both")
         if mesh is not None and not 0 <= mesh < len(self._meshes):
             raise ValueError(f"{name}: no mesh {mesh}")
-        node = pygltflib.Node(name=name, mesh=mesh)
+        node = objects.Node(name=name, mesh=mesh)
         if translation is not None:
             node.translation = [float(v) for v in translation]
         if rotation is not None:
@@ -350,24 +355,24 @@ class GltfBuilder:
 
     # ------------------------------------------------------------------ output
 
-    def document(self, bin_uri: str | None = None) -> pygltflib.GLTF2:
-        """The asset as a pygltflib document; its single buffer has ``bin_uri`` (None: GLB chunk).
+    def document(self, bin_uri: str | None = None) -> objects.GLTF2:
+        """The asset as a document of glTF objects; its single buffer has ``bin_uri`` (None: GLB chunk).
 
         The buffer's bytes are ``self.binary()``; the document is built afresh on every call.
         """
         roots = self._roots if self._roots is not None else [
             i for i in range(len(self._nodes)) if i not in self._child_nodes
         ]
-        doc = pygltflib.GLTF2(
-            asset=pygltflib.Asset(version="2.0", generator=GENERATOR),
+        doc = objects.GLTF2(
+            asset=objects.Asset(version="2.0", generator=GENERATOR),
             scene=0,
-            scenes=[pygltflib.Scene(nodes=roots)],
+            scenes=[objects.Scene(nodes=roots)],
             nodes=_copy(self._nodes),
             meshes=_copy(self._meshes),
             materials=_copy(self._materials),
             accessors=_copy(self._accessors),
             bufferViews=_copy(self._buffer_views),
-            buffers=[pygltflib.Buffer(byteLength=len(self.binary()), uri=bin_uri)] if self._blob else [],
+            buffers=[objects.Buffer(byteLength=len(self.binary()), uri=bin_uri)] if self._blob else [],
             images=_copy(self._images),
             textures=_copy(self._textures),
             samplers=_copy(self._samplers),
@@ -376,6 +381,10 @@ class GltfBuilder:
         if self._lights:
             doc.extensions = {"KHR_lights_punctual": {"lights": copy.deepcopy(self._lights)}}
         return doc
+
+    def json_data(self, bin_uri: str | None = None) -> dict:
+        """The asset's glTF JSON data (``document`` written as JSON gives the file's text)."""
+        return gltf_document.data(self.document(bin_uri))
 
     def binary(self) -> bytes:
         """The buffer's bytes, padded to a multiple of 4."""
@@ -392,8 +401,8 @@ class GltfBuilder:
             _write_atomic(path, self.glb_bytes())
         elif suffix == ".gltf":
             bin_name = path.stem + ".bin"
-            doc = self.document(bin_uri=bin_name if self._blob else None)
-            text = doc.gltf_to_json(indent=2) + "\n"
+            data = self.json_data(bin_uri=bin_name if self._blob else None)
+            text = json.dumps(data, indent=2) + "\n"
             if self._blob:
                 _write_atomic(path.with_name(bin_name), self.binary())
             _write_atomic(path, text.encode("utf-8"))
@@ -403,14 +412,16 @@ class GltfBuilder:
 
     def glb_bytes(self) -> bytes:
         """The asset as GLB bytes (header, JSON chunk padded with spaces, BIN chunk)."""
-        doc = self.document()
-        json_chunk = doc.gltf_to_json(separators=(",", ":"), indent=None).encode("utf-8")
-        json_chunk += b" " * (-len(json_chunk) % 4)
-        chunks = struct.pack("<II", len(json_chunk), 0x4E4F534A) + json_chunk
-        if self._blob:
-            blob = self.binary()
-            chunks += struct.pack("<II", len(blob), 0x004E4942) + blob
-        return struct.pack("<4sII", b"glTF", 2, 12 + len(chunks)) + chunks
+        return glb_file(self.json_data(), self.binary())
+
+
+def edited_glb(source: Path, edit: Callable[[objects.GLTF2], None], target: Path) -> Path:
+    """The .glb ``source`` with ``edit`` applied to its document (read by baker), written as
+    the .glb ``target``; returns ``target``."""
+    document = read_document(source)
+    edit(document)
+    _write_atomic(Path(target), glb_file(gltf_document.data(document), document.binary_blob()))
+    return Path(target)
 
 
 def _copy(items: list[Any]) -> list[Any]:

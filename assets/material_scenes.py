@@ -8,10 +8,10 @@ normal +Y.
 from __future__ import annotations
 
 import numpy as np
-import pygltflib
 
 from assets.gltf_builder import (GltfBuilder, box, box_face, quad, rotation_matrix, transformed,
                                  uv_sphere)
+from baker.gltf import objects
 
 # The extensions' own sample values (their README examples in the Khronos glTF repository).
 TRANSMISSION = {"KHR_materials_transmission": {"transmissionFactor": 1.0},
@@ -195,7 +195,7 @@ def metal_glass_room() -> GltfBuilder:
     halves[..., 1] = 160  # roughness 0.63
     halves[:, :4, 2] = 255  # metal on the left half (u < 0.5)
     mixed = b.material("mixed", (0.9, 0.6, 0.5), metallic=1.0, roughness=1.0)
-    b._materials[mixed].pbrMetallicRoughness.metallicRoughnessTexture = pygltflib.TextureInfo(
+    b._materials[mixed].pbrMetallicRoughness.metallicRoughnessTexture = objects.TextureInfo(
         index=b._image_texture(halves, "mixed metal roughness"))
     nodes = {}
     walls = {"floor": ("-y", white), "ceiling": ("+y", white), "left": ("-x", red),

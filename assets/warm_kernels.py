@@ -27,6 +27,7 @@ sys.path.append(str(Path(__file__).resolve().parent.parent))  # assets/, after t
 import baker  # noqa: E402
 from assets.compile_kernels import compile_ahead  # noqa: E402
 from assets.foliage_scenes import tree  # noqa: E402
+from assets.gltf_builder import edited_glb  # noqa: E402
 from assets.light_scenes import normal_mapped_floor  # noqa: E402
 from assets.make_scenes import cornell_box, vase_room  # noqa: E402
 from assets.rebake_scenes import box_room, grid_boxes, moved  # noqa: E402
@@ -51,13 +52,9 @@ def _unmarked(baked: Path) -> Path:
     """A bake's output as a scene with authored lightmap UVs (its TEXCOORD_1), for ``--uv 1``:
     without the ``asset.extras.baker`` mark that makes a bake refuse it
     (``Scene.check_not_a_bake``)."""
-    import pygltflib
-
-    document = pygltflib.GLTF2().load(str(baked))
-    del document.asset.extras["baker"]
-    authored = baked.with_name("authored_uv.glb")
-    document.save(str(authored))
-    return authored
+    def unmark(document) -> None:
+        del document.asset.extras["baker"]
+    return edited_glb(baked, unmark, baked.with_name("authored_uv.glb"))
 
 
 def warm(folder: Path) -> None:

@@ -25,10 +25,9 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-import pygltflib  # noqa: E402
-
 import baker  # noqa: E402
 from assets.foliage_scenes import tree_and_boxes  # noqa: E402
+from assets.gltf_builder import edited_glb  # noqa: E402
 from assets.rebake_scenes import box_room, grid_boxes  # noqa: E402
 
 ROOM, BIG_ROOM = (12.0, 3.0, 12.0), (6.0, 3.0, 6.0)
@@ -65,13 +64,12 @@ def edits(folder: Path, vase: Path | None):
     yield ("box by the tree moved", before,
            tree_and_boxes({"near": (2.3, 0.25, 0.3)}).save(folder / "near.glb"), foliage)
     if vase is not None:
-        gltf = pygltflib.GLTF2().load(str(vase))
-        node = gltf.nodes[0]
-        node.translation = [*(node.translation or [0.0, 0.0, 0.0])]
-        node.translation[0] += 0.004
-        gltf.save(str(folder / "vase_moved.glb"))  # a .glb: it holds all its data
-        yield f"{vase.stem}: {node.name} moved 4 mm", vase, folder / "vase_moved.glb", \
-            baker.Settings()
+        def move(document) -> None:
+            node = document.nodes[0]
+            node.translation = [*(node.translation or [0.0, 0.0, 0.0])]
+            node.translation[0] += 0.004
+        moved = edited_glb(vase, move, folder / "vase_moved.glb")  # a .glb: it holds all its data
+        yield f"{vase.stem}: the first node moved 4 mm", vase, moved, baker.Settings()
 
 
 def main() -> None:

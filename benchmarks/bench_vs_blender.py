@@ -91,6 +91,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from assets.gltf_builder import edited_glb  # noqa: E402
 from assets.make_scenes import cornell_box  # noqa: E402
 from assets.many_objects import boxes_and_sphere  # noqa: E402
 from bench_fixed_cost import compile_bytecode  # noqa: E402
@@ -171,11 +172,10 @@ def make_scene(name: str, folder: Path) -> Path:
     """The scene saved as a .glb in ``folder``; the Cornell room's lamp without emission."""
     path = SCENES[name][1]().save(folder / f"{name}.glb")
     if name == "cornell":
-        import pygltflib
-        document = pygltflib.GLTF2().load(str(path))
-        for material in document.materials:
-            material.emissiveFactor = [0.0, 0.0, 0.0]
-        document.save(str(path))
+        def lamp_off(document) -> None:
+            for material in document.materials:
+                material.emissiveFactor = [0.0, 0.0, 0.0]
+        edited_glb(path, lamp_off, path)
     return Path(path)
 
 

@@ -8,6 +8,7 @@ from pathlib import Path
 from baker.atlas.rasterise import Texels, cover, texels_of
 from baker.image.compose import Lightmaps, blank, compose_into
 from baker.pipeline.full import Computed, compute
+from baker.gltf import document as gltf_document
 from baker.gltf.load import load
 from baker.gltf.scene import Scene
 from baker.settings import Settings
@@ -61,12 +62,13 @@ def composed(done: Computed, direct=None, visibility: bool = True) -> Lightmaps:
 
 
 def carried(material) -> dict | None:
-    """What carries the bake on a material of a baked file (pygltflib Material or its JSON
-    dict), whichever the carrier: {"index": texture, "texCoord": n, "transform": its
+    """What carries the bake on a material of a baked file (a pygltflib or baker Material, or
+    its JSON dict), whichever the carrier: {"index": texture, "texCoord": n, "transform": its
     KHR_texture_transform or None}, from its MOZ_lightmap or, for a lightmap copy of the
     emissive carrier ("… (lightmap page p)"), its emissiveTexture; None for a material that
     carries none. ``page_uv`` maps the UVs it reads to the page's."""
-    data = material if isinstance(material, dict) else material.to_dict()
+    data = (material if isinstance(material, dict) else material.to_dict()
+            if hasattr(material, "to_dict") else gltf_document.data(material))
     extension = (data.get("extensions") or {}).get("MOZ_lightmap")
     if extension is not None:
         return {"index": extension["index"], "texCoord": extension.get("texCoord", 0),

@@ -637,25 +637,24 @@ def test_lights_punctual_lamp_reads_external_images():
     assert len(scene.document.extensions["KHR_lights_punctual"]["lights"]) == 5
 
 
-def _same_objects(a, b, path="document"):
-    """Assert a and b (pygltflib objects, lists, dicts, scalars) equal, types included (1 and
-    1.0 are not the same here)."""
-    assert type(a) is type(b), f"{path}: {type(a).__name__} vs {type(b).__name__}"
-    if dataclasses.is_dataclass(a):
-        for f in dataclasses.fields(a):
-            _same_objects(getattr(a, f.name), getattr(b, f.name), f"{path}.{f.name}")
-    elif isinstance(a, pygltflib.Attributes):
-        _same_objects(a.__dict__, b.__dict__, f"{path}.attributes")
-    elif isinstance(a, dict):
-        assert list(a) == list(b), path
-        for key in a:
-            _same_objects(a[key], b[key], f"{path}[{key!r}]")
-    elif isinstance(a, list):
-        assert len(a) == len(b), path
-        for i, (x, y) in enumerate(zip(a, b)):
-            _same_objects(x, y, f"{path}[{i}]")
+def _kept(raw, made, path="document"):
+    """Assert every value of the glTF JSON ``raw`` is in ``made`` as it was: keys kept, lists
+    item by item, numbers equal by value (1 and 1.0 alike), other values equal."""
+    if isinstance(raw, dict):
+        assert isinstance(made, dict), path
+        for key, value in raw.items():
+            if value == {} and key in ("extensions", "extras"):
+                continue  # an empty extensions or extras object says nothing
+            assert key in made, f"{path}.{key} lost"
+            _kept(value, made[key], f"{path}.{key}")
+    elif isinstance(raw, list):
+        assert isinstance(made, list) and len(made) == len(raw), path
+        for i, (x, y) in enumerate(zip(raw, made)):
+            _kept(x, y, f"{path}[{i}]")
+    elif isinstance(raw, (int, float)) and not isinstance(raw, bool):
+        assert type(made) in (int, float) and made == raw, f"{path}: {raw!r} vs {made!r}"
     else:
-        assert a == b, f"{path}: {a!r} vs {b!r}"
+        assert type(made) is type(raw) and made == raw, f"{path}: {raw!r} vs {made!r}"
 
 
 def _document_text(path: Path) -> str:
@@ -682,43 +681,17 @@ def _document_paths(name: str, tmp_path: Path) -> list[Path]:
 
 
 @pytest.mark.parametrize("name", ["shared", "cornell", "baked"])
-def test_documents_parse_as_pygltflib_parses_them(name, tmp_path):
-    """The document made directly from the JSON (``gltf_document.document``) equals
-    pygltflib's own, field by field and type by type."""
-    from baker.gltf import document as gltf_document
-
-    for path in _document_paths(name, tmp_path):
-        text = _document_text(path)
-        _same_objects(gltf_document.document(json.loads(text)),
-                      pygltflib.GLTF2.gltf_from_json(text), path.name)
-
-
-def _cleaned(value):
-    """pygltflib.gltf_asdict's data with None and empty properties dropped, but extensions and
-    extras kept unless {} (the rule ``gltf_document.data`` follows)."""
-    if isinstance(value, dict):
-        out = {}
-        for key, item in value.items():
-            if item is None or (key in ("extensions", "extras") and item == {}):
-                continue
-            item = item if key in ("extensions", "extras") else _cleaned(item)
-            if key in ("extensions", "extras") or not (isinstance(item, (dict, list)) and not item):
-                out[key] = item
-        return out
-    return [_cleaned(item) for item in value] if isinstance(value, list) else value
-
-
-@pytest.mark.parametrize("name", ["shared", "baked"])
-def test_document_data_is_pygltflib_data_cleaned(name, tmp_path):
-    """``gltf_document.data`` (the writer's JSON data) equals pygltflib's ``gltf_asdict``
-    cleaned, types included, and shares nothing with the document (a deep copy)."""
+def test_a_document_written_back_keeps_every_value_of_the_file(name, tmp_path):
+    """A document read from a file's JSON and turned back into JSON data (what the writer
+    starts from) keeps every value the file has, of every object; the data shares nothing with
+    the document (a deep copy)."""
     from baker.gltf import document as gltf_document
     from baker.gltf.container import read_document
 
     for path in _document_paths(name, tmp_path):
         document = read_document(path)
         made = gltf_document.data(document)
-        _same_objects(made, _cleaned(pygltflib.gltf_asdict(document)), path.name)
+        _kept(json.loads(_document_text(path)), made, path.name)
         if made.get("nodes"):
             made["nodes"][0]["name"] = "changed"
             made["nodes"][0].setdefault("extras", {})["k"] = 1
@@ -726,32 +699,52 @@ def test_document_data_is_pygltflib_data_cleaned(name, tmp_path):
             assert "k" not in (document.nodes[0].extras or {})
 
 
-def test_documents_with_odd_values_parse_as_pygltflib_parses_them():
-    """Ints for floats are floats, unknown keys are dropped, null stays None; a value of
-    another JSON type than its field's (a float for an index, a string for a number) is left
-    to pygltflib, which decides what it means."""
+def test_a_document_is_read_by_its_fields_json_types(tmp_path):
+    """Ints for floats are floats, integral floats for indices are ints, keys glTF does not
+    define are dropped, null stays None, defaults are the spec's; a value of another JSON type
+    than its field's (a fractional index, a number for a name, a string in a vector) is an
+    error naming where it is and saying what glTF expects there."""
     from baker.gltf import document as gltf_document
-    from baker.gltf.container import _document_from_json
 
     nodes = [{"name": "a", "mesh": 0, "translation": [1, 2, 3], "rotation": [0, 0, 0, 1]},
-             {"children": [0], "scale": [2, 2.5, 1], "extras": {"k": 1}, "weights": [0.5]},
+             {"children": [0.0], "scale": [2, 2.5, 1], "extras": {"k": 1}, "weights": [0.5],
+              "unknown": 1},
              {"matrix": [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1], "camera": None,
               "extensions": {"KHR_lights_punctual": {"light": 0}}}]
     raw = {"asset": {"version": "2.0"}, "nodes": nodes, "scene": 0,
+           "accessors": [{"componentType": 5126.0, "count": 3, "type": "VEC3"}],
            "materials": [{"pbrMetallicRoughness": {"baseColorFactor": [1, 0.5, 0, 1],
                                                    "metallicFactor": 0}, "alphaCutoff": 1}],
            "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "_CUSTOM": 1},
                                        "targets": [{"POSITION": 2}]}]}]}
-    text = json.dumps(raw)
-    fast = gltf_document.document(json.loads(text))
-    _same_objects(fast, pygltflib.GLTF2.gltf_from_json(text))
-    assert fast.nodes[0].translation == [1.0, 2.0, 3.0] and fast.materials[0].alphaCutoff == 1.0
-    for odd in ({"mesh": 1.0}, {"name": 3}, {"translation": ["1", 2, 3]}):
-        raw_odd = dict(raw, nodes=[*nodes, dict(nodes[0], **odd)])
-        with pytest.raises(gltf_document.NotPlain):
-            gltf_document.document(raw_odd)
-        text = json.dumps(raw_odd)
-        _same_objects(_document_from_json(text, raw_odd), pygltflib.GLTF2.gltf_from_json(text))
+    document = gltf_document.document(json.loads(json.dumps(raw)))
+    assert document.nodes[0].translation == [1.0, 2.0, 3.0]
+    assert all(type(v) is float for v in document.nodes[0].translation)
+    assert document.nodes[1].children == [0] and type(document.nodes[1].children[0]) is int
+    assert document.nodes[1].weights == [0.5] and not hasattr(document.nodes[1], "unknown")
+    assert document.nodes[2].camera is None and document.scene == 0
+    accessor = document.accessors[0]
+    assert type(accessor.componentType) is int and accessor.byteOffset == 0
+    assert accessor.normalized is False
+    material = document.materials[0]
+    assert material.alphaCutoff == 1.0 and type(material.alphaCutoff) is float
+    assert material.pbrMetallicRoughness.roughnessFactor == 1.0 and material.alphaMode == "OPAQUE"
+    primitive = document.meshes[0].primitives[0]
+    assert primitive.attributes.POSITION == 0 and primitive.attributes._CUSTOM == 1
+    assert primitive.attributes.NORMAL is None and primitive.mode == 4
+    assert primitive.targets == [{"POSITION": 2}]
+    accessor = {"componentType": 5126, "count": 2.5, "type": "VEC3"}
+    for odd, where, expected in (({"accessors": [accessor]}, "accessors[0].count", "an integer"),
+                                 ({"nodes": [{"name": 3}]}, "nodes[0].name", "a string"),
+                                 ({"nodes": [{"translation": [1, "2", 3]}]},
+                                  "nodes[0].translation[1]", "a number"),
+                                 ({"nodes": [{"scale": "big"}]}, "nodes[0].scale", "an array")):
+        path = tmp_path / "odd.gltf"
+        path.write_text(json.dumps({"asset": {"version": "2.0"}, **odd}))
+        with pytest.raises(InputError) as caught:
+            load(path)
+        assert caught.value.where == where and expected in caught.value.message
+        assert caught.value.file == str(path) and caught.value.fix
 
 
 def test_a_glb_json_chunk_padded_with_nul_bytes_loads(tmp_path):

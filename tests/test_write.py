@@ -23,6 +23,7 @@ from baker.run import atomic as staging
 from baker.atlas.layout import Atlas, InstanceUV
 from baker.image.encode import EncodedPage
 from baker.errors import OutputError
+from baker.gltf.container import read_document
 from baker.gltf.scene import Image, Instance, Material, Primitive, Scene
 from baker.output.write import WriteOptions, write
 
@@ -175,7 +176,7 @@ def _material(index, name) -> Material:
 
 def _scene(path: Path) -> Scene:
     """The Scene a loader would make of ``_input_glb``; nodes 0–3 baked, node 4 not."""
-    document = pygltflib.GLTF2.load(str(path))
+    document = read_document(path)
     f64 = np.float64
     primitives = (
         Primitive(mesh=0, index=0, positions=QUAD_POSITIONS.astype(f64),
@@ -615,9 +616,10 @@ def test_permission_error_becomes_output_error(tmp_path, baked, monkeypatch):
     def refused(*args, **kwargs):
         raise PermissionError(13, "Permission denied")
 
+    scene = _scene(source)
     monkeypatch.setattr(staging.os, "open", refused)
     with pytest.raises(OutputError) as raised:
-        write(_scene(source), _atlas(), _pages(), output, WriteOptions())
+        write(scene, _atlas(), _pages(), output, WriteOptions())
     assert "permission" in str(raised.value) and str(output.parent) in raised.value.fix
     assert not output.exists()
 

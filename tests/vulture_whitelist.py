@@ -34,3 +34,13 @@ cosine_directions  # light/hemisphere.py: the bake draws its directions in its k
 # The world-space filter, a prototype not yet in the bake (docs/design.md): its widths, read by
 # its docstring and bench_world_filter.py.
 WIDTHS  # image/world_filter.py
+
+# glTF properties baker reads into its objects and writes back as the file had them, but never
+# reads itself (gltf/objects.py: a field dropped would drop the property from the output).
+generator, copyright, minVersion  # Asset
+zfar, znear  # Perspective, Orthographic
+magFilter, minFilter  # Sampler
+inverseBindMatrices, skeleton, joints  # Skin
+mimeType  # Image
+interpolation  # AnimationSampler
+extensionsUsed, extensionsRequired, skins  # GLTF2

@@ -6,10 +6,9 @@ from __future__ import annotations
 from typing import Any, Sequence
 
 import numpy as np
-import pygltflib
 
 from baker.errors import InputError
-from baker.gltf import budget
+from baker.gltf import budget, objects
 from baker.gltf.context import checked_item, invalid, schema
 from baker.gltf.document import COMPONENT_DTYPES
 
@@ -31,7 +30,7 @@ TYPE_SHAPES = {
 
 
 def read_accessor(
-    document: pygltflib.GLTF2, buffers: Sequence[bytes], index: int, *, file: str = ""
+    document: objects.GLTF2, buffers: Sequence[bytes], index: int, *, file: str = ""
 ) -> np.ndarray:
     """The elements of ``document.accessors[index]`` as a (count, ncomp) array.
 
@@ -69,7 +68,7 @@ def read_accessor(
 
 
 def buffer_view(
-    document: pygltflib.GLTF2, buffers: Sequence[bytes], index: int, file: str, referrer: str
+    document: objects.GLTF2, buffers: Sequence[bytes], index: int, file: str, referrer: str
 ) -> tuple[memoryview, int | None]:
     """The bytes of ``document.bufferViews[index]`` (bounds checked) and its byteStride."""
     view = checked_item(document.bufferViews, index, "bufferViews", file, referrer)
@@ -132,7 +131,7 @@ def _elements(
 
 
 def _substitute_sparse(
-    document: pygltflib.GLTF2,
+    document: objects.GLTF2,
     buffers: Sequence[bytes],
     sparse: Any,
     raw: np.ndarray,

@@ -8,16 +8,15 @@ import base64
 import binascii
 import urllib.parse
 
-import pygltflib
 
 from baker.errors import InputError
-from baker.gltf import budget
+from baker.gltf import budget, objects
 from baker.gltf.context import invalid, schema
 from baker.gltf.decompress import draco_declared_bytes, is_meshopt_fallback
 from baker.gltf.files import SceneFolder
 
 
-def check_buffer_budget(document: pygltflib.GLTF2, file: str, spent: budget.Budget) -> None:
+def check_buffer_budget(document: objects.GLTF2, file: str, spent: budget.Budget) -> None:
     """Check every buffer's declared byteLength, before any is read, against the input's
     budget (``budget.check_buffers``): files, bytes embedded in the scene file, and the
     meshopt fallback buffers and Draco primitives that compressed geometry decodes into."""
@@ -32,7 +31,7 @@ def check_buffer_budget(document: pygltflib.GLTF2, file: str, spent: budget.Budg
     budget.check_buffers(lengths, draco_declared_bytes(document), spent)
 
 
-def resolve_buffers(document: pygltflib.GLTF2, folder: SceneFolder) -> list[bytes]:
+def resolve_buffers(document: objects.GLTF2, folder: SceneFolder) -> list[bytes]:
     """The bytes of every ``document.buffers[i]``, exactly ``byteLength`` of them.
 
     A buffer without ``uri`` is the GLB binary chunk; a ``data:`` URI is decoded; any other URI is
@@ -47,7 +46,7 @@ def resolve_buffers(document: pygltflib.GLTF2, folder: SceneFolder) -> list[byte
     return out
 
 
-def _buffer_bytes(buffer: pygltflib.Buffer, blob: bytes | None, folder: SceneFolder,
+def _buffer_bytes(buffer: objects.Buffer, blob: bytes | None, folder: SceneFolder,
                   where: str) -> bytes:
     """The ``byteLength`` bytes of one buffer: ``blob`` (GLB binary chunk) when it has no uri; of
     a file, at most ``byteLength`` bytes are read."""

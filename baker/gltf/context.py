@@ -9,10 +9,9 @@ from dataclasses import dataclass, field
 from typing import Any, Iterator, Sequence
 
 import numpy as np
-import pygltflib
 
 from baker.errors import InputError
-from baker.gltf import images
+from baker.gltf import images, objects
 from baker.gltf.files import SceneFolder
 from baker.gltf.scene import Skipped
 
@@ -22,7 +21,7 @@ class Context:
     """What every reading step needs: the document, its buffers as bytes, where the file lives,
     and the list of things left out so far."""
 
-    document: pygltflib.GLTF2
+    document: objects.GLTF2
     buffers: list[bytes]
     file: str
     folder: SceneFolder | None  # None once the load is done (``image_pixels``)
@@ -54,7 +53,7 @@ def invalid(message: str, file: str, where: str) -> InputError:
 
 def attributes_of(primitive: Any) -> dict[str, Any]:
     """A mesh primitive's attributes as {name: accessor index}, those the file leaves out (None)
-    dropped (pygltflib gives an ``Attributes`` or, for names it does not know, a dict; the
+    dropped (a primitive's are an ``objects.Attributes``, a morph target's a dict; the
     container refused any other JSON: ``container._check_primitives``)."""
     raw = primitive.attributes
     if raw is None:
@@ -64,7 +63,7 @@ def attributes_of(primitive: Any) -> dict[str, Any]:
 
 
 def or_default(value: Any, default: Any) -> Any:
-    """``value``, or ``default`` when the file leaves it out (pygltflib gives None)."""
+    """``value``, or ``default`` when the file leaves it out (its field is None)."""
     return default if value is None else value
 
 

@@ -23,9 +23,9 @@ from __future__ import annotations
 import copy
 
 import numpy as np
-import pygltflib
 
 from baker.errors import InputError
+from baker.gltf import objects
 from baker.gltf.document import COMPONENT_DTYPES
 
 DRACO = "KHR_draco_mesh_compression"
@@ -39,7 +39,7 @@ _WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}  # the accessor types D
 _REEXPORT = "re-export the asset (or decompress it, e.g. gltf-transform copy, and bake that)"
 
 
-def is_meshopt_fallback(buffer: pygltflib.Buffer) -> bool:
+def is_meshopt_fallback(buffer: objects.Buffer) -> bool:
     """Whether ``buffer`` is a meshopt fallback buffer: its bytes may be absent, and decoded
     bufferViews are put in it."""
     extensions = buffer.extensions or {}
@@ -47,13 +47,13 @@ def is_meshopt_fallback(buffer: pygltflib.Buffer) -> bool:
                for name in MESHOPT)
 
 
-def compressed(document: pygltflib.GLTF2) -> bool:
+def compressed(document: objects.GLTF2) -> bool:
     """Whether some primitive is Draco-compressed or some bufferView meshopt-compressed."""
     return bool(_meshopt_views(document) or _draco_primitives(document))
 
 
-def decompressed(document: pygltflib.GLTF2, buffers: list[bytes],
-                 file: str) -> tuple[pygltflib.GLTF2, list[bytes]]:
+def decompressed(document: objects.GLTF2, buffers: list[bytes],
+                 file: str) -> tuple[objects.GLTF2, list[bytes]]:
     """The plain document and buffers of a compressed one (see the module's docstring); the
     input is left as it was. A fallback buffer with a uri holds the uncompressed data itself:
     its views are read as stored. An ``InputError`` names the primitive or view that cannot be
@@ -71,7 +71,7 @@ def decompressed(document: pygltflib.GLTF2, buffers: list[bytes],
         for where, primitive, extension in draco:
             _decode_draco_primitive(document, buffers, appended, where, primitive, extension, file)
             del primitive.extensions[DRACO]
-        document.buffers.append(pygltflib.Buffer(byteLength=len(appended)))
+        document.buffers.append(objects.Buffer(byteLength=len(appended)))
         buffers.append(appended)
     for buffer in document.buffers:
         for name in MESHOPT:
@@ -83,7 +83,7 @@ def decompressed(document: pygltflib.GLTF2, buffers: list[bytes],
     return document, [bytes(b) for b in buffers]
 
 
-def draco_declared_bytes(document: pygltflib.GLTF2) -> list[tuple[str, int]]:
+def draco_declared_bytes(document: objects.GLTF2) -> list[tuple[str, int]]:
     """(where, bytes) that each Draco primitive's accessors declare (count × element size of
     the attributes its extension maps, and of its indices): what decoding it may make, for the
     input's budget (``gltf.budget.check_buffers``) before anything is decoded. Accessors that
@@ -107,7 +107,7 @@ def draco_declared_bytes(document: pygltflib.GLTF2) -> list[tuple[str, int]]:
     return out
 
 
-def _meshopt_views(document: pygltflib.GLTF2) -> list[tuple[int, pygltflib.BufferView, dict, str]]:
+def _meshopt_views(document: objects.GLTF2) -> list[tuple[int, objects.BufferView, dict, str]]:
     out = []
     for index, view in enumerate(document.bufferViews or []):
         for name in MESHOPT:
@@ -117,7 +117,7 @@ def _meshopt_views(document: pygltflib.GLTF2) -> list[tuple[int, pygltflib.Buffe
     return out
 
 
-def _draco_primitives(document: pygltflib.GLTF2) -> list[tuple[str, pygltflib.Primitive, dict]]:
+def _draco_primitives(document: objects.GLTF2) -> list[tuple[str, objects.Primitive, dict]]:
     out = []
     for m, mesh in enumerate(document.meshes or []):
         for j, primitive in enumerate(mesh.primitives or []):
@@ -147,7 +147,7 @@ def _slice(data: bytes | bytearray, offset, length, file: str, where: str) -> by
     return bytes(data[offset:offset + length])
 
 
-def _decode_meshopt_view(buffers: list[bytearray], index: int, view: pygltflib.BufferView,
+def _decode_meshopt_view(buffers: list[bytearray], index: int, view: objects.BufferView,
                          extension: dict, name: str, file: str) -> None:
     """Decode one meshopt bufferView into its place in its own buffer."""
     where = f"bufferViews[{index}].extensions.{name}"
@@ -186,8 +186,8 @@ def _decode_meshopt_view(buffers: list[bytearray], index: int, view: pygltflib.B
     target[offset:offset + len(payload)] = payload
 
 
-def _decode_draco_primitive(document: pygltflib.GLTF2, buffers: list[bytearray],
-                            appended: bytearray, where: str, primitive: pygltflib.Primitive,
+def _decode_draco_primitive(document: objects.GLTF2, buffers: list[bytearray],
+                            appended: bytearray, where: str, primitive: objects.Primitive,
                             extension: dict, file: str) -> None:
     """Decode one Draco primitive; its accessors get views into ``appended``, the buffer added
     after the file's (``len(buffers)`` is its index)."""
@@ -225,14 +225,14 @@ def _decode_draco_primitive(document: pygltflib.GLTF2, buffers: list[bytearray],
         raise InputError("the Draco data is a point cloud, not triangles", file=file, where=where,
                          fix=_REEXPORT)
     if primitive.indices is None:  # Draco's vertices are indexed whatever the primitive says
-        document.accessors.append(pygltflib.Accessor(componentType=5125, type="SCALAR"))
+        document.accessors.append(objects.Accessor(componentType=5125, type="SCALAR"))
         primitive.indices = len(document.accessors) - 1
     _set_accessor(document, appended, len(buffers), primitive.indices,
                   np.asarray(faces).reshape(-1, 1), file, f"{where} (indices)")
     primitive.mode = 4  # Draco decodes strips to triangles too
 
 
-def _set_accessor(document: pygltflib.GLTF2, appended: bytearray, buffer: int, index,
+def _set_accessor(document: objects.GLTF2, appended: bytearray, buffer: int, index,
                   values: np.ndarray, file: str, where: str) -> None:
     """Point accessor ``index`` at ``values`` (count, components), stored in its component type
     in a new tightly packed bufferView at the end of ``appended``; its count, and its min/max
@@ -261,7 +261,7 @@ def _set_accessor(document: pygltflib.GLTF2, appended: bytearray, buffer: int, i
         accessor.min = [number(v) for v in stored.min(axis=0)]
         accessor.max = [number(v) for v in stored.max(axis=0)]
     appended += b"\0" * (-len(appended) % 4)
-    document.bufferViews.append(pygltflib.BufferView(buffer=buffer, byteOffset=len(appended),
+    document.bufferViews.append(objects.BufferView(buffer=buffer, byteOffset=len(appended),
                                                      byteLength=len(payload)))
     appended += payload
     accessor.bufferView = len(document.bufferViews) - 1

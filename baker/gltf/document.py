@@ -1,15 +1,12 @@
-"""pygltflib documents made straight from parsed glTF JSON, as pygltflib itself would make them,
-and back.
+"""baker's glTF objects (``objects``) made from parsed glTF JSON (``document``), checking that
+every value has its field's JSON type, and turned back into JSON (``data``).
 
-pygltflib decodes every JSON object through dataclasses_json, which looks up each field's type
-hints anew for every object: about 0.5 ms a node, 50 ms for a room of 60 crates (a tenth of a
-rebake) and 5 s for a level of 10 000 nodes. pygltflib's classes are plain dataclasses whose
-fields are int, float, str, bool, Optional, List, Dict[str, Any], other such dataclasses, and
-``Attributes``; ``document`` walks the JSON once with a plan made per class (``_plan``), with
-dataclasses_json's rules for these types (see ``_value``). Any value of another JSON type than
-its field's (an int where a str is expected, say) is left to pygltflib (``NotPlain``), so that
-what it makes of it, or the error it raises, stays pygltflib's. ``data`` goes the other way
-(what ``pygltflib.gltf_asdict`` gives, cleaned for writing) in one walk.
+``document`` walks the JSON once with a plan made per class from its fields' types (``_plan``):
+int, float, str, bool, Optional, List, Dict[str, Any], other such dataclasses, and
+``Attributes``. A value of another JSON type than its field's (a string where an index is
+expected, say) is an error that names where it is (``WrongType``); an integral float where an
+integer is expected (``"count": 3.0``, as some exporters write them) is read as that integer.
+``data`` goes the other way, cleaned for writing, in one walk.
 """
 
 from __future__ import annotations
@@ -20,7 +17,8 @@ import functools
 import typing
 
 import numpy as np
-import pygltflib
+
+from baker.gltf import objects
 
 # accessor componentType → little-endian numpy dtype (glTF §3.6.2.2), for reading and writing.
 COMPONENT_DTYPES = {
@@ -33,13 +31,27 @@ COMPONENT_DTYPES = {
 }
 
 
-class NotPlain(Exception):
-    """A JSON value whose type is not its field's own; pygltflib decides what it means."""
+class WrongType(Exception):
+    """A JSON value whose type is not its field's: ``where`` is its JSON path (``nodes[3].mesh``),
+    ``expected`` what the field holds."""
+
+    def __init__(self, where: str, expected: str, value) -> None:
+        shown = repr(value) if len(repr(value)) <= 40 else f"a JSON {_JSON_NAMES[type(value)]}"
+        self.what = f"is {shown}, where glTF expects {expected}"
+        super().__init__(f"{where} {self.what}")
+        self.where = where
+
+
+_JSON_NAMES = {dict: "object", list: "array", str: "string", int: "number", float: "number",
+               bool: "boolean", type(None): "null"}
 
 
 # Field kinds of ``_plan``: how a JSON value becomes the field's value.
 _ANY, _INT, _FLOAT, _STR, _BOOL, _DICT, _LIST, _CLASS, _ATTRIBUTES = range(9)
 _SCALARS = {int: _INT, float: _FLOAT, str: _STR, bool: _BOOL}
+_EXPECTED = {_INT: "an integer", _FLOAT: "a number", _STR: "a string", _BOOL: "true or false",
+             _DICT: "an object", _LIST: "an array", _CLASS: "an object",
+             _ATTRIBUTES: "an object"}
 
 
 def _kind(hint) -> tuple:
@@ -52,7 +64,7 @@ def _kind(hint) -> tuple:
         return _SCALARS[hint], None
     if hint is typing.Any:
         return _ANY, None
-    if hint is pygltflib.Attributes:
+    if hint is objects.Attributes:
         return _ATTRIBUTES, None
     if origin is dict:
         return _DICT, None
@@ -60,20 +72,17 @@ def _kind(hint) -> tuple:
         return _LIST, _kind(args[0])
     if dataclasses.is_dataclass(hint):
         return _CLASS, hint
-    raise TypeError(f"pygltflib field type {hint!r} has no plan")  # a new pygltflib version
+    raise TypeError(f"glTF field type {hint!r} has no plan")
 
 
 @functools.cache
 def _plan(cls) -> tuple[dict, tuple]:
-    """({JSON name: (field name, kind, inner)}, the names of fields without a default) of a
-    pygltflib dataclass; fields not given to __init__ are left out."""
+    """({JSON name: (field name, kind, inner)}, the names of fields without a default) of an
+    ``objects`` dataclass."""
     hints = typing.get_type_hints(cls)
     plan, required = {}, []
     for f in dataclasses.fields(cls):
-        if not f.init:
-            continue
-        # extras may hold any JSON value (the spec's "SHOULD be an object" is advice):
-        # pygltflib types it as a dict and fails on a list or a string, so it is taken as is.
+        # extras may hold any JSON value (the spec's "SHOULD be an object" is advice)
         plan[f.name] = (f.name, _ANY, None) if f.name == "extras" else (
             f.name, *_kind(hints[f.name]))
         if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
@@ -81,11 +90,12 @@ def _plan(cls) -> tuple[dict, tuple]:
     return plan, tuple(required)
 
 
-def _value(kind: int, inner, value):
-    """A JSON value as the field of that kind holds it, with dataclasses_json's rules: ints of
-    a float field become floats, a dict field is copied, lists and dataclasses are decoded
-    item by item, ``Attributes`` dicts stay dicts (``document`` makes the primitives' own
-    ones), and null stays None whatever the field."""
+def _value(kind: int, inner, value, where: str):
+    """A JSON value as the field of that kind holds it: ints of a float field become floats
+    (and integral floats of an int field ints), a dict field is copied, lists and dataclasses
+    are decoded item by item, ``Attributes`` dicts stay dicts (``document`` makes the
+    primitives' own ones), and null stays None whatever the field. ``where``: the value's JSON
+    path, for the error (``WrongType``) a value of another type is."""
     if value is None:
         return None
     kind_of = type(value)
@@ -94,44 +104,49 @@ def _value(kind: int, inner, value):
     if (kind == _INT and kind_of is int) or (kind == _STR and kind_of is str) or (
             kind == _BOOL and kind_of is bool) or kind == _ANY:
         return value
+    if kind == _INT and kind_of is float and value.is_integer():
+        return int(value)
     if kind == _DICT and kind_of is dict:
         return dict(value)
     if kind == _ATTRIBUTES and kind_of is dict:
         return value
     if kind == _LIST and kind_of is list:
         item_kind, item_inner = inner
-        return [_value(item_kind, item_inner, item) for item in value]
+        return [_value(item_kind, item_inner, item, f"{where}[{i}]")
+                for i, item in enumerate(value)]
     if kind == _CLASS and kind_of is dict:
-        return _object(inner, value)
-    raise NotPlain(f"{value!r} for a field of kind {kind}")
+        return _object(inner, value, where)
+    raise WrongType(where, _EXPECTED[kind], value)
 
 
-def _object(cls, raw: dict):
-    """The pygltflib ``cls`` of a JSON object; keys that are not fields are dropped, as
-    dataclasses_json drops them, and fields without a default are None when absent."""
+def _object(cls, raw: dict, where: str):
+    """The ``cls`` of a JSON object at ``where``; keys that are not fields are dropped (glTF's
+    own data lives in its fields, ``extensions`` and ``extras``)."""
     plan, required = _plan(cls)
     values = {name: None for name in required}
     for key, value in raw.items():
         entry = plan.get(key)
         if entry is not None:
             name, kind, inner = entry
-            values[name] = _value(kind, inner, value)
+            values[name] = _value(kind, inner, value, f"{where}.{key}" if where else key)
     return cls(**values)
 
 
-def document(raw: dict) -> pygltflib.GLTF2:
-    """The pygltflib document of the parsed glTF JSON ``raw``: equal, field by field and type
-    by type, to ``pygltflib.GLTF2.gltf_from_json`` of its text. Raises NotPlain for a value of
-    another type than its field's."""
+def document(raw: dict) -> objects.GLTF2:
+    """The document of the parsed glTF JSON ``raw``. Raises WrongType for a value of another
+    JSON type than its field's (a top-level array or a mesh's primitives null among them)."""
     if type(raw) is not dict:
-        raise NotPlain("the document is not a JSON object")
-    result = _object(pygltflib.GLTF2, raw)
-    if result.meshes is None or any(mesh.primitives is None for mesh in result.meshes):
-        raise NotPlain("null meshes or primitives")
-    for mesh in result.meshes:
+        raise WrongType("the document", "an object", raw)
+    result = _object(objects.GLTF2, raw, "")
+    for name in ("meshes", "nodes", "accessors", "bufferViews", "buffers", "materials"):
+        if getattr(result, name) is None:
+            raise WrongType(name, "an array", None)
+    for i, mesh in enumerate(result.meshes):
+        if mesh.primitives is None:
+            raise WrongType(f"meshes[{i}].primitives", "an array", None)
         for primitive in mesh.primitives:
-            if primitive.attributes:  # as pygltflib's from_json does
-                primitive.attributes = pygltflib.Attributes(**primitive.attributes)
+            if primitive.attributes:
+                primitive.attributes = objects.Attributes(**primitive.attributes)
     return result
 
 
@@ -145,15 +160,14 @@ def _field_names(cls) -> tuple[str, ...]:
 
 
 def data(value):
-    """The glTF JSON data of a pygltflib document (or any object in it), a deep copy: None and
-    empty properties dropped, ``extensions`` and ``extras`` values kept verbatim unless they
-    are {} (an extension's empty object means something), list items never dropped (indices
-    stay valid). What cleaning ``pygltflib.gltf_asdict(value)`` so gives, without building the
-    uncleaned copy first: 18 -> 2 ms for a room of 60 crates. Numbers, strings and booleans
-    are immutable: they are the copy (deepcopy gives them back, at 1 µs a call)."""
+    """The glTF JSON data of a document (or any object in it), a deep copy: None and empty
+    properties dropped, ``extensions`` and ``extras`` values kept verbatim unless they are {}
+    (an extension's empty object means something), list items never dropped (indices stay
+    valid). Numbers, strings and booleans are immutable: they are the copy (deepcopy gives
+    them back, at 1 µs a call)."""
     if type(value) in _IMMUTABLE:
         return value
-    if isinstance(value, pygltflib.Attributes):
+    if isinstance(value, objects.Attributes):
         value = value.__dict__
     elif dataclasses.is_dataclass(value):
         value = {name: getattr(value, name) for name in _field_names(type(value))}

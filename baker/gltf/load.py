@@ -3,8 +3,8 @@
 Why a stage of its own: every later stage wants plain arrays — triangles in a mesh's local space,
 float64 world matrices per placement, materials reduced to what light transport needs — and none
 of them should know about buffers, strides, sparse accessors or node hierarchies. ``load`` and
-the modules of its steps are the only code that decodes glTF binary data. It keeps the pygltflib
-document so that the writer adds the bake to it and leaves everything else as it was.
+the modules of its steps are the only code that decodes glTF binary data. It keeps the file's
+document (``objects``) so that the writer adds the bake to it and leaves everything else as it was.
 
 In order, ``load`` does (each step a module of ``baker.gltf``, sharing ``context.Context``):
 1. read the file (``.gltf`` JSON or ``.glb``, told apart by the magic bytes, not the suffix) and

@@ -10,9 +10,8 @@ import os
 from typing import Any
 
 import numpy as np
-import pygltflib
 
-from baker.gltf import budget, images
+from baker.gltf import budget, images, objects
 from baker.gltf.accessors import buffer_view
 from baker.gltf.buffers import decode_data_uri
 from baker.gltf.context import Context, invalid, referred
@@ -49,7 +48,7 @@ def _read_image(ctx: Context, i: int, allowed: tuple[str, ...], spent: budget.Bu
     ctx.headers[i] = images.header(data, allowed, label, ctx.file, where)
 
 
-def _image_users(document: pygltflib.GLTF2) -> dict[int, str]:
+def _image_users(document: objects.GLTF2) -> dict[int, str]:
     """The first material texture slot that uses each image (its JSON path, e.g.
     ``materials[0].pbrMetallicRoughness.baseColorTexture``), to name in messages."""
     users: dict[int, str] = {}
@@ -73,7 +72,7 @@ def _is_file(uri: Any) -> bool:
     return uri is not None and not (isinstance(uri, str) and uri.startswith("data:"))
 
 
-def _image_formats(document: pygltflib.GLTF2) -> list[tuple[str, ...]]:
+def _image_formats(document: objects.GLTF2) -> list[tuple[str, ...]]:
     """The formats each image may have: those every texture naming it allows
     (``images.FORMATS``: PNG or JPEG as a core source, WebP through ``EXT_texture_webp``, …;
     none through an extension baker does not know), any format baker reads when none does."""

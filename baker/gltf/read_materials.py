@@ -8,10 +8,9 @@ import math
 from typing import Any
 
 import numpy as np
-import pygltflib
 
 from baker.errors import InputError
-from baker.gltf import budget, images
+from baker.gltf import budget, images, objects
 from baker.gltf.context import (MAX_ALBEDO, Context, checked_item, finite, invalid,
                                 or_default, referred, schema)
 from baker.gltf.extensions import MATERIAL_EXTENSIONS
@@ -40,7 +39,7 @@ def read_materials(ctx: Context) -> list[Material]:
     return materials + [default]
 
 
-def _read_material(ctx: Context, i: int, material: pygltflib.Material) -> Material:
+def _read_material(ctx: Context, i: int, material: objects.Material) -> Material:
     """The baker's view of ``materials[i]``: factors as float64 linear values, texture refs."""
     where = f"materials[{i}]"
     extensions = material.extensions or {}
@@ -99,7 +98,7 @@ def _read_material(ctx: Context, i: int, material: pygltflib.Material) -> Materi
     )
 
 
-def _base_terms(ctx: Context, material: pygltflib.Material, extensions: dict,
+def _base_terms(ctx: Context, material: objects.Material, extensions: dict,
                 where: str) -> dict[str, Any]:
     """The Material fields of the base layer: base colour factor and texture, metallic,
     roughness and their texture, from pbrMetallicRoughness, or from
@@ -117,7 +116,7 @@ def _base_terms(ctx: Context, material: pygltflib.Material, extensions: dict,
                                f"{at}.diffuseFactor"),
             base_color_texture=_texture_ref(ctx, info, f"{at}.diffuseTexture"),
             metallic=0.0, roughness=1.0 - glossiness, metallic_roughness_texture=None)
-    pbr = material.pbrMetallicRoughness or pygltflib.PbrMetallicRoughness()
+    pbr = material.pbrMetallicRoughness or objects.PbrMetallicRoughness()
     at = f"{where}.pbrMetallicRoughness"
     return dict(
         base_color=_factor(ctx, pbr.baseColorFactor, [1.0, 1.0, 1.0, 1.0], f"{at}.baseColorFactor"),
@@ -142,12 +141,12 @@ def _optional_texture(ctx: Context, info: Any, where: str, factors: str) -> Text
         return None
 
 
-def _texture_info(texture: Any) -> pygltflib.TextureInfo | None:
+def _texture_info(texture: Any) -> objects.TextureInfo | None:
     """A textureInfo of an extension's JSON (a dict with ``index``, ``texCoord``,
-    ``extensions``) as pygltflib's, for ``_texture_ref``; None when it is not one."""
+    ``extensions``) as an ``objects.TextureInfo``, for ``_texture_ref``; None when it is not one."""
     if not isinstance(texture, dict):
         return None
-    return pygltflib.TextureInfo(index=texture.get("index"), texCoord=texture.get("texCoord"),
+    return objects.TextureInfo(index=texture.get("index"), texCoord=texture.get("texCoord"),
                                  extensions=texture.get("extensions"))
 
 

@@ -4,9 +4,9 @@ colours and triangles (strips and fans expanded, ``expand_triangles``), each che
 from __future__ import annotations
 
 import numpy as np
-import pygltflib
 
 from baker.errors import InputError
+from baker.gltf import objects
 from baker.gltf.accessors import read_accessor
 from baker.gltf.context import (MAX_ALBEDO, Context, attributes_of, checked_item, invalid,
                                 or_default, referred, schema)
@@ -38,7 +38,7 @@ def read_mesh(ctx: Context, mesh: int, material_count: int) -> list[Primitive | 
 
 
 def _read_primitive(
-    ctx: Context, mesh: int, j: int, primitive: pygltflib.Primitive, material_count: int, where: str
+    ctx: Context, mesh: int, j: int, primitive: objects.Primitive, material_count: int, where: str
 ) -> Primitive | None:
     """One mesh primitive as local-space triangles, or None (recorded) when it has none."""
     mode = or_default(primitive.mode, _TRIANGLES)
@@ -82,7 +82,7 @@ def _read_primitive(
     )
 
 
-def _check_counts(ctx: Context, primitive: pygltflib.Primitive, attributes: dict, n: int,
+def _check_counts(ctx: Context, primitive: objects.Primitive, attributes: dict, n: int,
                   where: str) -> None:
     """Require every attribute of the primitive and of its morph targets to hold ``n``
     elements, POSITION's count (the spec's rule; the ones read here checked theirs as they
@@ -152,7 +152,7 @@ def _texcoords(ctx: Context, attributes: dict, n: int, where: str) -> tuple[np.n
     return tuple(sets)
 
 
-def _triangles(ctx: Context, primitive: pygltflib.Primitive, mode: int, n: int, where: str) -> np.ndarray:
+def _triangles(ctx: Context, primitive: objects.Primitive, mode: int, n: int, where: str) -> np.ndarray:
     """(m, 3) int64 vertex indices, strips and fans expanded, every index checked below n."""
     if primitive.indices is None:
         indices = np.arange(n, dtype=np.int64)

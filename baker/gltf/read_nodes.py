@@ -7,10 +7,9 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-import pygltflib
 
 from baker.errors import InputError
-from baker.gltf import budget
+from baker.gltf import budget, objects
 from baker.gltf.context import Context, checked_item, finite, invalid, or_default, schema
 from baker.gltf.read_meshes import read_attribute
 
@@ -118,7 +117,7 @@ def trs_matrices(
     return out
 
 
-def animated_nodes(document: pygltflib.GLTF2, paths: tuple[str, ...]) -> set[int]:
+def animated_nodes(document: objects.GLTF2, paths: tuple[str, ...]) -> set[int]:
     """Nodes that an animation channel drives on one of ``paths`` ("weights": morph targets;
     "translation", "rotation", "scale": the node's transform)."""
     nodes = set()
@@ -130,7 +129,7 @@ def animated_nodes(document: pygltflib.GLTF2, paths: tuple[str, ...]) -> set[int
     return nodes
 
 
-def moving_nodes(document: pygltflib.GLTF2) -> set[int]:
+def moving_nodes(document: objects.GLTF2) -> set[int]:
     """Nodes whose world transform an animation changes: its own, or an ancestor's."""
     stack = list(animated_nodes(document, ("translation", "rotation", "scale")))
     moving: set[int] = set()
@@ -143,7 +142,7 @@ def moving_nodes(document: pygltflib.GLTF2) -> set[int]:
     return moving
 
 
-def gpu_instances(ctx: Context, index: int, node: pygltflib.Node) -> np.ndarray | None:
+def gpu_instances(ctx: Context, index: int, node: objects.Node) -> np.ndarray | None:
     """(k, 4, 4) local matrices T_k @ R_k @ S_k of EXT_mesh_gpu_instancing, None without it."""
     extension = (node.extensions or {}).get("EXT_mesh_gpu_instancing")
     if not isinstance(extension, dict) or not extension.get("attributes"):

@@ -13,9 +13,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import pygltflib
 
 from baker.errors import InputError
+from baker.gltf import objects
 from baker.punctual import Light
 
 # glTF sampler wrap modes (OpenGL enums), as glTF stores them.
@@ -146,12 +146,12 @@ class Skipped:
 class Scene:
     """A loaded glTF scene: the flattened instances plus the document to write back.
 
-    ``document`` is the pygltflib document as read (buffers resolved); the writer changes only what
+    ``document`` is the file's document as read (``objects``) (buffers resolved); the writer changes only what
     the bake adds to it. ``materials`` has one entry per glTF material, then the default material.
     """
 
     path: Path
-    document: pygltflib.GLTF2
+    document: objects.GLTF2
     primitives: tuple[Primitive, ...]
     instances: tuple[Instance, ...]
     materials: tuple[Material, ...]

@@ -37,12 +37,11 @@ from pathlib import Path, PurePosixPath
 from urllib.parse import quote, unquote
 
 import numpy as np
-import pygltflib
 
 from baker.atlas.layout import Atlas, InstanceUV
 from baker.errors import InputError, OutputError, SettingsError
 from baker.gltf import document as gltf_document
-from baker.gltf import images
+from baker.gltf import images, objects
 from baker.gltf.document import COMPONENT_DTYPES
 from baker.gltf.accessors import read_accessor
 from baker.gltf.scene import Material, Scene
@@ -182,15 +181,15 @@ def write(scene: Scene, atlas: Atlas, pages: Sequence[EncodedPage], output: Path
 # the document as plain JSON data
 
 
-def _document_data(document: pygltflib.GLTF2) -> dict:
+def _document_data(document: objects.GLTF2) -> dict:
     """The document as glTF JSON data (a deep copy): None and empty properties dropped.
 
     ``extensions`` and ``extras`` values are kept verbatim (an extension's empty object means
     something); list items are never dropped, so indices stay valid.
     """
     data = gltf_document.data(document)
-    # pygltflib fills in byteOffset 0 and normalized false; on an accessor without bufferView
-    # (zeros or sparse only) byteOffset is an error, so drop these defaults everywhere.
+    # the objects hold the spec's byteOffset 0 and normalized false; on an accessor without
+    # bufferView (zeros or sparse only) byteOffset is an error, so drop these defaults everywhere.
     for accessor in data.get("accessors", []):
         if accessor.get("byteOffset") == 0:
             del accessor["byteOffset"]
@@ -757,7 +756,7 @@ class _Builder:
             text = json.dumps(self.data, indent=2, allow_nan=False) + "\n"
             files.append((self.output, text.encode("utf-8")))
         else:
-            files.append((self.output, _glb(self.data, blob)))
+            files.append((self.output, glb_file(self.data, blob)))
         return files
 
     def _image_files(self):
@@ -862,7 +861,7 @@ def _carry_as_emission(material: dict, texture: int, texcoord: int, scale: float
         del material["extensions"]
 
 
-def _glb(data: dict, blob: bytes) -> bytes:
+def glb_file(data: dict, blob: bytes | None) -> bytes:
     """The .glb file of the JSON ``data`` and the binary chunk ``blob``, joined in one copy
     (the blob is most of the file: megabytes)."""
     text = json.dumps(data, separators=(",", ":"), allow_nan=False).encode("utf-8")

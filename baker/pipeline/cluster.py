@@ -68,7 +68,7 @@ _IDENTITY_SECONDS = 120.0  # how long each node may take to start a worker and a
 _WAIT_SECONDS = 0.1  # how often the driver looks at the parts (progress, Ctrl-C)
 _ASKS = 8  # times Ray asks a head for its cluster's identity, a second apart (``_ray``)
 _CONNECT_SECONDS = 15.0  # how long Ray may take to connect to a head that answers
-_LIBRARIES = ("ray", "numpy", "numba", "embreex", "xatlas", "pygltflib")
+_LIBRARIES = ("ray", "numpy", "numba", "embreex", "xatlas")
 
 
 def _ray():
