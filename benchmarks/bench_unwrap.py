@@ -1,15 +1,16 @@
 """Benchmark: what an unwrap costs cold, after an edit, from the cache and at another density,
 and the atlas it makes (texels used, stretch, seams), against another checkout's baker.
 
-Scenes: the room of 200 boxes and a sphere (``assets/many_objects.py``, 98,732 triangles in
-202 meshes, a 512² page as ``bench_fixed_cost.py``); with ``--level`` the level of 400 distinct
+Scenes: the room of 200 boxes and a sphere (``assets/many_objects.py``, 98,732 triangles in 202
+meshes, a 512² page as ``bench_fixed_cost.py``); with ``--level`` the level of 400 distinct
 meshes (``many_objects.level``, 1,024,812 triangles) at a 4096² page; with ``--million`` the
-1M-triangle terrain of ``bench_million.py`` (default settings); with ``--rock`` a crumpled
-rock of 327,680 triangles on a floor (default settings), with ``--small-rock`` one of 20,480. For each,
-``unwrap.unwrap`` at the derived density (fitted to one page, as a default bake) is timed cold
-(empty cache), after an edit (the mesh of (lower) median triangle count stretched 10 % along
-x, which changes the derived density: the cache holds the scene before the edit), from the
-cache, and at 0.8 of the density (the cache holding the charts: ``--texel-density`` changed),
+1M-triangle terrain of ``bench_million.py`` (default settings); with ``--rock`` a crumpled rock
+of 327,680 triangles on a floor (default settings), with ``--small-rock`` one of 20,480; with
+``--ramp`` a helical ramp of 16,002 long thin triangles. For each, ``unwrap.unwrap`` at the
+derived density (fitted to one page, as a default bake) is timed cold (empty cache), after an
+edit (the mesh of (lower) median triangle count stretched 10 % along x, which changes the
+derived density: the cache holds the scene before the edit), from the cache, and at 0.8 of the
+density (the cache holding the charts: ``--texel-density`` changed),
 medians of ``--repeat``, with the atlas's:
 
 - pages and utilisation (texels the charts cover over the pages');
@@ -41,24 +42,49 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 CODE = os.environ.get("BENCH_UNWRAP_CODE", str(ROOT))  # whose baker (``--against``)
 sys.path.insert(0, str(ROOT))
-
-from assets.gltf_builder import GltfBuilder, quad, rock  # noqa: E402  (this checkout's scenes)
-from assets.many_objects import boxes_and_sphere, level  # noqa: E402
-
-sys.path.insert(0, CODE)  # before anything imports baker (bench_million does)
+sys.path.insert(0, CODE)  # before anything imports baker: the scenes are built by this
+# checkout's assets (which use its baker's glTF objects) in the parent only (``scene_file``)
 
 from baker.atlas import unwrap  # noqa: E402
 from baker.geometry.world import build_world  # noqa: E402
 from baker.gltf.load import load  # noqa: E402
 from baker.pipeline.full import bounds_of_baked  # noqa: E402
 from baker.settings import Settings, resolve  # noqa: E402
-from benchmarks.bench_million import terrain  # noqa: E402
 
 
-def rock_on_a_floor(subdivisions: int = 7) -> GltfBuilder:
+def scene_file(name: str, folder: Path) -> Path:
+    """The scene ``name`` of ``SCENES`` saved as a .glb in ``folder``."""
+    from assets.many_objects import boxes_and_sphere, level
+    from benchmarks.bench_million import terrain
+
+    builders = {"boxes": boxes_and_sphere, "level": level, "million": terrain,
+                "rock": rock_on_a_floor, "small_rock": lambda: rock_on_a_floor(5), "ramp": ramp}
+    return builders[name]().save(folder / f"{name}.glb")
+
+
+def ramp(steps: int = 8001):
+    """A ramp winding twice round, 1 to 2 m from its axis, of 2 · ``steps`` long thin
+    triangles (1 m by 1.2 mm at the default): one chart that overlaps itself once projected,
+    split until it does not (``planar``), its triangles across many cells of a grid."""
+    from assets.gltf_builder import GltfBuilder
+
+    angle = np.linspace(0, 4 * np.pi, steps + 1)
+    inner = np.stack([np.cos(angle), angle * 0.05, np.sin(angle)], axis=1)
+    k = np.arange(steps)
+    b = GltfBuilder()
+    b.node("ramp", b.mesh("ramp", np.concatenate([inner, inner * [2.0, 1.0, 2.0]]),
+                          np.concatenate([np.stack([k, k + 1, k + steps + 1], 1),
+                                          np.stack([k + 1, k + steps + 2, k + steps + 1], 1)]),
+                          material=b.material("ramp", (0.6, 0.6, 0.6))))
+    return b
+
+
+def rock_on_a_floor(subdivisions: int = 7):
     """A crumpled rock of 20·4^subdivisions triangles (``gltf_builder.rock``, 1 m; 327,680 by
     default) on an 8 m floor: charts of its projection fold over (``planar``: split until they
     do not), where xatlas's time per triangle grows with a mesh's size."""
+    from assets.gltf_builder import GltfBuilder, quad, rock
+
     b = GltfBuilder()
     stone, grey = b.material("rock", (0.5, 0.45, 0.4)), b.material("floor", (0.7, 0.7, 0.7))
     b.node("rock", b.shape_mesh("rock", rock(1.0, subdivisions), material=stone),
@@ -148,11 +174,10 @@ def unwrap_seconds(scene, settings: Settings, factor: float = 1.0):
     return (wall, cpu), atlas, world
 
 
-def times(title: str, builder, settings: Settings, repeat: int) -> None:
-    """Print the cold / one-edit / cached / other-density unwrap seconds of a scene, medians
-    of ``repeat``, and the cold atlas's quality."""
-    with tempfile.TemporaryDirectory() as folder:
-        scene = load(builder.save(Path(folder) / "scene.glb"))
+def times(title: str, path: Path, settings: Settings, repeat: int) -> None:
+    """Print the cold / one-edit / cached / other-density unwrap seconds of the scene at
+    ``path``, medians of ``repeat``, and the cold atlas's quality."""
+    scene = load(path)
     changed = edited(scene)
     cold, edit, cached, density = [], [], [], []
     for _ in range(repeat):
@@ -174,12 +199,12 @@ def times(title: str, builder, settings: Settings, repeat: int) -> None:
           f"load {os.getloadavg()[0]:.1f}); {quality(atlas, world)}", flush=True)
 
 
-SCENES = {"boxes": ("200 boxes + sphere", boxes_and_sphere,
-                    Settings(page_size=512, rays=4, rho="step", d_max=1.0)),
-          "level": ("400 distinct meshes", level, Settings(page_size=4096)),
-          "million": ("1M-triangle terrain", terrain, Settings()),
-          "rock": ("a rock of 327,680 triangles", rock_on_a_floor, Settings()),
-          "small_rock": ("a rock of 20,480 triangles", lambda: rock_on_a_floor(5), Settings())}
+SCENES = {"boxes": ("200 boxes + sphere", Settings(page_size=512, rays=4, rho="step", d_max=1.0)),
+          "level": ("400 distinct meshes", Settings(page_size=4096)),
+          "million": ("1M-triangle terrain", Settings()),
+          "rock": ("a rock of 327,680 triangles", Settings()),
+          "small_rock": ("a rock of 20,480 triangles", Settings()),
+          "ramp": ("a helical ramp of 16,002 long thin triangles", Settings())}
 
 
 def main() -> None:
@@ -188,19 +213,26 @@ def main() -> None:
     parser.add_argument("--million", action="store_true", help="also the 1M-triangle terrain")
     parser.add_argument("--rock", action="store_true", help="also a crumpled rock")
     parser.add_argument("--small-rock", action="store_true", help="also a rock of 20,480")
+    parser.add_argument("--ramp", action="store_true", help="also a ramp of long thin triangles")
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--against", help="a checkout whose baker is timed first (A/B)")
-    parser.add_argument("--scene", choices=sorted(SCENES), help=argparse.SUPPRESS)
+    parser.add_argument("--scene", nargs=2, help=argparse.SUPPRESS)  # name, file: a child's
     args = parser.parse_args()
-    names = [args.scene] if args.scene else (
-        ["boxes"] + [name for name in ("level", "million", "rock", "small_rock") if getattr(args, name)])
+    if args.scene:
+        name, path = args.scene
+        times(SCENES[name][0], Path(path), SCENES[name][1], args.repeat)
+        return
+    names = ["boxes"] + [name for name in ("level", "million", "rock", "small_rock", "ramp")
+                         if getattr(args, name)]
     for name in names:
-        title, builder, settings = SCENES[name]
-        if args.against:
-            subprocess.run([sys.executable, __file__, "--scene", name, "--repeat",
-                            str(args.repeat)], check=True,
-                           env=dict(os.environ, BENCH_UNWRAP_CODE=args.against))
-        times(title, builder(), settings, args.repeat)
+        title, settings = SCENES[name]
+        with tempfile.TemporaryDirectory() as folder:
+            path = scene_file(name, Path(folder))
+            if args.against:
+                subprocess.run([sys.executable, __file__, "--scene", name, str(path), "--repeat",
+                                str(args.repeat)], check=True,
+                               env=dict(os.environ, BENCH_UNWRAP_CODE=args.against))
+            times(title, path, settings, args.repeat)
 
 
 if __name__ == "__main__":

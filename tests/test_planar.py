@@ -61,11 +61,15 @@ def _check_charts(charts, positions, triangles):
 
 
 def _assert_apart(corners, tolerance: float = 1e-9):
-    """No two triangles (t, 3, 2) share an inner point: for every pair, some edge of one has
-    the whole other on its outer side, within ``tolerance`` of their extent (every pair
-    tested, no grid)."""
-    if len(corners) < 2:
-        return
+    """No two triangles (t, 3, 2) share an inner point (``_apart_pairs``)."""
+    if len(corners) >= 2:
+        assert _apart_pairs(corners, tolerance).all(), "two triangles of a chart overlap"
+
+
+def _apart_pairs(corners, tolerance: float = 1e-9) -> np.ndarray:
+    """(t, t) bool: whether each two triangles (t, 3, 2, counter-clockwise) share no inner
+    point: some edge of one has the whole other on its outer side, within ``tolerance`` of
+    their extent (every pair tested, no grid)."""
     apart = np.zeros((len(corners), len(corners)), bool)
     size = np.ptp(corners.reshape(-1, 2), axis=0).max()
     for k in range(3):  # triangles counter-clockwise: (dy, -dx) points out of edge a → b
@@ -73,11 +77,42 @@ def _assert_apart(corners, tolerance: float = 1e-9):
         normal = np.stack([b[:, 1] - a[:, 1], a[:, 0] - b[:, 0]], axis=1)
         reach = tolerance * size * np.linalg.norm(normal, axis=1)
         edge = np.einsum("ij,ij->i", a, normal)
-        nearest = np.einsum("pkj,ij->ipk", corners, normal).min(axis=2)  # (i, p)
+        nearest = np.minimum.reduce([np.outer(normal[:, 0], corners[:, m, 0])
+                                     + np.outer(normal[:, 1], corners[:, m, 1])
+                                     for m in range(3)])  # (i, p)
         apart |= nearest >= edge[:, None] - reach[:, None]
     apart |= apart.T
     np.fill_diagonal(apart, True)
-    assert apart.all(), "two triangles of a chart overlap"
+    return apart
+
+
+def test_the_overlap_test_finds_what_testing_every_pair_finds():
+    """``planar._overlapping`` on long thin triangles at a random turn (strips of a grid,
+    which a grid of cells bins badly by their bounding boxes), apart, and with one of them
+    moved by a random offset: overlapping exactly when testing every pair (``_apart_pairs``)
+    finds two that overlap, and never before the move."""
+    overlapped = 0
+    for seed in range(8):
+        rng = np.random.default_rng(seed)
+        rows, length = int(rng.integers(20, 200)), rng.uniform(0.3, 3.0)
+        y = np.linspace(0.0, 1.0, rows + 1)
+        low = np.stack([np.zeros(rows + 1), y], axis=1)
+        flat = np.concatenate([low, low + [length, 0.0]]) @ rotation_matrix(
+            (0, 0, 1), rng.uniform(0, 360))[:2, :2].T
+        k = np.arange(rows)
+        corners = np.concatenate([np.stack([k, k + rows + 1, k + 1], 1),
+                                  np.stack([k + 1, k + rows + 1, k + rows + 2], 1)])
+
+        def found() -> bool:
+            return bool(planar._overlapping(flat, corners, np.arange(len(corners)),
+                                            np.array([0, len(corners)]), 1e-9)[0])
+        assert not found() and _apart_pairs(flat[corners]).all()
+        one = int(rng.integers(len(corners)))  # moved: a triangle of its own corners
+        flat = np.concatenate([flat, flat[corners[one]] + rng.uniform(-0.3, 0.3, 2)])
+        corners[one] = len(flat) - 3 + np.arange(3)
+        assert found() == (not _apart_pairs(flat[corners]).all()), seed
+        overlapped += found()
+    assert overlapped >= 4
 
 
 @pytest.mark.parametrize("seed", range(3))

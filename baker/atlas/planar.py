@@ -232,9 +232,13 @@ def _area_scale(flat: np.ndarray, corners: np.ndarray, chart: np.ndarray,
 
 @jit
 def _overlapping(flat, corners, by_chart, start, tolerance):
-    """(c,) bool: whether two triangles of each chart overlap in ``flat`` (k, 2): each chart's
-    triangles (``by_chart[start[c]:start[c + 1]]``) binned on a grid of about one triangle a
-    cell, the pairs sharing a cell tested by their separating axes."""
+    """(c,) bool: whether two triangles of each chart overlap in ``flat`` (k, 2). Each chart's
+    triangles (``by_chart[start[c]:start[c + 1]]``) are binned in the cells of a grid of about
+    one triangle a cell that they cover: the cells of a triangle's bounding box that none of
+    its edges has wholly on its outer side (so a long thin triangle across the grid is in a
+    line of cells, not in its box's square: 16,002 triangles of a ramp 5.7 → 0.8 s). The
+    pairs sharing a cell are tested by their separating axes, up to the first that overlaps.
+    Triangles without area are apart from all (``_apart``) and binned nowhere."""
     overlapping = np.zeros(len(start) - 1, np.bool_)
     for c in range(len(start) - 1):
         first, last = start[c], start[c + 1]
@@ -250,59 +254,64 @@ def _overlapping(flat, corners, by_chart, start, tolerance):
         size = max(high[0] - low[0], high[1] - low[1])
         if not size > 0:
             continue
+        slack = tolerance * size
         side = int(np.sqrt(last - first)) + 1
         cell = size / side * (1 + 1e-9)
-        box = np.empty((last - first, 4), np.int64)
         fill = np.zeros(side * side + 1, np.int64)
-        for i in range(first, last):
-            lo_x, lo_y, hi_x, hi_y = np.inf, np.inf, -np.inf, -np.inf
-            for k in range(3):
-                x, y = flat[corners[by_chart[i], k], 0], flat[corners[by_chart[i], k], 1]
-                lo_x, hi_x = min(lo_x, x), max(hi_x, x)
-                lo_y, hi_y = min(lo_y, y), max(hi_y, y)
-            r = i - first
-            box[r, 0] = min(int((lo_x - low[0]) / cell), side - 1)
-            box[r, 1] = min(int((lo_y - low[1]) / cell), side - 1)
-            box[r, 2] = min(int((hi_x - low[0]) / cell), side - 1)
-            box[r, 3] = min(int((hi_y - low[1]) / cell), side - 1)
-            for gx in range(box[r, 0], box[r, 2] + 1):
-                for gy in range(box[r, 1], box[r, 3] + 1):
-                    fill[gx * side + gy + 1] += 1
-        for g in range(side * side):
-            fill[g + 1] += fill[g]
-        members = np.empty(fill[-1], np.int64)
-        at = fill[:-1].copy()
-        for r in range(last - first):
-            for gx in range(box[r, 0], box[r, 2] + 1):
-                for gy in range(box[r, 1], box[r, 3] + 1):
-                    members[at[gx * side + gy]] = first + r
-                    at[gx * side + gy] += 1
+        members = np.empty(0, np.int64)
+        for phase in range(2):  # the cells' counts, then their members
+            if phase == 1:
+                for g in range(side * side):
+                    fill[g + 1] += fill[g]
+                members = np.empty(fill[-1], np.int64)
+                at = fill[:-1].copy()
+            for i in range(first, last):
+                tri = corners[by_chart[i]]
+                ax, ay = flat[tri[0], 0], flat[tri[0], 1]
+                bx, by = flat[tri[1], 0], flat[tri[1], 1]
+                cx, cy = flat[tri[2], 0], flat[tri[2], 1]
+                if not (bx - ax) * (cy - ay) - (by - ay) * (cx - ax) > 0:
+                    continue
+                gx0 = min(int((min(ax, bx, cx) - low[0]) / cell), side - 1)
+                gy0 = min(int((min(ay, by, cy) - low[1]) / cell), side - 1)
+                gx1 = min(int((max(ax, bx, cx) - low[0]) / cell), side - 1)
+                gy1 = min(int((max(ay, by, cy) - low[1]) / cell), side - 1)
+                for gx in range(gx0, gx1 + 1):
+                    x0 = low[0] + gx * cell
+                    for gy in range(gy0, gy1 + 1):
+                        y0 = low[1] + gy * cell
+                        if not (_meets(ax, ay, bx, by, x0, y0, cell, slack)
+                                and _meets(bx, by, cx, cy, x0, y0, cell, slack)
+                                and _meets(cx, cy, ax, ay, x0, y0, cell, slack)):
+                            continue
+                        g = gx * side + gy
+                        if phase == 0:
+                            fill[g + 1] += 1
+                        else:
+                            members[at[g]] = i
+                            at[g] += 1
         for g in range(side * side):
             for i in range(fill[g], fill[g + 1]):
+                a = corners[by_chart[members[i]]]
                 for j in range(i + 1, fill[g + 1]):
-                    a, b = members[i] - first, members[j] - first
-                    if overlapping[c] or _tested_elsewhere(box, members, by_chart, first, i, j,
-                                                           g, side):
-                        continue
-                    if _share_an_edge(corners[by_chart[first + a]], corners[by_chart[first + b]]):
-                        continue
-                    if not _apart(flat, corners[by_chart[first + a]],
-                                  corners[by_chart[first + b]], tolerance * size):
+                    b = corners[by_chart[members[j]]]
+                    if not _share_an_edge(a, b) and not _apart(flat, a, b, slack):
                         overlapping[c] = True
+                        break
+                if overlapping[c]:
+                    break
+            if overlapping[c]:
+                break
     return overlapping
 
 
 @inline
-def _tested_elsewhere(box, members, by_chart, first, i, j, g, side):
-    """Whether the pair of cell entries ``i``, ``j`` (rows of ``box``) is tested in another
-    cell than ``g``, or need not be: their cell boxes do not meet, or meet first (their
-    common box's lowest cell) elsewhere."""
-    a, b = members[i] - first, members[j] - first
-    x = max(box[a, 0], box[b, 0])
-    y = max(box[a, 1], box[b, 1])
-    if x > min(box[a, 2], box[b, 2]) or y > min(box[a, 3], box[b, 3]):
-        return True
-    return x * side + y != g
+def _meets(px, py, qx, qy, x0, y0, cell, slack):
+    """Whether some of the cell [x0, x0 + cell] × [y0, y0 + cell] is on the inner side of a
+    counter-clockwise triangle's edge p → q, or within ``slack`` × its length of it."""
+    nx, ny = py - qy, qx - px  # points into the triangle
+    reach = nx * (x0 + cell if nx > 0 else x0) + ny * (y0 + cell if ny > 0 else y0)
+    return reach >= nx * px + ny * py - slack * np.sqrt(nx * nx + ny * ny)
 
 
 @inline
