@@ -209,7 +209,7 @@ def _mirrored_locals(t1, t2, normals, geometric, i, count, local, distance_sq):
 def drawn_near_rays(technique: int, seed, keys: np.ndarray, rays: int, starts: np.ndarray,
                     t1: np.ndarray, t2: np.ndarray, normals: np.ndarray,
                     geometric: np.ndarray, centres: np.ndarray, radii: np.ndarray,
-                    length: float, cells: bool = True):
+                    length: float, cells: bool):
     """The obscurance rays of texels keys (k,) — each texel's rays from ``starts[i]`` (k, 3) in
     its frame t1, t2, normals (k, 3) each (``Texels.hemisphere_normal``; ``geometric`` (k, 3)
     its front-face normal, which rays below are folded about) — that may pass near the spheres
@@ -217,12 +217,13 @@ def drawn_near_rays(technique: int, seed, keys: np.ndarray, rays: int, starts: n
     ``_mirrored_locals``): (texel (m,) int64 index into keys, sample (m,) int64 its sample
     index, x, y, z (m,) their local directions as drawn, the bits
     ``hemisphere.cosine_directions`` gives; ``hemisphere.world_rays`` folds them). Texels that
-    cannot reach a sphere (``_reachable``) draw nothing. With ``sobol`` points (and ``cells``;
-    False draws every ray, for the tests), a texel whose spheres subtend narrow cones draws
-    only the rays that may lie in them (``_cell_candidates``, in each of the texel's two nets:
-    ``sampling.fill_points``); the others' directions are drawn (``sampling.fill_points``,
-    ``fill_cosine``) a few texels at a time into small buffers, so that no (k·rays,) arrays
-    are made. Either way each drawn ray meets the same test."""
+    cannot reach a sphere (``_reachable``) draw nothing. With ``sobol`` points (and ``cells``:
+    the bake's; False draws every ray, the tests' reference, in the same compiled code), a
+    texel whose spheres subtend narrow cones draws only the rays that may lie in them
+    (``_cell_candidates``, in each of the texel's two nets: ``sampling.fill_points``); the
+    others' directions are drawn (``sampling.fill_points``, ``fill_cosine``) a few texels at a
+    time into small buffers, so that no (k·rays,) arrays are made. Either way each drawn ray
+    meets the same test."""
     k = len(starts)
     spheres = len(centres)
     local = np.empty((2 * spheres, 3))  # the spheres, then their mirror images

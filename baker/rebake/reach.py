@@ -95,7 +95,7 @@ def rays_meet(changed: Changed, texels: Texels, rows: np.ndarray, settings,
         texel, sample, x, y, z = drawn_near_rays(
             TECHNIQUES.index(settings.sampling), np.uint64(settings.seed), texels.key[chosen],
             n, starts, *tangent_frames(frame), frame, normal, changed.sphere_centres, radii,
-            settings.d_max)
+            settings.d_max, True)
         if not len(texel):
             return
         # Each drawn ray from its texel's sample point: the bits of that ray in a bake.
