@@ -89,6 +89,19 @@ def test_a_bad_index_in_an_unused_object_is_named(tmp_path, kind):
     assert f"{where} → {target}[" in error.message and error.fix
 
 
+@pytest.mark.parametrize("index", [0.0, 1.5, "0", True])
+def test_an_index_that_is_not_an_integer_is_named_as_such(tmp_path, index):
+    """A node's mesh given as 0.0, 1.5, "0" or true (the file has mesh 0): refused at it,
+    saying it is not an integer, where "objects the file does not have" alone misled."""
+    path, document = _scene(tmp_path)
+    document["nodes"][0]["mesh"] = index
+    path.write_text(json.dumps(document))
+    with pytest.raises(baker.InputError) as raised:
+        load(path)
+    assert raised.value.where == "nodes[0].mesh"
+    assert f"nodes[0].mesh → meshes[{index!r}] (not an integer; 1 meshes" in raised.value.message
+
+
 def test_every_bad_index_is_counted_and_the_first_ones_named(tmp_path):
     path, document = _scene(tmp_path)
     wheres = [EDITS[kind](document)[0] for kind in ("accessor", "texture", "camera", "image",

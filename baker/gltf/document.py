@@ -5,7 +5,8 @@ every value has its field's JSON type, and turned back into JSON (``data``).
 int, float, str, bool, Optional, List, Dict[str, Any], other such dataclasses, and
 ``Attributes``. A value of another JSON type than its field's (a string where an index is
 expected, say) is an error that names where it is (``WrongType``); an integral float where an
-integer is expected (``"count": 3.0``, as some exporters write them) is read as that integer.
+integer is expected (``"count": 3.0``, as some exporters write them) is read as that integer
+(an index into another array must be a JSON integer: ``references`` refuses one first).
 ``data`` goes the other way, cleaned for writing, in one walk.
 """
 

@@ -55,13 +55,18 @@ def check_references(raw: dict, file: str) -> None:
     bad = list(_bad_references(raw))
     if not bad:
         return
-    named = "; ".join(f"{where} → {target}[{index!r}] ({count} {target} in the file)"
+    named = "; ".join(f"{where} → {target}[{index!r}] ({_why(index)}{count} {target} in the file)"
                       for where, target, index, count in bad[:_MAX_NAMED])
     more = f"; and {len(bad) - _MAX_NAMED} more" if len(bad) > _MAX_NAMED else ""
     raise InputError(f"{len(bad)} reference(s) to objects the file does not have: {named}{more}",
                      file=file, where=bad[0][0],
                      fix="export the file again (its indices were not updated when objects "
                          "were removed), or run it through the Khronos glTF Validator")
+
+
+def _why(index: Any) -> str:
+    """What is wrong with an ``index`` besides its range: "" for an integer."""
+    return "" if isinstance(index, int) and not isinstance(index, bool) else "not an integer; "
 
 
 def _bad_references(raw: dict) -> Iterator[tuple[str, str, Any, int]]:
