@@ -115,6 +115,7 @@ def test_a_shared_scene_with_lights_is_the_local_bake_on_one_thread(ray_cluster,
     assert result.report["shadow_rays"] > 0 and result.texels > 4 * PART
 
 
+@pytest.mark.long
 def test_the_command_line_says_which_worker_baked_what(ray_cluster, small_parts, tmp_path,
                                                        capsys):
     from baker.cli.main import main
@@ -225,6 +226,7 @@ def _with_a_worker_killed(cluster: LocalCluster, bake) -> "baker.BakeResult":
     return result
 
 
+@pytest.mark.long
 def test_a_worker_killed_in_a_part_leaves_the_bytes_as_they_were(ray_cluster, small_parts,
                                                                    tmp_path):
     source = cornell_box().save(tmp_path / "cornell.glb")
