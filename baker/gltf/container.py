@@ -18,7 +18,7 @@ from baker.errors import InputError
 from baker.gltf import budget
 from baker.gltf import document as gltf_document
 from baker.gltf import objects
-from baker.gltf.context import REEXPORT, invalid
+from baker.gltf.context import invalid
 from baker.gltf.extensions import SUPPORTED_EXTENSIONS, unsupported_kind
 from baker.gltf.files import SceneFolder
 from baker.gltf.references import check_references

@@ -34,10 +34,11 @@ COMPONENT_DTYPES = {
 
 class WrongType(Exception):
     """A JSON value whose type is not its field's: ``where`` is its JSON path (``nodes[3].mesh``),
-    ``expected`` what the field holds."""
+    ``what`` says what it is and what glTF expects there."""
 
     def __init__(self, where: str, expected: str, value) -> None:
-        shown = repr(value) if len(repr(value)) <= 40 else f"a JSON {_JSON_NAMES[type(value)]}"
+        shown = repr(value)
+        shown = shown if len(shown) <= 40 else f"a JSON {_JSON_NAMES[type(value)]}"
         self.what = f"is {shown}, where glTF expects {expected}"
         super().__init__(f"{where} {self.what}")
         self.where = where
