@@ -907,10 +907,10 @@ def test_rebake_cost_prices_the_texels_by_the_stages_of_a_full_bake():
     """Half the texels redone whole at ``REDO_COST`` times their validity, trace and direct
     light (0.8 of the full bake), the rest searched at ``SEARCH_COST`` times their probes
     (validity 0.4); compose and write 0.1; a full bake from there redoes all but its 0.1 of
-    loading."""
+    loading, lights and plan (the rebake has done them and hands them over)."""
     from baker.rebake import cost
 
-    stages = {"load": 1.0, "validity": 4.0, "trace": 3.0, "direct": 1.0, "compose": 0.5,
+    stages = {"load": 0.5, "lights": 0.3, "plan": 0.2, "validity": 4.0, "trace": 3.0, "direct": 1.0, "compose": 0.5,
               "write": 0.5}
     scaling, tail, full = cost.rebake_cost(stages, 0.5, 0.5)
     redo, search = cost.REDO_COST, cost.SEARCH_COST

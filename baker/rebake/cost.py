@@ -40,17 +40,20 @@ def rebake_cost(stages: dict[str, float], redone: float, reached: float
     the work: ``redone`` (fraction of the texels: the moved nodes' own and those touching
     them) at ``REDO_COST`` × a full bake's validity, trace and direct light per texel,
     ``reached`` (fraction: the others within reach) at ``SEARCH_COST`` × its validity per
-    texel; compose and write as a full bake's. A full bake from there does all but loading the
-    scene (its lights and plan too: the rebake hands over what it made of them,
-    ``FullBake.prepared``, but a process's first bake pays numba's start there, which a
-    later one does not)."""
+    texel; compose and write as a full bake's. A full bake from there does all but what the
+    rebake has done before it prices: loading the scene, its lights and plan (the rebake hands
+    over what it made of them, ``FullBake.prepared``). Those stages hold a process's first
+    calls (numba's start, Embree's device): counted as a full bake's work they made a rebake of
+    nearly every texel look cheaper than one, on a small scene's first bake or one slowed
+    there by the machine."""
     total = sum(stages.values())
     share = {name: stages.get(name, 0.0) / total for name in
-             ("load", "validity", "trace", "direct", "compose", "spill", "write")}
+             ("load", "lights", "plan", "validity", "trace", "direct", "compose", "spill",
+              "write")}
     per_texel = share["validity"] + share["trace"] + share["direct"]
     tail = share["compose"] + share["spill"] + share["write"]
     return (redone * REDO_COST * per_texel + reached * SEARCH_COST * share["validity"], tail,
-            1.0 - share["load"])
+            1.0 - share["load"] - share["lights"] - share["plan"])
 
 
 def afford(full_bake: dict | None, redone: int, reached: int, texels: int,
