@@ -72,7 +72,7 @@ def _bake_both(source: Path, folder: Path, address: str, local_threads: int = 0,
 
 def test_the_demo_scene_baked_on_the_cluster_is_the_local_bake(ray_cluster, small_parts, tmp_path):
     source = cornell_box().save(tmp_path / "cornell.glb")
-    result = _bake_both(source, tmp_path, ray_cluster.address, rays=16, page_size=128)
+    result = _bake_both(source, tmp_path, ray_cluster.address, rays=4, page_size=128)
     report = result.report["cluster"]
     assert result.texels > 4 * PART and report["parts"] == len(parts.part_slices(result.texels))
     assert report["nodes"] == 2 and report["cpus"] == 2
