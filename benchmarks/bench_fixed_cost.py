@@ -42,7 +42,7 @@ from assets.make_scenes import cornell_box  # noqa: E402
 from assets.many_objects import boxes_and_sphere  # noqa: E402
 from baker.atlas.charts import chart_name  # noqa: E402
 from baker.atlas.unwrap import baked_instances, frame_meshes, unwrap  # noqa: E402
-from baker.atlas.unwrap_cache import entries  # noqa: E402
+from baker.atlas.unwrap_cache import entry_path  # noqa: E402
 from baker.api import encode_pages, write_output  # noqa: E402
 from baker.gltf.load import load  # noqa: E402
 from baker.pipeline.full import compute  # noqa: E402
@@ -119,7 +119,7 @@ def edited_unwrap(done, repeat: int) -> float:
     edited = sorted(range(len(meshes)), key=lambda m: (len(meshes[m][1]), m))[len(meshes) // 2]
     times = []
     for _ in range(repeat):
-        (entries() / f"{chart_name(meshes[edited])}.npz").unlink(missing_ok=True)
+        entry_path(chart_name(meshes[edited])).unlink(missing_ok=True)
         started = time.perf_counter()
         unwrap(done.scene, done.world, done.settings)
         times.append(time.perf_counter() - started)

@@ -31,13 +31,12 @@ def cache(tmp_path, monkeypatch):
 def _entries(place):
     """Every entry: one per distinct mesh charted, and one of all a scene's meshes together."""
     folder = place / "unwrap" / "charts"
-    return sorted(folder.glob("*.npz")) if folder.is_dir() else []
+    return sorted(folder.glob(f"*{unwrap_cache.SUFFIX}")) if folder.is_dir() else []
 
 
 def _meshes_in(entry) -> int:
     """How many meshes' charts an entry holds."""
-    with np.load(entry) as arrays:
-        return len(arrays["lengths"])
+    return len(unwrap_cache._unpacked(bytearray(entry.read_bytes()))[1])  # its lengths
 
 
 def _no_charting(monkeypatch):
@@ -89,12 +88,12 @@ def test_a_damaged_entry_is_ignored_and_written_again(tmp_path, cache, damage):
         data = entry.read_bytes()
         if damage == "truncated":
             entry.write_bytes(data[: len(data) // 2])
-        elif damage == "flipped":  # a bit of the arrays' data (the zip's CRC no longer matches)
+        elif damage == "flipped":  # a bit of the arrays' data (the entry's CRC no longer matches)
             flipped = bytearray(data)
             flipped[len(data) // 2] ^= 0x10
             entry.write_bytes(bytes(flipped))
         elif damage == "wrong arrays":
-            np.savez(entry.with_suffix(""), header=np.zeros(4, np.int64))
+            entry.write_bytes(unwrap_cache._packed([np.zeros(4, np.int64)]))
         else:
             entry.write_bytes(b"")
         assert unwrap_cache.read(entry.stem, meshes) is None
@@ -145,13 +144,17 @@ def test_an_unwritable_cache_costs_nothing_but_the_cache(tmp_path, monkeypatch):
 
 
 def test_only_the_most_recently_used_entries_are_kept(tmp_path, cache, monkeypatch):
+    """Entries of an earlier format (``.npz``), never read again, count and go first."""
     monkeypatch.setattr(unwrap_cache, "KEEP_CHARTS", 2)
     arrays = ((np.zeros(1, np.int64),) * unwrap_cache.PER_MESH,)
     for n, name in enumerate(("a", "b", "c")):
         unwrap_cache.write(name, (1,), arrays)
-        os.utime(cache / "unwrap" / "charts" / f"{name}.npz", (1000 + n, 1000 + n))
+        os.utime(unwrap_cache.entry_path(name), (1000 + n, 1000 + n))
+    old = unwrap_cache.entries() / "old.npz"
+    old.write_bytes(b"PK")
+    os.utime(old, (500, 500))
     unwrap_cache.write("d", (1,), arrays)
-    assert [p.stem for p in _entries(cache)] == ["c", "d"]
+    assert [p.stem for p in _entries(cache)] == ["c", "d"] and not old.exists()
 
 
 def test_the_charting_time_limit_grows_with_the_triangles(tmp_path, monkeypatch):
@@ -256,3 +259,27 @@ def test_the_atlas_does_not_depend_on_the_cores_or_on_which_charts_were_cached(
         for a, b in zip(alone.instances, other.instances, strict=True):
             assert np.array_equal(a.vertices, b.vertices) and np.array_equal(a.uv, b.uv)
             assert np.array_equal(a.triangles, b.triangles) and np.array_equal(a.pages, b.pages)
+
+
+def test_an_entry_round_trips_and_any_cut_or_changed_byte_is_refused(cache):
+    """An entry holds its arrays' values, types and shapes whole; cut anywhere, or with any
+    byte changed (the format's, the layout's or the data's), it is read as none, never as
+    other arrays or an exception."""
+    rng = np.random.default_rng(5)
+    mesh = (rng.integers(0, 9, 7), rng.integers(0, 7, (4, 3)), rng.random((7, 2)),
+            rng.integers(0, 2, 7), rng.random((2, 2)))
+    unwrap_cache.write("entry", (2,), (mesh, mesh[:4] + (rng.random((2, 2)),)))
+    header, meshes = unwrap_cache.read("entry", 2)
+    assert header == (2,)
+    for got, want in zip(meshes[0], mesh):
+        assert got.dtype == np.asarray(want).dtype and np.array_equal(got, want)
+    path = unwrap_cache.entry_path("entry")
+    data = path.read_bytes()
+    for cut in sorted({0, 1, len(data) - 1, *rng.integers(1, len(data), 40)}):
+        path.write_bytes(data[:cut])
+        assert unwrap_cache.read("entry", 2) is None, cut
+    for at in sorted({*range(40), *rng.integers(0, len(data), 60)}):
+        changed = bytearray(data)
+        changed[at] ^= 1 << int(rng.integers(0, 8))
+        path.write_bytes(bytes(changed))
+        assert unwrap_cache.read("entry", 2) is None, at

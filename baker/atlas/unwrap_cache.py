@@ -9,19 +9,20 @@ bake at another density hits too and only packs them again; a rigid move of a no
 input bit-identical (``unwrap.frame_positions``), so a rebake after moving objects hits.
 
 The folder is ``$BAKER_CACHE_DIR`` if set (``off`` or empty: no cache), else
-``$XDG_CACHE_HOME/baker`` or ``~/.cache/baker``; entries are ``unwrap/charts/<hash>.npz``
-(NumPy's zip of arrays, no pickle), written atomically, at most ``KEEP_CHARTS`` (the least
-recently used go first). An entry that cannot be read whole (truncated, a bad CRC, arrays of
-the wrong shape) is ignored, and the fresh result written over it. A cache that cannot be
-written (read-only, full) only costs the next bake the charting.
+``$XDG_CACHE_HOME/baker`` or ``~/.cache/baker``; entries are ``unwrap/charts/<hash>.charts``
+(``_packed``: the arrays' shapes and bytes behind a CRC-32, no pickle), written atomically, at
+most ``KEEP_CHARTS`` (the least recently used go first). An entry that cannot be read whole
+(truncated, a bad CRC, arrays of the wrong shape) is ignored, and the fresh result written over
+it. A cache that cannot be written (read-only, full) only costs the next bake the charting.
 """
 
 from __future__ import annotations
 
 import hashlib
-import io
+import math
 import os
-import zipfile
+import struct
+import zlib
 from pathlib import Path
 from typing import Iterable
 
@@ -30,10 +31,12 @@ import numpy as np
 from baker.errors import BakerError
 from baker.run.atomic import write_atomically
 
-FORMAT = b"baker unwrap cache 4"  # bump when what an entry holds, or how it is keyed, changes
+FORMAT = b"baker unwrap cache 5"  # bump when what an entry holds, or how it is keyed, changes
 KEEP_CHARTS = 16384  # meshes' charts kept (a scene has one per distinct mesh; most are small)
 PER_MESH = 5  # arrays per mesh: vertices, triangles, uv and chart of each vertex, chart sides
-_NAMES = ("header", "lengths") + tuple(f"joined{k}" for k in range(PER_MESH))
+SUFFIX = ".charts"
+_OLD_SUFFIXES = (".npz",)  # entries of earlier formats: never read again, pruned as the oldest
+_KINDS = {b"i": np.dtype("<i8"), b"f": np.dtype("<f8")}  # what an entry's arrays may hold
 
 
 def folder() -> Path | None:
@@ -64,34 +67,35 @@ def entries() -> Path | None:
     return None if place is None else place / "unwrap" / "charts"
 
 
-def _path(name: str) -> Path | None:
+def entry_path(name: str) -> Path | None:
+    """Where the entry ``name`` is kept, or None when caching is off."""
     place = entries()
-    return None if place is None else place / f"{name}.npz"
+    return None if place is None else place / f"{name}{SUFFIX}"
 
 
 def read(name: str, mesh_count: int
          ) -> tuple[tuple[int, ...], tuple[tuple[np.ndarray, ...], ...]] | None:
     """The entry ``name``: (header ints, per mesh ``PER_MESH`` arrays), or None
     when there is none or it cannot be read whole (it is then rewritten by the next ``write``)."""
-    path = _path(name)
+    path = entry_path(name)
     if path is None or not path.is_file():
         return None
     try:
-        with np.load(path, allow_pickle=False) as entry:
-            if sorted(entry.files) != sorted(_NAMES):
-                return None
-            header = tuple(int(v) for v in entry["header"])
-            lengths = entry["lengths"]
-            joined = [entry[f"joined{k}"] for k in range(PER_MESH)]
+        arrays = _unpacked(bytearray(path.read_bytes()))
         os.utime(path)  # recently used: kept longest
-    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
+    except OSError:
         return None
-    if lengths.shape != (mesh_count, PER_MESH) or lengths.dtype != np.int64 or (lengths < 0).any():
+    if arrays is None or len(arrays) != 2 + PER_MESH:
+        return None
+    header, lengths, joined = arrays[0], arrays[1], arrays[2:]
+    if (header.ndim != 1 or header.dtype != np.int64 or lengths.shape != (mesh_count, PER_MESH)
+            or lengths.dtype != np.int64 or (lengths < 0).any()):
         return None
     if any(len(a) != n for a, n in zip(joined, lengths.sum(axis=0))):
         return None
     split = [np.split(a, np.cumsum(n)[:-1]) for a, n in zip(joined, lengths.T)]
-    return header, tuple(tuple(parts[m] for parts in split) for m in range(mesh_count))
+    return (tuple(int(v) for v in header),
+            tuple(tuple(parts[m] for parts in split) for m in range(mesh_count)))
 
 
 def write(name: str, header: tuple[int, ...], meshes: tuple[tuple[np.ndarray, ...], ...],
@@ -100,22 +104,64 @@ def write(name: str, header: tuple[int, ...], meshes: tuple[tuple[np.ndarray, ..
     per kind of array all meshes' joined (a few large arrays read much faster than thousands of
     small ones). Then (``prune``) drop the least recently used beyond ``KEEP_CHARTS``. Any failure to
     write leaves the cache as it was, and the bake goes on."""
-    path = _path(name)
+    path = entry_path(name)
     if path is None or not meshes:
         return
-    arrays = {"header": np.asarray(header, np.int64),
-              "lengths": np.array([[len(a) for a in mesh] for mesh in meshes], np.int64)}
-    for k in range(PER_MESH):
-        arrays[f"joined{k}"] = np.concatenate([np.asarray(mesh[k]) for mesh in meshes])
-    buffer = io.BytesIO()
-    np.savez(buffer, **arrays)
+    arrays = [np.asarray(header, np.int64),
+              np.array([[len(a) for a in mesh] for mesh in meshes], np.int64)]
+    arrays += [np.concatenate([np.asarray(mesh[k]) for mesh in meshes]) for k in range(PER_MESH)]
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        write_atomically(path, buffer.getvalue())
+        write_atomically(path, _packed(arrays))
     except (OSError, BakerError):
         return
     if prune:
         prune_entries()
+
+
+def _packed(arrays: list[np.ndarray]) -> bytes:
+    """An entry's bytes: ``FORMAT``, the CRC-32 of the rest, the count of ``arrays`` and each
+    one's kind (``_KINDS``), dimensions and shape, then their data in turn (C order). What
+    ``np.savez`` stored before, in less of the time to write and read (0.5 and 1.4 ms an entry
+    there, a scene of 200 boxes writing 203 entries cold and reading 202 after an edit): integer
+    arrays as int64, others as float64."""
+    kept = [np.ascontiguousarray(a, _KINDS[b"i" if a.dtype.kind in "iub" else b"f"])
+            for a in arrays]
+    layout = [struct.pack("<I", len(kept))]
+    for array in kept:
+        layout.append(struct.pack(f"<cB{array.ndim}q", b"i" if array.dtype.kind == "i" else b"f",
+                                  array.ndim, *array.shape))
+    rest = b"".join(layout + [array.tobytes() for array in kept])
+    return FORMAT + struct.pack("<I", zlib.crc32(rest)) + rest
+
+
+def _unpacked(data: bytearray) -> list[np.ndarray] | None:
+    """The arrays of an entry's bytes (``_packed``), views of ``data``; None when they are not
+    such bytes whole (another format, truncated, a CRC that does not match, a shape past the
+    end)."""
+    start = len(FORMAT) + 4
+    if data[:len(FORMAT)] != FORMAT or len(data) < start + 4:
+        return None
+    if struct.unpack_from("<I", data, len(FORMAT))[0] != zlib.crc32(memoryview(data)[start:]):
+        return None
+    try:
+        count, = struct.unpack_from("<I", data, start)
+        at, shapes = start + 4, []
+        for _ in range(count):
+            kind, ndim = struct.unpack_from("<cB", data, at)
+            shape = struct.unpack_from(f"<{ndim}q", data, at + 2)
+            shapes.append((_KINDS[kind], shape))
+            at += 2 + 8 * ndim
+    except (struct.error, KeyError):
+        return None
+    arrays = []
+    for dtype, shape in shapes:
+        size = math.prod(shape)
+        if min(shape, default=0) < 0 or at + size * dtype.itemsize > len(data):
+            return None
+        arrays.append(np.frombuffer(data, dtype, size, at).reshape(shape))
+        at += size * dtype.itemsize
+    return arrays if at == len(data) else None
 
 
 def prune_entries() -> None:
@@ -132,7 +178,7 @@ def prune_entries() -> None:
 def _prune(place: Path, keep: int) -> None:
     """Remove all but the ``keep`` most recently used entries of ``place``."""
     entries = sorted(((e.stat().st_mtime, e.path) for e in os.scandir(place)
-                      if e.name.endswith(".npz")), reverse=True)
+                      if e.name.endswith((SUFFIX,) + _OLD_SUFFIXES)), reverse=True)
     for _mtime, path in entries[keep:]:
         try:
             os.unlink(path)
