@@ -262,7 +262,7 @@ def test_the_atlas_does_not_depend_on_the_cores_or_on_which_charts_were_cached(
 
 
 def test_an_entry_round_trips_and_any_cut_or_changed_byte_is_refused(cache):
-    """An entry holds its arrays' values, types and shapes whole; cut anywhere, or with any
+    """An entry holds its arrays' values, types and shapes whole, aligned; cut anywhere, or with any
     byte changed (the format's, the layout's or the data's), it is read as none, never as
     other arrays or an exception."""
     rng = np.random.default_rng(5)
@@ -273,6 +273,7 @@ def test_an_entry_round_trips_and_any_cut_or_changed_byte_is_refused(cache):
     assert header == (2,)
     for got, want in zip(meshes[0], mesh):
         assert got.dtype == np.asarray(want).dtype and np.array_equal(got, want)
+        assert got.flags.aligned  # else every kernel given them is numba's JIT
     path = unwrap_cache.entry_path("entry")
     data = path.read_bytes()
     for cut in sorted({0, 1, len(data) - 1, *rng.integers(1, len(data), 40)}):
