@@ -742,3 +742,25 @@ def test_uv_transforms_are_found_only_where_the_uvs_moved_as_one_block():
     shuffled = reference.astype(np.float64).copy()
     shuffled[:10] += 0.01  # one chart moved on its own
     assert _uv_transform(reference, shuffled) is None
+    flat = reference.copy()
+    flat[:, 1] = 0.5  # no extent on an axis: no scale to find
+    assert _uv_transform(flat, flat * 2.0) is None
+
+
+def test_a_page_s_vertices_and_rows_are_what_np_unique_gives():
+    """``_compacted`` (the vertices a page's triangles use and the triangles as rows into them)
+    is ``np.unique(..., return_inverse=True)`` of the page's triangles, on random primitives
+    split over random pages."""
+    from baker.output.write import _compacted
+
+    rng = np.random.default_rng(11)
+    for _ in range(200):
+        count = int(rng.integers(1, 40))
+        triangles = rng.integers(0, count, (int(rng.integers(0, 30)), 3))
+        page_of = rng.integers(0, 3, len(triangles))
+        page = int(rng.integers(0, 3))
+        vertices, rows = _compacted(triangles, page_of, page, count)
+        on_page = triangles[page_of == page]
+        want, inverse = np.unique(on_page, return_inverse=True)
+        assert np.array_equal(vertices, want)
+        assert np.array_equal(rows, inverse.reshape(-1, 3))

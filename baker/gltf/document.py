@@ -176,6 +176,9 @@ def data(value):
     if isinstance(value, dict):
         out = {}
         for key, item in value.items():
+            if type(item) in _IMMUTABLE:  # most values: no call for them
+                out[key] = item
+                continue
             if item is None:
                 continue
             if key in ("extensions", "extras"):
@@ -188,5 +191,5 @@ def data(value):
             out[key] = item
         return out
     if isinstance(value, (list, tuple)):
-        return [data(item) for item in value]
+        return [item if type(item) in _IMMUTABLE else data(item) for item in value]
     return copy.deepcopy(value)
