@@ -62,14 +62,15 @@ def test_code_for_wider_types_takes_narrower_arguments_only():
 
 def _bake(folder: Path, scene: Path, name: str, **env) -> tuple[bytes, list[str]]:
     """(the output's bytes, the heavy modules loaded, ``jit.status()``) of a bake in a new
-    process: numba, and pygltflib with the JSON schema libraries it brings (0.08–0.10 s of
-    every command's start until baker read glTF into its own objects, ``gltf/objects.py``)."""
+    process: numba, pygltflib with the JSON schema libraries it brings (0.08–0.10 s of
+    every command's start until baker read glTF into its own objects, ``gltf/objects.py``),
+    and tqdm (0.06 s; only a bar on a terminal needs it, ``progress.bar_class``)."""
     out = folder / f"{name}.glb"
     code = ("import sys, baker; "
             f"baker.bake({str(scene)!r}, {str(out)!r}, baker.Settings(rays=8, page_size=128, "
             "directional=True, smooth=True)); "
             "print(sorted(m for m in ('numba', 'llvmlite.binding', 'pygltflib', 'dataclasses_json', "
-            "'marshmallow') if m in sys.modules)); "
+            "'marshmallow', 'tqdm') if m in sys.modules)); "
             "print(baker.jit.status())")
     done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True,
                           text=True, check=True, env=dict(os.environ, **env))

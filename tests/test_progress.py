@@ -105,7 +105,7 @@ def test_once_every_stage_has_reported_the_time_left_is_the_time_left(seed):
     assert meter.seconds_left() == pytest.approx(0.0, abs=1e-9)
 
 
-class _Recorded(progress.Bar):
+class _Recorded(progress.bar_class()):
     """The bar drawing into a string, recording (rays done, total) at every update."""
 
     updates: list[tuple[int, int]] = []
@@ -123,7 +123,7 @@ def test_the_total_after_a_tenth_of_the_work_is_within_a_quarter(tmp_path, monke
     """When a tenth of the rays are cast, the rays the bar says are left, total − done, are
     within 25 % of those really left (GI's path lengths are guessed until its first chunk).
     The bar ends at its total, advancing with every stage, GI included."""
-    monkeypatch.setattr(progress, "Bar", _Recorded)
+    monkeypatch.setattr(progress, "bar_class", lambda: _Recorded)
     monkeypatch.setattr(full, "wanted", lambda quiet: True)
     _Recorded.updates = []
     done = computed(cornell_box(), tmp_path, rays=16, page_size=128, method=method)
@@ -144,7 +144,7 @@ def test_an_adaptive_bake_s_bar_does_not_stand_at_its_total_while_rounds_run(tmp
     """With ``--target-error`` the rounds after the first announce their rays: the bar's
     total is above its rays done at every update but one at each round's end (the next
     round's announcement follows it, at the same rays done), until the last ray."""
-    monkeypatch.setattr(progress, "Bar", _Recorded)
+    monkeypatch.setattr(progress, "bar_class", lambda: _Recorded)
     monkeypatch.setattr(full, "wanted", lambda quiet: True)
     _Recorded.updates = []
     computed(cornell_box(), tmp_path, page_size=128, method=method, target_error=0.01,

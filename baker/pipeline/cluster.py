@@ -42,7 +42,6 @@ import sys
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
-from importlib import metadata
 from typing import Callable, Iterator
 
 import numpy as np
@@ -88,7 +87,10 @@ def _ray():
 def versions() -> dict[str, str]:
     """Python's and the libraries' versions here: with baker's own code (``api``'s
     ``cluster_identity``), what must be the same on the driver and every worker for their
-    texels to be the same bits."""
+    texels to be the same bits. (importlib.metadata is imported here, for a cluster's bake
+    only: 0.02 s of every command's start else.)"""
+    from importlib import metadata
+
     out = {"python": platform.python_version()}
     for name in _LIBRARIES:
         try:

@@ -30,15 +30,17 @@ it made a cold GI bake's ETA 1.15–2 times the time left at 10–50 % of its ra
 
 from __future__ import annotations
 
+import functools
 import os
 import sys
 import threading
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Callable, Iterator
+from typing import TYPE_CHECKING, Callable, Iterator
 
-from tqdm import tqdm
+if TYPE_CHECKING:  # imported where a bar is drawn: 0.06 s of every command's start else
+    from tqdm import tqdm
 
 _DEFAULT_SIZE = (80, 24)  # columns and rows of a terminal that gives no size
 CLOCK: Callable[[], float] = time.perf_counter  # the Meter's clock, in seconds (wall time)
@@ -153,18 +155,26 @@ class Meter:
             self._bar.update(rays)
 
 
-class Bar(tqdm):
-    """tqdm showing the ``meter``'s time left (``Meter.seconds_left``) in place of its own."""
+@functools.cache
+def bar_class() -> type:
+    """The rays' bar: tqdm showing its ``meter``'s time left (``Meter.seconds_left``) in place
+    of its own. Made at the first bar drawn: importing tqdm (0.06 s, most of it its version's
+    lookup in the installed packages' metadata) is no part of a bake in a pipeline or of
+    ``baker --help``."""
+    from tqdm import tqdm
 
-    FORMAT = "{l_bar}{bar}| {n_fmt}/{total_fmt} [{elapsed}<{left}, {rate_fmt}]"
-    meter: Meter | None = None
+    class Bar(tqdm):
+        FORMAT = "{l_bar}{bar}| {n_fmt}/{total_fmt} [{elapsed}<{left}, {rate_fmt}]"
+        meter: Meter | None = None
 
-    @property
-    def format_dict(self) -> dict:
-        values = super().format_dict
-        left = self.meter.seconds_left() if self.meter is not None else None
-        values["left"] = "?" if left is None else self.format_interval(left)
-        return values
+        @property
+        def format_dict(self) -> dict:
+            values = super().format_dict
+            left = self.meter.seconds_left() if self.meter is not None else None
+            values["left"] = "?" if left is None else self.format_interval(left)
+            return values
+
+    return Bar
 
 
 @contextmanager
@@ -175,10 +185,10 @@ def bar(label: str, show: bool) -> Iterator[Meter]:
         return
     from baker.run.compile_clock import CompileClock  # numba: not for ``import baker.cli``
 
-    sized = _has_size()
-    with CompileClock() as compiling, Bar(
+    sized, drawing = _has_size(), bar_class()
+    with CompileClock() as compiling, drawing(
             total=0, desc=label, unit="ray", unit_scale=True, leave=False, smoothing=0,
-            bar_format=Bar.FORMAT, dynamic_ncols=sized,
+            bar_format=drawing.FORMAT, dynamic_ncols=sized,
             ncols=None if sized else _DEFAULT_SIZE[0],
             nrows=None if sized else _DEFAULT_SIZE[1]) as drawn:
         drawn.meter = Meter(drawn, compiled=lambda: compiling.seconds)
@@ -218,6 +228,8 @@ class Steps:
         with self._lock:
             self.total += int(steps)
             if self._draw and self._bar is None:
+                from tqdm import tqdm
+
                 sized = _has_size()
                 self._bar = tqdm(total=self.total, initial=self.done,
                                  desc=f"baker: {self._name}",
