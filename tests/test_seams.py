@@ -194,3 +194,59 @@ def test_row_groups_are_numpys_unique_index_and_inverse():
         got = row_groups(rows)
         assert np.array_equal(got[0], first) and np.array_equal(got[1], inverse.reshape(-1))
     assert [a.shape for a in row_groups(np.zeros((0, 3), np.int64))] == [(0,), (0,)]
+
+def _cut_edges_by_sorting(point, quantised, uv, page):
+    """What ``seams._cut_edges`` finds, the plain way (as it found them before): points
+    ranked by ``np.unique``, edges sorted by the ranks of their ends, pairs taken in order."""
+    rank = np.unique(quantised, axis=0, return_inverse=True)[1].ravel()[point]  # (m, 3)
+    ends = np.stack([rank, np.roll(rank, -1, axis=1)], axis=2).reshape(-1, 2)  # edge 3t + c
+    low, high = ends.min(axis=1), ends.max(axis=1)
+    key = low * (rank.max() + 1) + high
+    order = np.argsort(key, kind="stable")
+    found = []
+    for j in range(len(order) - 1):
+        same = key[order] == key[order[j]]
+        if not same[j + 1] or (j > 0 and same[j - 1]) or (j + 2 < len(order) and same[j + 2]):
+            continue
+        a, b = order[j], order[j + 1]
+        ta, tb = a // 3, b // 3
+        if page[ta] < 0 or page[tb] < 0:
+            continue
+        corners = []
+        for e in (a, b):
+            c, d = e % 3, (e + 1) % 3
+            corners += [(d, c)] if rank[e // 3, c] > rank[e // 3, d] else [(c, d)]
+        (lo_a, hi_a), (lo_b, hi_b) = corners
+        if (page[ta] != page[tb] or np.abs(uv[ta, lo_a] - uv[tb, lo_b]).max() > 1e-9
+                or np.abs(uv[ta, hi_a] - uv[tb, hi_b]).max() > 1e-9):
+            found.append((ta, tb, lo_a, hi_a, lo_b, hi_b))
+    return np.array(found, np.int64).reshape(-1, 6).T
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_cut_edges_are_those_a_sort_of_all_edges_finds(seed):
+    """On random triangle soups over a few points (edges shared by one, two or more
+    triangles, fans about one point past a small bucket, both windings, triangles on two
+    pages or off the atlas, UVs that agree or not), the cut edges, their corners and their
+    order are those the sort of every edge by its end points' ranks gives."""
+    from baker.image.seams import _SMALL_BUCKET, _cut_edges
+
+    rng = np.random.default_rng(seed)
+    points = int(rng.integers(3, 30)) + (3 * _SMALL_BUCKET if seed % 3 == 0 else 0)
+    quantised = rng.integers(-3, 3, (points, 3))
+    triangles = rng.integers(0, points, (int(rng.integers(1, 120)), 3))
+    if seed % 3 == 0:  # a fan about point 0: a bucket past the small ones
+        quantised[1:] += 10 * np.arange(1, points)[:, None]  # its rim's points apart
+        fan = np.stack([np.zeros(points - 2, np.int64), np.arange(1, points - 1),
+                        np.arange(2, points)], axis=1)
+        turned = rng.random(len(fan)) < 0.5  # either winding
+        fan[turned] = fan[turned][:, ::-1]
+        triangles = np.concatenate([triangles, fan])
+    point = np.empty_like(triangles)
+    for i, row in enumerate(quantised):  # each point's first row, as _shared_edges gives it
+        point[triangles == i] = np.flatnonzero((quantised == row).all(axis=1))[0]
+    uv = np.round(rng.random((len(triangles), 3, 2)) * 2) / 2  # agreeing often
+    page = rng.integers(-1, 2, len(triangles))
+    got = np.array(_cut_edges(point, quantised, uv, page)).reshape(6, -1)
+    want = _cut_edges_by_sorting(point, quantised, uv, page)
+    assert np.array_equal(got, want)

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from baker.atlas.layout import Atlas
-from baker.geometry.rows import joined_roots, row_groups
+from baker.geometry.rows import joined_roots
 from baker.geometry.world import World
 from baker.jit import inline, jit
 from baker.run.parallel import run_chunks
@@ -101,10 +101,9 @@ def find_seams(atlas: Atlas, world: World) -> Seams:
 
 
 def _shared_edges(world: World, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The edges of triangles ``tris`` (m,) (world triangle ids) in 3D, as ``_cut_edges``
-    takes them: (3m,) each edge's key, the same for the edges of two triangles that have the
-    same two end points, whichever instance each belongs to (edge 3t + c of triangle t runs
-    from its corner c to corner c + 1 mod 3), and the edges' order by key, stable.
+    """The corners of triangles ``tris`` (m,) (world triangle ids) as points in 3D, as
+    ``_cut_edges`` takes them: (m, 3) each corner's point, a row of (p, 3) int64 quantised
+    positions; corners at the same point share its row, whichever instance each belongs to.
 
     Same 3D point ⇔ same position rounded to 1e-7 of the largest coordinate (meshes split
     vertices at their own seams; touching objects have vertices of their own)."""
@@ -113,65 +112,158 @@ def _shared_edges(world: World, tris: np.ndarray) -> tuple[np.ndarray, np.ndarra
     used[corners.ravel()] = True  # each vertex once (np.unique's, without its sort)
     points = world.positions[used]
     extent = max(float(np.abs(points).max()), 1e-30)
-    _first, ranks = row_groups(np.round(points / (extent * 1e-7)).astype(np.int64))
-    point_id = ranks[(np.cumsum(used) - 1)[corners]]  # (m, 3)
-    key = np.empty(point_id.size, np.int64)
-    _edge_keys(point_id, key)
-    return point_id, key, np.argsort(key, kind="stable")
+    quantised = np.round(points / (extent * 1e-7)).astype(np.int64)
+    row = _point_rows(quantised)
+    return row[(np.cumsum(used) - 1)[corners]], quantised
 
 
-@jit
-def _edge_keys(point_id: np.ndarray, key: np.ndarray) -> None:
-    """``key`` (3m,): of edge 3t + c, from corner c of triangle t to corner c + 1 mod 3 with
-    end points ``point_id`` (m, 3), lower id × (largest id + 1) + higher id."""
-    width = point_id.max() + 1
-    for t in range(len(point_id)):
-        for c in range(3):
-            a, b = point_id[t, c], point_id[t, (c + 1) % 3]
-            key[3 * t + c] = min(a, b) * width + max(a, b)
-
-
-@jit
-def _cut_edges(point_id: np.ndarray, key: np.ndarray, order: np.ndarray, uv: np.ndarray,
-               page: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
-                                          np.ndarray, np.ndarray]:
-    """The edges that exactly two triangles share in 3D (``_shared_edges``' ``key`` and
-    ``order``) and that the atlas cuts: both triangles placed (``page`` (m,) ≥ 0) and on two
-    pages, or an end point at UVs (``uv`` (m, 3, 2)) more than 1e-9 apart on the two sides.
-    An edge used by three or more triangles (a fin, two objects overlapping) is left out.
-    Returns, per edge in key order, the two triangles (first, second in ``order``) and the
-    corners (0–2) of its lower and higher end point in each (lo_a, hi_a, lo_b, hi_b): ends
-    matched, whatever the windings. One pass: most shared edges lie inside a chart."""
-    n = len(order)
-    found = np.empty((6, n // 2), np.int64)
-    k = 0
-    for j in range(n - 1):
-        if (key[order[j]] != key[order[j + 1]] or (j > 0 and key[order[j - 1]] == key[order[j]])
-                or (j + 2 < n and key[order[j + 2]] == key[order[j]])):
-            continue
-        ta, tb = order[j] // 3, order[j + 1] // 3
-        if page[ta] < 0 or page[tb] < 0:
-            continue
-        lo_a, hi_a = _ends(point_id, order[j])
-        lo_b, hi_b = _ends(point_id, order[j + 1])
-        split = page[ta] != page[tb]
-        for axis in range(2):
-            split |= abs(uv[ta, lo_a, axis] - uv[tb, lo_b, axis]) > 1e-9
-            split |= abs(uv[ta, hi_a, axis] - uv[tb, hi_b, axis]) > 1e-9
-        if split:
-            found[0, k], found[1, k], found[2, k] = ta, tb, lo_a
-            found[3, k], found[4, k], found[5, k] = hi_a, lo_b, hi_b
-            k += 1
-    return found[0, :k], found[1, :k], found[2, :k], found[3, :k], found[4, :k], found[5, :k]
+def _cut_edges(point: np.ndarray, quantised: np.ndarray, uv: np.ndarray, page: np.ndarray
+               ) -> tuple[np.ndarray, ...]:
+    """The edges that exactly two triangles share in 3D (corners at points ``point`` (m, 3),
+    rows of ``quantised`` (p, 3): ``_shared_edges``) and that the atlas cuts: both triangles
+    placed (``page`` (m,) ≥ 0) and on two pages, or an end point at UVs (``uv`` (m, 3, 2))
+    more than 1e-9 apart on the two sides. An edge used by three or more triangles (a fin, two
+    objects overlapping) is left out. Edge 3t + c of triangle t runs from its corner c to
+    corner c + 1 mod 3. Returns, per edge, the two triangles (a: the one whose edge comes
+    first) and the corners (0–2) of its lower and higher end point in each (lo_a, hi_a, lo_b,
+    hi_b; lower: the lexicographically smaller quantised position), ends matched whatever the
+    windings; the edges in the order of their end points (lower, then higher)."""
+    found = _shared_pairs(point, quantised, uv, page)
+    ta, tb, lo_a, hi_a = found[0], found[1], found[2], found[3]
+    low, high = quantised[point[ta, lo_a]], quantised[point[ta, hi_a]]
+    order = np.lexsort((high[:, 2], high[:, 1], high[:, 0], low[:, 2], low[:, 1], low[:, 0]))
+    return tuple(found[:, order])
 
 
 @inline
-def _ends(point_id: np.ndarray, edge: int) -> tuple[int, int]:
-    """The corners (lower, higher) of edge ``edge`` (3t + c) of its triangle t by end point id:
-    c and c + 1 mod 3, swapped where c's point id is the higher."""
+def _hashed(x: int, y: int, z: int, size: int) -> int:
+    """A slot of a table of ``size`` for the integers (x, y, z) (multiplicative hashing)."""
+    h = x * 0x1E3779B97F4A7C15 + y * 0x632BE59BD9B4E019 + z * 0x05EBCA77C2B2AE63
+    return ((h ^ (h >> 29)) & 0x7FFFFFFFFFFFFFFF) % size
+
+
+@jit
+def _point_rows(quantised: np.ndarray) -> np.ndarray:
+    """(p,) for each row of ``quantised`` (p, 3) int64 the first row equal to it: the same
+    value for the same point (a hash table of the rows, in one pass)."""
+    size = 2 * len(quantised) + 1
+    table = np.full(size, -1, np.int64)
+    first = np.empty(len(quantised), np.int64)
+    for i in range(len(quantised)):
+        x, y, z = quantised[i, 0], quantised[i, 1], quantised[i, 2]
+        h = _hashed(x, y, z, size)
+        while True:
+            r = table[h]
+            if r < 0:
+                table[h] = i
+                first[i] = i
+                break
+            if quantised[r, 0] == x and quantised[r, 1] == y and quantised[r, 2] == z:
+                first[i] = r
+                break
+            h = h + 1 if h + 1 < size else 0
+    return first
+
+
+@jit
+def _shared_pairs(point: np.ndarray, quantised: np.ndarray, uv: np.ndarray, page: np.ndarray
+                  ) -> np.ndarray:
+    """``_cut_edges``' edges in no particular order, (6, k): ta, tb, lo_a, hi_a, lo_b, hi_b.
+    The 3m edges are bucketed by their lower end point's row (a counting sort) and each
+    bucket sorted by the higher end's (insertion sort; numpy's merge sort for a bucket past
+    ``_SMALL_BUCKET``: a fan's apex): a sort of all the edges' keys, the points' ranks by a sort
+    and a pass in key order took 0.7 s of a level of a million triangles."""
+    n, rows = 3 * len(point), len(quantised)
+    start = np.zeros(rows + 1, np.int64)
+    for e in range(n):
+        start[_low_end(point, e) + 1] += 1
+    for r in range(rows):
+        start[r + 1] += start[r]
+    edges, fill = np.empty(n, np.int64), start[:-1].copy()
+    for e in range(n):  # each bucket's edges in increasing order
+        r = _low_end(point, e)
+        edges[fill[r]] = e
+        fill[r] += 1
+    found = np.empty((6, n // 2), np.int64)
+    k = 0
+    for r in range(rows):
+        bucket = edges[start[r]:start[r + 1]]
+        _sort_by_high_end(point, bucket)
+        for i in range(len(bucket) - 1):
+            a, b = bucket[i], bucket[i + 1]
+            high = _high_end(point, a)
+            if (high != _high_end(point, b) or (i > 0 and _high_end(point, bucket[i - 1]) == high)
+                    or (i + 2 < len(bucket) and _high_end(point, bucket[i + 2]) == high)):
+                continue  # not shared, or shared by three or more triangles
+            k = _cut_pair(point, quantised, uv, page, a, b, found, k)
+    return found[:, :k]
+
+
+_SMALL_BUCKET = 32  # edges a bucket sorts by insertion (``_sort_by_high_end``)
+
+
+@inline
+def _low_end(point: np.ndarray, edge: int) -> int:
+    """The row of edge ``edge`` (3t + c)'s end point of the lower row."""
+    t, c = edge // 3, edge % 3
+    return min(point[t, c], point[t, (c + 1) % 3])
+
+
+@inline
+def _high_end(point: np.ndarray, edge: int) -> int:
+    """The row of edge ``edge`` (3t + c)'s end point of the higher row."""
+    t, c = edge // 3, edge % 3
+    return max(point[t, c], point[t, (c + 1) % 3])
+
+
+@jit
+def _sort_by_high_end(point: np.ndarray, bucket: np.ndarray) -> None:
+    """Sort ``bucket`` (edges, in increasing order) by their higher end's row, in place and
+    stably: equal ends keep the lower edge first."""
+    if len(bucket) > _SMALL_BUCKET:
+        high = np.array([_high_end(point, e) for e in bucket])
+        bucket[:] = bucket[np.argsort(high, kind="mergesort")]
+        return
+    for i in range(1, len(bucket)):
+        e, high, j = bucket[i], _high_end(point, bucket[i]), i
+        while j > 0 and _high_end(point, bucket[j - 1]) > high:
+            bucket[j] = bucket[j - 1]
+            j -= 1
+        bucket[j] = e
+
+
+@inline
+def _cut_pair(point: np.ndarray, quantised: np.ndarray, uv: np.ndarray, page: np.ndarray,
+              a: int, b: int, found: np.ndarray, k: int) -> int:
+    """Put the shared edges ``a`` < ``b`` in ``found[:, k]`` where the atlas cuts them (as
+    ``_cut_edges`` says); the count of ``found`` after."""
+    ta, tb = a // 3, b // 3
+    if page[ta] < 0 or page[tb] < 0:
+        return k
+    lo_a, hi_a = _ends(point, quantised, a)
+    lo_b, hi_b = _ends(point, quantised, b)
+    split = page[ta] != page[tb]
+    for axis in range(2):
+        split |= abs(uv[ta, lo_a, axis] - uv[tb, lo_b, axis]) > 1e-9
+        split |= abs(uv[ta, hi_a, axis] - uv[tb, hi_b, axis]) > 1e-9
+    if split:
+        found[0, k], found[1, k], found[2, k] = ta, tb, lo_a
+        found[3, k], found[4, k], found[5, k] = hi_a, lo_b, hi_b
+        k += 1
+    return k
+
+
+@inline
+def _ends(point: np.ndarray, quantised: np.ndarray, edge: int) -> tuple[int, int]:
+    """The corners (lower, higher) of edge ``edge`` (3t + c) of its triangle t by end point:
+    c and c + 1 mod 3, swapped where c's quantised position is lexicographically the higher."""
     t, c = edge // 3, edge % 3
     d = (c + 1) % 3
-    return (d, c) if point_id[t, c] > point_id[t, d] else (c, d)
+    p, q = point[t, c], point[t, d]
+    for axis in range(3):
+        if quantised[p, axis] != quantised[q, axis]:
+            return (d, c) if quantised[p, axis] > quantised[q, axis] else (c, d)
+    return c, d
 
 
 def _taps(page: np.ndarray, uv: np.ndarray, shape: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray]:
