@@ -220,9 +220,9 @@ def _high_end(point: np.ndarray, edge: int) -> int:
 def _sort_by_high_end(point: np.ndarray, bucket: np.ndarray) -> None:
     """Sort ``bucket`` (edges, in increasing order) by their higher end's row, in place and
     stably: equal ends keep the lower edge first."""
-    if len(bucket) > _SMALL_BUCKET:
-        high = np.array([_high_end(point, e) for e in bucket])
-        bucket[:] = bucket[np.argsort(high, kind="mergesort")]
+    if len(bucket) > _SMALL_BUCKET:  # (its own names: numba may type a name once a kernel)
+        ends = np.array([_high_end(point, e) for e in bucket])
+        bucket[:] = bucket[np.argsort(ends, kind="mergesort")]
         return
     for i in range(1, len(bucket)):
         e, high, j = bucket[i], _high_end(point, bucket[i]), i
