@@ -166,9 +166,12 @@ def _substitute_sparse(
 
 
 def _to_numbers(raw: np.ndarray, component_type: int, normalized: bool) -> np.ndarray:
-    """float64 for floats and normalized integers (signed ones clamped at -1), else int64."""
+    """float64 for floats and normalized integers (signed ones clamped at -1), else int64. A
+    signalling NaN among the floats stays a NaN, for the checks after to refuse, without
+    numpy's RuntimeWarning on the bake's stderr."""
     if component_type == 5126:
-        return raw.astype(np.float64)
+        with np.errstate(invalid="ignore"):
+            return raw.astype(np.float64)
     if normalized:
         values = raw.astype(np.float64) / _NORMALIZED_DIVISORS[component_type]
         return np.maximum(values, -1.0) if raw.dtype.kind == "i" else values
