@@ -160,15 +160,15 @@ def test_a_bake_whose_chart_builder_crashes_once_gives_the_same_bytes(tmp_path, 
     settings = baker.Settings(page_size=128, rays=4, shadow_rays=1, threads=1)
     baker.bake(scene, tmp_path / "calm.glb", settings, state=False)
     marker = tmp_path / "crashed"
-    real = charts.chart
+    real = charts.chart_many
 
-    def crashes_once(positions, triangles):
+    def crashes_once(meshes):
         if not marker.exists():
             marker.write_text("crashed")
             _crash()
-        return real(positions, triangles)
+        return real(meshes)
 
-    monkeypatch.setattr(charts, "chart", crashes_once)
+    monkeypatch.setattr(charts, "chart_many", crashes_once)
     baker.bake(scene, tmp_path / "crashed.glb", settings, state=False)
     assert marker.read_text() == "crashed"
     assert (tmp_path / "crashed.glb").read_bytes() == (tmp_path / "calm.glb").read_bytes()

@@ -235,8 +235,51 @@ def test_a_helical_ramp_is_charted_in_pieces_and_a_crumpled_surface_left_to_xatl
     assert planar.project(grid * [1.0, 0.01, 1.0], cells) is not None  # flattened: one chart
 
 
+@pytest.mark.parametrize("split", [False, True])
+def test_meshes_projected_together_get_the_charts_each_gets_alone(split):
+    """``project_many`` over boxes, spheres, ramps (split into narrower cones, or declined),
+    crumpled grids and rocks (declined), leaves, random triangle soups (shared corners,
+    degenerate and repeated triangles) and a mesh laid over another (the same positions: no
+    welding across meshes), shuffled: for each mesh the arrays and types ``project`` gives it
+    alone, or None where it does (every invariant of a chart holding but on the soups, whose
+    repeated triangles overlap alone as well)."""
+    rng = np.random.default_rng(7 + split)
+    meshes = [grid_box(rng.uniform(0.1, 3.0, 3), int(rng.integers(1, 5)))[:2] for _ in range(4)]
+    meshes += [uv_sphere(0.8, rings, 2 * rings)[:2] for rings in (3, 12)]
+    meshes += [_ramp(2, 160), _ramp(1, 40), rock(1.0, 2, 1)[:2],
+               leaves(30, (0, 0, 0), (3, 2, 3), 0.5, 3)[:2]]
+    side = 12
+    x, z = np.meshgrid(np.arange(side + 1.0), np.arange(side + 1.0), indexing="ij")
+    grid = np.stack([x.ravel(), rng.uniform(-1.0, 1.0, x.shape).ravel(), z.ravel()], axis=1)
+    a = (np.arange(side)[:, None] * (side + 1) + np.arange(side)).ravel()
+    meshes.append((grid, np.concatenate([np.stack([a, a + 1, a + side + 2], 1),
+                                         np.stack([a, a + side + 2, a + side + 1], 1)])))
+    shaped = len(meshes)
+    for _ in range(8):
+        n = int(rng.integers(3, 60))
+        points = np.round(rng.normal(size=(n, 3)), 1)  # some corners shared, some repeated
+        meshes.append((points, rng.integers(0, n, (int(rng.integers(1, 120)), 3))))
+    meshes.append((meshes[0][0].copy(), meshes[0][1][::-1].copy()))  # over the first box
+    order = rng.permutation(len(meshes))
+    meshes = [meshes[i] for i in order]
+    soup = (order >= shaped) & (order < shaped + 8)
+    together = planar.project_many(meshes, split)
+    alone = [planar.project(p, t, split) for p, t in meshes]
+    assert sum(c is None for c in alone) >= 2 and sum(c is not None for c in alone) >= 10
+    for (p, t), one, joined, random in zip(meshes, alone, together, soup):
+        assert (one is None) == (joined is None)
+        if one is None:
+            continue
+        for name in ("vertices", "triangles", "uv", "chart", "sides"):
+            mine, theirs = getattr(joined, name), getattr(one, name)
+            assert mine.dtype == theirs.dtype and mine.shape == theirs.shape
+            np.testing.assert_array_equal(mine, theirs)
+        if not random:
+            _check_charts(joined, p, t)
+
+
 def test_an_overlapping_mesh_goes_to_xatlas_only_while_it_fits_one_xatlas_piece(monkeypatch):
-    """``charts.chart``: a ramp of 320 triangles whose one chart overlaps itself goes to xatlas
+    """``charts.chart_many``: a ramp of 320 triangles whose one chart overlaps itself goes to xatlas
     (fast at that size, fewer seams); one of 16,002 triangles (more than an xatlas piece,
     whose time per triangle grows with the mesh) is split by projection instead, its charts
     those of ``planar.project`` and apart."""
@@ -244,10 +287,10 @@ def test_an_overlapping_mesh_goes_to_xatlas_only_while_it_fits_one_xatlas_piece(
     monkeypatch.setattr(charting, "_xatlas_charts", lambda p, t: asked.append(len(t)))
     small = _ramp(2, 160)
     assert planar.project(*small, split=False) is None
-    charting.chart(*small)
+    charting.chart_many([small])
     assert asked == [320]
     big = _ramp(2, charting._PIECE_TRIANGLES // 2 + 1)
-    charts = charting.chart(*big)
+    charts = charting.chart_many([big])[0]
     assert asked == [320] and charts is not None
     np.testing.assert_array_equal(charts.uv, planar.project(*big).uv)
     _check_charts(charts, *big)
@@ -292,7 +335,7 @@ def test_a_crumpled_mesh_is_charted_by_xatlas_in_compact_pieces(seed, monkeypatc
         piece_of[part] = k
         assert np.ptp(centroids[part], axis=0).max() <= 0.75 * np.ptp(centroids, axis=0).max()
     assert (piece_of >= 0).all() and len(pieces) == 8
-    charts = charting.chart(positions, triangles)
+    charts = charting.chart_many([(positions, triangles)])[0]
     np.testing.assert_array_equal(charts.vertices[charts.triangles], triangles)
     chart_of = charts.chart[charts.triangles]
     assert (chart_of == chart_of[:, :1]).all(), "a triangle's corners in two charts"
@@ -312,7 +355,7 @@ def test_a_crumpled_mesh_is_charted_by_xatlas_in_compact_pieces(seed, monkeypatc
     for c in range(len(charts.sides)):  # about 1 chart in 400 of xatlas's overlaps itself,
         # by up to 0.003 (whole) or 0.03 (in pieces) of its size (eight rocks)
         _assert_apart(corner[(chart_of[:, 0] == c) & (uv_area > 0)] * [sign[c], 1.0], 0.05)
-    again = charting.chart(positions, triangles)
+    again = charting.chart_many([(positions, triangles)])[0]
     for name in ("vertices", "triangles", "uv", "chart", "sides"):
         np.testing.assert_array_equal(getattr(again, name), getattr(charts, name))
 

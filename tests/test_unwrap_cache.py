@@ -194,14 +194,14 @@ def _counting_charts(monkeypatch, tmp_path):
     returned: its triangle count."""
     log = tmp_path / "charted"
     log.write_text("")
-    real = charts_module.chart
+    real = charts_module.chart_many
 
-    def counted(positions, triangles):
+    def counted(meshes):
         with open(log, "a") as out:
-            out.write(f"{len(triangles)}\n")
-        return real(positions, triangles)
+            out.writelines(f"{len(triangles)}\n" for _, triangles in meshes)
+        return real(meshes)
 
-    monkeypatch.setattr(charts_module, "chart", counted)
+    monkeypatch.setattr(charts_module, "chart_many", counted)
     return log
 
 

@@ -40,6 +40,9 @@ _XATLAS_AREA = 1e5
 # size (a crumpled rock of 81,920 triangles 6.8 s whole, 3.2–4.1 s in 8,000–32,000-triangle
 # pieces; of 327,680, 68 s whole), while the pieces add few charts (1,008 → 1,128 at 16,000).
 _PIECE_TRIANGLES = 16_000
+# Meshes of a piece or less are projected this many triangles at a time (``chart_many``): far
+# more than numpy's cost per call is worth, few enough that a child's progress moves.
+_BATCH_TRIANGLES = 50_000
 # The CPU time (all its threads) a charting child may use before it is taken for hung
 # (``forked.call_forked_together``: CPU time, so a loaded machine never makes a genuine run
 # look hung):
@@ -134,28 +137,45 @@ def chart_name(mesh: Mesh) -> str:
 
 
 def chart_list(meshes: list[Mesh]) -> list[Charts]:
-    """Each of ``meshes``' charts (``chart``), in order: a cluster worker's task."""
-    return [chart(*mesh) for mesh in meshes]
+    """Each of ``meshes``' charts (``chart_many``), in order: a cluster worker's task."""
+    return chart_many(meshes)
 
 
 def _chart_group(meshes: list[Mesh], group: list[int], charted_so_far: np.ndarray, slot: int
                  ) -> list[Charts]:
-    """The charts of the meshes ``group`` (indices into ``meshes``), in turn (one child's),
-    each kept in the cache as it is made (by the child: the cores write side by side); the
-    triangles charted so far are kept in ``charted_so_far[slot]`` (memory shared with the
-    parent, which shows them)."""
-    out = []
+    """The charts of the meshes ``group`` (indices into ``meshes``; one child's), each kept in
+    the cache as it is made (by the child: the cores write side by side); the triangles
+    charted so far are kept in ``charted_so_far[slot]`` (memory shared with the parent, which
+    shows them). Meshes of one xatlas piece or less go ``_BATCH_TRIANGLES`` at a time
+    (``chart_many``), bigger ones one by one."""
+    made = {}
     charted_so_far[slot] = 0  # a child run again starts again
-    for m in group:
-        out.append(chart(*meshes[m]))
-        unwrap_cache.write(chart_name(meshes[m]), (len(out[-1].sides),), (_entry(out[-1]),),
-                           prune=False)
-        charted_so_far[slot] += len(meshes[m][1])
-    return out
+    for batch in _batches([m for m in group if len(meshes[m][1]) <= _PIECE_TRIANGLES],
+                          meshes) + [[m] for m in group if len(meshes[m][1]) > _PIECE_TRIANGLES]:
+        for m, charts in zip(batch, chart_many([meshes[m] for m in batch])):
+            made[m] = charts
+            unwrap_cache.write(chart_name(meshes[m]), (len(charts.sides),), (_entry(charts),),
+                               prune=False)
+            charted_so_far[slot] += len(meshes[m][1])
+    return [made[m] for m in group]
 
 
-def chart(positions: np.ndarray, triangles: np.ndarray) -> Charts:
-    """One mesh's charts: by projection, else by xatlas; none for no triangles. A mesh bigger
+def _batches(small: list[int], meshes: list[Mesh]) -> list[list[int]]:
+    """``small`` (indices into ``meshes``) in runs of about ``_BATCH_TRIANGLES`` triangles."""
+    batches, size = [], _BATCH_TRIANGLES
+    for m in small:
+        if size >= _BATCH_TRIANGLES:
+            batches.append([])
+            size = 0
+        batches[-1].append(m)
+        size += len(meshes[m][1])
+    return batches
+
+
+def chart_many(meshes: list[Mesh]) -> list[Charts]:
+    """Each mesh's charts: by projection, else by xatlas; none for no triangles. The meshes of
+    one xatlas piece or less are projected together (``planar.project_many``: the same charts,
+    without numpy's cost per call for each of many small meshes). A mesh bigger
     than one xatlas piece whose projected charts overlap is split by projection
     (``planar.project``'s ``split``): xatlas would cut it into pieces too, and take 20 s
     against 1.2 s for a crumpled rock of 327,680 triangles (bench_unwrap.py --rock; its atlas
@@ -163,11 +183,18 @@ def chart(positions: np.ndarray, triangles: np.ndarray) -> Charts:
     stretch 1.000 [0.957, 1.040] against 1.026 [0.992, 1.172]). One piece or less, xatlas
     charts it in under half a second and cuts fewer seams (a rock of 20,480, a little over a
     piece: 0.45 s against 0.09 s, 0.180 of its inner edges cut against 0.333)."""
-    if not len(triangles):
-        return Charts(vertices=np.zeros(0, np.int64), triangles=np.zeros((0, 3), np.int64),
-                      uv=np.zeros((0, 2)), chart=np.zeros(0, np.int64), sides=np.zeros((0, 2)))
-    projected = planar.project(positions, triangles, split=len(triangles) > _PIECE_TRIANGLES)
-    return projected if projected is not None else _xatlas_charts(positions, triangles)
+    small = [m for m, (_, t) in enumerate(meshes) if 0 < len(t) <= _PIECE_TRIANGLES]
+    projected = dict(zip(small, planar.project_many([meshes[m] for m in small]) if small else []))
+    out = []
+    for m, (positions, triangles) in enumerate(meshes):
+        if not len(triangles):
+            out.append(Charts(vertices=np.zeros(0, np.int64), triangles=np.zeros((0, 3), np.int64),
+                              uv=np.zeros((0, 2)), chart=np.zeros(0, np.int64),
+                              sides=np.zeros((0, 2))))
+            continue
+        charts = projected[m] if m in projected else planar.project(positions, triangles)
+        out.append(charts if charts is not None else _xatlas_charts(positions, triangles))
+    return out
 
 
 def balanced(items: list[int], weights: list[int], count: int) -> list[list[int]]:

@@ -14,7 +14,7 @@ the seed's. A chart is projected along its area-weighted normal (every normal wi
 90° of it, so no triangle turns over), scaled so that its area is its surface's, and turned so that
 its bounding rectangle is the least one a side of its convex hull gives. A chart that
 overlaps itself once projected (a helical ramp, a fold of a crumpled rock) is grown again from
-its own triangles in half the cone, up to ``SPLITS`` times, if ``split`` (``charts.chart``:
+its own triangles in half the cone, up to ``SPLITS`` times, if ``split`` (``charts.chart_many``:
 for a mesh bigger than one of xatlas's pieces, whose time per triangle grows with its size); a
 mesh is left to xatlas (None) when a chart still overlaps itself, or when its surface is so
 crumpled that the charts average fewer than ``LEAST_TRIANGLES`` triangles (a rock's noise:
@@ -25,6 +25,8 @@ the charts are the same bits however the meshes are dealt to cores, and after a 
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -49,38 +51,101 @@ def project(positions: np.ndarray, triangles: np.ndarray, split: bool = True
     positions (n, 3) float64 world units (the instance's rigid-free frame), triangles (m, 3)
     int64. ``split``: a chart that overlaps itself is grown again in narrower cones (else the
     mesh is left to xatlas)."""
-    p = np.asarray(positions, np.float64)
-    t = np.asarray(triangles, np.int64)
-    if not len(t):
+    if not len(triangles):
         return None
+    return project_many([(positions, triangles)], split)[0]
+
+
+def project_many(meshes: list[tuple[np.ndarray, np.ndarray]], split: bool = False
+                 ) -> list[Charts | None]:
+    """``project`` of each of ``meshes`` (positions, triangles; each with a triangle at least),
+    the same bits as each alone, from one pass of numpy calls over all of them: a box of 432
+    triangles took 1.7 ms alone, nearly all of it numpy's cost per call (``charts.chart_many``).
+
+    The meshes' arrays are joined (``_Joined``); nothing joins across meshes (vertices weld
+    within their own mesh only), the seeds go mesh by mesh, and charts keep their numbers mesh
+    by mesh (``_regrown``), so each mesh's charts are numbered and made as alone."""
+    joined = _Joined.of(meshes)
+    p, t, mesh = joined.positions, joined.triangles, joined.triangle_mesh
     cross = triangle_cross(p, t)
     double_area = np.linalg.norm(cross, axis=1)
     valid = np.isfinite(double_area) & (double_area > 0)
     normals = np.divide(cross, double_area[:, None], out=np.zeros_like(cross),
                         where=valid[:, None])
-    neighbours = _neighbours(_welded(p)[t])
-    seeds = np.lexsort((np.arange(len(t)), -np.where(valid, double_area, 0.0)))
+    neighbours = _neighbours(_welded(p, joined.vertex_mesh)[t])
+    seeds = np.lexsort((np.arange(len(t)), -np.where(valid, double_area, 0.0), mesh))
     chart = np.full(len(t), -1, np.int64)
     count = _grow(normals, valid, neighbours, seeds, np.cos(np.radians(CONE)), chart, 0)
-    if _crumpled(chart, count, neighbours):
-        return None
+    declined = _crumpled(chart, count, neighbours, mesh, len(meshes))
     cone = CONE
     while True:
         vertex, owner, corners, flat = _flattened(p, t, cross, valid, double_area, chart, count)
         by_chart = np.argsort(chart, kind="stable")
         start = np.searchsorted(chart[by_chart], np.arange(count + 1))
+        chart_mesh = mesh[by_chart[start[:-1]]]
         overlapping = _overlapping(flat, corners, by_chart, start, _OVERLAP)
+        overlapping &= ~declined[chart_mesh]
         if not overlapping.any():
             break
         cone /= 2
         if not split or cone < CONE / 2 ** SPLITS:
-            return None
+            declined[chart_mesh[overlapping]] = True
+            break
         chart, count = _regrown(chart, count, overlapping, normals, valid, neighbours, seeds,
-                                np.cos(np.radians(cone)))
+                                np.cos(np.radians(cone)), mesh)
     hull_order = np.lexsort((flat[:, 1], flat[:, 0], owner))
     vertex_start = np.searchsorted(owner, np.arange(count + 1))
     uv, sides = _turned(flat, hull_order, vertex_start)
-    return Charts(vertices=vertex, triangles=corners, uv=uv, chart=owner, sides=sides)
+    return joined.split(Charts(vertices=vertex, triangles=corners, uv=uv, chart=owner,
+                               sides=sides), chart_mesh, declined)
+
+
+@dataclass(frozen=True)
+class _Joined:
+    """Meshes' arrays end to end: ``positions`` (n, 3) float64, ``triangles`` (m, 3) int64 into
+    them, the mesh of each vertex (n,) and triangle (m,), and where each mesh's vertices and
+    triangles start (meshes + 1,)."""
+
+    positions: np.ndarray
+    triangles: np.ndarray
+    vertex_mesh: np.ndarray
+    triangle_mesh: np.ndarray
+    vertex_start: np.ndarray
+    triangle_start: np.ndarray
+
+    @classmethod
+    def of(cls, meshes: list[tuple[np.ndarray, np.ndarray]]) -> _Joined:
+        vertices = np.array([len(p) for p, _ in meshes], np.int64)
+        triangles = np.array([len(t) for _, t in meshes], np.int64)
+        vertex_start = np.concatenate([[0], np.cumsum(vertices)])
+        triangle_mesh = np.repeat(np.arange(len(meshes)), triangles)
+        return cls(
+            positions=np.concatenate([np.asarray(p, np.float64).reshape(-1, 3) for p, _ in meshes]),
+            triangles=np.concatenate([np.asarray(t, np.int64).reshape(-1, 3) for _, t in meshes])
+            + vertex_start[triangle_mesh, None],
+            vertex_mesh=np.repeat(np.arange(len(meshes)), vertices),
+            triangle_mesh=triangle_mesh,
+            vertex_start=vertex_start,
+            triangle_start=np.concatenate([[0], np.cumsum(triangles)]))
+
+    def split(self, charts: Charts, chart_mesh: np.ndarray, declined: np.ndarray
+              ) -> list[Charts | None]:
+        """Each mesh's part of the joined ``charts`` (numbered mesh by mesh: ``chart_mesh``
+        (c,) the mesh of each, ascending) with its own numbers, or None where ``declined``."""
+        chart_start = np.searchsorted(chart_mesh, np.arange(len(declined) + 1))
+        corner_start = np.searchsorted(charts.chart, chart_start)
+        out = []
+        for i in range(len(declined)):
+            if declined[i]:
+                out.append(None)
+                continue
+            c0, c1 = chart_start[i], chart_start[i + 1]
+            k0, k1 = corner_start[i], corner_start[i + 1]
+            out.append(Charts(
+                vertices=charts.vertices[k0:k1] - self.vertex_start[i],
+                triangles=charts.triangles[self.triangle_start[i]:self.triangle_start[i + 1]] - k0,
+                uv=charts.uv[k0:k1], chart=charts.chart[k0:k1] - c0, sides=charts.sides[c0:c1]))
+        return out
 
 
 def _flattened(p: np.ndarray, t: np.ndarray, cross: np.ndarray, valid: np.ndarray,
@@ -104,15 +169,20 @@ def _flattened(p: np.ndarray, t: np.ndarray, cross: np.ndarray, valid: np.ndarra
 
 
 def _regrown(chart: np.ndarray, count: int, overlapping: np.ndarray, normals: np.ndarray,
-             valid: np.ndarray, neighbours: np.ndarray, seeds: np.ndarray, cone_cos: float
-             ) -> tuple[np.ndarray, int]:
+             valid: np.ndarray, neighbours: np.ndarray, seeds: np.ndarray, cone_cos: float,
+             mesh: np.ndarray) -> tuple[np.ndarray, int]:
     """The charts with the ``overlapping`` ones (c,) bool grown again from their own triangles
-    within the narrower cone (``_grow``; the others keep theirs), numbered 0 … count − 1 in
-    order of their old numbers, the new ones last; and their count."""
+    within the narrower cone (``_grow``; the others keep theirs), numbered 0 … count − 1 mesh
+    by mesh (``mesh`` (m,) of each triangle), within a mesh in order of their old numbers, the
+    new ones last; and their count."""
     chart = np.where(overlapping[chart], -1, chart)
-    _grow(normals, valid, neighbours, seeds[chart[seeds] < 0], cone_cos, chart, count)
-    _, chart = np.unique(chart, return_inverse=True)
-    return chart, int(chart.max(initial=-1)) + 1
+    count = _grow(normals, valid, neighbours, seeds[chart[seeds] < 0], cone_cos, chart, count)
+    chart_mesh = np.zeros(count, np.int64)
+    chart_mesh[chart] = mesh
+    numbers = np.unique(chart)
+    renumbered = np.zeros(count, np.int64)
+    renumbered[numbers[np.lexsort((numbers, chart_mesh[numbers]))]] = np.arange(len(numbers))
+    return renumbered[chart], len(numbers)
 
 
 def _no_area(chart: np.ndarray, valid: np.ndarray, count: int) -> np.ndarray:
@@ -123,12 +193,13 @@ def _no_area(chart: np.ndarray, valid: np.ndarray, count: int) -> np.ndarray:
     return np.bincount(chart, valid, count) == 0
 
 
-def _welded(p: np.ndarray) -> np.ndarray:
-    """(n,) int64 the same number for vertices at the same position (the first's index)."""
-    order = np.lexsort((p[:, 2], p[:, 1], p[:, 0]))
+def _welded(p: np.ndarray, mesh: np.ndarray) -> np.ndarray:
+    """(n,) int64 the same number for vertices at the same position in the same ``mesh`` (n,)
+    (the first's index)."""
+    order = np.lexsort((p[:, 2], p[:, 1], p[:, 0], mesh))
     ordered = p[order]
     new = np.ones(len(p), bool)
-    new[1:] = np.any(ordered[1:] != ordered[:-1], axis=1)
+    new[1:] = np.any(ordered[1:] != ordered[:-1], axis=1) | (mesh[order][1:] != mesh[order][:-1])
     first = order[np.flatnonzero(new)][np.cumsum(new) - 1]
     welded = np.empty(len(p), np.int64)
     welded[order] = first
@@ -193,18 +264,22 @@ def _grow(normals, valid, neighbours, seeds, cone_cos, chart, count):
     return count
 
 
-def _crumpled(chart: np.ndarray, count: int, neighbours: np.ndarray) -> bool:
-    """Whether the charts cut from connected pieces of surface average fewer than
-    ``LEAST_TRIANGLES`` triangles (loose parts charted whole do not count: a leaf is one chart
-    of two triangles, and rightly so)."""
+def _crumpled(chart: np.ndarray, count: int, neighbours: np.ndarray, mesh: np.ndarray,
+              meshes: int) -> np.ndarray:
+    """(meshes,) bool: whether the charts cut from connected pieces of surface of each mesh
+    (``mesh`` (m,) of each triangle) average fewer than ``LEAST_TRIANGLES`` triangles (loose
+    parts charted whole do not count: a leaf is one chart of two triangles, and rightly so)."""
     inner = neighbours >= 0
     rows = np.repeat(np.arange(len(chart)), 3)[inner.reshape(-1)]
     cut = np.zeros(count, bool)
     # Set, not ``|=``: a chart's many edges repeat its index, and a buffered ``|=`` keeps only
     # the last edge's answer (a chart was cut only if its last edge was).
     cut[chart[rows][chart[rows] != chart[neighbours[inner]]]] = True
-    cut_triangles = np.count_nonzero(cut[chart])
-    return cut_triangles >= 64 and cut_triangles < LEAST_TRIANGLES * np.count_nonzero(cut)
+    chart_mesh = np.zeros(count, np.int64)
+    chart_mesh[chart] = mesh
+    cut_triangles = np.bincount(mesh, cut[chart], meshes)
+    return (cut_triangles >= 64) & (cut_triangles < LEAST_TRIANGLES
+                                    * np.bincount(chart_mesh, cut, meshes))
 
 
 def _bases(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

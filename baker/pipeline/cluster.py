@@ -388,7 +388,7 @@ def part_texels(count: int) -> int:
 
 
 def chart_on_workers(meshes: list, steps) -> list:
-    """Each mesh's charts (``atlas.charts.chart``: ``Charts``), made by tasks on the current
+    """Each mesh's charts (``atlas.charts.chart_many``: ``Charts``), made by tasks on the current
     session's workers, in order: the meshes dealt by triangles into about
     ``_PARTS_A_WORKER`` groups a worker, each group a task of one CPU, run again where its
     worker is lost (Ray's retries). Charting is a pure function of a mesh, so the atlas the
