@@ -6,6 +6,7 @@ does another texel density, which only packs the charts again)."""
 from __future__ import annotations
 
 import os
+import stat
 
 import numpy as np
 import pytest
@@ -16,6 +17,7 @@ from assets.rebake_scenes import box_room, grid_boxes, moved
 from baker.atlas import charts as charts_module
 from baker.atlas import unwrap as unwrap_module
 from baker.atlas import unwrap_cache
+from baker.run import atomic
 
 SETTINGS = baker.Settings(page_size=128, rays=4, shadow_rays=1, threads=1)
 
@@ -141,6 +143,36 @@ def test_an_unwritable_cache_costs_nothing_but_the_cache(tmp_path, monkeypatch):
     monkeypatch.setenv("BAKER_CACHE_DIR", str(blocker))
     assert _bake(scene, tmp_path / "blocked.glb") == without
     assert blocker.read_text() == "not a folder"
+
+
+def test_an_entry_is_written_whole_or_not_at_all(tmp_path, monkeypatch):
+    """``atomic.write_private`` (the cache's writes): the bytes land whole, with the permissions
+    a new file gets (0666 less the umask); a write that fails midway (a full disk) or a Ctrl-C
+    leaves the entry that was there and no temporary beside it."""
+    path = tmp_path / "entry.charts"
+    old_mask = os.umask(0o027)
+    try:
+        atomic.write_private(path, b"first" * 1000)
+    finally:
+        os.umask(old_mask)
+    assert path.read_bytes() == b"first" * 1000
+    assert stat.S_IMODE(path.stat().st_mode) == 0o640
+    for failure in (OSError(28, "No space left on device"), KeyboardInterrupt()):
+        written = []
+
+        def fails(handle, data, failure=failure):
+            if written:
+                raise failure
+            written.append(len(data))
+            return len(data) // 2  # a short write: the rest is written again
+
+        monkeypatch.setattr(atomic.os, "write", fails)
+        with pytest.raises(type(failure)):
+            atomic.write_private(path, b"second" * 1000)
+        monkeypatch.undo()
+        assert written == [6000]
+        assert path.read_bytes() == b"first" * 1000
+        assert [p.name for p in tmp_path.iterdir()] == ["entry.charts"]
 
 
 def test_only_the_most_recently_used_entries_are_kept(tmp_path, cache, monkeypatch):

@@ -28,8 +28,7 @@ from typing import Iterable
 
 import numpy as np
 
-from baker.errors import BakerError
-from baker.run.atomic import write_atomically
+from baker.run.atomic import write_private
 
 FORMAT = b"baker unwrap cache 6"  # bump when what an entry holds, or how it is keyed, changes
 KEEP_CHARTS = 16384  # meshes' charts kept (a scene has one per distinct mesh; most are small)
@@ -112,8 +111,8 @@ def write(name: str, header: tuple[int, ...], meshes: tuple[tuple[np.ndarray, ..
     arrays += [np.concatenate([np.asarray(mesh[k]) for mesh in meshes]) for k in range(PER_MESH)]
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        write_atomically(path, _packed(arrays))
-    except (OSError, BakerError):
+        write_private(path, _packed(arrays))
+    except OSError:
         return
     if prune:
         prune_entries()

@@ -31,6 +31,7 @@ import os
 import shutil
 import stat
 import tempfile
+import threading
 from pathlib import Path
 from typing import BinaryIO, Callable, Iterable
 
@@ -275,6 +276,27 @@ def stage_atomically(path: Path, data: Data, durable: bool = False,
         remove_temporary(temp)
         raise
     return temp
+
+
+def write_private(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` through a temporary beside it (named by the process and thread)
+    and a rename, for baker's own files (``unwrap_cache``'s entries): a reader sees the old file
+    or the new one whole, and a failure or Ctrl-C leaves no temporary. None of ``Outputs``' care
+    for a user's files (links, FIFOs, inputs, what a rename replaces), which cost 0.5 ms of the
+    0.8 a cache entry took: a cold bake of 200 small meshes writes 200."""
+    temp = f"{path}.{os.getpid()}-{threading.get_ident()}.tmp"
+    try:
+        handle = os.open(temp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o666)
+        try:
+            rest = memoryview(data)
+            while rest:
+                rest = rest[os.write(handle, rest):]
+        finally:
+            os.close(handle)
+        os.replace(temp, path)
+    except BaseException:
+        remove_temporary(temp)
+        raise
 
 
 def remove_temporary(temp: str) -> None:
