@@ -269,6 +269,35 @@ def test_a_bake_with_one_mesh_edited_charts_only_that_mesh_again(tmp_path, cache
     assert _bake(grown, tmp_path / "uncached.glb") == cached
 
 
+@pytest.mark.parametrize("hint", ["kept", "garbage", "joint gone"])
+def test_an_edit_reads_the_scene_s_last_joint_entry(tmp_path, cache, monkeypatch, hint):
+    """After a bake, every entry of one mesh removed: the scene's last joint entry (named for
+    its file, ``unwrap_cache.last_joint``) gives the charts of the meshes an edit (box 2
+    stretched) left as they were, so only box 2 is charted again. A hint that cannot be read
+    (garbage, or naming an entry no longer there) costs the charting, never the bytes."""
+    boxes = grid_boxes(6)
+    scene = tmp_path / "room.glb"
+    box_room(boxes).save(scene)
+    _bake(scene, tmp_path / "before_baked.glb")
+    for entry in _entries(cache):
+        if _meshes_in(entry) == 1:
+            entry.unlink()
+    (last,) = (cache / "unwrap" / "scenes").iterdir()
+    if hint == "garbage":
+        last.write_bytes(b"not a name\n" + bytes(range(256)))
+    elif hint == "joint gone":
+        for entry in _entries(cache):
+            entry.unlink()
+    box_room(moved(boxes, "box2", size=(0.5, 0.3, 0.3))).save(scene)
+    with monkeypatch.context() as m:
+        log = _counting_charts(m, tmp_path)
+        cached = _bake(scene, tmp_path / "grown_baked.glb")
+        charted = sorted(map(int, log.read_text().split()))
+    assert charted == [12] if hint == "kept" else len(charted) > 1
+    monkeypatch.setenv("BAKER_CACHE_DIR", "off")
+    assert _bake(scene, tmp_path / "uncached.glb") == cached
+
+
 def test_the_atlas_does_not_depend_on_the_cores_or_on_which_charts_were_cached(
         tmp_path, monkeypatch):
     """Charted by one child or by three (the meshes dealt differently), or packed from charts

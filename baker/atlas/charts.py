@@ -53,8 +53,8 @@ Mesh = tuple[np.ndarray, np.ndarray]  # positions (n, 3) float64 world units, tr
 
 
 def chart_meshes(meshes: list[Mesh], threads: int, steps: Steps | None = None,
-                 elsewhere: Callable[[list[Mesh], Steps], list[Charts]] | None = None
-                 ) -> list[Charts]:
+                 elsewhere: Callable[[list[Mesh], Steps], list[Charts]] | None = None,
+                 scene: str | None = None) -> list[Charts]:
     """Every mesh's ``Charts``, in order: each distinct mesh once, from the cache or charted
     in forked children (at most ``threads`` at once, 0: one per core); the split changes only
     who charts what, not the charts. The charts of all the distinct meshes are also kept as
@@ -62,7 +62,9 @@ def chart_meshes(meshes: list[Mesh], threads: int, steps: Steps | None = None,
     (hundreds of small files cost a millisecond or two each). ``steps``: the triangles to
     chart and charted, counted as the children go. ``elsewhere(meshes, steps)``: the charts
     of the meshes not cached, made elsewhere (on a cluster's workers:
-    ``pipeline.cluster.chart_on_workers``) instead of in forked children here."""
+    ``pipeline.cluster.chart_on_workers``) instead of in forked children here. ``scene``: the
+    scene file's path, whose last joint entry holds the charts of the meshes an edit left as
+    they were (``unwrap_cache.last_joint``): read in one go, not from an entry each."""
     names, named = [], {}
     for mesh in meshes:
         shared = (id(mesh[0]), id(mesh[1]))  # one mesh's arrays for many instances: named once
@@ -74,8 +76,10 @@ def chart_meshes(meshes: list[Mesh], threads: int, steps: Steps | None = None,
     charted = _read_together(together, first, meshes)
     if charted is not None:
         return [charted[name] for name in names]
-    charted = {}
+    charted = _from_last(scene, first, meshes) if scene is not None else {}
     for name, m in first.items():
+        if name in charted:
+            continue
         stored = unwrap_cache.read(name, 1)
         found = _from_entry(stored[0], stored[1][0], meshes[m]) if stored is not None else None
         if found is not None:
@@ -104,7 +108,24 @@ def chart_meshes(meshes: list[Mesh], threads: int, steps: Steps | None = None,
                 charted[names[m]] = charts
     unwrap_cache.write(together, tuple(len(charted[name].sides) for name in first),
                        tuple(_entry(charted[name]) for name in first))
+    if scene is not None:
+        unwrap_cache.remember_joint(scene, together, list(first))
     return [charted[name] for name in names]
+
+
+def _from_last(scene: str, first: dict[str, int], meshes: list[Mesh]) -> dict[str, Charts]:
+    """The charts of those of the distinct meshes (``first``: name → a mesh of it) that the
+    scene file ``scene``'s last joint entry holds."""
+    last = unwrap_cache.last_joint(scene)
+    stored = unwrap_cache.read(last[0], len(last[1])) if last is not None else None
+    if stored is None or len(stored[0]) != len(last[1]):
+        return {}
+    charted = {}
+    for name, count, arrays in zip(last[1], stored[0], stored[1]):
+        found = _from_entry((count,), arrays, meshes[first[name]]) if name in first else None
+        if found is not None:
+            charted[name] = found
+    return charted
 
 
 def _read_together(name: str, first: dict[str, int], meshes: list[Mesh]

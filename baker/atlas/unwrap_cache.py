@@ -14,6 +14,12 @@ The folder is ``$BAKER_CACHE_DIR`` if set (``off`` or empty: no cache), else
 most ``KEEP_CHARTS`` (the least recently used go first). An entry that cannot be read whole
 (truncated, a bad CRC, arrays of the wrong shape) is ignored, and the fresh result written over
 it. A cache that cannot be written (read-only, full) only costs the next bake the charting.
+
+Each scene file's last joint entry (all its meshes' charts in one, ``charts.chart_meshes``) is
+named in ``unwrap/scenes/<hash of its path>.last`` with its meshes' names (``remember_joint``):
+the next bake of that file after an edit reads its unchanged meshes' charts from that one entry
+(``last_joint``), not from one file each (about a millisecond each: 0.2 s for 200 boxes). Only
+a hint: the charts are found by their meshes' names, which hash their input.
 """
 
 from __future__ import annotations
@@ -32,6 +38,9 @@ from baker.run.atomic import write_private
 
 FORMAT = b"baker unwrap cache 6"  # bump when what an entry holds, or how it is keyed, changes
 KEEP_CHARTS = 16384  # meshes' charts kept (a scene has one per distinct mesh; most are small)
+KEEP_SCENES = 1024  # scene files whose last joint entry is named
+_LAST = ".last"
+_HEX = frozenset("0123456789abcdef")
 PER_MESH = 5  # arrays per mesh: vertices, triangles, uv and chart of each vertex, chart sides
 SUFFIX = ".charts"
 _OLD_SUFFIXES = (".npz",)  # entries of earlier formats: never read again, pruned as the oldest
@@ -64,6 +73,41 @@ def entries() -> Path | None:
     """The folder of the entries, or None when caching is off."""
     place = folder()
     return None if place is None else place / "unwrap" / "charts"
+
+
+def _scene_path(scene: str) -> Path | None:
+    """Where the scene file ``scene``'s last joint entry is named, or None when caching is off."""
+    place = folder()
+    digest = hashlib.sha256(scene.encode(errors="surrogateescape")).hexdigest()
+    return None if place is None else place / "unwrap" / "scenes" / f"{digest}{_LAST}"
+
+
+def remember_joint(scene: str, joint: str, names: list[str]) -> None:
+    """Name ``joint`` (an entry of the charts of the meshes ``names``, in order) as the scene
+    file ``scene``'s last; then keep only the ``KEEP_SCENES`` scenes baked last. Any failure
+    to write leaves it as it was."""
+    path = _scene_path(scene)
+    if path is None:
+        return
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_private(path, "\n".join([joint, *names]).encode())
+        _prune(path.parent, KEEP_SCENES, _LAST)
+    except OSError:
+        pass
+
+
+def last_joint(scene: str) -> tuple[str, list[str]] | None:
+    """The scene file ``scene``'s last joint entry and its meshes' names (``remember_joint``),
+    or None."""
+    path = _scene_path(scene)
+    try:
+        lines = path.read_bytes().decode().split("\n") if path is not None else []
+    except (OSError, UnicodeDecodeError):
+        return None
+    if len(lines) < 2 or not all(len(line) == 64 and _HEX.issuperset(line) for line in lines):
+        return None
+    return lines[0], lines[1:]
 
 
 def entry_path(name: str) -> Path | None:
@@ -172,15 +216,15 @@ def prune_entries() -> None:
     place = entries()
     if place is not None and place.is_dir():
         try:
-            _prune(place, KEEP_CHARTS)
+            _prune(place, KEEP_CHARTS, SUFFIX, *_OLD_SUFFIXES)
         except OSError:
             pass
 
 
-def _prune(place: Path, keep: int) -> None:
-    """Remove all but the ``keep`` most recently used entries of ``place``."""
+def _prune(place: Path, keep: int, *suffixes: str) -> None:
+    """Remove all but the ``keep`` most recently used files of ``place`` named with ``suffixes``."""
     entries = sorted(((e.stat().st_mtime, e.path) for e in os.scandir(place)
-                      if e.name.endswith((SUFFIX,) + _OLD_SUFFIXES)), reverse=True)
+                      if e.name.endswith(suffixes)), reverse=True)
     for _mtime, path in entries[keep:]:
         try:
             os.unlink(path)
