@@ -5,6 +5,7 @@ does another texel density, which only packs the charts again)."""
 
 from __future__ import annotations
 
+import hashlib
 import os
 import stat
 
@@ -296,6 +297,22 @@ def test_an_edit_reads_the_scene_s_last_joint_entry(tmp_path, cache, monkeypatch
     assert charted == [12] if hint == "kept" else len(charted) > 1
     monkeypatch.setenv("BAKER_CACHE_DIR", "off")
     assert _bake(scene, tmp_path / "uncached.glb") == cached
+
+
+def test_the_last_joint_entries_of_the_scenes_baked_last_are_named(cache, monkeypatch):
+    """``remember_joint`` / ``last_joint`` round-trip a scene's joint entry and its meshes'
+    names, by the scene's path; past ``KEEP_SCENES`` scenes the least recently baked's go."""
+    monkeypatch.setattr(unwrap_cache, "KEEP_SCENES", 2)
+    names = {f"/scenes/{k}.glb": [f"{k:x}{m:x}" * 32 for m in range(k + 1)] for k in range(1, 4)}
+    for k, (scene, meshes) in enumerate(names.items()):
+        unwrap_cache.remember_joint(scene, f"{k + 10:x}" * 64, meshes)
+        os.utime(next((cache / "unwrap" / "scenes").glob(
+            f"{hashlib.sha256(scene.encode()).hexdigest()}.last")), (k, k))  # in order
+    kept = {scene: unwrap_cache.last_joint(scene) for scene in names}
+    assert kept["/scenes/1.glb"] is None
+    for k, scene in ((1, "/scenes/2.glb"), (2, "/scenes/3.glb")):
+        assert kept[scene] == (f"{k + 10:x}" * 64, names[scene])
+    assert unwrap_cache.last_joint("/scenes/other.glb") is None
 
 
 def test_the_atlas_does_not_depend_on_the_cores_or_on_which_charts_were_cached(
