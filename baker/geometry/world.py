@@ -243,16 +243,17 @@ def _placed_positions(positions: np.ndarray, matrices: np.ndarray) -> np.ndarray
             + matrices[:, None, :3, 3])
 
 
-def placed(prim, matrices: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def placed(prim, matrices: np.ndarray, cofactor: np.ndarray, det: np.ndarray
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The instances of the primitive ``prim`` (``gltf.scene.Primitive``) placed by their world
     ``matrices`` (k, 4, 4), all at once: world positions (k, n, 3), unit world normals
     (k, n, 3) and triangles (k, m, 3) into each instance's own rows, two corners swapped where
-    a matrix mirrors (see the module notes). Normals go through det(M)·M⁻ᵀ with det's sign (a
-    zero scale flattens them, never NaNs them); a primitive without normals gets flat ones
+    a matrix mirrors (see the module notes). Normals go through det(M)·M⁻ᵀ with det's sign
+    (``cofactor`` (k, 3, 3) and ``det`` (k,), ``_cofactors`` of the matrices: a zero scale
+    flattens them, never NaNs them); a primitive without normals gets flat ones
     (``_flat_normals``). Elementwise arithmetic and ``rows_times`` only: the same bits on every
     machine and thread count, however many instances are placed together."""
     positions = _placed_positions(prim.positions, matrices)
-    cofactor, det = _cofactors(matrices[:, :3, :3])
     mirrored = det < 0
     triangles = np.where(mirrored[:, None, None], prim.triangles[:, [0, 2, 1]], prim.triangles)
     k, n = positions.shape[:2]
@@ -283,9 +284,11 @@ def build_world(scene: Scene) -> World:
     by_primitive: dict[int, list[int]] = {}
     for i, inst in enumerate(instances):
         by_primitive.setdefault(inst.primitive, []).append(i)
+    matrices = np.stack([inst.world for inst in instances]) if instances else np.zeros((0, 4, 4))
+    cofactor, det = _cofactors(matrices[:, :3, :3])  # every instance's at once: elementwise
     for index, placed_here in by_primitive.items():  # every instance of a primitive at once
         prim, ids = scene.primitives[index], np.asarray(placed_here, np.int64)
-        at, normal_at, tris = placed(prim, np.stack([instances[i].world for i in placed_here]))
+        at, normal_at, tris = placed(prim, matrices[ids], cofactor[ids], det[ids])
         vrows = (vertex_start[ids][:, None] + np.arange(len(prim.positions))).reshape(-1)
         trows = (tri_start[ids][:, None] + np.arange(len(prim.triangles))).reshape(-1)
         positions[vrows], normals[vrows] = at.reshape(-1, 3), normal_at.reshape(-1, 3)
