@@ -245,7 +245,14 @@ def test_unchanged_scene_recomputes_nothing(base, tmp_path):
     assert (tmp_path / "out.glb").read_bytes() == base.read_bytes()
 
 
-def test_cli_bakes_incrementally_rebakes_and_watches(base, tmp_path, capsys):
+def test_cli_bakes_incrementally_rebakes_and_watches(base, tmp_path, capsys, monkeypatch):
+    """The commands' flow; whether the cost model prices a rebake out is its own tests' (it
+    weighs times measured on the machine: a small room's rebake can lose to a full bake)."""
+    import baker.rebake.dirty as dirty_module
+    import baker.rebake.incremental as incremental_module
+
+    monkeypatch.setattr(incremental_module, "worth_reading", lambda path: None)
+    monkeypatch.setattr(dirty_module, "afford", lambda *args, **kwargs: None)
     out = tmp_path / "out.glb"
     scene = _room().save(tmp_path / "room.glb")
     args = ["--rays", "16", "--page-size", "128", "--shadow-rays", "4", "--threads", "1"]
@@ -264,6 +271,31 @@ def test_cli_bakes_incrementally_rebakes_and_watches(base, tmp_path, capsys):
     assert main(["watch", str(scene), "-o", str(out), "--rays", "16", "--max-bakes", "1",
                  "--interval", "0.01"]) == 0
     assert "baked" in capsys.readouterr().out
+
+
+def test_rebake_says_a_moved_name_the_scene_lacks_after_a_full_bake_too(
+        tmp_path, capsys, monkeypatch):
+    """``baker rebake --moved`` naming a node the scene has not: the note says so also when
+    the rebake is priced out and a full bake is done (it was said after incremental ones only,
+    so a machine where the last rebake's fixed work outweighed a full bake lost it)."""
+    import baker.rebake.incremental as incremental_module
+
+    out = tmp_path / "out.glb"
+    scene = _room().save(tmp_path / "room.glb")
+    args = ["--rays", "4", "--page-size", "64", "--shadow-rays", "1", "--threads", "1"]
+    assert main(["bake", str(scene), "-o", str(out), *args]) == 0
+    EDITS["box moved across the room"]().save(scene)
+
+    def priced_out(path):
+        raise FullBake("a rebake would cost more than a full bake (the test's price)")
+
+    monkeypatch.setattr(incremental_module, "worth_reading", priced_out)
+    capsys.readouterr()
+    assert main(["rebake", str(scene), "-o", str(out), "--moved", "box1", "crate_99"]) == 0
+    captured = capsys.readouterr()
+    assert "full bake: a rebake would cost more" in captured.out
+    assert "has no node named crate_99 (--moved)" in captured.err
+    assert "the diff found" not in captured.err  # no diff was made to compare with
 
 
 @pytest.mark.parametrize("suffix", [".glb", ".gltf"])

@@ -53,15 +53,15 @@ def run(args: argparse.Namespace) -> int:
     result = baker.bake(args.scene, args.output, settings, report_path=report_file(args),
                         quiet=args.quiet, incremental=True, state=args.state)
     code = finish(args, result, print_rebake, print_summary)
-    if args.moved and result.rebake.get("incremental"):
+    if args.moved:
         names = scene_node_names(args.scene)
-        found = set(result.rebake["moved_nodes"])
         named = {names.get(int(n), n) if n.isdigit() else n for n in args.moved}
         unknown = sorted(named - set(names.values()))
-        if unknown:
+        if unknown:  # said whichever way the bake went (the cost model may choose a full one)
             print(f"baker: note: {args.scene} has no node named {', '.join(unknown)} (--moved)",
                   file=sys.stderr)
-        if found != named:
+        found = set(result.rebake.get("moved_nodes", ()))
+        if result.rebake.get("incremental") and found != named:
             print(f"baker: note: --moved named {', '.join(sorted(named))}; the diff found "
                   f"{', '.join(sorted(found)) or 'no node'} moved (the rebake followed the diff)",
                   file=sys.stderr)
