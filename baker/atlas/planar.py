@@ -82,7 +82,7 @@ def project_many(meshes: list[tuple[np.ndarray, np.ndarray]], split: bool = Fals
         vertex, owner, corners, flat = _flattened(p, t, cross, valid, double_area, chart, count)
         by_chart = np.argsort(chart, kind="stable")
         start = np.searchsorted(chart[by_chart], np.arange(count + 1))
-        chart_mesh = mesh[by_chart[start[:-1]]]
+        chart_mesh = _chart_mesh(chart, count, mesh)
         overlapping = _overlapping(flat, corners, by_chart, start, _OVERLAP)
         overlapping &= ~declined[chart_mesh]
         if not overlapping.any():
@@ -177,8 +177,7 @@ def _regrown(chart: np.ndarray, count: int, overlapping: np.ndarray, normals: np
     new ones last; and their count."""
     chart = np.where(overlapping[chart], -1, chart)
     count = _grow(normals, valid, neighbours, seeds[chart[seeds] < 0], cone_cos, chart, count)
-    chart_mesh = np.zeros(count, np.int64)
-    chart_mesh[chart] = mesh
+    chart_mesh = _chart_mesh(chart, count, mesh)
     numbers = np.unique(chart)
     renumbered = np.zeros(count, np.int64)
     renumbered[numbers[np.lexsort((numbers, chart_mesh[numbers]))]] = np.arange(len(numbers))
@@ -275,11 +274,17 @@ def _crumpled(chart: np.ndarray, count: int, neighbours: np.ndarray, mesh: np.nd
     # Set, not ``|=``: a chart's many edges repeat its index, and a buffered ``|=`` keeps only
     # the last edge's answer (a chart was cut only if its last edge was).
     cut[chart[rows][chart[rows] != chart[neighbours[inner]]]] = True
-    chart_mesh = np.zeros(count, np.int64)
-    chart_mesh[chart] = mesh
     cut_triangles = np.bincount(mesh, cut[chart], meshes)
-    return (cut_triangles >= 64) & (cut_triangles < LEAST_TRIANGLES
-                                    * np.bincount(chart_mesh, cut, meshes))
+    return (cut_triangles >= 64) & (cut_triangles < LEAST_TRIANGLES * np.bincount(
+        _chart_mesh(chart, count, mesh), cut, meshes))
+
+
+def _chart_mesh(chart: np.ndarray, count: int, mesh: np.ndarray) -> np.ndarray:
+    """(count,) int64 the mesh of each chart numbered 0 … count − 1 (0 for a number no
+    triangle has), from ``chart`` and ``mesh`` (m,), each triangle's."""
+    out = np.zeros(count, np.int64)
+    out[chart] = mesh
+    return out
 
 
 def _bases(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
