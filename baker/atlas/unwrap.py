@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import functools
 from dataclasses import replace
-from pathlib import Path
 from typing import Callable
 
 import numpy as np
@@ -142,7 +141,7 @@ def unwrap(scene: Scene, world: World, settings: Resolved, fit_one_page: bool = 
                      padding=settings.padding, instances=())
     _check_triangles_fit(world, scene, instances, settings)
     charts = chart_meshes(frame_meshes(scene, world, instances), settings.threads, steps,
-                          chart_elsewhere, str(Path(scene.path).absolute()))
+                          chart_elsewhere, str(scene.path.absolute()))
     _check_charts_fit(charts, scene, instances, settings)
     density = settings.texel_density
     packed = _packed(charts, density, settings)

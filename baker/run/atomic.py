@@ -282,8 +282,8 @@ def write_private(path: Path, data: bytes) -> None:
     """Write ``data`` to ``path`` through a temporary beside it (named by the process and thread)
     and a rename, for baker's own files (``unwrap_cache``'s entries): a reader sees the old file
     or the new one whole, and a failure or Ctrl-C leaves no temporary. None of ``Outputs``' care
-    for a user's files (links, FIFOs, inputs, what a rename replaces), which cost 0.5 ms of the
-    0.8 a cache entry took: a cold bake of 200 small meshes writes 200."""
+    for a user's files (links, FIFOs, inputs, what a rename replaces): a cache entry of a box's
+    charts took 0.53 ms that way, 0.37 ms this way, and a cold bake of 200 boxes writes 200."""
     temp = f"{path}.{os.getpid()}-{threading.get_ident()}.tmp"
     try:
         handle = os.open(temp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o666)
