@@ -169,9 +169,14 @@ _DEFLATE_DIGEST = """
 import hashlib, numpy as np
 from baker.rebake import zipwriter
 rng = np.random.default_rng(22)
+junk = [rng.integers(0, 256, int(n)).astype(np.uint8).tobytes()  # the heap dirtied first
+        for n in rng.integers(1000, 3_000_000, 8)]
+del junk
 inputs = [np.array([3818, 3200, 3818]).tobytes()] + [  # the counts that first varied
     rng.integers(0, 1 << int(rng.integers(4, 16)), int(rng.integers(1, 40))).tobytes()
-    for _ in range(300)]
+    for _ in range(300)] + [  # whole blocks of a noisy mean and of keys, as a state's
+    np.round(rng.random(zipwriter.BLOCK_BYTES // 8), 2).tobytes(),
+    np.repeat(rng.integers(0, 1 << 40, 4096), 32).tobytes()]
 from baker.image.encode import png_bytes
 pages = [rng.integers(0, 256, (h, w, 3)).astype(np.uint8) // k
          for h, w, k in ((8, 8, 1), (49, 49, 16), (70, 130, 64))]
@@ -186,7 +191,8 @@ def test_small_arrays_deflate_to_the_same_bytes_in_every_process():
     same inputs in fresh processes. ISA-L's one-shot
     compressor did not: a 24-byte array of three counts deflated to 14, 15 or 16 bytes from
     one process to the next (in 2 of 40), and a bake in parts stored a member that the bake
-    at once deflated. 301 short arrays of small integers, in 16 processes."""
+    at once deflated. 301 short arrays of small integers and two whole blocks (zlib-ng's
+    deflate, since it replaced zlib's), in 16 processes."""
     import subprocess
     import sys
     digests = {subprocess.run([sys.executable, "-c", _DEFLATE_DIGEST], capture_output=True,
