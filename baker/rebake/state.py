@@ -160,8 +160,8 @@ class BakeState:
 MIN_RATIO = 1.7
 """An array is deflated only if zlib-ng deflates its first ``zipwriter.BLOCK_BYTES`` to at most
 1/MIN_RATIO of their size, else stored: the terms' noisy means (``w_hit`` 1.39×, ``hit_sq``
-1.2–1.3× by zlib's level 1 in the crates of bench_rebake.py) inflate at a fraction of a stored read's speed and
-are the bulk of a rebake's read, for a few MB saved."""
+1.2–1.3× by zlib's level 1 in the crates of bench_rebake.py) inflate at a fraction of a stored
+read's speed and are the bulk of a rebake's read, for a few MB saved."""
 
 
 def _deflates(column: Column) -> bool:
