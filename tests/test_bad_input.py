@@ -337,12 +337,18 @@ def test_a_texture_reading_a_uv_set_a_primitive_lacks_reads_zeros(tmp_path):
     assert pages["lacking"] == pages["zeros"] and pages["lacking"]
 
 
-def test_a_primitive_with_empty_attributes_stays_readable_in_the_output(tmp_path):
-    """A primitive with ``attributes: {}`` (nothing to place: left out, counted) keeps the
-    required key in the output, which reads back; the output once dropped it as an empty
-    property, and reading it failed inside pygltflib."""
+@pytest.mark.parametrize("empty", [True, False])
+def test_a_primitive_with_empty_attributes_stays_readable_in_the_output(tmp_path, empty):
+    """A primitive with ``attributes: {}``, or none at all (nothing to place: left out, counted)
+    keeps the required key in the output, which reads back; the output once dropped it as an
+    empty property, and reading it failed inside pygltflib. Without the key, reading the
+    file once ended in an internal error (the fuzzer's find)."""
     source, document, _ = gltf_pair(tmp_path)
-    document["meshes"][1]["primitives"][0]["attributes"] = {}
+    primitive = document["meshes"][1]["primitives"][0]
+    if empty:
+        primitive["attributes"] = {}
+    else:
+        del primitive["attributes"]
     result = baker.bake(rewrite(source, document), tmp_path / "out.glb",
                         baker.Settings(rays=2, page_size=64))
     assert result.report["warnings"].get("no POSITION attribute: nothing to place") == 1

@@ -146,8 +146,8 @@ def document(raw: dict) -> objects.GLTF2:
     for i, mesh in enumerate(result.meshes):
         if mesh.primitives is None:
             raise WrongType(f"meshes[{i}].primitives", "an array", None)
-        for primitive in mesh.primitives:
-            if primitive.attributes:
+        for primitive in mesh.primitives:  # missing, its default Attributes() stays
+            if type(primitive.attributes) is dict:
                 primitive.attributes = objects.Attributes(**primitive.attributes)
     return result
 
