@@ -112,9 +112,6 @@ def _meshopt_quad(path, count: int, stride: int = 16):
     """A .glb of one quad whose positions are a meshopt bufferView (EXT_meshopt_compression,
     ATTRIBUTES) that declares ``count`` rows of ``stride`` bytes, decoded into a fallback
     buffer of 64 bytes (the quad's 4 rows of 16)."""
-    import json
-    import struct
-
     import meshopt
 
     rows = np.array([[-1, 0, -1, 0], [1, 0, -1, 0], [1, 0, 1, 0], [-1, 0, 1, 0]], np.float32)
@@ -136,12 +133,54 @@ def _meshopt_quad(path, count: int, stride: int = 16):
         "buffers": [{"byteLength": len(blob) + 24},
                     {"byteLength": 64, "extensions": {name: {"fallback": True}}}]}
     blob += np.array([0, 2, 1, 0, 3, 2], "<u4").tobytes()
+    return _glb(path, document, blob)
+
+
+def _glb(path, document: dict, blob: bytes):
+    """Write the .glb of the glTF JSON ``document`` and its binary chunk ``blob`` to ``path``."""
+    import json
+    import struct
+
+    blob += b"\0" * (-len(blob) % 4)
     text = json.dumps(document).encode()
     text += b" " * (-len(text) % 4)
     body = (struct.pack("<II", len(text), 0x4E4F534A) + text
             + struct.pack("<II", len(blob), 0x004E4942) + blob)
     path.write_bytes(struct.pack("<III", 0x46546C67, 2, 12 + len(body)) + body)
     return path
+
+
+def test_draco_data_that_decodes_to_nan_bakes_as_plain_data_would(tmp_path):
+    """A Draco quad whose UVs decode with a NaN (damaged data; the byte fuzzer's find): its
+    accessor's min/max were set from the decoded values, NaN, and writing the output's JSON
+    failed inside json.dumps, an internal error. The bounds are now the finite values': the
+    bake warns of the vertex, as for a plain file's NaN, and its output reads back."""
+    import DracoPy
+
+    name = "KHR_draco_mesh_compression"
+    corners = np.array([[-1, 0, -1], [1, 0, -1], [1, 0, 1], [-1, 0, 1]], np.float64)
+    uv = np.array([[0, 0], [np.nan, 0], [1, 1], [0, 1]], np.float64)
+    data = DracoPy.encode(corners, np.array([[0, 2, 1], [0, 3, 2]], np.uint32), tex_coord=uv)
+    ids = {len(a["data"][0]): a["unique_id"] for a in DracoPy.decode(data).attributes}
+    document = {
+        "asset": {"version": "2.0"}, "extensionsUsed": [name], "extensionsRequired": [name],
+        "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}], "materials": [{}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "TEXCOORD_0": 1}, "indices": 2,
+                                    "material": 0, "extensions": {name: {
+                                        "bufferView": 0,
+                                        "attributes": {"POSITION": ids[3], "TEXCOORD_0": ids[2]}}}}]}],
+        "accessors": [{"componentType": 5126, "count": 4, "type": "VEC3", "min": [-1, 0, -1],
+                       "max": [1, 0, 1]},
+                      {"componentType": 5126, "count": 4, "type": "VEC2", "min": [0, 0],
+                       "max": [1, 1]},
+                      {"componentType": 5125, "count": 6, "type": "SCALAR"}],
+        "bufferViews": [{"buffer": 0, "byteLength": len(data)}],
+        "buffers": [{"byteLength": len(data)}]}
+    result = baker.bake(_glb(tmp_path / "quad.glb", document, data), tmp_path / "out.glb",
+                        baker.Settings(page_size=64, rays=4), state=False)
+    assert any("NaN" in warning for warning in result.report["warnings"])
+    written = load(tmp_path / "out.glb").document.accessors[1]
+    assert (written.min, written.max) == ([0.0, 0.0], [1.0, 1.0])
 
 
 @pytest.mark.parametrize("count", [2**31, 10**12])

@@ -255,11 +255,14 @@ def _set_accessor(document: objects.GLTF2, appended: bytearray, buffer: int, ind
                          f"{values.shape[1]} components", file=file, where=where, fix=_REEXPORT)
     stored = np.ascontiguousarray(values.astype(dtype))
     payload = stored.tobytes()
-    if len(stored) and (accessor.min is not None or accessor.max is not None):
-        # Draco's quantized values are the data now: bounds of the values as they decode
+    bounded = stored[np.isfinite(stored).all(axis=1)] if stored.dtype.kind == "f" else stored
+    if len(bounded) and (accessor.min is not None or accessor.max is not None):
+        # Draco's quantized values are the data now: bounds of the values as they decode, of
+        # the finite ones (damaged data may decode to NaN, which JSON cannot hold: the file's
+        # own bounds stay where no value is finite)
         number = float if stored.dtype.kind == "f" else int
-        accessor.min = [number(v) for v in stored.min(axis=0)]
-        accessor.max = [number(v) for v in stored.max(axis=0)]
+        accessor.min = [number(v) for v in bounded.min(axis=0)]
+        accessor.max = [number(v) for v in bounded.max(axis=0)]
     appended += b"\0" * (-len(appended) % 4)
     document.bufferViews.append(objects.BufferView(buffer=buffer, byteOffset=len(appended),
                                                      byteLength=len(payload)))
