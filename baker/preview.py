@@ -265,7 +265,8 @@ def read_lightmaps(scene: Scene, world: World) -> SceneLightmaps:
     directional = _DirectionalReader(scene, count)
     for i, inst in enumerate(scene.instances):
         prim = scene.primitives[inst.primitive]
-        found = _carried_texture(document, scene.materials[prim.material], carrier, encoding)
+        found = _carried_texture(document, scene.materials[prim.material], carrier, encoding,
+                                 str(scene.path))
         if found is None or found[1] >= len(prim.texcoords):
             continue
         directional.add(scene, world, i)
@@ -317,12 +318,14 @@ class _DirectionalReader:
         normal = gltf.normalTexture
         if not isinstance(ext, dict) or ext.get("index") is None or normal is None:
             return
+        page, _ = _page_texture(self.scene.document, ext.get("index"), 0, str(scene.path),
+                                f"materials[{index}].extensions.{DIRECTIONAL_EXTENSION}")
         texcoord = int(normal.texCoord or 0)
         if texcoord >= len(prim.texcoords):
             return
         tris = world.instance_triangles(instance)
         local = world.triangles[tris] - world.vertex_start[instance]
-        self.page[tris] = self._image(self.pages, self.images, ext["index"], texel_vectors)
+        self.page[tris] = self._image(self.pages, self.images, page, texel_vectors)
         self.normal_map[tris] = self._image(self.normals, self.maps, normal.index, texel_vectors)
         self.normal_uv[tris] = prim.texcoords[texcoord][local]
         self.normal_scale[tris] = 1.0 if normal.scale is None else float(normal.scale)
@@ -341,24 +344,56 @@ class _DirectionalReader:
                            self.normal_scale)
 
 
-def _carried_texture(document, material, carrier: str, encoding: str):
+def _carried_texture(document, material, carrier: str, encoding: str, file: str):
     """(texture, texCoord, scale, curve, red channel only) of the bake that ``material``
     (scene.Material) carries, or None: its MOZ_lightmap, else the emissive or occlusion
-    carrier's texture when the file says that carrier wrote it."""
+    carrier's texture when the file says that carrier wrote it. InputError (naming the
+    material) for a MOZ_lightmap whose index, texCoord or intensity is not one."""
     if material.index is None:
         return None
     gltf = document.materials[material.index]
     ext = (gltf.extensions or {}).get("MOZ_lightmap")
     if isinstance(ext, dict) and ext.get("index") is not None:
-        return (ext["index"], int(ext.get("texCoord", 0)), float(ext.get("intensity", 1.0)),
-                encoding, False)
+        where = f"materials[{material.index}].extensions.MOZ_lightmap"
+        intensity = ext.get("intensity", 1.0)
+        if type(intensity) not in (int, float) or not np.isfinite(intensity):
+            raise _not_a_page(f"its intensity {intensity!r} is not a finite number", file, where)
+        texture, texcoord = _page_texture(document, ext.get("index"), ext.get("texCoord", 0),
+                                          file, where)
+        return texture, texcoord, float(intensity), encoding, False
     if carrier == "emissive" and gltf.emissiveTexture is not None:
-        return (gltf.emissiveTexture.index, int(gltf.emissiveTexture.texCoord or 0),
+        return (*_page_texture(document, gltf.emissiveTexture.index,
+                               gltf.emissiveTexture.texCoord or 0, file,
+                               f"materials[{material.index}].emissiveTexture"),
                 float(material.emissive[0]), "srgb", False)
     if carrier == "occlusion" and gltf.occlusionTexture is not None:
-        return (gltf.occlusionTexture.index, int(gltf.occlusionTexture.texCoord or 0), 1.0,
-                "linear", True)
+        return (*_page_texture(document, gltf.occlusionTexture.index,
+                               gltf.occlusionTexture.texCoord or 0, file,
+                               f"materials[{material.index}].occlusionTexture"),
+                1.0, "linear", True)
     return None
+
+
+def _page_texture(document, texture, texcoord, file: str, where: str) -> tuple[int, int]:
+    """(texture, texCoord) of a lightmap page's texture reference at ``where``: one of the
+    file's textures, with an image, and a UV set's number; InputError otherwise."""
+    textures, images = document.textures or [], document.images or []
+    if type(texture) is not int or not 0 <= texture < len(textures):
+        raise _not_a_page(f"its texture {texture!r} is not one of the file's {len(textures)}",
+                          file, where)
+    source = textures[texture].source
+    if type(source) is not int or not 0 <= source < len(images):
+        raise _not_a_page(f"textures[{texture}] has no image ({source!r})", file, where)
+    if type(texcoord) is not int or texcoord < 0:
+        raise _not_a_page(f"its texCoord {texcoord!r} is not a UV set's number", file, where)
+    return texture, texcoord
+
+
+def _not_a_page(what: str, file: str, where: str) -> InputError:
+    """The error for a lightmap page the preview cannot read."""
+    return InputError(f"the lightmap page is not readable: {what}", file=file, where=where,
+                      fix="bake the scene again (baker bake SCENE -o OUT.glb) and preview that "
+                          "output")
 
 
 def _carrier_transform(material, carrier: str) -> tuple[float, ...] | None:
@@ -403,7 +438,7 @@ def _first_front_hits(scene: Scene, world: World, tracer: Tracer, origins: np.nd
     step = 1e-6 * scale  # past a culled face: above float32 spacing at the scene's extent
     triangle = np.full(len(origins), -1, np.int64)
     bary = np.zeros((len(origins), 3))
-    active = np.arange(len(origins))
+    active = np.arange(len(origins) if len(world.triangles) else 0)  # none: every ray leaves
     start = origins.copy()
     for _ in range(_MAX_CULLED_LAYERS):
         if not len(active):

@@ -12,7 +12,7 @@ import pytest
 from PIL import Image
 
 import baker
-from assets.gltf_builder import quat_axis_angle
+from assets.gltf_builder import edited_glb, quat_axis_angle
 from assets.make_scenes import cornell_box
 from baker.geometry.world import build_world
 from baker.gltf.load import load
@@ -136,6 +136,41 @@ def test_scene_without_lightmaps_is_refused_cleanly(cornell, tmp_path, capsys):
     assert not png.exists()
     assert main(["preview", str(cornell["out"]), "-o", str(tmp_path / "p.jpg")]) == 1
     assert "PNG" in capsys.readouterr().err
+
+
+def _moz(document):
+    """The first material's MOZ_lightmap extension (a dict) of a baked document."""
+    return next(m.extensions["MOZ_lightmap"] for m in document.materials
+                if "MOZ_lightmap" in (m.extensions or {}))
+
+
+@pytest.mark.parametrize("field, value", [("intensity", "x"), ("intensity", [1]),
+                                          ("index", 99), ("index", 0.5), ("texCoord", [1])])
+def test_a_damaged_lightmap_reference_is_refused_cleanly(cornell, tmp_path, capsys, field,
+                                                         value):
+    """A baked file whose MOZ_lightmap holds a value of another type, or a texture it does not
+    have (edited by hand, or damaged): a clear error naming the material, no picture. These
+    were internal errors (float() of a list, a list indexed by a float; the fuzzer's finds)."""
+    damaged = edited_glb(cornell["out"], lambda d: _moz(d).__setitem__(field, value),
+                         tmp_path / "damaged.glb")
+    png = tmp_path / "preview.png"
+    assert main(["preview", str(damaged), "-o", str(png)]) == 1
+    err = capsys.readouterr().err
+    assert "MOZ_lightmap" in err and "materials[" in err and "baker bake" in err, err
+    assert "Traceback" not in err and "internal error" not in err and not png.exists()
+
+
+def test_a_baked_file_without_triangles_previews_as_background(cornell, tmp_path):
+    """Every primitive made points (mode 0): nothing to meet, and the rays' first hits once
+    indexed an empty array of normals (an internal error). The picture is the background."""
+    def points(document):
+        for mesh in document.meshes:
+            for primitive in mesh.primitives:
+                primitive.mode = 0
+
+    picture = render(load(edited_glb(cornell["out"], points, tmp_path / "points.glb")), "lit",
+                     (40, 30))
+    assert picture.rgb.shape == (30, 40, 3) and (picture.triangle == -1).all()
 
 
 @pytest.fixture(scope="module")
