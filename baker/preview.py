@@ -253,8 +253,7 @@ def read_lightmaps(scene: Scene, world: World) -> SceneLightmaps:
     nothing got a lightmap (e.g. only GPU-instanced meshes) has no pages, and renders flat.
     """
     document = scene.document
-    extras = (document.asset.extras or {}) if document.asset is not None else {}
-    recorded = ((extras.get("baker") or {}) if isinstance(extras, dict) else {})
+    recorded = scene.recorded_bake() or {}
     encoding = recorded.get("lightmap_encoding") or "linear"
     carrier = recorded.get("carrier") or "moz"
     pages: list[np.ndarray] = []
@@ -315,13 +314,14 @@ class _DirectionalReader:
             return
         gltf = self.scene.document.materials[index]
         ext = (gltf.extensions or {}).get(DIRECTIONAL_EXTENSION)
-        normal = gltf.normalTexture
-        if not isinstance(ext, dict) or ext.get("index") is None or normal is None:
+        normal = gltf.normalTexture  # one without an image is shaded as none
+        if not isinstance(ext, dict) or ext.get("index") is None or normal is None or \
+                _not_an_image(self.scene.document, normal.index):
             return
         page, _ = _page_texture(self.scene.document, ext.get("index"), 0, str(scene.path),
                                 f"materials[{index}].extensions.{DIRECTIONAL_EXTENSION}")
         texcoord = int(normal.texCoord or 0)
-        if texcoord >= len(prim.texcoords):
+        if not 0 <= texcoord < len(prim.texcoords):
             return
         tris = world.instance_triangles(instance)
         local = world.triangles[tris] - world.vertex_start[instance]
@@ -377,16 +377,23 @@ def _carried_texture(document, material, carrier: str, encoding: str, file: str)
 def _page_texture(document, texture, texcoord, file: str, where: str) -> tuple[int, int]:
     """(texture, texCoord) of a lightmap page's texture reference at ``where``: one of the
     file's textures, with an image, and a UV set's number; InputError otherwise."""
-    textures, images = document.textures or [], document.images or []
-    if type(texture) is not int or not 0 <= texture < len(textures):
-        raise _not_a_page(f"its texture {texture!r} is not one of the file's {len(textures)}",
-                          file, where)
-    source = textures[texture].source
-    if type(source) is not int or not 0 <= source < len(images):
-        raise _not_a_page(f"textures[{texture}] has no image ({source!r})", file, where)
+    wrong = _not_an_image(document, texture)
+    if wrong:
+        raise _not_a_page(wrong, file, where)
     if type(texcoord) is not int or texcoord < 0:
         raise _not_a_page(f"its texCoord {texcoord!r} is not a UV set's number", file, where)
     return texture, texcoord
+
+
+def _not_an_image(document, texture) -> str:
+    """Why ``texture`` is not one of the file's textures with an image ("" when it is)."""
+    textures, images = document.textures or [], document.images or []
+    if type(texture) is not int or not 0 <= texture < len(textures):
+        return f"its texture {texture!r} is not one of the file's {len(textures)}"
+    source = textures[texture].source
+    if type(source) is not int or not 0 <= source < len(images):
+        return f"textures[{texture}] has no image ({source!r})"
+    return ""
 
 
 def _not_a_page(what: str, file: str, where: str) -> InputError:

@@ -41,11 +41,10 @@ def page_info(path: Path) -> dict:
     from baker.preview import render  # late: preview builds an Embree scene
 
     scene = load(path)
-    extras = (scene.document.asset.extras or {}) if scene.document.asset else {}
-    recorded = (extras.get("baker") or {}) if isinstance(extras, dict) else {}
     picture = render(scene, "lit", _PREVIEW_SIZE)  # InputError when nothing is baked
     return {"name": path.name, "model": "model/" + quote(path.name),
-            "carrier": recorded.get("carrier") or "moz", "exposure": picture.exposure}
+            "carrier": (scene.recorded_bake() or {}).get("carrier") or "moz",
+            "exposure": picture.exposure}
 
 
 class _Handler(SimpleHTTPRequestHandler):

@@ -17,6 +17,7 @@ from assets.make_scenes import cornell_box
 from baker.geometry.world import build_world
 from baker.gltf.load import load
 from baker.preview import View, primary_rays, render
+from baker.view import page_info
 from baker.geometry.surface import LUMINANCE, viewer_diffuse_weight_at
 from baker.cli.main import main
 from tests.bakehelp import REAL_SCENES, saved
@@ -158,6 +159,20 @@ def test_a_damaged_lightmap_reference_is_refused_cleanly(cornell, tmp_path, caps
     err = capsys.readouterr().err
     assert "MOZ_lightmap" in err and "materials[" in err and "baker bake" in err, err
     assert "Traceback" not in err and "internal error" not in err and not png.exists()
+
+
+@pytest.mark.parametrize("record", [5, ["moz"], None])
+def test_a_damaged_bake_record_previews_from_its_lightmaps(cornell, tmp_path, record):
+    """asset.extras.baker (what the bake recorded: carrier, encoding) as a number, a list or
+    null: the file's MOZ_lightmap pages still render, and ``baker view`` says the default
+    carrier. A number there was an internal error (``.get`` of an int; the fuzzer's find)."""
+    def damage(document):
+        document.asset.extras["baker"] = record
+
+    damaged = edited_glb(cornell["out"], damage, tmp_path / "damaged.glb")
+    picture = render(load(damaged), "lit", (40, 30))
+    assert (picture.triangle >= 0).any() and picture.rgb.std() > 0
+    assert page_info(damaged)["carrier"] == "moz"
 
 
 def test_a_baked_file_without_triangles_previews_as_background(cornell, tmp_path):

@@ -167,6 +167,13 @@ class Scene:
     # its buffers and images): no file a bake writes may replace one (run/atomic.py).
     inputs: dict[tuple[int, int], str] = field(default_factory=dict)
 
+    def recorded_bake(self) -> dict | None:
+        """What baker recorded in a file it wrote (``asset.extras.baker``: the carrier, the
+        lightmap encoding), or None when the file holds no such object."""
+        extras = getattr(self.document.asset, "extras", None)
+        made = extras.get("baker") if isinstance(extras, dict) else None
+        return made if isinstance(made, dict) else None
+
     def check_not_a_bake(self) -> None:
         """Refuse a file baker wrote (``asset.extras.baker``, as ``output.write`` marks every
         bake): its materials are lightmap copies (under the emissive carrier black, their light
@@ -174,9 +181,8 @@ class Scene:
         copies the copies. The first bake's output given again as input, e.g. after
         ``--overwrite`` replaced the scene with its bake, ended in "nothing baked: black base
         colour", which named neither the file's kind nor what to do."""
-        extras = getattr(self.document.asset, "extras", None)
-        made = extras.get("baker") if isinstance(extras, dict) else None
-        if not isinstance(made, dict):
+        made = self.recorded_bake()
+        if made is None:
             return
         carrier = made.get("carrier")
         raise InputError(
