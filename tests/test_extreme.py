@@ -15,6 +15,7 @@ import pytest
 import baker
 from assets.extreme_scenes import (closed_room, defect_panels, instanced_boxes, l_strip,
                                    non_manifold_fin, panel_over_floor, single_triangle)
+from assets.light_scenes import lit_floor
 from baker.light.ambient import MAX_BOUNCES, bounce_factor
 from baker.image.compose import effective_r_ave
 from baker.geometry.world import build_world
@@ -69,6 +70,22 @@ def test_white_room_with_tiny_or_huge_emission_bakes_finite(tmp_path):
         assert np.isfinite(light[emission]).all() and light[emission].max() > 0
     covered = light[1e-6] > 0
     np.testing.assert_allclose(light[1e6][covered] / light[1e-6][covered], 1e12, rtol=1e-6)
+
+
+@pytest.mark.parametrize("kind", ["point", "spot", "directional"])
+def test_a_light_too_faint_for_its_power_squared_bakes(tmp_path, kind):
+    """A punctual light of intensity 1e-300 or the least float64: the relative variance of the
+    sources' power divided by the power's luminance squared, which underflows to 0 (a
+    ZeroDivisionError in every bake of such a file; the long fuzzer's find). Now the bake
+    ends with finite pages, its light in proportion to the intensity, and a finite estimate."""
+    peaks = []
+    for intensity in (1.0, 1e-300, 5e-324):
+        done = computed(lit_floor(kind, intensity=intensity), tmp_path, texel_density=4.0,
+                        rays=4)
+        assert np.isfinite(done.lightmaps.light).all() and np.isfinite(done.rmse_estimate())
+        peaks.append(done.lightmaps.light.max())
+    assert peaks[0] > 0 and peaks[1] == pytest.approx(peaks[0] * 1e-300, rel=1e-6)
+    assert 0 <= peaks[2] <= 1e-300
 
 
 def test_one_triangle_scene(tmp_path):

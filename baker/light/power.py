@@ -179,8 +179,8 @@ def delivered_power(context: Context, sources: Sources) -> Power:
         variance += area * area * _strata_variance(seen)
     power = Power(punctual=punctual, light_colours=colours, emission=emitted, sky=sky,
                   area=area)
-    level = float(luminance(power.total()))
-    return replace(power, relative_variance=variance / level ** 2 if level > 0 else 0.0)
+    square = float(luminance(power.total())) ** 2  # 0 below 1.5e-154 too: its error is ~0
+    return replace(power, relative_variance=variance / square if square > 0 else 0.0)
 
 
 def _strata_variance(values: np.ndarray) -> float:
