@@ -108,8 +108,8 @@ values = st.deferred(lambda: st.one_of(
     st.none(),
     st.booleans(),
     st.lists(st.sampled_from(INTERESTING_FLOATS + [0.0, 1.0]), min_size=0, max_size=17),
-    st.just({}),
-    st.just([]),
+    st.builds(dict),  # a new object each draw: one shared {} set inside itself made a cycle
+    st.builds(list),
     st.dictionaries(st.sampled_from(["index", "count", "bufferView", "uri", "byteLength"]),
                     st.sampled_from(INTERESTING_INTS), max_size=2),
 ))
@@ -399,7 +399,7 @@ def reference_mutation(draw, document: dict):
     if draw(st.integers(0, 3)) == 0:
         reference.pop(key, None)
     else:
-        reference[key] = draw(st.one_of(st.sampled_from(WRONG_TYPES), values))
+        reference[key] = draw(st.one_of(st.sampled_from(WRONG_TYPES).map(copy.deepcopy), values))
 
 
 WRONG_TYPES = ["x", [1], {"index": 0}, 0.5, -1, 99, 2 ** 40, None, True, math.nan, math.inf]
