@@ -312,12 +312,16 @@ def test_a_mixed_material_s_copy_reflects_f0_mixed_texel_by_texel(tmp_path):
     ({"KHR_materials_ior": {"ior": 1.8}}, (0.8 / 2.8) ** 2),
     ({"KHR_materials_ior": {"ior": 1.8},
       "KHR_materials_specular": {"specularFactor": 0.5, "specularColorFactor": [1.0, 0.5, 0.25]}},
-     (0.8 / 2.8) ** 2 * 0.5 * np.array([1.0, 0.5, 0.25]))])
+     (0.8 / 2.8) ** 2 * 0.5 * np.array([1.0, 0.5, 0.25])),
+    ({"KHR_materials_ior": {"ior": "x"}}, 0.04),
+    ({"KHR_materials_ior": 5, "KHR_materials_specular": {"specularFactor": [0.5]}}, 0.04)])
 def test_a_mixed_material_without_textures_reflects_its_own_f0(tmp_path, extensions, f0):
     """metallicFactor 0.4 and no texture: the emissive copy is all metal with base colour
     F0 = 0.6 · ((ior − 1)/(ior + 1))² × KHR_materials_specular + 0.4 · base colour, its
     extensions for the dielectric gone (a metal reads neither); they used to be dropped before
-    they were read, so every such copy reflected as at ior 1.5."""
+    they were read, so every such copy reflected as at ior 1.5. An ior or a factor that is not
+    a number is the default's, as the load warns (the writer read them again from the JSON,
+    unchecked: a string ior was an internal error)."""
     from assets.gltf_builder import GltfBuilder, quad
 
     b = GltfBuilder()

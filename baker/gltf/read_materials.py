@@ -57,6 +57,7 @@ def _read_material(ctx: Context, i: int, material: objects.Material) -> Material
             ctx.skip(f"{where}.extensions.{name}", f"{name} is not understood by baker: baked "
                                                    "without it (core metallic-roughness material)")
     volume = _extension(extensions, "KHR_materials_volume")
+    specular = _extension(extensions, "KHR_materials_specular")
     diffuse_transmission = _extension(extensions, "KHR_materials_diffuse_transmission")
     ext = f"{where}.extensions"
 
@@ -84,6 +85,10 @@ def _read_material(ctx: Context, i: int, material: objects.Material) -> Material
             f"{ext}.KHR_materials_transmission.transmissionTexture", "the transmission factor"),
         ior=value(_extension(extensions, "KHR_materials_ior"), "ior", 1.5, 1.0, math.inf,
                   f"{ext}.KHR_materials_ior"),
+        specular=value(specular, "specularFactor", 1.0, 0.0, 1.0, f"{ext}.KHR_materials_specular"),
+        specular_color=_factor(ctx, specular.get("specularColorFactor"), [1.0, 1.0, 1.0],
+                               f"{ext}.KHR_materials_specular.specularColorFactor",
+                               colour=False),
         thickness=value(volume, "thicknessFactor", 0.0, 0.0, math.inf,
                         f"{ext}.KHR_materials_volume"),
         attenuation_distance=value(volume, "attenuationDistance", math.inf, 1e-300, math.inf,

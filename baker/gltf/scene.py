@@ -80,6 +80,8 @@ class Material:
     # KHR_materials_transmission transmissionTexture (linear, R: × the factor), None when absent.
     transmission_texture: TextureRef | None = None
     ior: float = 1.5  # KHR_materials_ior
+    specular: float = 1.0  # KHR_materials_specular specularFactor (its texture left out)
+    specular_color: np.ndarray = field(default_factory=lambda: np.ones(3))  # (3,) its colour factor
     thickness: float = 0.0  # KHR_materials_volume thicknessFactor, mesh units (0: thin-walled)
     attenuation_distance: float = float("inf")  # KHR_materials_volume, metres
     attenuation_color: np.ndarray = field(default_factory=lambda: np.ones(3))  # (3,) linear

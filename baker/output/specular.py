@@ -47,17 +47,13 @@ AddImage = Callable[[bytes, str], int]
 """Adds a PNG image (bytes, name) to the output and returns its texture index."""
 
 
-def dielectric_f0(material: dict) -> np.ndarray:
+def dielectric_f0(material: Material) -> np.ndarray:
     """(3,) the specular reflectance at normal incidence of ``material``'s dielectric part:
     ((ior − 1)/(ior + 1))² × KHR_materials_specular's factor and colour (their textures left
-    out), at most 1."""
-    extensions = material.get("extensions") or {}
-    ior = float((extensions.get("KHR_materials_ior") or {}).get("ior", 1.5))
-    f0 = ((ior - 1.0) / (ior + 1.0)) ** 2 if ior >= 1.0 else 0.04
-    specular = extensions.get("KHR_materials_specular") or {}
-    scale = float(specular.get("specularFactor", 1.0))
-    colour = np.asarray(specular.get("specularColorFactor", [1.0, 1.0, 1.0]), np.float64)
-    return np.clip(f0 * scale * colour, 0.0, 1.0)
+    out), in [0, 1]: the values the load read and checked (it read them from the file's JSON
+    here, unchecked: an ior that was a string ended the bake in an internal error)."""
+    f0 = ((material.ior - 1.0) / (material.ior + 1.0)) ** 2
+    return np.clip(f0 * material.specular * material.specular_color, 0.0, 1.0)
 
 
 def kind(material: Material) -> str:
@@ -93,7 +89,7 @@ def without_diffuse(copied: dict, material: Material, scene: Scene,
     if how == "mixed":
         alpha = float((pbr.get("baseColorFactor") or [1.0, 1.0, 1.0, 1.0])[3])
         pbr["metallicFactor"] = 1.0
-        f0 = dielectric_f0(copied)  # read before the extensions it is read from go
+        f0 = dielectric_f0(material)
         for name in ("KHR_materials_ior", "KHR_materials_specular"):  # a metal has no use for them
             extensions.pop(name, None)
         textured = pbr.get("metallicRoughnessTexture") or pbr.get("baseColorTexture")
