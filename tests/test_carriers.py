@@ -370,6 +370,24 @@ def test_a_specular_glossiness_copy_loses_its_diffuse_where_viewers_read_it(tmp_
     assert not gltf_validator.issue_codes(report, 0), gltf_validator.describe(report, 0)
 
 
+@pytest.mark.parametrize("variants", [[1], 5, "x"])
+def test_a_primitive_s_variants_that_are_not_an_object_are_as_none(tmp_path, variants):
+    """A primitive whose KHR_materials_variants is not the extension's object: the bake goes
+    on as for a primitive without it, and the output keeps the value as it was. The writer
+    read its mappings with ``.get`` and ended in an internal error."""
+    from assets.gltf_builder import GltfBuilder, quad
+
+    b = GltfBuilder()
+    mesh = b.shape_mesh("card", quad(2.0, 2.0), material=b.material("red", (0.8, 0.1, 0.1)))
+    b.node("card", mesh)
+    b._meshes[mesh].primitives[0].extensions = {"KHR_materials_variants": variants}
+    out = tmp_path / "out.glb"
+    baker.bake(b.save(tmp_path / "variants.glb"), out,
+               baker.Settings(texel_density=4.0, rays=4, carrier="moz"), state=False)
+    primitive = pygltflib.GLTF2().load(str(out)).meshes[0].primitives[0]
+    assert primitive.extensions["KHR_materials_variants"] == variants
+
+
 @pytest.mark.parametrize("carrier", ["moz", "occlusion", "emissive"])
 def test_material_variants_keep_the_bake_where_the_carrier_allows(tmp_path, carrier):
     """A quad with KHR_materials_variants (red by default and as variant 0, blue as variant

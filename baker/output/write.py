@@ -639,9 +639,9 @@ class _Builder:
         UV set and texture transform, where the carrier's page is the same for every material
         (moz: irradiance, occlusion: visibility); else, under the emissive carrier, whose page
         holds the default material's colour, each variant keeps its own material (noted)."""
-        mappings = ((primitive.get("extensions") or {}).get(VARIANTS_EXTENSION) or {}).get(
-            "mappings")
-        if not isinstance(mappings, list):
+        variants = (primitive.get("extensions") or {}).get(VARIANTS_EXTENSION)
+        mappings = variants.get("mappings") if isinstance(variants, dict) else None
+        if not isinstance(mappings, list):  # none, or not the extension's object: as none
             return
         if self.options.carrier == "emissive":
             self._note(f"{where} has {VARIANTS_EXTENSION}: under the emissive carrier its "
