@@ -25,7 +25,7 @@ from baker.image.encode import EncodedPage
 from baker.errors import OutputError
 from baker.gltf.container import read_document
 from baker.gltf.scene import Image, Instance, Material, Primitive, Scene
-from baker.output.write import WriteOptions, write
+from baker.output.write import WriteOptions, _shift_texcoords, write
 
 import gltf_validator
 
@@ -422,6 +422,20 @@ def test_existing_texcoord_1_moves_to_2_and_lightmap_goes_to_1(baked):
     np.testing.assert_array_equal(lightmap, _atlas().instances[2].uv[order].astype(np.float32))
     # the input's material, which an unbaked primitive could still use, is unchanged
     assert document.materials[1].occlusionTexture.texCoord == 1
+
+
+@pytest.mark.parametrize("extensions", [[1], 5, "x"])
+def test_a_texture_reference_whose_extensions_are_not_an_object_still_moves_up(extensions):
+    """An extension's own textureInfo (unchecked JSON, here KHR_materials_clearcoat's) whose
+    ``extensions`` is not an object: its texCoord moves up with the others and the value
+    stays. The shift read it with ``.get`` and ended the bake in an internal error."""
+    material = {"occlusionTexture": {"index": 1, "texCoord": 1},
+                "extensions": {"KHR_materials_clearcoat": {"clearcoatTexture": {
+                    "index": 0, "texCoord": 1, "extensions": extensions}}}}
+    _shift_texcoords(material)
+    clearcoat = material["extensions"]["KHR_materials_clearcoat"]["clearcoatTexture"]
+    assert clearcoat == {"index": 0, "texCoord": 2, "extensions": extensions}
+    assert material["occlusionTexture"]["texCoord"] == 2
 
 
 def test_texcoord_sets_stay_where_variants_would_break(tmp_path):

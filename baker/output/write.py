@@ -888,7 +888,9 @@ def _shift_texcoords(value) -> None:
     ``texCoord``, and the ``texCoord`` of its KHR_texture_transform, which overrides it."""
     items = value if isinstance(value, list) else value.values() if isinstance(value, dict) else ()
     if isinstance(value, dict) and isinstance(value.get("index"), int):
-        transform = (value.get("extensions") or {}).get("KHR_texture_transform")
+        extensions = value.get("extensions")  # an extension's own textureInfo: unchecked JSON
+        transform = (extensions.get("KHR_texture_transform") if isinstance(extensions, dict)
+                     else None)
         for holder in (value, transform):
             if isinstance(holder, dict) and isinstance(holder.get("texCoord"), int) \
                     and holder["texCoord"] >= 1:
