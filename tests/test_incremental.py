@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 import baker
-from assets.gltf_builder import quat_axis_angle, rotation_matrix
+from assets.gltf_builder import edited_glb, quat_axis_angle, rotation_matrix
+from assets.make_scenes import cornell_box
 from assets.rebake_scenes import box_room, grid_boxes, moved
 from baker.pipeline.full import compute
 from baker.geometry.world import build_world
@@ -86,6 +87,38 @@ def test_rebake_is_byte_identical_to_a_full_bake(base, tmp_path, edit):
     else:
         assert 0 < fraction < 0.5, fraction
         assert len(incremental.rebake["dirty_keys"]) == info["dirty_texels"]
+
+
+GLASS = {"KHR_materials_transmission": {"transmissionFactor": 1.0},
+         "KHR_materials_ior": {"ior": 1.5},
+         "KHR_materials_volume": {"thicknessFactor": 0.1, "attenuationDistance": 2.0}}
+
+
+@pytest.mark.parametrize("extension, key, value", [
+    ("KHR_materials_ior", "ior", 1.2), ("KHR_materials_transmission", "transmissionFactor", 0.5),
+    ("KHR_materials_volume", "thicknessFactor", 0.3),
+    ("KHR_materials_volume", "attenuationDistance", 0.5)])
+def test_a_glass_s_values_changed_rebake_like_a_full_bake(tmp_path, extension, key, value):
+    """The Cornell room's tall box made of glass (transmission, ior, volume), one value of an
+    extension it already has changed: the rebake is a full bake (the material changed, or the
+    clear glass left the atlas), and says why. The material's
+    fingerprint held its extensions' names, not these values: an ior edit rebaked as "nothing
+    changed" and kept the old refraction (the output differed from a full bake's)."""
+    def glass(document):
+        material = document.materials[1]
+        material.extensions = {name: dict(values) for name, values in GLASS.items()}
+        material.pbrMetallicRoughness.metallicFactor = 0.0
+        material.pbrMetallicRoughness.roughnessFactor = 0.0
+
+    settings = baker.Settings(rays=8, page_size=64, threads=1)
+    scene = edited_glb(cornell_box().save(tmp_path / "room.glb"), glass, tmp_path / "glass.glb")
+    baker.bake(scene, tmp_path / "incremental.glb", settings)
+    edited = edited_glb(scene, lambda d: d.materials[1].extensions[extension].__setitem__(
+        key, value), tmp_path / "edited.glb")
+    rebaked = baker.bake(edited, tmp_path / "incremental.glb", settings, incremental="always")
+    baker.bake(edited, tmp_path / "full.glb", settings)
+    assert (tmp_path / "incremental.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()
+    assert rebaked.rebake["incremental"] is False and rebaked.rebake["full_bake_reason"]
 
 
 def test_added_or_removed_node_names_the_reason(base, tmp_path):

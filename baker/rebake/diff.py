@@ -57,11 +57,17 @@ def _image_digest(scene: Scene, ref) -> str | None:
 
 
 def _material(scene: Scene, m) -> dict:
-    """A material's colour fingerprint (what the obscurance rays read) and the rest."""
+    """A material's colour fingerprint (what the obscurance rays read) and the rest: every
+    other term the bake reads (a change of an ior once went unseen: the rebake kept the glass's
+    old refraction, where a full bake bent its rays anew)."""
     colour = digest(np.asarray(m.base_color, np.float64), _image_digest(scene, m.base_color_texture))
     rest = digest(np.asarray(m.emissive, np.float64), _image_digest(scene, m.emissive_texture),
                   m.metallic, m.roughness, m.alpha_mode, m.alpha_cutoff, m.double_sided, m.unlit,
-                  m.extensions)
+                  m.extensions, _image_digest(scene, m.metallic_roughness_texture),
+                  m.transmission, _image_digest(scene, m.transmission_texture), m.ior,
+                  m.thickness, m.attenuation_distance, np.asarray(m.attenuation_color, np.float64),
+                  m.diffuse_transmission,
+                  np.asarray(m.diffuse_transmission_color, np.float64))
     return {"colour": colour, "rest": rest}
 
 
@@ -245,7 +251,7 @@ def diff(old: dict, new: dict) -> Diff:
     for m, (a, b) in enumerate(zip(om, nm)):
         if a["rest"] != b["rest"]:
             return full(f"material {m} changed beyond its base colour (emission, metalness, "
-                        "alpha or sides)")
+                        "alpha, sides, transmission, ior or volume)")
         if a["colour"] != b["colour"]:
             result.recoloured.append(m)
             result.changes.append(f"material {m}: base colour changed")
