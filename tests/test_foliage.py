@@ -180,6 +180,28 @@ def test_a_rebake_in_foliage_mode_gives_the_bytes_of_a_full_bake(tmp_path, moves
     assert again.report["foliage"] == full.report["foliage"]
 
 
+@pytest.mark.parametrize("extras", [{"foliage": "none"}, {"foliage": "grass"},
+                                    {"foliage_density": 50.0}])
+def test_a_rebake_after_the_foliage_hints_changed_is_a_full_bake(tmp_path, extras):
+    """The crown's node told otherwise by its extras (not foliage, grass, or a density): the
+    fingerprints held no foliage hint, and such an edit rebaked as "nothing changed", its
+    leaves still the old crown (the output not a full bake's). Now it is a full bake, and says
+    why; an edit of other extras stays an incremental one."""
+    settings = baker.Settings(**{**SETTINGS, "rays": 8}, foliage="approx", shadow_rays=1)
+    b = _tree_and_boxes({})
+    baker.bake(saved(b, tmp_path, "base.glb"), tmp_path / "out.glb", settings)
+    b._nodes[b.info["nodes"]["crown"]].extras = extras
+    edited = saved(b, tmp_path, "edited.glb")
+    again = baker.bake(edited, tmp_path / "out.glb", settings, incremental="always")
+    assert "foliage hints of node 'crown'" in again.rebake["full_bake_reason"]
+    baker.bake(edited, tmp_path / "full.glb", settings)
+    assert (tmp_path / "out.glb").read_bytes() == (tmp_path / "full.glb").read_bytes()
+    b._nodes[b.info["nodes"]["crown"]].extras = dict(extras, note="any other value")
+    other = baker.bake(saved(b, tmp_path, "other.glb"), tmp_path / "out.glb", settings,
+                       incremental="always")
+    assert other.rebake["incremental"] is True, other.rebake
+
+
 def test_relight_keeps_working_in_foliage_mode(tmp_path):
     def lit(intensity):
         b = _tree()

@@ -112,6 +112,15 @@ def code_fingerprint() -> str:
     return digest(package_digest(), *versions)
 
 
+def _foliage_hints(scene: Scene, node: int) -> str:
+    """A digest of the node's ``extras.foliage`` and ``extras.foliage_density``, which say what
+    ``--foliage approx`` makes of its triangles (``light.foliage``; without it they are not
+    read): an edit of them once rebaked as "nothing changed"."""
+    extras = scene.document.nodes[node].extras
+    extras = extras if isinstance(extras, dict) else {}
+    return digest(extras.get("foliage"), extras.get("foliage_density"))
+
+
 def _authored_uv(scene: Scene, instance: int, uv: int | None) -> tuple[np.ndarray, ...]:
     """The instance's TEXCOORD_<uv> (the atlas with ``--uv``), as a one-array tuple; none
     without ``--uv`` or when the set is missing (the bake refuses that)."""
@@ -160,7 +169,9 @@ def fingerprints(scene: Scene, world: World, settings: Resolved, asked=None) -> 
                        "node": int(inst.node), "name": _node_name(scene, inst.node),
                        "mesh": _primitive(scene.primitives[inst.primitive]),
                        "material": int(scene.primitives[inst.primitive].material),
-                       "baked": bool(inst.baked)}
+                       "baked": bool(inst.baked),
+                       "foliage": (_foliage_hints(scene, inst.node)
+                                   if settings.foliage == "approx" else None)}
                       for i, inst in enumerate(scene.instances)],
         "materials": [_material(scene, m) for m in scene.materials],
         "lights": [_light(light) for light in scene.lights],
@@ -235,8 +246,9 @@ def diff(old: dict, new: dict) -> Diff:
                          (("added", added), ("removed", removed)) if group)
         return full(f"instances {what or 'reordered'}: the atlas is packed anew")
     for i, (a, b) in enumerate(zip(oi, ni)):
-        if a["mesh"] != b["mesh"] or a["material"] != b["material"] or a["baked"] != b["baked"]:
-            return full(f"the mesh, material slot or baking of {_named(b)} changed")
+        if any(a[k] != b[k] for k in ("mesh", "material", "baked", "foliage")):
+            return full(f"the mesh, material slot, baking or foliage hints of {_named(b)} "
+                        "changed")
     if old["unwrap"] != new["unwrap"]:
         return full("the unwrap input changed (a node was scaled, or the texel density moved): "
                     "the atlas is laid out anew")
