@@ -162,13 +162,12 @@ def test_draco_data_that_decodes_to_nan_bakes_as_plain_data_would(tmp_path):
     uv = np.array([[0, 0], [np.nan, 0], [1, 1], [0, 1]], np.float64)
     data = DracoPy.encode(corners, np.array([[0, 2, 1], [0, 3, 2]], np.uint32), tex_coord=uv)
     ids = {len(a["data"][0]): a["unique_id"] for a in DracoPy.decode(data).attributes}
+    draco = {"bufferView": 0, "attributes": {"POSITION": ids[3], "TEXCOORD_0": ids[2]}}
     document = {
         "asset": {"version": "2.0"}, "extensionsUsed": [name], "extensionsRequired": [name],
         "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}], "materials": [{}],
         "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "TEXCOORD_0": 1}, "indices": 2,
-                                    "material": 0, "extensions": {name: {
-                                        "bufferView": 0,
-                                        "attributes": {"POSITION": ids[3], "TEXCOORD_0": ids[2]}}}}]}],
+                                    "material": 0, "extensions": {name: draco}}]}],
         "accessors": [{"componentType": 5126, "count": 4, "type": "VEC3", "min": [-1, 0, -1],
                        "max": [1, 0, 1]},
                       {"componentType": 5126, "count": 4, "type": "VEC2", "min": [0, 0],

@@ -432,8 +432,8 @@ def test_a_mutated_baked_file_previews_or_fails_cleanly(data):
     """``baker preview`` (and ``baker view``, which renders the same way) of a baked file with
     a field of one of its materials' texture references (where the lightmap pages are named)
     changed or deleted, and up to two more values of its JSON changed, deleted or duplicated:
-    a picture, or a BakerError with a message and a fix. Its lightmap references were read unchecked (52 internal errors
-    in 800 such files before they were checked)."""
+    a picture, or a BakerError with a message and a fix. Its lightmap references were read
+    unchecked (52 internal errors in 800 such files before they were checked)."""
     bases = baked_bases()
     document, blob = copy.deepcopy(bases[data.draw(st.integers(0, len(bases) - 1))])
     data.draw(reference_mutation(document))
