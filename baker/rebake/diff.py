@@ -23,7 +23,7 @@ follow, and what it must redo:
 from __future__ import annotations
 
 import functools
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from importlib import metadata
 from pathlib import Path
 
@@ -31,7 +31,7 @@ import numpy as np
 
 from baker.atlas.unwrap import baked_instances, frame_positions
 from baker.geometry.world import World
-from baker.gltf.scene import Scene
+from baker.gltf.scene import Scene, TextureRef
 from baker.jit import package_digest
 from baker.rebake.state import digest
 from baker.settings import CALLER_ONLY, Resolved
@@ -56,18 +56,20 @@ def _image_digest(scene: Scene, ref) -> str | None:
                   ref.transform)
 
 
+_NOT_IN_REST = ("index", "name", "base_color", "base_color_texture",  # names; the colour
+                "occlusion_texture", "specular", "specular_color")  # the writer's alone
+"""Material fields outside the fingerprint's rest: every other field is in it, so that a term
+the bake comes to read is in it too (a change of an ior once went unseen when the rest was a
+hand-made list: the rebake kept a glass's old refraction where a full bake bent its rays anew)."""
+
+
 def _material(scene: Scene, m) -> dict:
     """A material's colour fingerprint (what the obscurance rays read) and the rest: every
-    other term the bake reads (a change of an ior once went unseen: the rebake kept the glass's
-    old refraction, where a full bake bent its rays anew)."""
+    field but ``_NOT_IN_REST``, each texture by its pixels and how it is read."""
     colour = digest(np.asarray(m.base_color, np.float64), _image_digest(scene, m.base_color_texture))
-    rest = digest(np.asarray(m.emissive, np.float64), _image_digest(scene, m.emissive_texture),
-                  m.metallic, m.roughness, m.alpha_mode, m.alpha_cutoff, m.double_sided, m.unlit,
-                  m.extensions, _image_digest(scene, m.metallic_roughness_texture),
-                  m.transmission, _image_digest(scene, m.transmission_texture), m.ior,
-                  m.thickness, m.attenuation_distance, np.asarray(m.attenuation_color, np.float64),
-                  m.diffuse_transmission,
-                  np.asarray(m.diffuse_transmission_color, np.float64))
+    rest = digest(*(_image_digest(scene, value) if isinstance(value, TextureRef) else value
+                    for value in (getattr(m, f.name) for f in fields(m)
+                                  if f.name not in _NOT_IN_REST)))
     return {"colour": colour, "rest": rest}
 
 
